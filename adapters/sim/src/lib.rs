@@ -1,0 +1,1 @@
+//! Built-in 2.5D simulator: worlds, UGV/UAV/sensor/radio models, lockstep runs.

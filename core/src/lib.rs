@@ -1,0 +1,27 @@
+//! Shared types of spomp.
+//!
+//! Everything here is plain data plus the small traits through which behaviours see a robot.
+//! No algorithms, no I/O, no threads: skills, behaviours and adapters all agree on these types,
+//! and nothing in this crate depends on another spomp crate.
+
+pub mod aerial;
+pub mod classes;
+pub mod geometry;
+pub mod grid;
+pub mod ids;
+pub mod motion;
+pub mod panorama;
+pub mod platform;
+pub mod scan;
+pub mod time;
+
+pub use aerial::{AerialMap, MapTile};
+pub use classes::{ClassId, ClassInfo, ClassTable, ClassTableError, UNKNOWN_CLASS};
+pub use geometry::{Point2, Pose2, normalize_angle};
+pub use grid::{Cell, Grid, GridSpec};
+pub use ids::{GoalId, RobotId, RobotKind};
+pub use motion::{Odometry, PoseEstimate, Twist2};
+pub use panorama::{DepthPanorama, PanoramaFrame, PanoramaGeometry, SemanticPanorama};
+pub use platform::{MotionSink, OdometrySource, PanoramaSource, Platform, PoseSource, TeamLink};
+pub use scan::ReachabilityScan;
+pub use time::{Clock, ManualClock, Time, WallClock};

@@ -1,0 +1,44 @@
+//! Commands, odometry and pose estimates.
+
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::Pose2;
+use crate::time::Time;
+
+/// A velocity command for a planar robot.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Twist2 {
+    /// Forward speed, m/s.
+    pub v: f64,
+    /// Turn rate, rad/s, counter-clockwise positive.
+    pub omega: f64,
+}
+
+impl Twist2 {
+    /// Standing still.
+    pub const ZERO: Twist2 = Twist2 { v: 0.0, omega: 0.0 };
+}
+
+/// Odometry: the robot's pose in its own drifting odometry frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Odometry {
+    /// When it was measured.
+    pub stamp: Time,
+    /// Pose in the odometry frame.
+    pub pose: Pose2,
+    /// Measured velocity.
+    pub twist: Twist2,
+}
+
+/// A pose estimate in the map frame, with uncertainty.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PoseEstimate {
+    /// When it holds.
+    pub stamp: Time,
+    /// Map-frame pose.
+    pub pose: Pose2,
+    /// Row-major 3 × 3 covariance of (x, y, yaw).
+    pub covariance: [f64; 9],
+    /// 0 (lost) … 1 (certain).
+    pub confidence: f64,
+}

@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""Checks the layering rules of DESIGN.md §2 on the workspace's dependency graph.
+
+Layers, bottom to top: core < skills < behaviors < adapters < the CLI (root package).
+- core depends on no spomp crate;
+- a skill depends only on core and other skills (never behaviours or adapters);
+- behaviours depend on core and skills, never on adapters;
+- an adapter depends on core, skills and behaviours, never on another adapter;
+- only the root `spomp` package wires adapters together.
+Every spomp crate must live in a known layer directory. Exit 1 on any violation.
+"""
+import json
+import os
+import subprocess
+import sys
+
+
+def layer_of(manifest_dir: str, root: str) -> str:
+    rel = os.path.relpath(manifest_dir, root)
+    if rel == ".":
+        return "cli"
+    if rel == "core":
+        return "core"
+    if rel == "behaviors":
+        return "behaviors"
+    if rel.startswith("skills" + os.sep):
+        return "skill"
+    if rel.startswith("adapters" + os.sep):
+        return "adapter"
+    if rel == "tests" or rel.startswith("tests" + os.sep):
+        return "tests"
+    return "unknown:" + rel
+
+
+ALLOWED = {
+    "core": set(),
+    "skill": {"core", "skill"},
+    "behaviors": {"core", "skill"},
+    "adapter": {"core", "skill", "behaviors"},
+    "cli": {"core", "skill", "behaviors", "adapter"},
+    "tests": {"core", "skill", "behaviors", "adapter", "cli"},
+}
+
+
+def main() -> int:
+    meta = json.loads(
+        subprocess.check_output(["cargo", "metadata", "--no-deps", "--format-version", "1"])
+    )
+    root = meta["workspace_root"]
+    ours = {}
+    for pkg in meta["packages"]:
+        ours[pkg["name"]] = layer_of(os.path.dirname(pkg["manifest_path"]), root)
+    problems = []
+    for pkg in meta["packages"]:
+        name = pkg["name"]
+        layer = ours[name]
+        if layer.startswith("unknown:"):
+            problems.append(f"{name}: lives in {layer[8:]}, which is no layer directory")
+            continue
+        for dep in pkg["dependencies"]:
+            if dep["name"] not in ours or dep.get("kind") == "dev":
+                continue
+            dep_layer = ours[dep["name"]]
+            if dep_layer not in ALLOWED[layer]:
+                problems.append(f"{name} ({layer}) must not depend on {dep['name']} ({dep_layer})")
+    for p in problems:
+        print("layering:", p)
+    if problems:
+        return 1
+    print(f"layering: {len(ours)} crates, all dependencies respect the layers")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+//! Global ground planner: traversability graph, learned traversability, experience updates, search.

@@ -1,0 +1,1 @@
+//! Local ground planner: panorama terrain analysis, reachability scan, local goal, DWA.

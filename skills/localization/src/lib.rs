@@ -1,0 +1,1 @@
+//! Cross-view semantic localizer: particle filter against the aerial semantic map.

@@ -1,0 +1,1 @@
+//! Aerial orthomap layers, PNG compression for transmission, goal detection and placement.

@@ -1,0 +1,1 @@
+//! Replicated team database with priorities and deterministic merge rules, transport-free.
