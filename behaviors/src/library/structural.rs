@@ -1,0 +1,112 @@
+//! Control nodes, decorators, the state machine and subtree references, as registry entries.
+
+use serde_json::json;
+
+use crate::blackboard::PortType;
+use crate::registry::{Category, NodeRegistry, NodeTypeSpec, PortSpec};
+
+/// The control node types.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ControlType {
+    /// `sequence`.
+    Sequence,
+    /// `fallback`.
+    Fallback,
+    /// `reactive_sequence`.
+    ReactiveSequence,
+    /// `reactive_fallback`.
+    ReactiveFallback,
+    /// `parallel`.
+    Parallel,
+}
+
+impl ControlType {
+    /// By mission name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Some(match name {
+            "sequence" => ControlType::Sequence,
+            "fallback" => ControlType::Fallback,
+            "reactive_sequence" => ControlType::ReactiveSequence,
+            "reactive_fallback" => ControlType::ReactiveFallback,
+            "parallel" => ControlType::Parallel,
+            _ => return None,
+        })
+    }
+}
+
+/// The decorator types.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DecoratorType {
+    /// `timeout`.
+    Timeout,
+    /// `retry`.
+    Retry,
+    /// `repeat`.
+    Repeat,
+    /// `inverter`.
+    Inverter,
+    /// `force_success`.
+    ForceSuccess,
+    /// `force_failure`.
+    ForceFailure,
+    /// `run_once`.
+    RunOnce,
+    /// `delay`.
+    Delay,
+    /// `rate_limit`.
+    RateLimit,
+}
+
+impl DecoratorType {
+    /// By mission name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Some(match name {
+            "timeout" => DecoratorType::Timeout,
+            "retry" => DecoratorType::Retry,
+            "repeat" => DecoratorType::Repeat,
+            "inverter" => DecoratorType::Inverter,
+            "force_success" => DecoratorType::ForceSuccess,
+            "force_failure" => DecoratorType::ForceFailure,
+            "run_once" => DecoratorType::RunOnce,
+            "delay" => DecoratorType::Delay,
+            "rate_limit" => DecoratorType::RateLimit,
+            _ => return None,
+        })
+    }
+}
+
+/// Registers the structural node types.
+pub fn register_structural(r: &mut NodeRegistry) {
+    use Category::{Control, Decorator};
+    use PortType::{Float, Int, String as Str};
+    let s = NodeTypeSpec::structural;
+    r.register(s("sequence", Control, "Ticks `children` in order and resumes at the running one; fails on the first failure, succeeds when all succeed.", vec![]));
+    r.register(s("fallback", Control, "Ticks `children` in order and resumes at the running one; succeeds on the first success, fails when all fail.", vec![]));
+    r.register(s("reactive_sequence", Control, "Like `sequence`, but restarts from the first child every tick, so conditions before a running action are re-checked; a later running child is halted as soon as an earlier one fails or runs.", vec![]));
+    r.register(s("reactive_fallback", Control, "Like `fallback`, but restarts from the first child every tick, so a preferred option that becomes possible halts the running fallback.", vec![]));
+    r.register(s(
+        "parallel",
+        Control,
+        "Ticks all `children` every tick; succeeds when `success_threshold` succeeded, fails when `failure_threshold` failed (or success became impossible), then halts the rest.",
+        vec![
+            PortSpec::optional("success_threshold", Int, "Successes needed (default: all children)."),
+            PortSpec::input("failure_threshold", Int, "Failures that fail the node.").with_default(json!(1)),
+        ],
+    ));
+    r.register(s("timeout", Decorator, "Fails and halts its `child` if it has not finished within `duration_s`.", vec![PortSpec::input("duration_s", Float, "Time allowed, seconds.")]));
+    r.register(s("retry", Decorator, "Re-runs a failing `child` at once, up to `max_attempts` attempts in all.", vec![PortSpec::input("max_attempts", Int, "Attempts in all, ≥ 1.")]));
+    r.register(s("repeat", Decorator, "Re-runs a succeeding `child` `times` times (each run on a new tick), or forever if `times` is left out; fails when the child fails.", vec![PortSpec::optional("times", Int, "Runs; forever if absent.")]));
+    r.register(s("inverter", Decorator, "Swaps Success and Failure of its `child`.", vec![]));
+    r.register(s("force_success", Decorator, "Reports Success whatever its finished `child` reported.", vec![]));
+    r.register(s("force_failure", Decorator, "Reports Failure whatever its finished `child` reported.", vec![]));
+    r.register(s("run_once", Decorator, "Runs its `child` to completion once; afterwards reports that outcome without ticking it.", vec![]));
+    r.register(s("delay", Decorator, "Waits `delay_s`, then runs its `child`.", vec![PortSpec::input("delay_s", Float, "Wait before the child starts, seconds.")]));
+    r.register(s("rate_limit", Decorator, "Ticks its `child` at most `hz` times per second; reports Running in between.", vec![PortSpec::input("hz", Float, "Maximum child ticks per second.")]));
+    r.register(s(
+        "state_machine",
+        Category::StateMachine,
+        "Named `states`, each running an optional subtree (`run`), with `transitions` on the subtree's outcome (`on: success|failure`), on timers (`on: timer, after_s`) and on events (`on: event, event`); `terminal: success|failure` states end the machine.",
+        vec![PortSpec::input("initial", Str, "Name of the first state.")],
+    ));
+    r.register(s("subtree", Category::Subtree, "Inserts the named subtree (from `subtrees:` of this file or an included file); it shares the robot's blackboard.", vec![PortSpec::input("name", Str, "Subtree name.")]));
+}

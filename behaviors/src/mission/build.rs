@@ -1,0 +1,115 @@
+//! Turns a compiled tree into live nodes bound to a robot's blackboard.
+
+use crate::blackboard::{Binding, Blackboard};
+use crate::control::{Fallback, Parallel, ReactiveFallback, ReactiveSequence, Sequence};
+use crate::decorators::{Delay, MapResult, RateLimit, Repeat, ResultMap, Retry, RunOnce, Timeout};
+use crate::library::{ControlType, DecoratorType};
+use crate::node::{Behavior, NodeInfo, Slot};
+use crate::registry::{NodeRegistry, PortBindings};
+use crate::state_machine::{State, StateMachine, Transition};
+
+use super::compile::{Ir, IrBinding, IrKind};
+
+/// Why a tree could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum BuildError {
+    /// A node's factory refused its parameters.
+    #[error("{path}: {message}")]
+    Node {
+        /// Node path.
+        path: String,
+        /// What the factory said.
+        message: String,
+    },
+    /// A node this build cannot run.
+    #[error("{path}: node `{node}` is not implemented in this build")]
+    NotImplemented {
+        /// Node path.
+        path: String,
+        /// Node type.
+        node: String,
+    },
+}
+
+/// Options for building.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct BuildOptions {
+    /// Build declared-but-unimplemented nodes as nodes that fail loudly when ticked, instead of
+    /// refusing to build.
+    pub allow_unimplemented: bool,
+}
+
+/// Builds live nodes for `ir`, declaring the blackboard entries it uses.
+pub fn build_tree(ir: &Ir, registry: &NodeRegistry, bb: &mut Blackboard, opts: BuildOptions) -> Result<Slot, BuildError> {
+    let mut next_id = 0;
+    build(ir, registry, bb, opts, &mut next_id)
+}
+
+fn build(ir: &Ir, registry: &NodeRegistry, bb: &mut Blackboard, opts: BuildOptions, next_id: &mut u32) -> Result<Slot, BuildError> {
+    let info = NodeInfo { id: *next_id, type_name: ir.type_name.as_str().into(), path: ir.path.as_str().into() };
+    *next_id += 1;
+    let behavior: Box<dyn Behavior> = match &ir.kind {
+        IrKind::Control { ty, children, success_threshold, failure_threshold } => {
+            let kids = children.iter().map(|c| build(c, registry, bb, opts, next_id)).collect::<Result<Vec<_>, _>>()?;
+            match ty {
+                ControlType::Sequence => Box::new(Sequence::new(kids)),
+                ControlType::Fallback => Box::new(Fallback::new(kids)),
+                ControlType::ReactiveSequence => Box::new(ReactiveSequence::new(kids)),
+                ControlType::ReactiveFallback => Box::new(ReactiveFallback::new(kids)),
+                ControlType::Parallel => Box::new(Parallel::new(kids, *success_threshold, *failure_threshold)),
+            }
+        }
+        IrKind::Decorator { ty, child, duration, count, hz } => {
+            let c = build(child, registry, bb, opts, next_id)?;
+            match ty {
+                DecoratorType::Timeout => Box::new(Timeout::new(c, *duration)),
+                DecoratorType::Delay => Box::new(Delay::new(c, *duration)),
+                DecoratorType::Retry => Box::new(Retry::new(c, count.unwrap_or(1))),
+                DecoratorType::Repeat => Box::new(Repeat::new(c, *count)),
+                DecoratorType::Inverter => Box::new(MapResult::new(c, ResultMap::Invert)),
+                DecoratorType::ForceSuccess => Box::new(MapResult::new(c, ResultMap::ForceSuccess)),
+                DecoratorType::ForceFailure => Box::new(MapResult::new(c, ResultMap::ForceFailure)),
+                DecoratorType::RunOnce => Box::new(RunOnce::new(c)),
+                DecoratorType::RateLimit => Box::new(RateLimit::new(c, *hz)),
+            }
+        }
+        IrKind::StateMachine { states, initial } => {
+            let mut children = Vec::new();
+            let mut built = Vec::new();
+            for s in states {
+                let run = match &s.run {
+                    Some(r) => {
+                        children.push(build(r, registry, bb, opts, next_id)?);
+                        Some(children.len() - 1)
+                    }
+                    None => None,
+                };
+                built.push(State {
+                    name: s.name.clone(),
+                    run,
+                    transitions: s.transitions.iter().map(|(t, target)| Transition { trigger: t.clone(), target: *target }).collect(),
+                    terminal: s.terminal,
+                });
+            }
+            Box::new(StateMachine::new(built, children, *initial))
+        }
+        IrKind::Leaf { ports } => {
+            let spec = registry.get(&ir.type_name).ok_or_else(|| BuildError::Node { path: ir.path.clone(), message: format!("unknown node type `{}`", ir.type_name) })?;
+            if !spec.implemented && !opts.allow_unimplemented {
+                return Err(BuildError::NotImplemented { path: ir.path.clone(), node: ir.type_name.clone() });
+            }
+            let mut bindings = PortBindings::default();
+            for p in ports {
+                let b = match &p.binding {
+                    IrBinding::Literal(v) => Binding::Literal(v.clone()),
+                    IrBinding::Ref(name) => Binding::Entry(bb.declare(name, p.spec.ty)),
+                    IrBinding::Unset => Binding::Unset,
+                };
+                bindings.insert(p.spec.name, b);
+            }
+            let factory = spec.factory().ok_or_else(|| BuildError::Node { path: ir.path.clone(), message: "node type has no factory".into() })?;
+            factory(&bindings).map_err(|message| BuildError::Node { path: ir.path.clone(), message })?
+        }
+    };
+    Ok(Slot::new(info, behavior))
+}

@@ -1,0 +1,124 @@
+//! Mission diagnostics: file, line, column, node path, stage and message, rendered with the
+//! source line.
+
+use std::fmt;
+use std::path::PathBuf;
+
+use serde::Serialize;
+
+use super::yaml::Loc;
+
+/// The validation stage that found a problem (DESIGN.md §3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stage {
+    /// YAML syntax, unreadable file.
+    Parse,
+    /// Keys, types, ranges, units.
+    Schema,
+    /// Node types, ports, references, states.
+    Wiring,
+    /// Roles, priorities, ids, skills per robot kind.
+    Team,
+    /// Simulated dry run.
+    DryRun,
+}
+
+impl Stage {
+    /// Lower-case name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Stage::Parse => "parse",
+            Stage::Schema => "schema",
+            Stage::Wiring => "wiring",
+            Stage::Team => "team",
+            Stage::DryRun => "dry_run",
+        }
+    }
+}
+
+/// One problem in a mission.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Diagnostic {
+    /// File it is in.
+    pub file: PathBuf,
+    /// Line, from 1 (0 if the problem concerns the whole file).
+    pub line: u32,
+    /// Column, from 1.
+    pub column: u32,
+    /// Path of the node or field: `roles.visitor.tree/sequence/claim_goal` or `team[1].priority`.
+    pub node_path: String,
+    /// Stage.
+    pub stage: Stage,
+    /// What was expected and what was found.
+    pub message: String,
+    /// Byte span for rendering.
+    #[serde(skip)]
+    pub span: Option<(usize, usize)>,
+}
+
+impl Diagnostic {
+    /// A diagnostic at a location.
+    pub fn new(file: impl Into<PathBuf>, loc: Loc, node_path: impl Into<String>, stage: Stage, message: impl Into<String>) -> Self {
+        Diagnostic {
+            file: file.into(),
+            line: loc.line,
+            column: loc.column,
+            node_path: node_path.into(),
+            stage,
+            message: message.into(),
+            span: loc.offset.map(|o| (o, loc.len.max(1))),
+        }
+    }
+}
+
+impl fmt::Display for Diagnostic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:{}:{}: [{}] ", self.file.display(), self.line, self.column, self.stage.as_str())?;
+        if !self.node_path.is_empty() {
+            write!(f, "at {}: ", self.node_path)?;
+        }
+        f.write_str(&self.message)
+    }
+}
+
+/// A diagnostic with its source, for miette's graphical report.
+#[derive(Debug)]
+pub struct Rendered {
+    diag: Diagnostic,
+    src: miette::NamedSource<String>,
+}
+
+impl Rendered {
+    /// Pairs a diagnostic with the text of its file.
+    pub fn new(diag: Diagnostic, source: String) -> Self {
+        let name = diag.file.display().to_string();
+        Rendered { diag, src: miette::NamedSource::new(name, source) }
+    }
+}
+
+impl fmt::Display for Rendered {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.diag.node_path.is_empty() {
+            write!(f, "{}", self.diag.message)
+        } else {
+            write!(f, "{}: {}", self.diag.node_path, self.diag.message)
+        }
+    }
+}
+
+impl std::error::Error for Rendered {}
+
+impl miette::Diagnostic for Rendered {
+    fn code<'a>(&'a self) -> Option<Box<dyn fmt::Display + 'a>> {
+        Some(Box::new(format!("spomp::{}", self.diag.stage.as_str())))
+    }
+    fn source_code(&self) -> Option<&dyn miette::SourceCode> {
+        self.diag.span.map(|_| &self.src as &dyn miette::SourceCode)
+    }
+    fn labels(&self) -> Option<Box<dyn Iterator<Item = miette::LabeledSpan> + '_>> {
+        let (offset, len) = self.diag.span?;
+        let label = format!("{}:{}:{}", self.diag.file.display(), self.diag.line, self.diag.column);
+        Some(Box::new(std::iter::once(miette::LabeledSpan::new(Some(label), offset, len))))
+    }
+}

@@ -1,0 +1,504 @@
+//! Loading a mission: read and parse every file (stage parse), check keys, types and ranges
+//! (schema), compile the trees and check how nodes connect (wiring), then check the team
+//! (team). Every stage reports all the problems it finds; later stages run on whatever the
+//! earlier ones could make sense of.
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::path::{Path, PathBuf};
+
+use spomp_core::{ClassTable, RobotKind};
+
+use crate::blackboard::{BbValue, PortType};
+use crate::registry::NodeRegistry;
+
+use super::compile::{Compiler, FileId, Ir, IrKind, SubtreeDef, check_wiring};
+use super::diagnostic::{Diagnostic, Stage};
+use super::schema::{IncludeFile, MissionFile, RobotSpec};
+use super::yaml::{DeError, Loc, Node, parse};
+
+/// Blackboard entries every robot's executor provides before the first tick.
+pub const PROVIDED_ENTRIES: &[(&str, PortType)] =
+    &[("robot_id", PortType::Robot), ("start_pose", PortType::Pose), ("home", PortType::Point)];
+
+/// Skills each robot kind carries.
+pub fn skills_of(kind: RobotKind) -> &'static [&'static str] {
+    match kind {
+        RobotKind::Ugv => &["local_planner", "global_planner", "localization", "mapping", "teamstate"],
+        RobotKind::Uav => &["mapping", "teamstate"],
+        RobotKind::Basestation => &["mapping", "teamstate"],
+    }
+}
+
+/// A compiled role.
+#[derive(Debug, Clone)]
+pub struct CompiledRole {
+    /// The tree.
+    pub tree: Ir,
+    /// Type of every blackboard entry the tree uses.
+    pub entry_types: BTreeMap<String, PortType>,
+    /// Initial blackboard values from the role.
+    pub initial: Vec<(String, BbValue)>,
+    /// Tick rate.
+    pub tick_hz: f64,
+}
+
+/// The result of loading a mission: what could be understood, and every problem found.
+#[derive(Debug, Default)]
+pub struct LoadedMission {
+    /// Files read: the mission first, then includes.
+    pub files: Vec<PathBuf>,
+    /// Their text, same order.
+    pub sources: Vec<String>,
+    /// The typed mission, if the schema stage passed.
+    pub mission: Option<MissionFile>,
+    /// Compiled roles (those that compiled).
+    pub roles: BTreeMap<String, CompiledRole>,
+    /// Problems, sorted by file and position.
+    pub diagnostics: Vec<Diagnostic>,
+}
+
+impl LoadedMission {
+    /// Whether the mission is valid.
+    pub fn is_valid(&self) -> bool {
+        self.diagnostics.is_empty() && self.mission.is_some()
+    }
+
+    /// The source text of a diagnostic's file.
+    pub fn source_of(&self, file: &Path) -> Option<&str> {
+        self.files.iter().position(|f| f == file).and_then(|i| self.sources.get(i)).map(String::as_str)
+    }
+
+    /// Folder of the mission file (where relative paths in it start).
+    pub fn base_dir(&self) -> PathBuf {
+        self.files.first().and_then(|f| f.parent()).map(Path::to_path_buf).unwrap_or_default()
+    }
+}
+
+fn de_diag(file: &Path, prefix: &str, e: &DeError, fallback: Loc) -> Diagnostic {
+    let sub = e.path_string();
+    let path = match (prefix.is_empty(), sub.is_empty()) {
+        (true, _) => sub,
+        (false, true) => prefix.to_string(),
+        (false, false) if sub.starts_with('[') => format!("{prefix}{sub}"),
+        (false, false) => format!("{prefix}.{sub}"),
+    };
+    Diagnostic::new(file, e.loc.unwrap_or(fallback), path, Stage::Schema, e.message.clone())
+}
+
+/// Loads and validates a mission file against a node registry.
+pub fn load_mission(path: &Path, registry: &NodeRegistry) -> LoadedMission {
+    let mut out = LoadedMission::default();
+    let file: FileId = 0;
+    out.files.push(path.to_path_buf());
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) => {
+            out.sources.push(String::new());
+            out.diagnostics.push(Diagnostic::new(path, Loc::default(), "", Stage::Parse, format!("cannot read the mission: {e}")));
+            return out;
+        }
+    };
+    out.sources.push(text.clone());
+    let root = match parse(&text) {
+        Ok(n) => n,
+        Err(e) => {
+            out.diagnostics.push(Diagnostic::new(path, e.loc, "", Stage::Parse, e.message));
+            return out;
+        }
+    };
+    let mut diags = Vec::new();
+
+    // --- schema: each section on its own, so every broken section is reported ---
+    let Some(entries) = root.as_map() else {
+        diags.push(Diagnostic::new(path, root.loc, "", Stage::Schema, format!("a mission is a mapping with `mission`, `team`, `roles`, …; found {}", root.value.kind())));
+        out.diagnostics = diags;
+        return out;
+    };
+    let mut section_ok = true;
+    for (k, v) in entries {
+        let result = match k.name.as_str() {
+            "team" => match v.as_seq() {
+                Some(items) => {
+                    let mut ok = true;
+                    for (i, item) in items.iter().enumerate() {
+                        if let Err(e) = item.deserialize::<RobotSpec>() {
+                            diags.push(de_diag(path, &format!("team[{i}]"), &e, item.loc));
+                            ok = false;
+                        }
+                    }
+                    if ok { Ok(()) } else { Err(None) }
+                }
+                None => Err(Some(DeError { message: format!("expected a list of robots, found {}", v.value.kind()), loc: Some(v.loc), path: vec![] })),
+            },
+            "roles" => match v.as_map() {
+                Some(roles) => {
+                    let mut ok = true;
+                    for (rk, rv) in roles {
+                        if let Err(e) = rv.deserialize::<super::schema::RoleSpec>() {
+                            diags.push(de_diag(path, &format!("roles.{}", rk.name), &e, rv.loc));
+                            ok = false;
+                        }
+                    }
+                    if ok { Ok(()) } else { Err(None) }
+                }
+                None => Err(Some(DeError { message: format!("expected a mapping of role names to roles, found {}", v.value.kind()), loc: Some(v.loc), path: vec![] })),
+            },
+            "mission" | "description" => v.deserialize::<Option<String>>().map(|_| ()).map_err(Some),
+            "include" => v.deserialize::<Vec<String>>().map(|_| ()).map_err(Some),
+            "goals" => v.deserialize::<Option<super::schema::GoalsSpec>>().map(|_| ()).map_err(Some),
+            "subtrees" => v.deserialize::<BTreeMap<String, super::schema::TreeNode>>().map(|_| ()).map_err(Some),
+            "complete_when" => v.deserialize::<super::schema::CompleteWhen>().map(|_| ()).map_err(Some),
+            "time_limit_s" => v.deserialize::<f64>().map(|_| ()).map_err(Some),
+            "comms" => v.deserialize::<super::schema::CommsSpec>().map(|_| ()).map_err(Some),
+            "sim" => v.deserialize::<Option<super::schema::SimSpec>>().map(|_| ()).map_err(Some),
+            other => {
+                const KNOWN: &[&str] = &["mission", "description", "include", "team", "goals", "roles", "subtrees", "complete_when", "time_limit_s", "comms", "sim"];
+                let hint = super::compile::closest(other, KNOWN).map(|c| format!(" (did you mean `{c}`?)")).unwrap_or_default();
+                diags.push(Diagnostic::new(path, k.loc, other, Stage::Schema, format!("unknown key `{other}`{hint}; expected one of: {}", KNOWN.join(", "))));
+                section_ok = false;
+                continue;
+            }
+        };
+        match result {
+            Ok(()) => {}
+            Err(Some(e)) => {
+                diags.push(de_diag(path, &k.name, &e, v.loc));
+                section_ok = false;
+            }
+            Err(None) => section_ok = false,
+        }
+    }
+    let mission = if section_ok {
+        match root.deserialize::<MissionFile>() {
+            Ok(m) => Some(m),
+            Err(e) => {
+                diags.push(de_diag(path, "", &e, root.loc));
+                None
+            }
+        }
+    } else {
+        None
+    };
+    if let Some(m) = &mission {
+        check_ranges(m, &root, path, &mut diags);
+    }
+
+    // --- includes and subtrees ---
+    let mut subtrees: BTreeMap<String, SubtreeDef> = BTreeMap::new();
+    collect_subtrees(&root, file, &mut subtrees, &out.files, &mut diags);
+    let mut stack = vec![canonical(path)];
+    if let Some(inc) = root.get("include") {
+        load_includes(inc, path, &mut out, &mut stack, &mut subtrees, &mut diags);
+    }
+
+    // --- wiring: compile every role ---
+    let files = out.files.clone();
+    let mut used_subtrees_ok = true;
+    if let Some(roles) = root.get("roles").and_then(Node::as_map) {
+        for (rk, rv) in roles {
+            let Some(tree) = rv.get("tree") else {
+                continue; // reported by the schema stage
+            };
+            let mut compiler = Compiler::new(registry, &subtrees, &files);
+            let ir = compiler.compile(tree, file, &rk.name);
+            let mut d = compiler.into_diagnostics();
+            used_subtrees_ok &= d.is_empty();
+            let Some(ir) = ir else {
+                diags.append(&mut d);
+                continue;
+            };
+            let mut initial: BTreeMap<String, (Option<PortType>, Loc, FileId)> = BTreeMap::new();
+            for (name, ty) in PROVIDED_ENTRIES {
+                initial.insert((*name).to_string(), (Some(*ty), Loc::default(), file));
+            }
+            let bb_node = rv.get("blackboard");
+            for (bk, _) in bb_node.and_then(Node::as_map).unwrap_or(&[]) {
+                initial.insert(bk.name.clone(), (None, bk.loc, file));
+            }
+            let entry_types = check_wiring(&ir, &initial, &files, &mut d);
+            // Type the role's initial values by the ports they feed.
+            let mut values = Vec::new();
+            for (bk, bv) in bb_node.and_then(Node::as_map).unwrap_or(&[]) {
+                let bpath = format!("roles.{}.blackboard.{}", rk.name, bk.name);
+                match entry_types.get(&bk.name) {
+                    None => d.push(Diagnostic::new(path, bk.loc, bpath, Stage::Wiring, format!("blackboard entry `{}` is never used by the tree", bk.name))),
+                    Some(ty) => match BbValue::from_json(*ty, &bv.to_json()) {
+                        Ok(v) => values.push((bk.name.clone(), v)),
+                        Err(e) => d.push(Diagnostic::new(path, bv.loc, bpath, Stage::Wiring, format!("entry `{}` feeds {ty} ports: {e}", bk.name))),
+                    },
+                }
+            }
+            diags.append(&mut d);
+            let tick_hz = rv.get("tick_hz").and_then(Node::as_f64).unwrap_or(10.0);
+            out.roles.insert(rk.name.clone(), CompiledRole { tree: ir, entry_types, initial: values, tick_hz });
+        }
+    }
+    // Subtrees no role uses still get checked on their own (when the roles compiled cleanly,
+    // so a broken subtree is not reported twice).
+    if used_subtrees_ok {
+        for (name, def) in &subtrees {
+            let mut compiler = Compiler::new(registry, &subtrees, &files);
+            let _ = compiler.compile(&def.node, def.file, name);
+            diags.append(&mut compiler.into_diagnostics());
+        }
+    }
+
+    // --- team ---
+    if let Some(m) = &mission {
+        check_team(m, &root, path, registry, &out.roles, &mut diags);
+    }
+
+    diags.sort_by(|a, b| (a.file.clone(), a.line, a.column).cmp(&(b.file.clone(), b.line, b.column)));
+    diags.dedup();
+    out.diagnostics = diags;
+    out.mission = mission;
+    out
+}
+
+fn canonical(p: &Path) -> PathBuf {
+    std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf())
+}
+
+fn collect_subtrees(root: &Node, file: FileId, into: &mut BTreeMap<String, SubtreeDef>, files: &[PathBuf], diags: &mut Vec<Diagnostic>) {
+    let Some(entries) = root.get("subtrees").and_then(Node::as_map) else { return };
+    for (k, v) in entries {
+        if let Some(prev) = into.get(&k.name) {
+            let where_ = files.get(prev.file).map(|f| f.display().to_string()).unwrap_or_default();
+            diags.push(Diagnostic::new(
+                files.get(file).cloned().unwrap_or_default(),
+                k.loc,
+                format!("subtrees.{}", k.name),
+                Stage::Wiring,
+                format!("subtree `{}` is defined twice (also in {where_})", k.name),
+            ));
+            continue;
+        }
+        into.insert(k.name.clone(), SubtreeDef { node: v.clone(), file });
+    }
+}
+
+fn load_includes(
+    list: &Node,
+    including: &Path,
+    out: &mut LoadedMission,
+    stack: &mut Vec<PathBuf>,
+    subtrees: &mut BTreeMap<String, SubtreeDef>,
+    diags: &mut Vec<Diagnostic>,
+) {
+    let Some(items) = list.as_seq() else { return };
+    let base = including.parent().map(Path::to_path_buf).unwrap_or_default();
+    for item in items {
+        let Some(rel) = item.as_str() else { continue };
+        let target = base.join(rel);
+        let canon = canonical(&target);
+        if stack.contains(&canon) {
+            let chain: Vec<String> = stack.iter().chain(std::iter::once(&canon)).map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default()).collect();
+            diags.push(Diagnostic::new(including, item.loc, "include", Stage::Parse, format!("include cycle: {}", chain.join(" → "))));
+            continue;
+        }
+        if out.files.iter().any(|f| canonical(f) == canon) {
+            continue; // already included through another path
+        }
+        let text = match std::fs::read_to_string(&target) {
+            Ok(t) => t,
+            Err(e) => {
+                diags.push(Diagnostic::new(including, item.loc, "include", Stage::Parse, format!("cannot read included file `{}`: {e}", target.display())));
+                continue;
+            }
+        };
+        let file = out.files.len();
+        out.files.push(target.clone());
+        out.sources.push(text.clone());
+        let node = match parse(&text) {
+            Ok(n) => n,
+            Err(e) => {
+                diags.push(Diagnostic::new(&target, e.loc, "", Stage::Parse, e.message));
+                continue;
+            }
+        };
+        if let Err(e) = node.deserialize::<IncludeFile>() {
+            diags.push(de_diag(&target, "", &e, node.loc));
+            continue;
+        }
+        collect_subtrees(&node, file, subtrees, &out.files, diags);
+        if let Some(inc) = node.get("include") {
+            stack.push(canon);
+            load_includes(inc, &target, out, stack, subtrees, diags);
+            stack.pop();
+        }
+    }
+}
+
+/// Location of a nested field, falling back to the closest known parent.
+fn loc_at(root: &Node, path: &[&str]) -> Loc {
+    let mut node = root;
+    let mut loc = root.loc;
+    for seg in path {
+        let next = match seg.parse::<usize>() {
+            Ok(i) => node.as_seq().and_then(|s| s.get(i)),
+            Err(_) => node.get(seg),
+        };
+        match next {
+            Some(n) => {
+                node = n;
+                loc = n.loc;
+            }
+            None => break,
+        }
+    }
+    loc
+}
+
+fn check_ranges(m: &MissionFile, root: &Node, file: &Path, diags: &mut Vec<Diagnostic>) {
+    let mut bad = |path: &[&str], msg: String| {
+        diags.push(Diagnostic::new(file, loc_at(root, path), path.join("."), Stage::Schema, msg));
+    };
+    if !(m.time_limit_s > 0.0 && m.time_limit_s.is_finite()) {
+        bad(&["time_limit_s"], format!("expected a positive number of seconds, found {}", m.time_limit_s));
+    }
+    if m.mission.trim().is_empty() {
+        bad(&["mission"], "the mission needs a name".into());
+    }
+    if m.comms.position_range_m < 0.0 {
+        bad(&["comms", "position_range_m"], format!("expected a non-negative distance in metres, found {}", m.comms.position_range_m));
+    }
+    if m.comms.data_range_m < 0.0 {
+        bad(&["comms", "data_range_m"], format!("expected a non-negative distance in metres, found {}", m.comms.data_range_m));
+    }
+    if m.comms.data_range_m > m.comms.position_range_m {
+        bad(&["comms", "data_range_m"], format!("the data range ({} m) cannot exceed the position range ({} m)", m.comms.data_range_m, m.comms.position_range_m));
+    }
+    if m.comms.bandwidth_bytes_per_s <= 0.0 {
+        bad(&["comms", "bandwidth_bytes_per_s"], format!("expected a positive rate, found {}", m.comms.bandwidth_bytes_per_s));
+    }
+    if let Some(g) = &m.goals {
+        if g.deconfliction_radius_m < 0.0 {
+            bad(&["goals", "deconfliction_radius_m"], format!("expected a non-negative distance in metres, found {}", g.deconfliction_radius_m));
+        }
+        if g.time_limit_per_m_s <= 0.0 {
+            bad(&["goals", "time_limit_per_m_s"], format!("expected a positive number of seconds per metre, found {}", g.time_limit_per_m_s));
+        }
+        if let Some(d) = &g.detect {
+            let classes = ClassTable::default_table();
+            if classes.by_name(&d.class).is_none() {
+                bad(&["goals", "detect", "class"], format!("unknown class `{}`; classes are: {}", d.class, classes.names().join(", ")));
+            }
+            for (name, v) in [("merge_distance_m", d.merge_distance_m), ("min_size_m", d.min_size_m), ("placement_region_m", d.placement_region_m)] {
+                if v < 0.0 {
+                    bad(&["goals", "detect", name], format!("expected a non-negative distance in metres, found {v}"));
+                }
+            }
+        }
+        if g.detect.is_none() && g.manual.is_empty() {
+            bad(&["goals"], "no goal source: give `detect:` or `manual:` goals (or leave `goals` out)".into());
+        }
+    }
+    for (name, role) in &m.roles {
+        if !(role.tick_hz > 0.0 && role.tick_hz <= 1000.0) {
+            bad(&["roles", name, "tick_hz"], format!("expected a tick rate in (0, 1000] per second, found {}", role.tick_hz));
+        }
+    }
+    for (i, r) in m.team.iter().enumerate() {
+        let idx = i.to_string();
+        if let Some(l) = &r.localization {
+            if l.prior_sigma_m < 0.0 || l.prior_sigma_deg < 0.0 || l.noise_m < 0.0 {
+                bad(&["team", &idx, "localization"], "uncertainties and noise cannot be negative".into());
+            }
+        }
+    }
+    if let Some(sim) = &m.sim {
+        if let Some(super::schema::WorldSpec::Generate(g)) = &sim.world {
+            if g.size_m.iter().any(|s| !(*s >= 50.0 && *s <= 5000.0)) {
+                bad(&["sim", "world", "generate", "size_m"], format!("each side must be between 50 and 5000 m, found {:?}", g.size_m));
+            }
+        }
+        if sim.trials == Some(0) {
+            bad(&["sim", "trials"], "expected at least one trial".into());
+        }
+        for (i, f) in sim.faults.iter().enumerate() {
+            let idx = i.to_string();
+            let negative = match f {
+                super::schema::FaultSpec::Kill { at_s, .. } => *at_s < 0.0,
+                super::schema::FaultSpec::Blackout { from_s, to_s } => *from_s < 0.0 || to_s < from_s,
+                super::schema::FaultSpec::OdometryNoise { scale } => *scale < 0.0,
+            };
+            if negative {
+                bad(&["sim", "faults", &idx], "times must be non-negative and in order, scales non-negative".into());
+            }
+        }
+    }
+}
+
+fn leaf_types(ir: &Ir, out: &mut Vec<(String, String, Loc, FileId)>) {
+    match &ir.kind {
+        IrKind::Leaf { .. } => out.push((ir.type_name.clone(), ir.path.clone(), ir.loc, ir.file)),
+        IrKind::Control { children, .. } => children.iter().for_each(|c| leaf_types(c, out)),
+        IrKind::Decorator { child, .. } => leaf_types(child, out),
+        IrKind::StateMachine { states, .. } => states.iter().filter_map(|s| s.run.as_ref()).for_each(|r| leaf_types(r, out)),
+    }
+}
+
+fn check_team(m: &MissionFile, root: &Node, file: &Path, registry: &NodeRegistry, roles: &BTreeMap<String, CompiledRole>, diags: &mut Vec<Diagnostic>) {
+    let mut team_diag = |path: Vec<String>, msg: String| {
+        let segs: Vec<&str> = path.iter().map(String::as_str).collect();
+        let shown = path.iter().enumerate().map(|(i, s)| if i > 0 && s.parse::<usize>().is_ok() { format!("[{s}]") } else if i > 0 { format!(".{s}") } else { s.clone() }).collect::<String>();
+        diags.push(Diagnostic::new(file, loc_at(root, &segs), shown, Stage::Team, msg));
+    };
+    if m.team.is_empty() {
+        team_diag(vec!["team".into()], "the team has no robots".into());
+    }
+    let mut ids: HashMap<&str, usize> = HashMap::new();
+    let mut priorities: HashMap<u32, &str> = HashMap::new();
+    for (i, r) in m.team.iter().enumerate() {
+        let idx = i.to_string();
+        if r.id.trim().is_empty() {
+            team_diag(vec!["team".into(), idx.clone(), "id".into()], "a robot needs a non-empty id".into());
+        }
+        if let Some(first) = ids.insert(&r.id, i) {
+            team_diag(vec!["team".into(), idx.clone(), "id".into()], format!("robot id `{}` is used twice (also team[{first}])", r.id));
+        }
+        if !m.roles.contains_key(&r.role) {
+            let names: Vec<&str> = m.roles.keys().map(String::as_str).collect();
+            team_diag(vec!["team".into(), idx.clone(), "role".into()], format!("role `{}` is not defined; roles are: {}", r.role, names.join(", ")));
+        }
+        match (r.kind, r.priority) {
+            (RobotKind::Ugv, None) => team_diag(vec!["team".into(), idx.clone()], format!("UGV `{}` needs a `priority` (lower number = higher priority)", r.id)),
+            (RobotKind::Ugv, Some(p)) => {
+                if let Some(other) = priorities.insert(p, &r.id) {
+                    team_diag(vec!["team".into(), idx.clone(), "priority".into()], format!("priority {p} is used by `{other}` and `{}`; UGV priorities must be unique", r.id));
+                }
+            }
+            (_, Some(_)) => team_diag(vec!["team".into(), idx.clone(), "priority".into()], format!("`priority` orders UGVs only; `{}` is a {}", r.id, r.kind)),
+            (_, None) => {}
+        }
+        if r.localization.is_some() && r.kind != RobotKind::Ugv {
+            team_diag(vec!["team".into(), idx.clone(), "localization".into()], format!("`localization` applies to UGVs; `{}` is a {} (it has GPS or is fixed)", r.id, r.kind));
+        }
+        // Every node of the robot's role must suit its kind and find its skills.
+        if let Some(role) = roles.get(&r.role) {
+            let mut leaves = Vec::new();
+            leaf_types(&role.tree, &mut leaves);
+            let mut reported = HashSet::new();
+            for (ty, npath, _, _) in leaves {
+                let Some(spec) = registry.get(&ty) else { continue };
+                if !spec.robot_kinds.is_empty() && !spec.robot_kinds.contains(&r.kind) && reported.insert(ty.clone()) {
+                    let kinds: Vec<&str> = spec.robot_kinds.iter().map(|k| k.as_str()).collect();
+                    team_diag(
+                        vec!["team".into(), idx.clone(), "role".into()],
+                        format!("`{}` ({}) runs role `{}`, whose node `{ty}` at {npath} runs on {} only", r.id, r.kind, r.role, kinds.join(", ")),
+                    );
+                }
+                for skill in &spec.skills {
+                    if !skills_of(r.kind).contains(skill) && reported.insert(format!("{ty}:{skill}")) {
+                        team_diag(vec!["team".into(), idx.clone(), "role".into()], format!("node `{ty}` needs the `{skill}` skill, which a {} does not carry", r.kind));
+                    }
+                }
+            }
+        }
+    }
+    for name in m.roles.keys() {
+        if !m.team.iter().any(|r| &r.role == name) {
+            diags.push(Diagnostic::new(file, root.get("roles").and_then(|r| r.key(name)).map_or(root.loc, |k| k.loc), format!("roles.{name}"), Stage::Team, format!("role `{name}` is assigned to no robot")));
+        }
+    }
+}

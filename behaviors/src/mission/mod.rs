@@ -1,0 +1,15 @@
+//! The mission language: YAML files → typed mission + compiled behaviour trees, with staged
+//! validation whose every error names the file, line, column and node.
+
+pub mod build;
+pub mod compile;
+pub mod diagnostic;
+pub mod json_schema;
+pub mod load;
+pub mod schema;
+pub mod yaml;
+
+pub use build::{BuildError, BuildOptions, build_tree};
+pub use diagnostic::{Diagnostic, Rendered, Stage};
+pub use load::{CompiledRole, LoadedMission, PROVIDED_ENTRIES, load_mission, skills_of};
+pub use schema::MissionFile;

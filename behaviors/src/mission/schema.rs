@@ -1,0 +1,389 @@
+//! The typed mission file. Unknown keys are rejected everywhere; units are in key names
+//! (`_s` seconds, `_m` metres, `_deg` degrees, `_mps` metres per second, `_hz` per second).
+//!
+//! Behaviour trees (`roles.*.tree`, `subtrees.*`) are compiled from the YAML node tree directly
+//! (see `compile`), because their keys are node types from the registry; their JSON schema is
+//! generated from the node manifest.
+
+use std::collections::BTreeMap;
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+use spomp_core::RobotKind;
+
+/// A mission file.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MissionFile {
+    /// Mission name.
+    pub mission: String,
+    /// What the mission is for.
+    #[serde(default)]
+    pub description: Option<String>,
+    /// Files with reusable `subtrees:`, relative to this file.
+    #[serde(default)]
+    pub include: Vec<String>,
+    /// The robots.
+    pub team: Vec<RobotSpec>,
+    /// Where goals come from.
+    #[serde(default)]
+    pub goals: Option<GoalsSpec>,
+    /// Behaviour of each role.
+    pub roles: BTreeMap<String, RoleSpec>,
+    /// Reusable trees, used with `subtree: {name: …}`.
+    #[serde(default)]
+    pub subtrees: BTreeMap<String, TreeNode>,
+    /// When the mission is complete.
+    #[serde(default)]
+    pub complete_when: CompleteWhen,
+    /// Mission time limit, seconds.
+    pub time_limit_s: f64,
+    /// Radio settings.
+    #[serde(default)]
+    pub comms: CommsSpec,
+    /// Settings for `spomp sim` and dry runs.
+    #[serde(default)]
+    pub sim: Option<SimSpec>,
+}
+
+/// A behaviour-tree node: a mapping with one key, the node type, whose value holds the node's
+/// ports (and `children` / `child` / `states`). Its schema is generated from the node manifest.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct TreeNode(pub serde_json::Value);
+
+impl JsonSchema for TreeNode {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "TreeNode".into()
+    }
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        // Replaced by the manifest-generated definition in `json_schema::mission_schema`.
+        schemars::json_schema!({ "type": "object", "minProperties": 1, "maxProperties": 1 })
+    }
+}
+
+/// One robot of the team.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RobotSpec {
+    /// Unique id (`ugv1`).
+    pub id: String,
+    /// `ugv`, `uav` or `basestation`.
+    pub kind: RobotKind,
+    /// Role name from `roles`.
+    pub role: String,
+    /// UGV priority, unique; lower number = higher priority (as in the paper).
+    #[serde(default)]
+    pub priority: Option<u32>,
+    /// Start pose in the map frame.
+    pub start: StartPose,
+    /// Where the robot's map-frame pose comes from (UGVs).
+    #[serde(default)]
+    pub localization: Option<LocalizationSpec>,
+    /// ROS 2 adapter settings.
+    #[serde(default)]
+    pub ros2: Option<Ros2Spec>,
+}
+
+/// A start pose.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct StartPose {
+    /// East, metres.
+    pub x_m: f64,
+    /// North, metres.
+    pub y_m: f64,
+    /// Heading, degrees counter-clockwise from east.
+    #[serde(default)]
+    pub yaw_deg: f64,
+}
+
+/// Localization mode of a robot.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LocalizationSpec {
+    /// `cross_view` (the particle filter against the aerial map) or `ground_truth` (simulator
+    /// only, with noise).
+    pub mode: LocalizationMode,
+    /// Prior position uncertainty at the start, metres (1σ).
+    #[serde(default = "default_prior_position")]
+    pub prior_sigma_m: f64,
+    /// Prior heading uncertainty at the start, degrees (1σ).
+    #[serde(default = "default_prior_yaw")]
+    pub prior_sigma_deg: f64,
+    /// Noise added to ground truth in `ground_truth` mode, metres (1σ).
+    #[serde(default)]
+    pub noise_m: f64,
+}
+
+fn default_prior_position() -> f64 {
+    2.0
+}
+
+fn default_prior_yaw() -> f64 {
+    5.0
+}
+
+/// Localization modes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum LocalizationMode {
+    /// Cross-view semantic localizer.
+    CrossView,
+    /// Simulator ground truth plus noise (the paper's simulation switch).
+    GroundTruth,
+}
+
+/// ROS 2 settings of a robot.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Ros2Spec {
+    /// Topic namespace (default `/<id>`).
+    #[serde(default)]
+    pub namespace: Option<String>,
+    /// DDS domain id.
+    #[serde(default)]
+    pub domain_id: u16,
+}
+
+/// Goal sources and coordination limits.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GoalsSpec {
+    /// Automatic detection in the aerial map.
+    #[serde(default)]
+    pub detect: Option<DetectSpec>,
+    /// Operator-specified goals.
+    #[serde(default)]
+    pub manual: Vec<ManualGoal>,
+    /// Goals closer than this are the same goal, metres.
+    #[serde(default = "default_deconfliction")]
+    pub deconfliction_radius_m: f64,
+    /// Time limit per metre of planned path, seconds (the paper's per-goal time limit).
+    #[serde(default = "default_time_per_m")]
+    pub time_limit_per_m_s: f64,
+}
+
+fn default_deconfliction() -> f64 {
+    10.0
+}
+
+fn default_time_per_m() -> f64 {
+    2.0
+}
+
+/// Goal detection settings.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DetectSpec {
+    /// Class to cluster.
+    #[serde(default = "default_class")]
+    pub class: String,
+    /// Merge distance, metres.
+    #[serde(default = "default_merge")]
+    pub merge_distance_m: f64,
+    /// Minimum cluster size, metres.
+    #[serde(default = "default_min_size")]
+    pub min_size_m: f64,
+    /// Placement region around a cluster, metres.
+    #[serde(default = "default_region")]
+    pub placement_region_m: f64,
+}
+
+fn default_class() -> String {
+    "vehicle".into()
+}
+
+fn default_merge() -> f64 {
+    15.0
+}
+
+fn default_min_size() -> f64 {
+    8.0
+}
+
+fn default_region() -> f64 {
+    7.0
+}
+
+/// A goal given by the operator.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ManualGoal {
+    /// East, metres.
+    pub x_m: f64,
+    /// North, metres.
+    pub y_m: f64,
+    /// Optional label.
+    #[serde(default)]
+    pub name: Option<String>,
+}
+
+/// A role: the behaviour tree its robots run.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RoleSpec {
+    /// What the role does.
+    #[serde(default)]
+    pub description: Option<String>,
+    /// Initial blackboard entries: `name: value` (type from the ports they feed).
+    #[serde(default)]
+    pub blackboard: BTreeMap<String, serde_json::Value>,
+    /// Tick rate of the tree.
+    #[serde(default = "default_tick")]
+    pub tick_hz: f64,
+    /// The tree.
+    pub tree: TreeNode,
+}
+
+fn default_tick() -> f64 {
+    10.0
+}
+
+/// Mission completion.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum CompleteWhen {
+    /// Every goal visited by at least one UGV (the paper's criterion).
+    #[default]
+    AllGoalsVisited,
+    /// Every robot's tree finished.
+    AllTreesDone,
+    /// Only the time limit ends it.
+    TimeLimit,
+}
+
+/// Radio settings (the paper's simulation values by default).
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CommsSpec {
+    /// Within this range robots exchange positions and claims, metres.
+    #[serde(default = "default_pos_range")]
+    pub position_range_m: f64,
+    /// Within this range robots exchange everything, metres.
+    #[serde(default = "default_data_range")]
+    pub data_range_m: f64,
+    /// Bytes per second per link.
+    #[serde(default = "default_bandwidth")]
+    pub bandwidth_bytes_per_s: f64,
+    /// Disable direct UGV-to-UGV links (data only via the UAV and basestation).
+    #[serde(default)]
+    pub ugv_to_ugv: Option<bool>,
+}
+
+fn default_pos_range() -> f64 {
+    50.0
+}
+
+fn default_data_range() -> f64 {
+    30.0
+}
+
+fn default_bandwidth() -> f64 {
+    1_000_000.0
+}
+
+impl Default for CommsSpec {
+    fn default() -> Self {
+        CommsSpec {
+            position_range_m: default_pos_range(),
+            data_range_m: default_data_range(),
+            bandwidth_bytes_per_s: default_bandwidth(),
+            ugv_to_ugv: None,
+        }
+    }
+}
+
+/// Simulation settings.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SimSpec {
+    /// The world: generated or from a folder.
+    #[serde(default)]
+    pub world: Option<WorldSpec>,
+    /// Default number of trials for `spomp sim`.
+    #[serde(default)]
+    pub trials: Option<u32>,
+    /// Default first seed.
+    #[serde(default)]
+    pub seed: Option<u64>,
+    /// Faults to inject.
+    #[serde(default)]
+    pub faults: Vec<FaultSpec>,
+}
+
+/// Which world to simulate.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, rename_all = "snake_case")]
+pub enum WorldSpec {
+    /// A procedural city.
+    Generate(GenerateSpec),
+    /// A world folder (`world.yaml` and layers), relative to the mission.
+    Dir(String),
+}
+
+/// Procedural city settings.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GenerateSpec {
+    /// Width and height, metres.
+    #[serde(default = "default_size")]
+    pub size_m: [f64; 2],
+    /// Vehicle clusters.
+    #[serde(default = "default_clusters")]
+    pub vehicle_clusters: u32,
+    /// Roadblocks.
+    #[serde(default = "default_roadblocks")]
+    pub roadblocks: u32,
+    /// World seed (default: the trial seed).
+    #[serde(default)]
+    pub seed: Option<u64>,
+}
+
+fn default_size() -> [f64; 2] {
+    [400.0, 300.0]
+}
+
+fn default_clusters() -> u32 {
+    15
+}
+
+fn default_roadblocks() -> u32 {
+    3
+}
+
+/// A fault to inject in simulation.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, rename_all = "snake_case")]
+pub enum FaultSpec {
+    /// Kill a robot.
+    Kill {
+        /// Robot id.
+        robot: String,
+        /// When, seconds.
+        at_s: f64,
+    },
+    /// Radio blackout.
+    Blackout {
+        /// Start, seconds.
+        from_s: f64,
+        /// End, seconds.
+        to_s: f64,
+    },
+    /// Scale odometry noise.
+    OdometryNoise {
+        /// Multiplier of the default noise.
+        scale: f64,
+    },
+}
+
+/// A file of reusable subtrees (`include:` target).
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct IncludeFile {
+    /// Further includes, relative to this file.
+    #[serde(default)]
+    pub include: Vec<String>,
+    /// The subtrees.
+    pub subtrees: BTreeMap<String, TreeNode>,
+}

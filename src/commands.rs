@@ -1,0 +1,99 @@
+//! The subcommands.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use spomp_behaviors::builtin_registry;
+use spomp_behaviors::mission::json_schema::mission_schema;
+use spomp_behaviors::mission::{Rendered, load_mission};
+use spomp_behaviors::registry::PortDirection;
+
+/// `spomp validate`.
+pub fn validate(files: &[PathBuf], json: bool) -> Result<ExitCode> {
+    let registry = builtin_registry();
+    let mut all = Vec::new();
+    let mut human = String::new();
+    for file in files {
+        let loaded = load_mission(file, &registry);
+        if loaded.diagnostics.is_empty() {
+            if let Some(m) = &loaded.mission {
+                human.push_str(&format!(
+                    "✔ {}: mission `{}` is valid ({} robots, {} roles)\n",
+                    file.display(),
+                    m.mission,
+                    m.team.len(),
+                    m.roles.len()
+                ));
+            }
+        } else {
+            let handler = miette::GraphicalReportHandler::new_themed(miette::GraphicalTheme::unicode_nocolor());
+            for d in &loaded.diagnostics {
+                human.push_str(&format!("{d}\n"));
+                let src = loaded.source_of(&d.file).unwrap_or_default().to_string();
+                let rendered = Rendered::new(d.clone(), src);
+                let mut out = String::new();
+                if handler.render_report(&mut out, &rendered).is_ok() {
+                    human.push_str(&out);
+                    human.push('\n');
+                }
+            }
+            human.push_str(&format!("✘ {}: {} problem(s)\n", file.display(), loaded.diagnostics.len()));
+        }
+        all.extend(loaded.diagnostics);
+    }
+    let mut stdout = std::io::stdout().lock();
+    if json {
+        writeln!(stdout, "{}", serde_json::to_string_pretty(&all)?)?;
+    } else {
+        write!(stdout, "{human}")?;
+    }
+    Ok(if all.is_empty() { ExitCode::SUCCESS } else { ExitCode::from(1) })
+}
+
+/// `spomp schema`.
+pub fn schema() -> Result<ExitCode> {
+    let schema = mission_schema(&builtin_registry());
+    println!("{}", serde_json::to_string_pretty(&schema).context("serialising the schema")?);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `spomp nodes`.
+pub fn nodes(json: bool, only: Option<&str>) -> Result<ExitCode> {
+    let registry = builtin_registry();
+    if let Some(name) = only
+        && registry.get(name).is_none()
+    {
+        eprintln!("error: unknown node type `{name}`; run `spomp nodes` for the list");
+        return Ok(ExitCode::from(2));
+    }
+    let specs: Vec<_> = registry.iter().filter(|s| only.is_none_or(|n| n == s.name)).collect();
+    if json {
+        println!("{}", serde_json::to_string_pretty(&specs)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    let mut out = String::new();
+    for s in specs {
+        let kinds = if s.robot_kinds.is_empty() { "any robot".to_string() } else { s.robot_kinds.iter().map(|k| k.as_str()).collect::<Vec<_>>().join(", ") };
+        let status = if s.implemented { "" } else { "  (declared; not implemented in this build)" };
+        out.push_str(&format!("{}  [{:?}, {kinds}]{status}\n", s.name, s.category));
+        out.push_str(&format!("    {}\n", s.description));
+        for p in &s.ports {
+            let dir = match p.direction {
+                PortDirection::Input => "in ",
+                PortDirection::Output => "out",
+                PortDirection::InOut => "i/o",
+            };
+            let default = match (&p.default, p.optional) {
+                (Some(d), _) => format!(" = {d}"),
+                (None, true) => " (optional)".into(),
+                (None, false) => " (required)".into(),
+            };
+            out.push_str(&format!("    {dir} {:<24} {:<7}{default}  {}\n", p.name, p.ty.as_str(), p.description));
+        }
+        out.push('\n');
+    }
+    print!("{out}");
+    Ok(ExitCode::SUCCESS)
+}
