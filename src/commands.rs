@@ -75,7 +75,11 @@ pub fn nodes(json: bool, only: Option<&str>) -> Result<ExitCode> {
     }
     let mut out = String::new();
     for s in specs {
-        let kinds = if s.robot_kinds.is_empty() { "any robot".to_string() } else { s.robot_kinds.iter().map(|k| k.as_str()).collect::<Vec<_>>().join(", ") };
+        let kinds = if s.robot_kinds.is_empty() {
+            "any robot".to_string()
+        } else {
+            s.robot_kinds.iter().map(|k| k.as_str()).collect::<Vec<_>>().join(", ")
+        };
         let status = if s.implemented { "" } else { "  (declared; not implemented in this build)" };
         out.push_str(&format!("{}  [{:?}, {kinds}]{status}\n", s.name, s.category));
         out.push_str(&format!("    {}\n", s.description));

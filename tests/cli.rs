@@ -1,5 +1,7 @@
 //! The command line as a user meets it: exit codes, JSON output, the shipped schema.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
+
 use std::path::Path;
 
 use assert_cmd::Command;
@@ -48,7 +50,10 @@ fn shipped_schema_is_current() {
     let generated: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let shipped: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(root().join("missions/mission.schema.json")).unwrap()).unwrap();
-    assert!(generated == shipped, "missions/mission.schema.json is stale: run `cargo run -- schema > missions/mission.schema.json`");
+    assert!(
+        generated == shipped,
+        "missions/mission.schema.json is stale: run `cargo run -- schema > missions/mission.schema.json`"
+    );
     // The tree nodes come from the manifest.
     let variants = generated["$defs"]["TreeNode"]["oneOf"].as_array().unwrap();
     assert!(variants.iter().any(|v| v["properties"].get("claim_goal").is_some()));

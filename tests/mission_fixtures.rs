@@ -2,6 +2,8 @@
 //! `tests/missions/invalid-*.yaml` yields the diagnostics its `# expect:` header lines name:
 //! `# expect: [FILE:]LINE:COL | node path | message fragment`.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
+
 use std::path::{Path, PathBuf};
 
 use spomp_behaviors::builtin_registry;
@@ -12,7 +14,9 @@ fn fixtures(prefix: &str) -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().path())
-        .filter(|p| p.file_name().unwrap().to_string_lossy().starts_with(prefix) && p.extension().is_some_and(|e| e == "yaml"))
+        .filter(|p| {
+            p.file_name().unwrap().to_string_lossy().starts_with(prefix) && p.extension().is_some_and(|e| e == "yaml")
+        })
         .collect();
     v.sort();
     v
@@ -80,7 +84,11 @@ fn invalid_fixtures_report_the_right_place_and_field() {
                     Some(name) => d.file.ends_with(name),
                     None => d.file == f,
                 };
-                file_ok && d.line == e.line && d.column == e.column && d.node_path == e.path && d.message.contains(&e.message)
+                file_ok
+                    && d.line == e.line
+                    && d.column == e.column
+                    && d.node_path == e.path
+                    && d.message.contains(&e.message)
             });
             assert!(
                 found,

@@ -13,7 +13,9 @@ use spomp_core::{Pose2, RobotId, Time};
 /// A mission whose one role is a tree of `groups` reactive sequences, each of `leaves`
 /// `check_flag` conditions (true) and one `wait`; all of them are ticked every tick.
 fn mission(groups: usize, leaves: usize) -> String {
-    let mut s = String::from("mission: bench\nteam:\n  - { id: r, kind: ugv, role: r, priority: 1, start: { x_m: 0, y_m: 0 } }\nroles:\n  r:\n    blackboard: { ok: true }\n    tree:\n      parallel:\n        children:\n");
+    let mut s = String::from(
+        "mission: bench\nteam:\n  - { id: r, kind: ugv, role: r, priority: 1, start: { x_m: 0, y_m: 0 } }\nroles:\n  r:\n    blackboard: { ok: true }\n    tree:\n      parallel:\n        children:\n",
+    );
     for _ in 0..groups {
         s.push_str("          - reactive_sequence:\n");
         for _ in 0..leaves {
@@ -29,12 +31,15 @@ fn executor(groups: usize, leaves: usize) -> (RobotExecutor, usize) {
     let dir = std::env::temp_dir().join(format!("spomp-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let path = dir.join("bench.yaml");
-    std::fs::File::create(&path).and_then(|mut f| f.write_all(mission(groups, leaves).as_bytes())).expect("write mission");
+    std::fs::File::create(&path)
+        .and_then(|mut f| f.write_all(mission(groups, leaves).as_bytes()))
+        .expect("write mission");
     let registry = builtin_registry();
     let loaded = load_mission(&path, &registry);
     assert!(loaded.diagnostics.is_empty(), "{:#?}", loaded.diagnostics);
     let role = &loaded.roles["r"];
-    let ex = RobotExecutor::new(role, &registry, &RobotId::new("r"), Pose2::default(), BuildOptions::default()).expect("build");
+    let ex = RobotExecutor::new(role, &registry, &RobotId::new("r"), Pose2::default(), BuildOptions::default())
+        .expect("build");
     let n = ex.root().count();
     (ex, n)
 }

@@ -60,7 +60,10 @@ impl PortType {
 
     /// Whether a value of type `other` can flow into a port of this type.
     pub fn accepts(self, other: PortType) -> bool {
-        self == other || self == PortType::Any || other == PortType::Any || (self == PortType::Float && other == PortType::Int)
+        self == other
+            || self == PortType::Any
+            || other == PortType::Any
+            || (self == PortType::Float && other == PortType::Int)
     }
 }
 
@@ -134,10 +137,13 @@ impl BbValue {
             PortType::Pose => BbValue::Pose(
                 serde_json::from_value(v.clone()).map_err(|e| format!("expected a pose {{x, y, yaw}}: {e}"))?,
             ),
-            PortType::Goal => return Err("a goal cannot be written literally; wire it to a blackboard entry like \"{goal}\"".into()),
+            PortType::Goal => {
+                return Err("a goal cannot be written literally; wire it to a blackboard entry like \"{goal}\"".into());
+            }
             PortType::Robot => BbValue::Robot(RobotId::new(v.as_str().ok_or_else(|| expected("a robot id", v))?)),
             PortType::Points => BbValue::Points(Arc::new(
-                serde_json::from_value(v.clone()).map_err(|e| format!("expected a list of points [{{x, y}}, …]: {e}"))?,
+                serde_json::from_value(v.clone())
+                    .map_err(|e| format!("expected a list of points [{{x, y}}, …]: {e}"))?,
             )),
             PortType::Params => {
                 if !v.is_object() {

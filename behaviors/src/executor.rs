@@ -20,7 +20,13 @@ pub struct RobotExecutor {
 
 impl RobotExecutor {
     /// Builds a robot's tree from its compiled role and fills the provided blackboard entries.
-    pub fn new(role: &CompiledRole, registry: &NodeRegistry, robot: &RobotId, start: Pose2, opts: BuildOptions) -> Result<Self, BuildError> {
+    pub fn new(
+        role: &CompiledRole,
+        registry: &NodeRegistry,
+        robot: &RobotId,
+        start: Pose2,
+        opts: BuildOptions,
+    ) -> Result<Self, BuildError> {
         let mut blackboard = Blackboard::new();
         let root = build_tree(&role.tree, registry, &mut blackboard, opts)?;
         blackboard.set_by_name("robot_id", BbValue::Robot(robot.clone()));
@@ -41,7 +47,13 @@ impl RobotExecutor {
     pub fn tick(&mut self, now: Time, env: &mut dyn Any, mut observer: Option<&mut dyn TreeObserver>) -> Status {
         self.ticks += 1;
         let s = {
-            let mut ctx = TickContext { now, tick: self.ticks, blackboard: &mut self.blackboard, env, observer: shorten(&mut observer) };
+            let mut ctx = TickContext {
+                now,
+                tick: self.ticks,
+                blackboard: &mut self.blackboard,
+                env,
+                observer: shorten(&mut observer),
+            };
             self.root.tick(&mut ctx)
         };
         self.blackboard.end_tick();
@@ -51,7 +63,13 @@ impl RobotExecutor {
 
     /// Halts the whole tree (mission end, robot killed).
     pub fn halt(&mut self, now: Time, env: &mut dyn Any, mut observer: Option<&mut dyn TreeObserver>) {
-        let mut ctx = TickContext { now, tick: self.ticks, blackboard: &mut self.blackboard, env, observer: shorten(&mut observer) };
+        let mut ctx = TickContext {
+            now,
+            tick: self.ticks,
+            blackboard: &mut self.blackboard,
+            env,
+            observer: shorten(&mut observer),
+        };
         self.root.halt(&mut ctx);
     }
 

@@ -155,4 +155,3 @@ impl Behavior for StateMachine {
         &self.children
     }
 }
-

@@ -60,7 +60,16 @@ impl<W: Write> LinePrinter<W> {
 impl<W: Write> TreeObserver for LinePrinter<W> {
     fn on_transition(&mut self, t: &Transition<'_>) {
         // A closed pipe must not take the robot down; tracing is best effort.
-        let _ = writeln!(self.out, "{} #{:<6} {:>9} {} {} -> {}", self.prefix, t.tick, t.time.to_string(), t.node.path, t.from, t.to);
+        let _ = writeln!(
+            self.out,
+            "{} #{:<6} {:>9} {} {} -> {}",
+            self.prefix,
+            t.tick,
+            t.time.to_string(),
+            t.node.path,
+            t.from,
+            t.to
+        );
     }
 }
 

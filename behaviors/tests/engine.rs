@@ -1,6 +1,8 @@
 //! Semantics of the control nodes, decorators and state machine, on small trees of scripted
 //! leaves. Each test covers a case engines commonly get wrong.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
+
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -217,7 +219,10 @@ fn rate_limit_throttles_child_ticks() {
     assert_eq!(la.lock().unwrap().ticks, 2);
 }
 
-fn machine(states: Vec<(&str, Option<Slot>, Vec<(Trigger, usize)>, Option<Status>)>) -> Slot {
+/// (name, subtree, transitions, terminal outcome) of a test state.
+type StateDef<'a> = (&'a str, Option<Slot>, Vec<(Trigger, usize)>, Option<Status>);
+
+fn machine(states: Vec<StateDef<'_>>) -> Slot {
     let mut children = Vec::new();
     let built = states
         .into_iter()
@@ -325,7 +330,7 @@ impl Behavior for JobNode {
         }
         match self.job.as_mut().map(Job::poll) {
             Some(JobPoll::Pending) => Status::Running,
-            Some(JobPoll::Done(v)) if v == 1_999_000 => Status::Success,
+            Some(JobPoll::Done(1_999_000)) => Status::Success,
             _ => Status::Failure,
         }
     }

@@ -1,6 +1,8 @@
 //! Bad input never panics the loader: arbitrary bytes, arbitrary YAML, and arbitrary trees of
 //! mission-like keys all end in diagnostics.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
+
 use std::io::Write;
 
 use proptest::prelude::*;
@@ -19,11 +21,35 @@ fn load_text(text: &[u8]) -> usize {
 /// YAML-ish values whose keys are drawn from the mission language, so the loader goes deep.
 fn yamlish() -> impl Strategy<Value = String> {
     let key = prop_oneof![
-        Just("mission"), Just("team"), Just("roles"), Just("tree"), Just("sequence"), Just("children"),
-        Just("child"), Just("timeout"), Just("duration_s"), Just("state_machine"), Just("states"),
-        Just("initial"), Just("transitions"), Just("on"), Just("to"), Just("subtree"), Just("include"),
-        Just("navigate_to"), Just("target"), Just("claim_goal"), Just("goal"), Just("id"), Just("kind"),
-        Just("priority"), Just("start"), Just("time_limit_s"), Just("parallel"), Just("x"), Just("y")
+        Just("mission"),
+        Just("team"),
+        Just("roles"),
+        Just("tree"),
+        Just("sequence"),
+        Just("children"),
+        Just("child"),
+        Just("timeout"),
+        Just("duration_s"),
+        Just("state_machine"),
+        Just("states"),
+        Just("initial"),
+        Just("transitions"),
+        Just("on"),
+        Just("to"),
+        Just("subtree"),
+        Just("include"),
+        Just("navigate_to"),
+        Just("target"),
+        Just("claim_goal"),
+        Just("goal"),
+        Just("id"),
+        Just("kind"),
+        Just("priority"),
+        Just("start"),
+        Just("time_limit_s"),
+        Just("parallel"),
+        Just("x"),
+        Just("y")
     ];
     let leaf = prop_oneof![
         Just("1".to_string()),
@@ -41,8 +67,10 @@ fn yamlish() -> impl Strategy<Value = String> {
     leaf.prop_recursive(4, 40, 6, move |inner| {
         prop_oneof![
             prop::collection::vec(inner.clone(), 0..4).prop_map(|v| format!("[{}]", v.join(", "))),
-            prop::collection::vec((key.clone(), inner), 0..5)
-                .prop_map(|kv| format!("{{{}}}", kv.into_iter().map(|(k, v)| format!("{k}: {v}")).collect::<Vec<_>>().join(", "))),
+            prop::collection::vec((key.clone(), inner), 0..5).prop_map(|kv| format!(
+                "{{{}}}",
+                kv.into_iter().map(|(k, v)| format!("{k}: {v}")).collect::<Vec<_>>().join(", ")
+            )),
         ]
     })
 }

@@ -58,8 +58,7 @@ pub const DEFAULT_CLASS_TABLE_YAML: &str = include_str!("../data/classes.yaml");
 impl ClassTable {
     /// Parses and checks a table from YAML text.
     pub fn from_yaml(text: &str) -> Result<Self, ClassTableError> {
-        let table: ClassTable =
-            serde_saphyr::from_str(text).map_err(|e| ClassTableError::Parse(e.to_string()))?;
+        let table: ClassTable = serde_saphyr::from_str(text).map_err(|e| ClassTableError::Parse(e.to_string()))?;
         table.check()?;
         Ok(table)
     }

@@ -140,9 +140,7 @@ mod tests {
     use proptest::prelude::*;
 
     fn close(a: Pose2, b: Pose2) -> bool {
-        (a.x - b.x).abs() < 1e-9
-            && (a.y - b.y).abs() < 1e-9
-            && normalize_angle(a.yaw - b.yaw).abs() < 1e-9
+        (a.x - b.x).abs() < 1e-9 && (a.y - b.y).abs() < 1e-9 && normalize_angle(a.yaw - b.yaw).abs() < 1e-9
     }
 
     #[test]

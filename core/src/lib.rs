@@ -12,6 +12,7 @@ pub mod ids;
 pub mod motion;
 pub mod panorama;
 pub mod platform;
+pub mod ros;
 pub mod scan;
 pub mod time;
 

@@ -50,7 +50,7 @@ macro_rules! declared {
 pub fn register_domain_declarations(r: &mut NodeRegistry) {
     use Category::{Action, Condition};
     use PortType::{Bool, Float, Goal, Int, Params, Point, Points, Robot, String as Str};
-    use RobotKind::{Basestation, Ugv, Uav};
+    use RobotKind::{Basestation, Uav, Ugv};
 
     r.register(
         declared!(

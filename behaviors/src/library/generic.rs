@@ -15,7 +15,9 @@ use crate::status::Status;
 pub fn register_generic(r: &mut NodeRegistry) {
     use Category::{Action, Condition};
     use PortType::{Bool, Float, String as Str};
-    r.register(NodeTypeSpec::leaf("succeed", Action, "Succeeds at once.", vec![], |_| Ok(Box::new(Fixed(Status::Success)))));
+    r.register(NodeTypeSpec::leaf("succeed", Action, "Succeeds at once.", vec![], |_| {
+        Ok(Box::new(Fixed(Status::Success)))
+    }));
     r.register(NodeTypeSpec::leaf("fail", Action, "Fails at once.", vec![], |_| Ok(Box::new(Fixed(Status::Failure)))));
     r.register(NodeTypeSpec::leaf(
         "wait",
@@ -154,4 +156,3 @@ impl Behavior for TimeAtLeast {
         }
     }
 }
-

@@ -81,7 +81,12 @@ pub fn register_structural(r: &mut NodeRegistry) {
     use PortType::{Float, Int, String as Str};
     let s = NodeTypeSpec::structural;
     r.register(s("sequence", Control, "Ticks `children` in order and resumes at the running one; fails on the first failure, succeeds when all succeed.", vec![]));
-    r.register(s("fallback", Control, "Ticks `children` in order and resumes at the running one; succeeds on the first success, fails when all fail.", vec![]));
+    r.register(s(
+        "fallback",
+        Control,
+        "Ticks `children` in order and resumes at the running one; succeeds on the first success, fails when all fail.",
+        vec![],
+    ));
     r.register(s("reactive_sequence", Control, "Like `sequence`, but restarts from the first child every tick, so conditions before a running action are re-checked; a later running child is halted as soon as an earlier one fails or runs.", vec![]));
     r.register(s("reactive_fallback", Control, "Like `fallback`, but restarts from the first child every tick, so a preferred option that becomes possible halts the running fallback.", vec![]));
     r.register(s(
@@ -93,15 +98,40 @@ pub fn register_structural(r: &mut NodeRegistry) {
             PortSpec::input("failure_threshold", Int, "Failures that fail the node.").with_default(json!(1)),
         ],
     ));
-    r.register(s("timeout", Decorator, "Fails and halts its `child` if it has not finished within `duration_s`.", vec![PortSpec::input("duration_s", Float, "Time allowed, seconds.")]));
-    r.register(s("retry", Decorator, "Re-runs a failing `child` at once, up to `max_attempts` attempts in all.", vec![PortSpec::input("max_attempts", Int, "Attempts in all, ≥ 1.")]));
+    r.register(s(
+        "timeout",
+        Decorator,
+        "Fails and halts its `child` if it has not finished within `duration_s`.",
+        vec![PortSpec::input("duration_s", Float, "Time allowed, seconds.")],
+    ));
+    r.register(s(
+        "retry",
+        Decorator,
+        "Re-runs a failing `child` at once, up to `max_attempts` attempts in all.",
+        vec![PortSpec::input("max_attempts", Int, "Attempts in all, ≥ 1.")],
+    ));
     r.register(s("repeat", Decorator, "Re-runs a succeeding `child` `times` times (each run on a new tick), or forever if `times` is left out; fails when the child fails.", vec![PortSpec::optional("times", Int, "Runs; forever if absent.")]));
     r.register(s("inverter", Decorator, "Swaps Success and Failure of its `child`.", vec![]));
     r.register(s("force_success", Decorator, "Reports Success whatever its finished `child` reported.", vec![]));
     r.register(s("force_failure", Decorator, "Reports Failure whatever its finished `child` reported.", vec![]));
-    r.register(s("run_once", Decorator, "Runs its `child` to completion once; afterwards reports that outcome without ticking it.", vec![]));
-    r.register(s("delay", Decorator, "Waits `delay_s`, then runs its `child`.", vec![PortSpec::input("delay_s", Float, "Wait before the child starts, seconds.")]));
-    r.register(s("rate_limit", Decorator, "Ticks its `child` at most `hz` times per second; reports Running in between.", vec![PortSpec::input("hz", Float, "Maximum child ticks per second.")]));
+    r.register(s(
+        "run_once",
+        Decorator,
+        "Runs its `child` to completion once; afterwards reports that outcome without ticking it.",
+        vec![],
+    ));
+    r.register(s(
+        "delay",
+        Decorator,
+        "Waits `delay_s`, then runs its `child`.",
+        vec![PortSpec::input("delay_s", Float, "Wait before the child starts, seconds.")],
+    ));
+    r.register(s(
+        "rate_limit",
+        Decorator,
+        "Ticks its `child` at most `hz` times per second; reports Running in between.",
+        vec![PortSpec::input("hz", Float, "Maximum child ticks per second.")],
+    ));
     r.register(s(
         "state_machine",
         Category::StateMachine,

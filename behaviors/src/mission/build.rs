@@ -40,12 +40,23 @@ pub struct BuildOptions {
 }
 
 /// Builds live nodes for `ir`, declaring the blackboard entries it uses.
-pub fn build_tree(ir: &Ir, registry: &NodeRegistry, bb: &mut Blackboard, opts: BuildOptions) -> Result<Slot, BuildError> {
+pub fn build_tree(
+    ir: &Ir,
+    registry: &NodeRegistry,
+    bb: &mut Blackboard,
+    opts: BuildOptions,
+) -> Result<Slot, BuildError> {
     let mut next_id = 0;
     build(ir, registry, bb, opts, &mut next_id)
 }
 
-fn build(ir: &Ir, registry: &NodeRegistry, bb: &mut Blackboard, opts: BuildOptions, next_id: &mut u32) -> Result<Slot, BuildError> {
+fn build(
+    ir: &Ir,
+    registry: &NodeRegistry,
+    bb: &mut Blackboard,
+    opts: BuildOptions,
+    next_id: &mut u32,
+) -> Result<Slot, BuildError> {
     let info = NodeInfo { id: *next_id, type_name: ir.type_name.as_str().into(), path: ir.path.as_str().into() };
     *next_id += 1;
     let behavior: Box<dyn Behavior> = match &ir.kind {
@@ -87,14 +98,21 @@ fn build(ir: &Ir, registry: &NodeRegistry, bb: &mut Blackboard, opts: BuildOptio
                 built.push(State {
                     name: s.name.clone(),
                     run,
-                    transitions: s.transitions.iter().map(|(t, target)| Transition { trigger: t.clone(), target: *target }).collect(),
+                    transitions: s
+                        .transitions
+                        .iter()
+                        .map(|(t, target)| Transition { trigger: t.clone(), target: *target })
+                        .collect(),
                     terminal: s.terminal,
                 });
             }
             Box::new(StateMachine::new(built, children, *initial))
         }
         IrKind::Leaf { ports } => {
-            let spec = registry.get(&ir.type_name).ok_or_else(|| BuildError::Node { path: ir.path.clone(), message: format!("unknown node type `{}`", ir.type_name) })?;
+            let spec = registry.get(&ir.type_name).ok_or_else(|| BuildError::Node {
+                path: ir.path.clone(),
+                message: format!("unknown node type `{}`", ir.type_name),
+            })?;
             if !spec.implemented && !opts.allow_unimplemented {
                 return Err(BuildError::NotImplemented { path: ir.path.clone(), node: ir.type_name.clone() });
             }
@@ -107,7 +125,10 @@ fn build(ir: &Ir, registry: &NodeRegistry, bb: &mut Blackboard, opts: BuildOptio
                 };
                 bindings.insert(p.spec.name, b);
             }
-            let factory = spec.factory().ok_or_else(|| BuildError::Node { path: ir.path.clone(), message: "node type has no factory".into() })?;
+            let factory = spec.factory().ok_or_else(|| BuildError::Node {
+                path: ir.path.clone(),
+                message: "node type has no factory".into(),
+            })?;
             factory(&bindings).map_err(|message| BuildError::Node { path: ir.path.clone(), message })?
         }
     };

@@ -141,7 +141,11 @@ const STRUCTURAL_KEYS_DECORATOR: &[&str] = &["child", "name"];
 
 impl<'a> Compiler<'a> {
     /// A compiler over a registry and the mission's subtrees.
-    pub fn new(registry: &'a NodeRegistry, subtrees: &'a BTreeMap<String, SubtreeDef>, files: &'a [std::path::PathBuf]) -> Self {
+    pub fn new(
+        registry: &'a NodeRegistry,
+        subtrees: &'a BTreeMap<String, SubtreeDef>,
+        files: &'a [std::path::PathBuf],
+    ) -> Self {
         Compiler { registry, subtrees, files, diags: Vec::new(), expanding: Vec::new() }
     }
 
@@ -158,7 +162,13 @@ impl<'a> Compiler<'a> {
     /// Compiles one tree rooted at `node`, whose path prefix is `path`.
     pub fn compile(&mut self, node: &Node, file: FileId, path: &str) -> Option<Ir> {
         let Some(entries) = node.as_map() else {
-            self.err(file, node.loc, path, Stage::Schema, format!("expected a node (a mapping with one key, the node type), found {}", node.value.kind()));
+            self.err(
+                file,
+                node.loc,
+                path,
+                Stage::Schema,
+                format!("expected a node (a mapping with one key, the node type), found {}", node.value.kind()),
+            );
             return None;
         };
         if entries.len() != 1 {
@@ -168,13 +178,19 @@ impl<'a> Compiler<'a> {
                 node.loc,
                 path,
                 Stage::Schema,
-                format!("expected exactly one key (the node type) in a node, found {}: {}", entries.len(), keys.join(", ")),
+                format!(
+                    "expected exactly one key (the node type) in a node, found {}: {}",
+                    entries.len(),
+                    keys.join(", ")
+                ),
             );
             return None;
         }
         let (key, body) = &entries[0];
         let Some(spec) = self.registry.get(&key.name) else {
-            let hint = closest(&key.name, &self.registry.names()).map(|c| format!(" (did you mean `{c}`?)")).unwrap_or_default();
+            let hint = closest(&key.name, &self.registry.names())
+                .map(|c| format!(" (did you mean `{c}`?)"))
+                .unwrap_or_default();
             self.err(file, key.loc, path, Stage::Wiring, format!("unknown node type `{}`{hint}", key.name));
             return None;
         };
@@ -189,7 +205,15 @@ impl<'a> Compiler<'a> {
         }
     }
 
-    fn params<'n>(&mut self, spec: &NodeTypeSpec, key: &Key, body: &'n Node, file: FileId, path: &str, structural: &[&str]) -> Option<&'n [(Key, Node)]> {
+    fn params<'n>(
+        &mut self,
+        spec: &NodeTypeSpec,
+        key: &Key,
+        body: &'n Node,
+        file: FileId,
+        path: &str,
+        structural: &[&str],
+    ) -> Option<&'n [(Key, Node)]> {
         match &body.value {
             Value::Null => Some(&[]),
             Value::Map(m) => {
@@ -197,27 +221,56 @@ impl<'a> Compiler<'a> {
                     if spec.port(&k.name).is_none() && !structural.contains(&k.name.as_str()) {
                         let mut expected: Vec<&str> = spec.ports.iter().map(|p| p.name).collect();
                         expected.extend(structural.iter().filter(|s| **s != "name"));
-                        let list = if expected.is_empty() { "it takes none".to_string() } else { format!("expected one of: {}", expected.join(", ")) };
-                        self.err(file, k.loc, path, Stage::Schema, format!("unknown port `{}` of node `{}`; {list}", k.name, spec.name));
+                        let list = if expected.is_empty() {
+                            "it takes none".to_string()
+                        } else {
+                            format!("expected one of: {}", expected.join(", "))
+                        };
+                        self.err(
+                            file,
+                            k.loc,
+                            path,
+                            Stage::Schema,
+                            format!("unknown port `{}` of node `{}`; {list}", k.name, spec.name),
+                        );
                     }
                 }
                 Some(m)
             }
             other => {
-                self.err(file, body.loc, path, Stage::Schema, format!("expected the ports of `{}` as a mapping, found {}", key.name, other.kind()));
+                self.err(
+                    file,
+                    body.loc,
+                    path,
+                    Stage::Schema,
+                    format!("expected the ports of `{}` as a mapping, found {}", key.name, other.kind()),
+                );
                 None
             }
         }
     }
 
     /// A literal value for a structural port (thresholds, durations): refs are not allowed.
-    fn literal_port(&mut self, spec: &NodeTypeSpec, body: &Node, name: &str, file: FileId, path: &str) -> Option<BbValue> {
+    fn literal_port(
+        &mut self,
+        spec: &NodeTypeSpec,
+        body: &Node,
+        name: &str,
+        file: FileId,
+        path: &str,
+    ) -> Option<BbValue> {
         let port = spec.port(name)?;
         let Some(v) = body.get(name) else {
             return port.default.as_ref().and_then(|d| BbValue::from_json(port.ty, d).ok());
         };
         if v.as_str().and_then(parse_ref).is_some() {
-            self.err(file, v.loc, path, Stage::Schema, format!("port `{name}` of `{}` must be a literal, not a blackboard reference", spec.name));
+            self.err(
+                file,
+                v.loc,
+                path,
+                Stage::Schema,
+                format!("port `{name}` of `{}` must be a literal, not a blackboard reference", spec.name),
+            );
             return None;
         }
         match BbValue::from_json(port.ty, &v.to_json()) {
@@ -247,16 +300,34 @@ impl<'a> Compiler<'a> {
         };
         let Some(children_node) = children_node else {
             if params_ok {
-                self.err(file, key.loc, &path, Stage::Schema, format!("`{}` needs `children:` (a list of nodes)", spec.name));
+                self.err(
+                    file,
+                    key.loc,
+                    &path,
+                    Stage::Schema,
+                    format!("`{}` needs `children:` (a list of nodes)", spec.name),
+                );
             }
             return None;
         };
         let Some(items) = children_node.as_seq() else {
-            self.err(file, children_node.loc, &path, Stage::Schema, format!("`children` of `{}` must be a list of nodes, found {}", spec.name, children_node.value.kind()));
+            self.err(
+                file,
+                children_node.loc,
+                &path,
+                Stage::Schema,
+                format!("`children` of `{}` must be a list of nodes, found {}", spec.name, children_node.value.kind()),
+            );
             return None;
         };
         if items.is_empty() {
-            self.err(file, children_node.loc, &path, Stage::Schema, format!("`{}` needs at least one child", spec.name));
+            self.err(
+                file,
+                children_node.loc,
+                &path,
+                Stage::Schema,
+                format!("`{}` needs at least one child", spec.name),
+            );
             return None;
         }
         let mut children = Vec::new();
@@ -274,7 +345,13 @@ impl<'a> Compiler<'a> {
             if let Some(BbValue::Int(s)) = self.literal_port(spec, body, "success_threshold", file, &path) {
                 if s < 1 || s as usize > n {
                     let loc = body.get("success_threshold").map_or(key.loc, |v| v.loc);
-                    self.err(file, loc, &path, Stage::Schema, format!("success_threshold must be between 1 and the number of children ({n}), found {s}"));
+                    self.err(
+                        file,
+                        loc,
+                        &path,
+                        Stage::Schema,
+                        format!("success_threshold must be between 1 and the number of children ({n}), found {s}"),
+                    );
                     ok = false;
                 }
                 success_threshold = s.max(1) as usize;
@@ -282,7 +359,13 @@ impl<'a> Compiler<'a> {
             if let Some(BbValue::Int(f)) = self.literal_port(spec, body, "failure_threshold", file, &path) {
                 if f < 1 || f as usize > n {
                     let loc = body.get("failure_threshold").map_or(key.loc, |v| v.loc);
-                    self.err(file, loc, &path, Stage::Schema, format!("failure_threshold must be between 1 and the number of children ({n}), found {f}"));
+                    self.err(
+                        file,
+                        loc,
+                        &path,
+                        Stage::Schema,
+                        format!("failure_threshold must be between 1 and the number of children ({n}), found {f}"),
+                    );
                     ok = false;
                 }
                 failure_threshold = f.max(1) as usize;
@@ -339,7 +422,13 @@ impl<'a> Compiler<'a> {
                         Some(BbValue::Int(n)) if n >= 1 => count = Some(n as u32),
                         Some(BbValue::Int(n)) => {
                             let loc = body.get("times").map_or(key.loc, |v| v.loc);
-                            self.err(file, loc, &path, Stage::Schema, format!("times must be at least 1 (leave it out to repeat forever), found {n}"));
+                            self.err(
+                                file,
+                                loc,
+                                &path,
+                                Stage::Schema,
+                                format!("times must be at least 1 (leave it out to repeat forever), found {n}"),
+                            );
                             ok = false;
                         }
                         _ => ok = false,
@@ -355,7 +444,10 @@ impl<'a> Compiler<'a> {
                 }
                 _ => ok = false,
             },
-            DecoratorType::Inverter | DecoratorType::ForceSuccess | DecoratorType::ForceFailure | DecoratorType::RunOnce => {}
+            DecoratorType::Inverter
+            | DecoratorType::ForceSuccess
+            | DecoratorType::ForceFailure
+            | DecoratorType::RunOnce => {}
         }
         let child = child?;
         ok.then(|| Ir {
@@ -370,35 +462,66 @@ impl<'a> Compiler<'a> {
     fn state_machine(&mut self, spec: &NodeTypeSpec, key: &Key, body: &Node, file: FileId, path: String) -> Option<Ir> {
         self.params(spec, key, body, file, &path, &["states", "name"])?;
         let Some(states_node) = body.get("states") else {
-            self.err(file, key.loc, &path, Stage::Schema, "`state_machine` needs `states:` (a mapping of state names to states)");
+            self.err(
+                file,
+                key.loc,
+                &path,
+                Stage::Schema,
+                "`state_machine` needs `states:` (a mapping of state names to states)",
+            );
             return None;
         };
         let Some(state_entries) = states_node.as_map() else {
-            self.err(file, states_node.loc, &path, Stage::Schema, format!("`states` must be a mapping of state names to states, found {}", states_node.value.kind()));
+            self.err(
+                file,
+                states_node.loc,
+                &path,
+                Stage::Schema,
+                format!("`states` must be a mapping of state names to states, found {}", states_node.value.kind()),
+            );
             return None;
         };
         if state_entries.is_empty() {
             self.err(file, states_node.loc, &path, Stage::Schema, "`states` is empty");
             return None;
         }
-        let index: HashMap<&str, usize> = state_entries.iter().enumerate().map(|(i, (k, _))| (k.name.as_str(), i)).collect();
+        let index: HashMap<&str, usize> =
+            state_entries.iter().enumerate().map(|(i, (k, _))| (k.name.as_str(), i)).collect();
         let names: Vec<&str> = state_entries.iter().map(|(k, _)| k.name.as_str()).collect();
         let mut ok = true;
         let initial = match body.get("initial") {
             None => {
-                self.err(file, key.loc, &path, Stage::Schema, "missing port `initial` of `state_machine` (the first state)");
+                self.err(
+                    file,
+                    key.loc,
+                    &path,
+                    Stage::Schema,
+                    "missing port `initial` of `state_machine` (the first state)",
+                );
                 return None;
             }
             Some(n) => match n.as_str() {
                 Some(s) => match index.get(s) {
                     Some(&i) => i,
                     None => {
-                        self.err(file, n.loc, &path, Stage::Wiring, format!("initial state `{s}` is not defined; states are: {}", names.join(", ")));
+                        self.err(
+                            file,
+                            n.loc,
+                            &path,
+                            Stage::Wiring,
+                            format!("initial state `{s}` is not defined; states are: {}", names.join(", ")),
+                        );
                         return None;
                     }
                 },
                 None => {
-                    self.err(file, n.loc, &path, Stage::Schema, format!("`initial` must be a state name, found {}", n.value.kind()));
+                    self.err(
+                        file,
+                        n.loc,
+                        &path,
+                        Stage::Schema,
+                        format!("`initial` must be a state name, found {}", n.value.kind()),
+                    );
                     return None;
                 }
             },
@@ -408,7 +531,16 @@ impl<'a> Compiler<'a> {
             let spath = format!("{path}.{}", k.name);
             let mut st = IrState { name: k.name.clone(), run: None, transitions: Vec::new(), terminal: None };
             let Some(fields) = snode.as_map() else {
-                self.err(file, snode.loc, &spath, Stage::Schema, format!("a state must be a mapping with `run`, `transitions` or `terminal`, found {}", snode.value.kind()));
+                self.err(
+                    file,
+                    snode.loc,
+                    &spath,
+                    Stage::Schema,
+                    format!(
+                        "a state must be a mapping with `run`, `transitions` or `terminal`, found {}",
+                        snode.value.kind()
+                    ),
+                );
                 ok = false;
                 continue;
             };
@@ -428,7 +560,13 @@ impl<'a> Compiler<'a> {
                     },
                     "transitions" => {
                         let Some(list) = fv.as_seq() else {
-                            self.err(file, fv.loc, &spath, Stage::Schema, format!("`transitions` must be a list, found {}", fv.value.kind()));
+                            self.err(
+                                file,
+                                fv.loc,
+                                &spath,
+                                Stage::Schema,
+                                format!("`transitions` must be a list, found {}", fv.value.kind()),
+                            );
                             ok = false;
                             continue;
                         };
@@ -442,16 +580,34 @@ impl<'a> Compiler<'a> {
                     }
                     "description" => {}
                     other => {
-                        self.err(file, fk.loc, &spath, Stage::Schema, format!("unknown key `{other}` in a state; expected run, transitions, terminal or description"));
+                        self.err(
+                            file,
+                            fk.loc,
+                            &spath,
+                            Stage::Schema,
+                            format!(
+                                "unknown key `{other}` in a state; expected run, transitions, terminal or description"
+                            ),
+                        );
                         ok = false;
                     }
                 }
             }
             if st.terminal.is_some() && (st.run.is_some() || !st.transitions.is_empty()) {
-                self.err(file, k.loc, &spath, Stage::Wiring, "a terminal state ends the machine: it cannot have `run` or `transitions`");
+                self.err(
+                    file,
+                    k.loc,
+                    &spath,
+                    Stage::Wiring,
+                    "a terminal state ends the machine: it cannot have `run` or `transitions`",
+                );
                 ok = false;
             }
-            if st.terminal.is_none() && st.run.is_none() && !st.transitions.iter().any(|(t, _)| matches!(t, Trigger::Timer(_) | Trigger::Event(_))) && fields.iter().all(|(fk, _)| fk.name != "run") {
+            if st.terminal.is_none()
+                && st.run.is_none()
+                && !st.transitions.iter().any(|(t, _)| matches!(t, Trigger::Timer(_) | Trigger::Event(_)))
+                && fields.iter().all(|(fk, _)| fk.name != "run")
+            {
                 self.err(file, k.loc, &spath, Stage::Wiring, "a state without `run` must have a timer or event transition, or be `terminal`; otherwise it waits forever");
                 ok = false;
             }
@@ -472,22 +628,56 @@ impl<'a> Compiler<'a> {
             }
             for (i, (k, _)) in state_entries.iter().enumerate() {
                 if !seen[i] {
-                    self.err(file, k.loc, &format!("{path}.{}", k.name), Stage::Wiring, format!("state `{}` is unreachable: no transition from `{}` leads to it", k.name, names[initial]));
+                    self.err(
+                        file,
+                        k.loc,
+                        &format!("{path}.{}", k.name),
+                        Stage::Wiring,
+                        format!(
+                            "state `{}` is unreachable: no transition from `{}` leads to it",
+                            k.name, names[initial]
+                        ),
+                    );
                     ok = false;
                 }
             }
         }
-        ok.then(|| Ir { type_name: spec.name.into(), path, loc: key.loc, file, kind: IrKind::StateMachine { states, initial } })
+        ok.then(|| Ir {
+            type_name: spec.name.into(),
+            path,
+            loc: key.loc,
+            file,
+            kind: IrKind::StateMachine { states, initial },
+        })
     }
 
-    fn transition(&mut self, t: &Node, file: FileId, path: &str, index: &HashMap<&str, usize>, names: &[&str]) -> Option<(Trigger, usize)> {
+    fn transition(
+        &mut self,
+        t: &Node,
+        file: FileId,
+        path: &str,
+        index: &HashMap<&str, usize>,
+        names: &[&str],
+    ) -> Option<(Trigger, usize)> {
         let Some(fields) = t.as_map() else {
-            self.err(file, t.loc, path, Stage::Schema, format!("a transition must be a mapping like `{{on: success, to: next}}`, found {}", t.value.kind()));
+            self.err(
+                file,
+                t.loc,
+                path,
+                Stage::Schema,
+                format!("a transition must be a mapping like `{{on: success, to: next}}`, found {}", t.value.kind()),
+            );
             return None;
         };
         for (k, _) in fields {
             if !["on", "to", "after_s", "event"].contains(&k.name.as_str()) {
-                self.err(file, k.loc, path, Stage::Schema, format!("unknown key `{}` in a transition; expected on, to, after_s or event", k.name));
+                self.err(
+                    file,
+                    k.loc,
+                    path,
+                    Stage::Schema,
+                    format!("unknown key `{}` in a transition; expected on, to, after_s or event", k.name),
+                );
                 return None;
             }
         }
@@ -499,11 +689,23 @@ impl<'a> Compiler<'a> {
                 Some(v) => match v.as_f64() {
                     Some(s) if s >= 0.0 && s.is_finite() => Trigger::Timer(Duration::from_secs_f64(s)),
                     Some(s) => {
-                        self.err(file, v.loc, path, Stage::Schema, format!("`after_s` must be a non-negative number of seconds, found {s}"));
+                        self.err(
+                            file,
+                            v.loc,
+                            path,
+                            Stage::Schema,
+                            format!("`after_s` must be a non-negative number of seconds, found {s}"),
+                        );
                         return None;
                     }
                     None => {
-                        self.err(file, v.loc, path, Stage::Schema, format!("`after_s` must be a number of seconds, found {}", v.value.kind()));
+                        self.err(
+                            file,
+                            v.loc,
+                            path,
+                            Stage::Schema,
+                            format!("`after_s` must be a number of seconds, found {}", v.value.kind()),
+                        );
                         return None;
                     }
                 },
@@ -521,11 +723,23 @@ impl<'a> Compiler<'a> {
             },
             Some(other) => {
                 let loc = t.get("on").map_or(t.loc, |n| n.loc);
-                self.err(file, loc, path, Stage::Schema, format!("unknown trigger `{other}`; expected success, failure, timer or event"));
+                self.err(
+                    file,
+                    loc,
+                    path,
+                    Stage::Schema,
+                    format!("unknown trigger `{other}`; expected success, failure, timer or event"),
+                );
                 return None;
             }
             None => {
-                self.err(file, t.loc, path, Stage::Schema, "a transition needs `on:` (success, failure, timer or event)");
+                self.err(
+                    file,
+                    t.loc,
+                    path,
+                    Stage::Schema,
+                    "a transition needs `on:` (success, failure, timer or event)",
+                );
                 return None;
             }
         };
@@ -534,13 +748,25 @@ impl<'a> Compiler<'a> {
             return None;
         };
         let Some(to) = to_node.as_str() else {
-            self.err(file, to_node.loc, path, Stage::Schema, format!("`to` must be a state name, found {}", to_node.value.kind()));
+            self.err(
+                file,
+                to_node.loc,
+                path,
+                Stage::Schema,
+                format!("`to` must be a state name, found {}", to_node.value.kind()),
+            );
             return None;
         };
         match index.get(to) {
             Some(&i) => Some((trigger, i)),
             None => {
-                self.err(file, to_node.loc, path, Stage::Wiring, format!("transition to undefined state `{to}`; states are: {}", names.join(", ")));
+                self.err(
+                    file,
+                    to_node.loc,
+                    path,
+                    Stage::Wiring,
+                    format!("transition to undefined state `{to}`; states are: {}", names.join(", ")),
+                );
                 None
             }
         }
@@ -552,7 +778,13 @@ impl<'a> Compiler<'a> {
             Value::Map(m) => {
                 for (k, _) in m {
                     if k.name != "name" {
-                        self.err(file, k.loc, &path, Stage::Schema, format!("unknown port `{}` of node `subtree`; expected one of: name", k.name));
+                        self.err(
+                            file,
+                            k.loc,
+                            &path,
+                            Stage::Schema,
+                            format!("unknown port `{}` of node `subtree`; expected one of: name", k.name),
+                        );
                         return None;
                     }
                 }
@@ -563,17 +795,33 @@ impl<'a> Compiler<'a> {
                 n
             }
             other => {
-                self.err(file, body.loc, &path, Stage::Schema, format!("`subtree` takes a name, found {}", other.kind()));
+                self.err(
+                    file,
+                    body.loc,
+                    &path,
+                    Stage::Schema,
+                    format!("`subtree` takes a name, found {}", other.kind()),
+                );
                 return None;
             }
         };
         let Some(name) = name_node.as_str() else {
-            self.err(file, name_node.loc, &path, Stage::Schema, format!("subtree name must be a string, found {}", name_node.value.kind()));
+            self.err(
+                file,
+                name_node.loc,
+                &path,
+                Stage::Schema,
+                format!("subtree name must be a string, found {}", name_node.value.kind()),
+            );
             return None;
         };
         let Some(def) = self.subtrees.get(name) else {
             let known: Vec<&str> = self.subtrees.keys().map(String::as_str).collect();
-            let list = if known.is_empty() { "none are defined".to_string() } else { format!("defined: {}", known.join(", ")) };
+            let list = if known.is_empty() {
+                "none are defined".to_string()
+            } else {
+                format!("defined: {}", known.join(", "))
+            };
             self.err(file, name_node.loc, &path, Stage::Wiring, format!("unknown subtree `{name}`; {list}"));
             return None;
         };
@@ -601,27 +849,63 @@ impl<'a> Compiler<'a> {
                     let as_ref = v.as_str().and_then(parse_ref);
                     match (as_ref, port.ty) {
                         (Some(r), PortType::Params) => {
-                            self.err(file, v.loc, &path, Stage::Schema, format!("port `{}` of `{}` takes a parameter block, not a reference `{{{r}}}`", port.name, spec.name));
+                            self.err(
+                                file,
+                                v.loc,
+                                &path,
+                                Stage::Schema,
+                                format!(
+                                    "port `{}` of `{}` takes a parameter block, not a reference `{{{r}}}`",
+                                    port.name, spec.name
+                                ),
+                            );
                             ok = false;
                             continue;
                         }
                         (Some(r), _) => (IrBinding::Ref(r.to_string()), v.loc),
-                        (None, _) if port.direction == crate::registry::PortDirection::Output || port.direction == crate::registry::PortDirection::InOut => {
-                            self.err(file, v.loc, &path, Stage::Wiring, format!("output port `{}` of `{}` must name a blackboard entry like \"{{{}}}\", found {}", port.name, spec.name, port.name, v.value.kind()));
+                        (None, _)
+                            if port.direction == crate::registry::PortDirection::Output
+                                || port.direction == crate::registry::PortDirection::InOut =>
+                        {
+                            self.err(
+                                file,
+                                v.loc,
+                                &path,
+                                Stage::Wiring,
+                                format!(
+                                    "output port `{}` of `{}` must name a blackboard entry like \"{{{}}}\", found {}",
+                                    port.name,
+                                    spec.name,
+                                    port.name,
+                                    v.value.kind()
+                                ),
+                            );
                             ok = false;
                             continue;
                         }
                         (None, _) => match BbValue::from_json(port.ty, &v.to_json()) {
                             Ok(val) => {
                                 if let Some(msg) = range_problem(port.name, &val) {
-                                    self.err(file, v.loc, &path, Stage::Schema, format!("port `{}` of `{}`: {msg}", port.name, spec.name));
+                                    self.err(
+                                        file,
+                                        v.loc,
+                                        &path,
+                                        Stage::Schema,
+                                        format!("port `{}` of `{}`: {msg}", port.name, spec.name),
+                                    );
                                     ok = false;
                                     continue;
                                 }
                                 (IrBinding::Literal(val), v.loc)
                             }
                             Err(e) => {
-                                self.err(file, v.loc, &path, Stage::Schema, format!("port `{}` of `{}` ({}): {e}", port.name, spec.name, port.ty));
+                                self.err(
+                                    file,
+                                    v.loc,
+                                    &path,
+                                    Stage::Schema,
+                                    format!("port `{}` of `{}` ({}): {e}", port.name, spec.name, port.ty),
+                                );
                                 ok = false;
                                 continue;
                             }
@@ -635,7 +919,16 @@ impl<'a> Compiler<'a> {
                     },
                     None if port.optional => (IrBinding::Unset, key.loc),
                     None => {
-                        self.err(file, key.loc, &path, Stage::Wiring, format!("missing port `{}` ({}) of `{}`: {}", port.name, port.ty, spec.name, port.description));
+                        self.err(
+                            file,
+                            key.loc,
+                            &path,
+                            Stage::Wiring,
+                            format!(
+                                "missing port `{}` ({}) of `{}`: {}",
+                                port.name, port.ty, spec.name, port.description
+                            ),
+                        );
                         ok = false;
                         continue;
                     }
@@ -666,7 +959,12 @@ fn range_problem(name: &str, v: &BbValue) -> Option<String> {
 
 /// The closest name by edit distance, if reasonably close.
 pub fn closest<'n>(name: &str, candidates: &[&'n str]) -> Option<&'n str> {
-    candidates.iter().map(|c| (edit_distance(name, c), *c)).filter(|(d, c)| *d <= 2.max(c.len() / 3)).min().map(|(_, c)| c)
+    candidates
+        .iter()
+        .map(|c| (edit_distance(name, c), *c))
+        .filter(|(d, c)| *d <= 2.max(c.len() / 3))
+        .min()
+        .map(|(_, c)| c)
 }
 
 fn edit_distance(a: &str, b: &str) -> usize {

@@ -59,7 +59,13 @@ pub struct Diagnostic {
 
 impl Diagnostic {
     /// A diagnostic at a location.
-    pub fn new(file: impl Into<PathBuf>, loc: Loc, node_path: impl Into<String>, stage: Stage, message: impl Into<String>) -> Self {
+    pub fn new(
+        file: impl Into<PathBuf>,
+        loc: Loc,
+        node_path: impl Into<String>,
+        stage: Stage,
+        message: impl Into<String>,
+    ) -> Self {
         Diagnostic {
             file: file.into(),
             line: loc.line,

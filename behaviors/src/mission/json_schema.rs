@@ -19,7 +19,9 @@ fn port_value_schema(ty: PortType) -> Value {
         PortType::Float => json!({"type": "number"}),
         PortType::String | PortType::Robot => json!({"type": "string"}),
         PortType::Point => point,
-        PortType::Pose => json!({"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "yaw": {"type": "number"}}, "required": ["x", "y"], "additionalProperties": false}),
+        PortType::Pose => {
+            json!({"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "yaw": {"type": "number"}}, "required": ["x", "y"], "additionalProperties": false})
+        }
         PortType::Goal => json!({"type": "string", "pattern": REF_PATTERN}),
         PortType::Points => json!({"type": "array", "items": point}),
         PortType::Params => json!({"type": "object"}),
@@ -31,18 +33,31 @@ fn node_body_schema(spec: &NodeTypeSpec) -> Value {
     let tree = json!({"$ref": "#/$defs/TreeNode"});
     let mut props = Map::new();
     let mut required = Vec::new();
-    props.insert("name".into(), json!({"type": "string", "description": "Display name used in node paths and traces."}));
+    props
+        .insert("name".into(), json!({"type": "string", "description": "Display name used in node paths and traces."}));
     for p in &spec.ports {
-        let reference = json!({"type": "string", "pattern": REF_PATTERN, "description": "A blackboard entry, like \"{goal}\"."});
+        let reference =
+            json!({"type": "string", "pattern": REF_PATTERN, "description": "A blackboard entry, like \"{goal}\"."});
         let schema = match (p.direction, p.ty) {
             (PortDirection::Output | PortDirection::InOut, _) => reference,
             (_, PortType::Params) => port_value_schema(p.ty),
-            _ if matches!(spec.category, Category::Control | Category::Decorator | Category::StateMachine | Category::Subtree) => port_value_schema(p.ty),
+            _ if matches!(
+                spec.category,
+                Category::Control | Category::Decorator | Category::StateMachine | Category::Subtree
+            ) =>
+            {
+                port_value_schema(p.ty)
+            }
             _ => json!({"anyOf": [port_value_schema(p.ty), reference]}),
         };
         let mut schema = schema;
         if let Value::Object(o) = &mut schema {
-            let mut desc = format!("{} ({}{})", p.description, p.ty, if p.direction == PortDirection::Input { "" } else { ", output" });
+            let mut desc = format!(
+                "{} ({}{})",
+                p.description,
+                p.ty,
+                if p.direction == PortDirection::Input { "" } else { ", output" }
+            );
             if let Some(d) = &p.default {
                 desc.push_str(&format!(" Default: {d}."));
             }
@@ -67,12 +82,18 @@ fn node_body_schema(spec: &NodeTypeSpec) -> Value {
             json!({"type": "object", "properties": props, "required": required, "additionalProperties": false})
         }
         Category::StateMachine => {
-            props.insert("states".into(), json!({"type": "object", "additionalProperties": {"$ref": "#/$defs/State"}, "minProperties": 1}));
+            props.insert(
+                "states".into(),
+                json!({"type": "object", "additionalProperties": {"$ref": "#/$defs/State"}, "minProperties": 1}),
+            );
             json!({"type": "object", "properties": props, "required": ["initial", "states"], "additionalProperties": false})
         }
-        Category::Subtree => json!({"anyOf": [{"type": "string"}, {"type": "object", "properties": props, "required": ["name"], "additionalProperties": false}]}),
+        Category::Subtree => {
+            json!({"anyOf": [{"type": "string"}, {"type": "object", "properties": props, "required": ["name"], "additionalProperties": false}]})
+        }
         Category::Action | Category::Condition => {
-            let obj = json!({"type": "object", "properties": props, "required": required, "additionalProperties": false});
+            let obj =
+                json!({"type": "object", "properties": props, "required": required, "additionalProperties": false});
             if required.is_empty() { json!({"anyOf": [{"type": "null"}, obj]}) } else { obj }
         }
     }
@@ -94,7 +115,8 @@ pub fn mission_schema(registry: &NodeRegistry) -> Value {
             json!({"type": "object", "properties": props, "required": [spec.name], "additionalProperties": false})
         })
         .collect();
-    let tree = json!({"description": "A behaviour-tree node: one key, the node type, holding its ports.", "oneOf": variants});
+    let tree =
+        json!({"description": "A behaviour-tree node: one key, the node type, holding its ports.", "oneOf": variants});
     let state = json!({
         "type": "object",
         "properties": {

@@ -94,7 +94,13 @@ pub fn load_mission(path: &Path, registry: &NodeRegistry) -> LoadedMission {
         Ok(t) => t,
         Err(e) => {
             out.sources.push(String::new());
-            out.diagnostics.push(Diagnostic::new(path, Loc::default(), "", Stage::Parse, format!("cannot read the mission: {e}")));
+            out.diagnostics.push(Diagnostic::new(
+                path,
+                Loc::default(),
+                "",
+                Stage::Parse,
+                format!("cannot read the mission: {e}"),
+            ));
             return out;
         }
     };
@@ -110,7 +116,13 @@ pub fn load_mission(path: &Path, registry: &NodeRegistry) -> LoadedMission {
 
     // --- schema: each section on its own, so every broken section is reported ---
     let Some(entries) = root.as_map() else {
-        diags.push(Diagnostic::new(path, root.loc, "", Stage::Schema, format!("a mission is a mapping with `mission`, `team`, `roles`, …; found {}", root.value.kind())));
+        diags.push(Diagnostic::new(
+            path,
+            root.loc,
+            "",
+            Stage::Schema,
+            format!("a mission is a mapping with `mission`, `team`, `roles`, …; found {}", root.value.kind()),
+        ));
         out.diagnostics = diags;
         return out;
     };
@@ -128,7 +140,11 @@ pub fn load_mission(path: &Path, registry: &NodeRegistry) -> LoadedMission {
                     }
                     if ok { Ok(()) } else { Err(None) }
                 }
-                None => Err(Some(DeError { message: format!("expected a list of robots, found {}", v.value.kind()), loc: Some(v.loc), path: vec![] })),
+                None => Err(Some(DeError {
+                    message: format!("expected a list of robots, found {}", v.value.kind()),
+                    loc: Some(v.loc),
+                    path: vec![],
+                })),
             },
             "roles" => match v.as_map() {
                 Some(roles) => {
@@ -141,7 +157,11 @@ pub fn load_mission(path: &Path, registry: &NodeRegistry) -> LoadedMission {
                     }
                     if ok { Ok(()) } else { Err(None) }
                 }
-                None => Err(Some(DeError { message: format!("expected a mapping of role names to roles, found {}", v.value.kind()), loc: Some(v.loc), path: vec![] })),
+                None => Err(Some(DeError {
+                    message: format!("expected a mapping of role names to roles, found {}", v.value.kind()),
+                    loc: Some(v.loc),
+                    path: vec![],
+                })),
             },
             "mission" | "description" => v.deserialize::<Option<String>>().map(|_| ()).map_err(Some),
             "include" => v.deserialize::<Vec<String>>().map(|_| ()).map_err(Some),
@@ -152,9 +172,29 @@ pub fn load_mission(path: &Path, registry: &NodeRegistry) -> LoadedMission {
             "comms" => v.deserialize::<super::schema::CommsSpec>().map(|_| ()).map_err(Some),
             "sim" => v.deserialize::<Option<super::schema::SimSpec>>().map(|_| ()).map_err(Some),
             other => {
-                const KNOWN: &[&str] = &["mission", "description", "include", "team", "goals", "roles", "subtrees", "complete_when", "time_limit_s", "comms", "sim"];
-                let hint = super::compile::closest(other, KNOWN).map(|c| format!(" (did you mean `{c}`?)")).unwrap_or_default();
-                diags.push(Diagnostic::new(path, k.loc, other, Stage::Schema, format!("unknown key `{other}`{hint}; expected one of: {}", KNOWN.join(", "))));
+                const KNOWN: &[&str] = &[
+                    "mission",
+                    "description",
+                    "include",
+                    "team",
+                    "goals",
+                    "roles",
+                    "subtrees",
+                    "complete_when",
+                    "time_limit_s",
+                    "comms",
+                    "sim",
+                ];
+                let hint = super::compile::closest(other, KNOWN)
+                    .map(|c| format!(" (did you mean `{c}`?)"))
+                    .unwrap_or_default();
+                diags.push(Diagnostic::new(
+                    path,
+                    k.loc,
+                    other,
+                    Stage::Schema,
+                    format!("unknown key `{other}`{hint}; expected one of: {}", KNOWN.join(", ")),
+                ));
                 section_ok = false;
                 continue;
             }
@@ -221,10 +261,22 @@ pub fn load_mission(path: &Path, registry: &NodeRegistry) -> LoadedMission {
             for (bk, bv) in bb_node.and_then(Node::as_map).unwrap_or(&[]) {
                 let bpath = format!("roles.{}.blackboard.{}", rk.name, bk.name);
                 match entry_types.get(&bk.name) {
-                    None => d.push(Diagnostic::new(path, bk.loc, bpath, Stage::Wiring, format!("blackboard entry `{}` is never used by the tree", bk.name))),
+                    None => d.push(Diagnostic::new(
+                        path,
+                        bk.loc,
+                        bpath,
+                        Stage::Wiring,
+                        format!("blackboard entry `{}` is never used by the tree", bk.name),
+                    )),
                     Some(ty) => match BbValue::from_json(*ty, &bv.to_json()) {
                         Ok(v) => values.push((bk.name.clone(), v)),
-                        Err(e) => d.push(Diagnostic::new(path, bv.loc, bpath, Stage::Wiring, format!("entry `{}` feeds {ty} ports: {e}", bk.name))),
+                        Err(e) => d.push(Diagnostic::new(
+                            path,
+                            bv.loc,
+                            bpath,
+                            Stage::Wiring,
+                            format!("entry `{}` feeds {ty} ports: {e}", bk.name),
+                        )),
                     },
                 }
             }
@@ -248,7 +300,7 @@ pub fn load_mission(path: &Path, registry: &NodeRegistry) -> LoadedMission {
         check_team(m, &root, path, registry, &out.roles, &mut diags);
     }
 
-    diags.sort_by(|a, b| (a.file.clone(), a.line, a.column).cmp(&(b.file.clone(), b.line, b.column)));
+    diags.sort_by_key(|d| (d.file.clone(), d.line, d.column));
     diags.dedup();
     out.diagnostics = diags;
     out.mission = mission;
@@ -259,7 +311,13 @@ fn canonical(p: &Path) -> PathBuf {
     std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf())
 }
 
-fn collect_subtrees(root: &Node, file: FileId, into: &mut BTreeMap<String, SubtreeDef>, files: &[PathBuf], diags: &mut Vec<Diagnostic>) {
+fn collect_subtrees(
+    root: &Node,
+    file: FileId,
+    into: &mut BTreeMap<String, SubtreeDef>,
+    files: &[PathBuf],
+    diags: &mut Vec<Diagnostic>,
+) {
     let Some(entries) = root.get("subtrees").and_then(Node::as_map) else { return };
     for (k, v) in entries {
         if let Some(prev) = into.get(&k.name) {
@@ -292,8 +350,18 @@ fn load_includes(
         let target = base.join(rel);
         let canon = canonical(&target);
         if stack.contains(&canon) {
-            let chain: Vec<String> = stack.iter().chain(std::iter::once(&canon)).map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default()).collect();
-            diags.push(Diagnostic::new(including, item.loc, "include", Stage::Parse, format!("include cycle: {}", chain.join(" → "))));
+            let chain: Vec<String> = stack
+                .iter()
+                .chain(std::iter::once(&canon))
+                .map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default())
+                .collect();
+            diags.push(Diagnostic::new(
+                including,
+                item.loc,
+                "include",
+                Stage::Parse,
+                format!("include cycle: {}", chain.join(" → ")),
+            ));
             continue;
         }
         if out.files.iter().any(|f| canonical(f) == canon) {
@@ -302,7 +370,13 @@ fn load_includes(
         let text = match std::fs::read_to_string(&target) {
             Ok(t) => t,
             Err(e) => {
-                diags.push(Diagnostic::new(including, item.loc, "include", Stage::Parse, format!("cannot read included file `{}`: {e}", target.display())));
+                diags.push(Diagnostic::new(
+                    including,
+                    item.loc,
+                    "include",
+                    Stage::Parse,
+                    format!("cannot read included file `{}`: {e}", target.display()),
+                ));
                 continue;
             }
         };
@@ -360,30 +434,58 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, diags: &mut Vec<Diagn
         bad(&["mission"], "the mission needs a name".into());
     }
     if m.comms.position_range_m < 0.0 {
-        bad(&["comms", "position_range_m"], format!("expected a non-negative distance in metres, found {}", m.comms.position_range_m));
+        bad(
+            &["comms", "position_range_m"],
+            format!("expected a non-negative distance in metres, found {}", m.comms.position_range_m),
+        );
     }
     if m.comms.data_range_m < 0.0 {
-        bad(&["comms", "data_range_m"], format!("expected a non-negative distance in metres, found {}", m.comms.data_range_m));
+        bad(
+            &["comms", "data_range_m"],
+            format!("expected a non-negative distance in metres, found {}", m.comms.data_range_m),
+        );
     }
     if m.comms.data_range_m > m.comms.position_range_m {
-        bad(&["comms", "data_range_m"], format!("the data range ({} m) cannot exceed the position range ({} m)", m.comms.data_range_m, m.comms.position_range_m));
+        bad(
+            &["comms", "data_range_m"],
+            format!(
+                "the data range ({} m) cannot exceed the position range ({} m)",
+                m.comms.data_range_m, m.comms.position_range_m
+            ),
+        );
     }
     if m.comms.bandwidth_bytes_per_s <= 0.0 {
-        bad(&["comms", "bandwidth_bytes_per_s"], format!("expected a positive rate, found {}", m.comms.bandwidth_bytes_per_s));
+        bad(
+            &["comms", "bandwidth_bytes_per_s"],
+            format!("expected a positive rate, found {}", m.comms.bandwidth_bytes_per_s),
+        );
     }
     if let Some(g) = &m.goals {
         if g.deconfliction_radius_m < 0.0 {
-            bad(&["goals", "deconfliction_radius_m"], format!("expected a non-negative distance in metres, found {}", g.deconfliction_radius_m));
+            bad(
+                &["goals", "deconfliction_radius_m"],
+                format!("expected a non-negative distance in metres, found {}", g.deconfliction_radius_m),
+            );
         }
         if g.time_limit_per_m_s <= 0.0 {
-            bad(&["goals", "time_limit_per_m_s"], format!("expected a positive number of seconds per metre, found {}", g.time_limit_per_m_s));
+            bad(
+                &["goals", "time_limit_per_m_s"],
+                format!("expected a positive number of seconds per metre, found {}", g.time_limit_per_m_s),
+            );
         }
         if let Some(d) = &g.detect {
             let classes = ClassTable::default_table();
             if classes.by_name(&d.class).is_none() {
-                bad(&["goals", "detect", "class"], format!("unknown class `{}`; classes are: {}", d.class, classes.names().join(", ")));
+                bad(
+                    &["goals", "detect", "class"],
+                    format!("unknown class `{}`; classes are: {}", d.class, classes.names().join(", ")),
+                );
             }
-            for (name, v) in [("merge_distance_m", d.merge_distance_m), ("min_size_m", d.min_size_m), ("placement_region_m", d.placement_region_m)] {
+            for (name, v) in [
+                ("merge_distance_m", d.merge_distance_m),
+                ("min_size_m", d.min_size_m),
+                ("placement_region_m", d.placement_region_m),
+            ] {
                 if v < 0.0 {
                     bad(&["goals", "detect", name], format!("expected a non-negative distance in metres, found {v}"));
                 }
@@ -395,22 +497,28 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, diags: &mut Vec<Diagn
     }
     for (name, role) in &m.roles {
         if !(role.tick_hz > 0.0 && role.tick_hz <= 1000.0) {
-            bad(&["roles", name, "tick_hz"], format!("expected a tick rate in (0, 1000] per second, found {}", role.tick_hz));
+            bad(
+                &["roles", name, "tick_hz"],
+                format!("expected a tick rate in (0, 1000] per second, found {}", role.tick_hz),
+            );
         }
     }
     for (i, r) in m.team.iter().enumerate() {
         let idx = i.to_string();
-        if let Some(l) = &r.localization {
-            if l.prior_sigma_m < 0.0 || l.prior_sigma_deg < 0.0 || l.noise_m < 0.0 {
-                bad(&["team", &idx, "localization"], "uncertainties and noise cannot be negative".into());
-            }
+        if let Some(l) = &r.localization
+            && (l.prior_sigma_m < 0.0 || l.prior_sigma_deg < 0.0 || l.noise_m < 0.0)
+        {
+            bad(&["team", &idx, "localization"], "uncertainties and noise cannot be negative".into());
         }
     }
     if let Some(sim) = &m.sim {
-        if let Some(super::schema::WorldSpec::Generate(g)) = &sim.world {
-            if g.size_m.iter().any(|s| !(*s >= 50.0 && *s <= 5000.0)) {
-                bad(&["sim", "world", "generate", "size_m"], format!("each side must be between 50 and 5000 m, found {:?}", g.size_m));
-            }
+        if let Some(super::schema::WorldSpec::Generate(g)) = &sim.world
+            && g.size_m.iter().any(|s| !(*s >= 50.0 && *s <= 5000.0))
+        {
+            bad(
+                &["sim", "world", "generate", "size_m"],
+                format!("each side must be between 50 and 5000 m, found {:?}", g.size_m),
+            );
         }
         if sim.trials == Some(0) {
             bad(&["sim", "trials"], "expected at least one trial".into());
@@ -434,14 +542,35 @@ fn leaf_types(ir: &Ir, out: &mut Vec<(String, String, Loc, FileId)>) {
         IrKind::Leaf { .. } => out.push((ir.type_name.clone(), ir.path.clone(), ir.loc, ir.file)),
         IrKind::Control { children, .. } => children.iter().for_each(|c| leaf_types(c, out)),
         IrKind::Decorator { child, .. } => leaf_types(child, out),
-        IrKind::StateMachine { states, .. } => states.iter().filter_map(|s| s.run.as_ref()).for_each(|r| leaf_types(r, out)),
+        IrKind::StateMachine { states, .. } => {
+            states.iter().filter_map(|s| s.run.as_ref()).for_each(|r| leaf_types(r, out))
+        }
     }
 }
 
-fn check_team(m: &MissionFile, root: &Node, file: &Path, registry: &NodeRegistry, roles: &BTreeMap<String, CompiledRole>, diags: &mut Vec<Diagnostic>) {
+fn check_team(
+    m: &MissionFile,
+    root: &Node,
+    file: &Path,
+    registry: &NodeRegistry,
+    roles: &BTreeMap<String, CompiledRole>,
+    diags: &mut Vec<Diagnostic>,
+) {
     let mut team_diag = |path: Vec<String>, msg: String| {
         let segs: Vec<&str> = path.iter().map(String::as_str).collect();
-        let shown = path.iter().enumerate().map(|(i, s)| if i > 0 && s.parse::<usize>().is_ok() { format!("[{s}]") } else if i > 0 { format!(".{s}") } else { s.clone() }).collect::<String>();
+        let shown = path
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                if i > 0 && s.parse::<usize>().is_ok() {
+                    format!("[{s}]")
+                } else if i > 0 {
+                    format!(".{s}")
+                } else {
+                    s.clone()
+                }
+            })
+            .collect::<String>();
         diags.push(Diagnostic::new(file, loc_at(root, &segs), shown, Stage::Team, msg));
     };
     if m.team.is_empty() {
@@ -455,24 +584,42 @@ fn check_team(m: &MissionFile, root: &Node, file: &Path, registry: &NodeRegistry
             team_diag(vec!["team".into(), idx.clone(), "id".into()], "a robot needs a non-empty id".into());
         }
         if let Some(first) = ids.insert(&r.id, i) {
-            team_diag(vec!["team".into(), idx.clone(), "id".into()], format!("robot id `{}` is used twice (also team[{first}])", r.id));
+            team_diag(
+                vec!["team".into(), idx.clone(), "id".into()],
+                format!("robot id `{}` is used twice (also team[{first}])", r.id),
+            );
         }
         if !m.roles.contains_key(&r.role) {
             let names: Vec<&str> = m.roles.keys().map(String::as_str).collect();
-            team_diag(vec!["team".into(), idx.clone(), "role".into()], format!("role `{}` is not defined; roles are: {}", r.role, names.join(", ")));
+            team_diag(
+                vec!["team".into(), idx.clone(), "role".into()],
+                format!("role `{}` is not defined; roles are: {}", r.role, names.join(", ")),
+            );
         }
         match (r.kind, r.priority) {
-            (RobotKind::Ugv, None) => team_diag(vec!["team".into(), idx.clone()], format!("UGV `{}` needs a `priority` (lower number = higher priority)", r.id)),
+            (RobotKind::Ugv, None) => team_diag(
+                vec!["team".into(), idx.clone()],
+                format!("UGV `{}` needs a `priority` (lower number = higher priority)", r.id),
+            ),
             (RobotKind::Ugv, Some(p)) => {
                 if let Some(other) = priorities.insert(p, &r.id) {
-                    team_diag(vec!["team".into(), idx.clone(), "priority".into()], format!("priority {p} is used by `{other}` and `{}`; UGV priorities must be unique", r.id));
+                    team_diag(
+                        vec!["team".into(), idx.clone(), "priority".into()],
+                        format!("priority {p} is used by `{other}` and `{}`; UGV priorities must be unique", r.id),
+                    );
                 }
             }
-            (_, Some(_)) => team_diag(vec!["team".into(), idx.clone(), "priority".into()], format!("`priority` orders UGVs only; `{}` is a {}", r.id, r.kind)),
+            (_, Some(_)) => team_diag(
+                vec!["team".into(), idx.clone(), "priority".into()],
+                format!("`priority` orders UGVs only; `{}` is a {}", r.id, r.kind),
+            ),
             (_, None) => {}
         }
         if r.localization.is_some() && r.kind != RobotKind::Ugv {
-            team_diag(vec!["team".into(), idx.clone(), "localization".into()], format!("`localization` applies to UGVs; `{}` is a {} (it has GPS or is fixed)", r.id, r.kind));
+            team_diag(
+                vec!["team".into(), idx.clone(), "localization".into()],
+                format!("`localization` applies to UGVs; `{}` is a {} (it has GPS or is fixed)", r.id, r.kind),
+            );
         }
         // Every node of the robot's role must suit its kind and find its skills.
         if let Some(role) = roles.get(&r.role) {
@@ -485,12 +632,21 @@ fn check_team(m: &MissionFile, root: &Node, file: &Path, registry: &NodeRegistry
                     let kinds: Vec<&str> = spec.robot_kinds.iter().map(|k| k.as_str()).collect();
                     team_diag(
                         vec!["team".into(), idx.clone(), "role".into()],
-                        format!("`{}` ({}) runs role `{}`, whose node `{ty}` at {npath} runs on {} only", r.id, r.kind, r.role, kinds.join(", ")),
+                        format!(
+                            "`{}` ({}) runs role `{}`, whose node `{ty}` at {npath} runs on {} only",
+                            r.id,
+                            r.kind,
+                            r.role,
+                            kinds.join(", ")
+                        ),
                     );
                 }
                 for skill in &spec.skills {
                     if !skills_of(r.kind).contains(skill) && reported.insert(format!("{ty}:{skill}")) {
-                        team_diag(vec!["team".into(), idx.clone(), "role".into()], format!("node `{ty}` needs the `{skill}` skill, which a {} does not carry", r.kind));
+                        team_diag(
+                            vec!["team".into(), idx.clone(), "role".into()],
+                            format!("node `{ty}` needs the `{skill}` skill, which a {} does not carry", r.kind),
+                        );
                     }
                 }
             }
@@ -498,7 +654,13 @@ fn check_team(m: &MissionFile, root: &Node, file: &Path, registry: &NodeRegistry
     }
     for name in m.roles.keys() {
         if !m.team.iter().any(|r| &r.role == name) {
-            diags.push(Diagnostic::new(file, root.get("roles").and_then(|r| r.key(name)).map_or(root.loc, |k| k.loc), format!("roles.{name}"), Stage::Team, format!("role `{name}` is assigned to no robot")));
+            diags.push(Diagnostic::new(
+                file,
+                root.get("roles").and_then(|r| r.key(name)).map_or(root.loc, |k| k.loc),
+                format!("roles.{name}"),
+                Stage::Team,
+                format!("role `{name}` is assigned to no robot"),
+            ));
         }
     }
 }

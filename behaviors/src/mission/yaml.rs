@@ -9,8 +9,8 @@
 use std::fmt;
 
 use serde::de::{
-    self, Deserialize, DeserializeSeed, Deserializer, EnumAccess, IntoDeserializer, MapAccess,
-    SeqAccess, VariantAccess, Visitor,
+    self, Deserialize, DeserializeSeed, Deserializer, EnumAccess, IntoDeserializer, MapAccess, SeqAccess,
+    VariantAccess, Visitor,
 };
 use serde_saphyr::Spanned;
 
@@ -210,22 +210,22 @@ enum Raw {
 }
 
 fn into_node(raw: Spanned<Raw>) -> Node {
-        let loc = Loc::from_saphyr(&raw.referenced);
-        let value = match raw.value {
-            Raw::Null => Value::Null,
-            Raw::Bool(b) => Value::Bool(b),
-            Raw::Int(i) => Value::Int(i),
-            Raw::Float(f) => Value::Float(f),
-            Raw::Str(s) => Value::Str(s),
-            Raw::Seq(items) => Value::Seq(items.into_iter().map(into_node).collect()),
-            Raw::Map(entries) => Value::Map(
-                entries
-                    .into_iter()
-                    .map(|(k, v)| (Key { loc: Loc::from_saphyr(&k.referenced), name: k.value }, into_node(v)))
-                    .collect(),
-            ),
-        };
-        Node { loc, value }
+    let loc = Loc::from_saphyr(&raw.referenced);
+    let value = match raw.value {
+        Raw::Null => Value::Null,
+        Raw::Bool(b) => Value::Bool(b),
+        Raw::Int(i) => Value::Int(i),
+        Raw::Float(f) => Value::Float(f),
+        Raw::Str(s) => Value::Str(s),
+        Raw::Seq(items) => Value::Seq(items.into_iter().map(into_node).collect()),
+        Raw::Map(entries) => Value::Map(
+            entries
+                .into_iter()
+                .map(|(k, v)| (Key { loc: Loc::from_saphyr(&k.referenced), name: k.value }, into_node(v)))
+                .collect(),
+        ),
+    };
+    Node { loc, value }
 }
 
 impl<'de> Deserialize<'de> for Raw {
@@ -448,11 +448,7 @@ impl<'de, 'a> Deserializer<'de> for NodeDeserializer<'a> {
         }
     }
 
-    fn deserialize_newtype_struct<V: Visitor<'de>>(
-        self,
-        _name: &'static str,
-        visitor: V,
-    ) -> Result<V::Value, DeError> {
+    fn deserialize_newtype_struct<V: Visitor<'de>>(self, _name: &'static str, visitor: V) -> Result<V::Value, DeError> {
         visitor.visit_newtype_struct(self)
     }
 
@@ -501,8 +497,7 @@ impl<'de, 'a> MapAccess<'de> for NodeMap<'a> {
         let Some((k, node)) = self.value.take() else {
             return Err(<DeError as de::Error>::custom("value requested before key"));
         };
-        seed.deserialize(NodeDeserializer { node })
-            .map_err(|e| e.at(node.loc).within(PathSeg::Key(k.name.clone())))
+        seed.deserialize(NodeDeserializer { node }).map_err(|e| e.at(node.loc).within(PathSeg::Key(k.name.clone())))
     }
 }
 
@@ -538,7 +533,11 @@ impl<'de, 'a> VariantAccess<'de> for NodeVariant<'a> {
     fn tuple_variant<V: Visitor<'de>>(self, _len: usize, visitor: V) -> Result<V::Value, DeError> {
         NodeDeserializer { node: self.node }.deserialize_any(visitor)
     }
-    fn struct_variant<V: Visitor<'de>>(self, _fields: &'static [&'static str], visitor: V) -> Result<V::Value, DeError> {
+    fn struct_variant<V: Visitor<'de>>(
+        self,
+        _fields: &'static [&'static str],
+        visitor: V,
+    ) -> Result<V::Value, DeError> {
         NodeDeserializer { node: self.node }.deserialize_any(visitor)
     }
 }

@@ -1,0 +1,18 @@
+//! MCAP recording and reading for spomp.
+//!
+//! Every message is a ROS 2 type from [`spomp_core::ros`], CDR-encoded (little endian, with the
+//! 4-byte encapsulation header ROS 2 uses) on a channel whose schema is the type's `ros2msg`
+//! definition, so `ros2 bag`, Foxglove and the Python `mcap-ros2-support` decoder read the files
+//! as they are.
+//!
+//! Topics (per robot `R`): `/R/pose` (PoseStamped, map frame), `/R/odom` (Odometry),
+//! `/R/cmd_vel` (Twist), `/R/panorama/depth` (Image mono16, 1/512 m per count),
+//! `/R/panorama/semantic` (Image mono8 class labels), `/R/reachability` (LaserScan),
+//! `/R/path` (Path), `/R/bt` (Log: node transitions), `/team/state` (String: JSON team-state
+//! changes), `/mission/status` (String: JSON).
+
+mod read;
+mod record;
+
+pub use read::{LogMessage, McapLog, ReadError, decode_cdr};
+pub use record::{RecordError, Recorder, RecorderOptions, encode_cdr};

@@ -1,0 +1,260 @@
+//! Writing.
+
+use std::collections::BTreeMap;
+use std::collections::HashMap;
+use std::io::{Seek, Write};
+
+use byteorder::LittleEndian;
+use spomp_behaviors::trace::TransitionRecord;
+use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
+use spomp_core::ros::{self, RosMessage};
+use spomp_core::{DepthPanorama, Pose2, ReachabilityScan, SemanticPanorama, Time, Twist2};
+
+/// CDR encapsulation header for little-endian plain CDR, as ROS 2 writes it.
+pub(crate) const CDR_LE_HEADER: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
+
+/// Why recording failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// The MCAP writer failed (I/O or format).
+    #[error("mcap: {0}")]
+    Mcap(#[from] mcap::McapError),
+    /// A message could not be encoded.
+    #[error("cdr encoding of {type_name}: {message}")]
+    Encode {
+        /// Message type.
+        type_name: &'static str,
+        /// What failed.
+        message: String,
+    },
+    /// JSON encoding failed.
+    #[error("json: {0}")]
+    Json(#[from] serde_json::Error),
+}
+
+/// Encodes a ROS 2 message as ROS 2 puts it on the wire: encapsulation header + CDR body.
+pub fn encode_cdr<M: RosMessage>(msg: &M) -> Result<Vec<u8>, RecordError> {
+    let body = cdr_encoding::to_vec::<M, LittleEndian>(msg)
+        .map_err(|e| RecordError::Encode { type_name: M::TYPE_NAME, message: e.to_string() })?;
+    let mut out = Vec::with_capacity(body.len() + 4);
+    out.extend_from_slice(&CDR_LE_HEADER);
+    out.extend_from_slice(&body);
+    Ok(out)
+}
+
+/// Recording options.
+#[derive(Debug, Clone)]
+pub struct RecorderOptions {
+    /// Keep every n-th panorama row and column (1 = full size).
+    pub panorama_downsample: usize,
+    /// Compress chunks with zstd.
+    pub compress: bool,
+}
+
+impl Default for RecorderOptions {
+    fn default() -> Self {
+        RecorderOptions { panorama_downsample: 4, compress: true }
+    }
+}
+
+/// Writes a run to MCAP.
+pub struct Recorder<W: Write + Seek> {
+    writer: mcap::Writer<W>,
+    schemas: HashMap<&'static str, u16>,
+    channels: HashMap<String, u16>,
+    sequence: u32,
+    options: RecorderOptions,
+    messages: u64,
+}
+
+impl<W: Write + Seek> Recorder<W> {
+    /// A recorder writing to `w`.
+    pub fn new(w: W, options: RecorderOptions) -> Result<Self, RecordError> {
+        let compression = if options.compress { Some(mcap::Compression::Zstd) } else { None };
+        let writer = mcap::WriteOptions::new().profile("ros2").library("spomp").compression(compression).create(w)?;
+        Ok(Recorder { writer, schemas: HashMap::new(), channels: HashMap::new(), sequence: 0, options, messages: 0 })
+    }
+
+    /// Messages written so far.
+    pub fn message_count(&self) -> u64 {
+        self.messages
+    }
+
+    fn channel<M: RosMessage>(&mut self, topic: &str) -> Result<u16, RecordError> {
+        if let Some(&id) = self.channels.get(topic) {
+            return Ok(id);
+        }
+        let schema = match self.schemas.get(M::TYPE_NAME) {
+            Some(&id) => id,
+            None => {
+                let id = self.writer.add_schema(M::TYPE_NAME, "ros2msg", M::DEFINITION.as_bytes())?;
+                self.schemas.insert(M::TYPE_NAME, id);
+                id
+            }
+        };
+        let id = self.writer.add_channel(schema, topic, "cdr", &BTreeMap::new())?;
+        self.channels.insert(topic.to_string(), id);
+        Ok(id)
+    }
+
+    /// Writes one message on a topic at a time.
+    pub fn log<M: RosMessage>(&mut self, topic: &str, time: Time, msg: &M) -> Result<(), RecordError> {
+        let channel_id = self.channel::<M>(topic)?;
+        let data = encode_cdr(msg)?;
+        let t = time.nanos.max(0) as u64;
+        self.sequence = self.sequence.wrapping_add(1);
+        self.writer.write_to_known_channel(
+            &mcap::records::MessageHeader { channel_id, sequence: self.sequence, log_time: t, publish_time: t },
+            &data,
+        )?;
+        self.messages += 1;
+        Ok(())
+    }
+
+    /// A map-frame pose (`/R/pose`).
+    pub fn pose(&mut self, robot: &str, time: Time, pose: Pose2, z: f64) -> Result<(), RecordError> {
+        let msg = ros::PoseStamped { header: ros::Header::new(time, "map"), pose: ros::Pose::from_pose2(pose, z) };
+        self.log(&format!("/{robot}/pose"), time, &msg)
+    }
+
+    /// Odometry (`/R/odom`).
+    pub fn odometry(&mut self, robot: &str, odom: &spomp_core::Odometry) -> Result<(), RecordError> {
+        let mut msg = ros::Odometry {
+            header: ros::Header::new(odom.stamp, format!("{robot}/odom")),
+            child_frame_id: format!("{robot}/base_link"),
+            ..Default::default()
+        };
+        msg.pose.pose = ros::Pose::from_pose2(odom.pose, 0.0);
+        msg.twist.twist.linear.x = odom.twist.v;
+        msg.twist.twist.angular.z = odom.twist.omega;
+        self.log(&format!("/{robot}/odom"), odom.stamp, &msg)
+    }
+
+    /// A velocity command (`/R/cmd_vel`).
+    pub fn command(&mut self, robot: &str, time: Time, cmd: Twist2) -> Result<(), RecordError> {
+        let mut msg = ros::Twist::default();
+        msg.linear.x = cmd.v;
+        msg.angular.z = cmd.omega;
+        self.log(&format!("/{robot}/cmd_vel"), time, &msg)
+    }
+
+    /// A panorama, downsampled (`/R/panorama/depth` as mono16 counts of 1/512 m,
+    /// `/R/panorama/semantic` as mono8 labels).
+    pub fn panorama(
+        &mut self,
+        robot: &str,
+        time: Time,
+        depth: &DepthPanorama,
+        semantic: Option<&SemanticPanorama>,
+    ) -> Result<(), RecordError> {
+        let k = self.options.panorama_downsample.max(1);
+        let g = depth.geometry;
+        let (rows, cols) = (g.rows.div_ceil(k), g.cols.div_ceil(k));
+        let frame = format!("{robot}/lidar");
+        let mut data = Vec::with_capacity(rows * cols * 2);
+        for r in (0..g.rows).step_by(k) {
+            for c in (0..g.cols).step_by(k) {
+                let m = depth.range_m.get(r * g.cols + c).copied().unwrap_or(0.0);
+                let count = if m.is_finite() && m > 0.0 {
+                    (m as f64 / DEFAULT_RANGE_SCALE_M).round().clamp(1.0, 65535.0) as u16
+                } else {
+                    0
+                };
+                data.extend_from_slice(&count.to_le_bytes());
+            }
+        }
+        let img = ros::Image {
+            header: ros::Header::new(time, frame.clone()),
+            height: rows as u32,
+            width: cols as u32,
+            encoding: "mono16".into(),
+            is_bigendian: 0,
+            step: (cols * 2) as u32,
+            data,
+        };
+        self.log(&format!("/{robot}/panorama/depth"), time, &img)?;
+        if let Some(sem) = semantic {
+            let sg = sem.geometry;
+            let mut data = Vec::with_capacity(rows * cols);
+            for r in (0..sg.rows).step_by(k) {
+                for c in (0..sg.cols).step_by(k) {
+                    data.push(sem.class.get(r * sg.cols + c).copied().unwrap_or(spomp_core::UNKNOWN_CLASS));
+                }
+            }
+            let img = ros::Image {
+                header: ros::Header::new(time, frame),
+                height: sg.rows.div_ceil(k) as u32,
+                width: sg.cols.div_ceil(k) as u32,
+                encoding: "mono8".into(),
+                is_bigendian: 0,
+                step: sg.cols.div_ceil(k) as u32,
+                data,
+            };
+            self.log(&format!("/{robot}/panorama/semantic"), time, &img)?;
+        }
+        Ok(())
+    }
+
+    /// A reachability scan (`/R/reachability`, LaserScan in the robot frame: bin i at angle
+    /// −i·2π/N, intensity 1 where a known obstacle ends the bin).
+    pub fn reachability(&mut self, scan: &ReachabilityScan) -> Result<(), RecordError> {
+        let n = scan.bins().max(1);
+        let step = -(std::f64::consts::TAU / n as f64) as f32;
+        let msg = ros::LaserScan {
+            header: ros::Header::new(scan.stamp, format!("{}/base_link", scan.robot)),
+            angle_min: 0.0,
+            angle_max: step * (n as f32 - 1.0),
+            angle_increment: step,
+            time_increment: 0.0,
+            scan_time: 0.0,
+            range_min: 0.0,
+            range_max: scan.range_m.iter().copied().fold(0.0, f32::max),
+            ranges: scan.range_m.clone(),
+            intensities: scan.obstacle.iter().map(|&o| if o { 1.0 } else { 0.0 }).collect(),
+        };
+        self.log(&format!("/{}/reachability", scan.robot), scan.stamp, &msg)
+    }
+
+    /// A planned path (`/R/path`).
+    pub fn path(&mut self, robot: &str, time: Time, points: &[spomp_core::Point2]) -> Result<(), RecordError> {
+        let header = ros::Header::new(time, "map");
+        let poses = points
+            .iter()
+            .map(|p| ros::PoseStamped {
+                header: header.clone(),
+                pose: ros::Pose::from_pose2(Pose2::new(p.x, p.y, 0.0), 0.0),
+            })
+            .collect();
+        self.log(&format!("/{robot}/path"), time, &ros::Path { header, poses })
+    }
+
+    /// Behaviour-node transitions (`/R/bt`, one Log each: name = node path, msg = `from -> to`).
+    pub fn transitions(&mut self, robot: &str, records: &[TransitionRecord]) -> Result<(), RecordError> {
+        let topic = format!("/{robot}/bt");
+        for r in records {
+            let msg = ros::Log {
+                stamp: r.time.into(),
+                level: 20,
+                name: format!("{robot}/{}", r.path),
+                msg: format!("{} -> {} (tick {}, node {})", r.from, r.to, r.tick, r.node_id),
+                file: String::new(),
+                function: String::new(),
+                line: 0,
+            };
+            self.log(&topic, r.time, &msg)?;
+        }
+        Ok(())
+    }
+
+    /// A JSON document on a `std_msgs/String` topic (team-state changes, mission status).
+    pub fn json<T: serde::Serialize>(&mut self, topic: &str, time: Time, value: &T) -> Result<(), RecordError> {
+        let data = serde_json::to_string(value)?;
+        self.log(topic, time, &ros::StringMsg { data })
+    }
+
+    /// Writes the summary and index; the file is complete after this.
+    pub fn finish(mut self) -> Result<(), RecordError> {
+        self.writer.finish()?;
+        Ok(())
+    }
+}

@@ -1,0 +1,133 @@
+//! A recorded run reads back with the same content, standard schemas, and bad logs are
+//! rejected without a panic.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
+
+use std::io::Cursor;
+use std::sync::Arc;
+
+use proptest::prelude::*;
+use spomp_behaviors::Status;
+use spomp_behaviors::trace::TransitionRecord;
+use spomp_core::ros::{Image, LaserScan, Log, PoseStamped};
+use spomp_core::{DepthPanorama, PanoramaGeometry, Pose2, ReachabilityScan, RobotId, SemanticPanorama, Time, Twist2};
+use spomp_mcap::{McapLog, Recorder, RecorderOptions, decode_cdr};
+
+fn sample_log() -> Vec<u8> {
+    let mut buf = Cursor::new(Vec::new());
+    let mut rec = Recorder::new(&mut buf, RecorderOptions::default()).unwrap();
+    for i in 0..5 {
+        let t = Time::from_millis(100 * i);
+        rec.pose("ugv1", t, Pose2::new(i as f64, 2.0, 0.5), 0.0).unwrap();
+        rec.command("ugv1", t, Twist2 { v: 1.0, omega: -0.2 }).unwrap();
+    }
+    let g = PanoramaGeometry { rows: 8, cols: 16, v_fov_rad: 1.0 };
+    let depth = DepthPanorama { geometry: g, range_m: (0..128).map(|i| i as f32 * 0.25).collect() };
+    let sem = SemanticPanorama { geometry: g, class: (0..128).map(|i| (i % 9) as u8).collect() };
+    rec.panorama("ugv1", Time::from_millis(500), &depth, Some(&sem)).unwrap();
+    let scan = ReachabilityScan {
+        robot: RobotId::new("ugv1"),
+        stamp: Time::from_millis(500),
+        pose: Pose2::default(),
+        range_m: vec![1.0, 2.0, 3.0, 4.0],
+        obstacle: vec![true, false, false, true],
+    };
+    rec.reachability(&scan).unwrap();
+    let tr = TransitionRecord {
+        tick: 3,
+        time: Time::from_millis(300),
+        node_id: 2,
+        path: Arc::<str>::from("visitor/sequence").to_string(),
+        from: Status::Idle,
+        to: Status::Running,
+    };
+    rec.transitions("ugv1", &[tr]).unwrap();
+    rec.json("/team/state", Time::from_millis(600), &serde_json::json!({"goal": 1, "status": "claimed"})).unwrap();
+    assert_eq!(rec.message_count(), 15);
+    rec.finish().unwrap();
+    buf.into_inner()
+}
+
+#[test]
+fn messages_round_trip_with_ros2_schemas() {
+    let log = McapLog::from_bytes(sample_log());
+    let msgs = log.messages().unwrap();
+    assert_eq!(msgs.len(), 15);
+    assert!(msgs.iter().all(|m| m.schema_encoding == "ros2msg" && m.encoding == "cdr"));
+    let pose = msgs.iter().find(|m| m.topic == "/ugv1/pose" && m.log_time == 300_000_000).unwrap();
+    assert_eq!(pose.schema, "geometry_msgs/msg/PoseStamped");
+    let p: PoseStamped = decode_cdr(&pose.topic, &pose.data).unwrap();
+    assert_eq!(p.pose.position.x, 3.0);
+    assert_eq!(p.header.frame_id, "map");
+    assert!((p.pose.orientation.z - (0.25f64).sin()).abs() < 1e-12);
+
+    let depth = msgs.iter().find(|m| m.topic == "/ugv1/panorama/depth").unwrap();
+    let img: Image = decode_cdr(&depth.topic, &depth.data).unwrap();
+    // Downsampled by 4: 2 × 4 pixels of mono16.
+    assert_eq!((img.height, img.width, img.encoding.as_str(), img.step), (2, 4, "mono16", 8));
+    let second = u16::from_le_bytes([img.data[2], img.data[3]]);
+    assert_eq!(second, 512, "pixel (0, 4) is 1.0 m = 512 counts");
+
+    let scan = msgs.iter().find(|m| m.topic == "/ugv1/reachability").unwrap();
+    let s: LaserScan = decode_cdr(&scan.topic, &scan.data).unwrap();
+    assert_eq!(s.ranges, vec![1.0, 2.0, 3.0, 4.0]);
+    assert_eq!(s.intensities, vec![1.0, 0.0, 0.0, 1.0]);
+
+    let bt = msgs.iter().find(|m| m.topic == "/ugv1/bt").unwrap();
+    let l: Log = decode_cdr(&bt.topic, &bt.data).unwrap();
+    assert_eq!(l.name, "ugv1/visitor/sequence");
+    assert!(l.msg.starts_with("idle -> running"));
+}
+
+#[test]
+fn truncated_and_garbage_logs_are_errors() {
+    let bytes = sample_log();
+    for cut in [0, 8, 100, bytes.len() / 2, bytes.len() - 10] {
+        let log = McapLog::from_bytes(bytes[..cut].to_vec());
+        assert!(log.messages().is_err(), "cut at {cut} should not read cleanly");
+    }
+    assert!(decode_cdr::<PoseStamped>("/x", &[1, 2, 3]).is_err());
+    assert!(decode_cdr::<PoseStamped>("/x", &[0, 1, 0, 0, 9]).is_err());
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, .. ProptestConfig::default() })]
+    #[test]
+    fn corrupted_logs_never_panic(flips in prop::collection::vec((0usize..4096, any::<u8>()), 1..8)) {
+        let mut bytes = sample_log();
+        let n = bytes.len();
+        for (i, b) in flips {
+            bytes[i % n] ^= b | 1;
+        }
+        if let Ok(msgs) = McapLog::from_bytes(bytes).messages() {
+            for m in msgs {
+                let _ = decode_cdr::<PoseStamped>(&m.topic, &m.data);
+                let _ = decode_cdr::<Image>(&m.topic, &m.data);
+            }
+        }
+    }
+}
+
+/// Regression: a corrupt record length inside a chunk made the `mcap` reader try to allocate
+/// petabytes and abort the process. It must be an error.
+#[test]
+fn huge_record_length_inside_a_chunk_is_an_error_not_an_abort() {
+    let mut buf = Cursor::new(Vec::new());
+    let mut rec = Recorder::new(&mut buf, RecorderOptions { panorama_downsample: 4, compress: false }).unwrap();
+    rec.pose("ugv1", Time::ZERO, Pose2::default(), 0.0).unwrap();
+    rec.finish().unwrap();
+    let mut bytes = buf.into_inner();
+    assert!(McapLog::from_bytes(bytes.clone()).messages().is_ok());
+    // First top-level record after the 8-byte magic is the header; find the chunk (opcode 6).
+    let mut pos = 8;
+    while bytes[pos] != 0x06 {
+        let len = u64::from_le_bytes(bytes[pos + 1..pos + 9].try_into().unwrap()) as usize;
+        pos += 9 + len;
+    }
+    let body = pos + 9;
+    let name_len = u32::from_le_bytes(bytes[body + 28..body + 32].try_into().unwrap()) as usize;
+    let first_inner = body + 40 + name_len;
+    bytes[first_inner + 1..first_inner + 9].copy_from_slice(&(1u64 << 57).to_le_bytes());
+    let err = McapLog::from_bytes(bytes).messages().unwrap_err();
+    assert!(err.to_string().contains("declares"), "{err}");
+}
