@@ -1,0 +1,56 @@
+//! Simulator benchmarks: panorama synthesis (bar: ≤ 2 ms for 256 × 1024 on one core), city
+//! generation and a UGV step.
+//!
+//! `cargo bench -p spomp-sim --bench sim -- --warm-up-time 1 --measurement-time 3`
+
+use std::hint::black_box;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use spomp_core::{DepthPanorama, PanoramaGeometry, Pose2, SemanticPanorama, Twist2, UNKNOWN_CLASS};
+use spomp_sim::{CityParams, PanoramaRenderer, Ugv, UgvParams, generate_city};
+
+fn panorama(c: &mut Criterion) {
+    let world = generate_city(&CityParams::default(), 1).expect("city");
+    let g = PanoramaGeometry::default_lidar();
+    let renderer = PanoramaRenderer::new(g, 0.4, 50.0).expect("renderer");
+    let mut depth = DepthPanorama::empty(g);
+    let mut sem = spomp_core::SemanticPanorama { geometry: g, class: vec![UNKNOWN_CLASS; g.len()] };
+    // Among the buildings (a crossing in the middle of the city) and at the start.
+    let start = world.meta.start_poses[0];
+    let spec = world.spec();
+    let mid = Pose2::new(spec.size_m().0 / 2.0, 5.0, 0.3);
+    c.bench_function("panorama_256x1024_start", |b| {
+        b.iter(|| renderer.render(&world, black_box(start), &mut depth, &mut sem));
+    });
+    c.bench_function("panorama_256x1024_street", |b| {
+        b.iter(|| renderer.render(&world, black_box(mid), &mut depth, &mut sem));
+    });
+    let _: &SemanticPanorama = &sem;
+}
+
+fn city(c: &mut Criterion) {
+    let params = CityParams::default();
+    let mut group = c.benchmark_group("city");
+    group.sample_size(10);
+    group.bench_function("generate_400x300m", |b| b.iter(|| generate_city(&params, black_box(7)).expect("city")));
+    group.finish();
+}
+
+fn ugv(c: &mut Criterion) {
+    let world = generate_city(&CityParams::default(), 1).expect("city");
+    let start = world.meta.start_poses[0];
+    let mut robot = Ugv::new(&world, UgvParams::default(), start).expect("robot");
+    let cmd = Twist2 { v: 1.5, omega: 0.3 };
+    c.bench_function("ugv_step_0.1s", |b| {
+        b.iter(|| {
+            robot.step(&world, black_box(cmd), 0.1);
+            // Keep the robot in open road: start over every lap.
+            if robot.pose().position().distance(start.position()) > 3.0 {
+                robot = Ugv::new(&world, UgvParams::default(), start).expect("robot");
+            }
+        });
+    });
+}
+
+criterion_group!(benches, panorama, city, ugv);
+criterion_main!(benches);

@@ -1,0 +1,369 @@
+//! World files: `world.yaml` plus PNG layers, and a top-down picture of a world.
+//!
+//! PNG row 0 is the northern edge of the world (images are drawn north-up), so pixel (x, y) is
+//! cell (x, height − 1 − y).
+
+use std::path::{Path, PathBuf};
+
+use image::{ImageBuffer, Luma, Rgb, RgbImage};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+use spomp_core::{AerialMap, ClassTable, GridSpec, Point2};
+
+use crate::error::SimError;
+use crate::world::{World, WorldMeta};
+
+/// Name of the world description inside a world directory.
+pub const WORLD_FILE: &str = "world.yaml";
+
+/// Where the class table of a world file comes from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(untagged)]
+pub enum ClassTableSource {
+    /// A YAML class table file, relative to the world directory.
+    Path(String),
+    /// The table itself.
+    Inline(ClassTable),
+}
+
+/// The 16-bit elevation layer: elevation = offset_m + count · scale_m.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ElevationLayer {
+    /// 16-bit grayscale PNG, relative to the world directory.
+    pub file: String,
+    /// Metres per count.
+    pub scale_m: f64,
+    /// Elevation of count 0, metres.
+    #[serde(default)]
+    pub offset_m: f64,
+}
+
+/// The layer files of a world.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LayerFiles {
+    /// RGB PNG whose colours are class colours of the table.
+    pub class: String,
+    /// Optional elevation layer; without it elevations are derived from the classes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub elevation: Option<ElevationLayer>,
+    /// Optional RGB PNG of the world's appearance; without it the class colours are used.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub color: Option<String>,
+}
+
+/// The contents of `world.yaml`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct WorldFile {
+    /// Cell size, metres.
+    pub resolution_m: f64,
+    /// Map-frame position of the south-west corner of the world.
+    #[serde(default)]
+    pub origin: Point2,
+    /// Width in cells; checked against the layers when given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub width: Option<u32>,
+    /// Height in cells; checked against the layers when given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub height: Option<u32>,
+    /// The class table; the table shipped with spomp when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub class_table: Option<ClassTableSource>,
+    /// Layer files.
+    pub layers: LayerFiles,
+    /// Ground truth and start poses.
+    #[serde(default)]
+    pub meta: WorldMeta,
+}
+
+/// Heights used to derive an elevation layer from classes when a world has none.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct DerivedElevationParams {
+    /// Height of `building` cells, metres.
+    pub building_m: f32,
+    /// Height of `vehicle` cells, metres.
+    pub vehicle_m: f32,
+    /// Height of `grass_sidewalk` cells (the curb), metres.
+    pub grass_sidewalk_m: f32,
+    /// Height of `vegetation` cells (bushes, canopy edge), metres.
+    pub vegetation_m: f32,
+    /// Height of `tree_trunk` cells, metres.
+    pub tree_trunk_m: f32,
+    /// Height of `light_pole` cells, metres.
+    pub light_pole_m: f32,
+}
+
+impl Default for DerivedElevationParams {
+    fn default() -> Self {
+        DerivedElevationParams {
+            building_m: 12.0,
+            vehicle_m: 1.5,
+            grass_sidewalk_m: 0.15,
+            vegetation_m: 1.0,
+            tree_trunk_m: 5.0,
+            light_pole_m: 6.0,
+        }
+    }
+}
+
+impl DerivedElevationParams {
+    /// Height for a class name; classes not listed (road, gravel, …) lie at 0.
+    pub fn height_of(&self, class_name: &str) -> f32 {
+        match class_name {
+            "building" => self.building_m,
+            "vehicle" => self.vehicle_m,
+            "grass_sidewalk" => self.grass_sidewalk_m,
+            "vegetation" => self.vegetation_m,
+            "tree_trunk" => self.tree_trunk_m,
+            "light_pole" => self.light_pole_m,
+            _ => 0.0,
+        }
+    }
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> SimError + '_ {
+    move |source| SimError::Io { path: path.to_path_buf(), source }
+}
+
+fn image_err(path: &Path) -> impl FnOnce(image::ImageError) -> SimError + '_ {
+    move |e| match e {
+        image::ImageError::IoError(source) => SimError::Io { path: path.to_path_buf(), source },
+        other => SimError::BadImage { path: path.to_path_buf(), message: other.to_string() },
+    }
+}
+
+/// Re-checks a table through the core parser (which owns the rules).
+fn checked_table(table: ClassTable, path: &Path) -> Result<ClassTable, SimError> {
+    let text = serde_saphyr::to_string(&table)
+        .map_err(|e| SimError::BadYaml { path: path.to_path_buf(), message: e.to_string() })?;
+    Ok(ClassTable::from_yaml(&text)?)
+}
+
+fn open_layer(dir: &Path, file: &str, layer: &'static str) -> Result<(PathBuf, image::DynamicImage), SimError> {
+    let path = dir.join(file);
+    if !path.is_file() {
+        return Err(SimError::MissingLayer { layer, path });
+    }
+    let img = image::open(&path).map_err(image_err(&path))?;
+    Ok((path, img))
+}
+
+fn check_size(layer: &'static str, path: &Path, spec: &GridSpec, w: u32, h: u32) -> Result<(), SimError> {
+    if w != spec.width || h != spec.height {
+        return Err(SimError::WrongSize {
+            layer,
+            path: path.to_path_buf(),
+            width: spec.width,
+            height: spec.height,
+            got_width: w,
+            got_height: h,
+        });
+    }
+    Ok(())
+}
+
+impl World {
+    /// Loads a world directory (`world.yaml` and its layers); elevations absent from the files
+    /// are derived from the classes with the default heights.
+    pub fn load(dir: impl AsRef<Path>) -> Result<World, SimError> {
+        World::load_with(dir, &DerivedElevationParams::default())
+    }
+
+    /// Loads a world directory, deriving missing elevations with `heights`.
+    pub fn load_with(dir: impl AsRef<Path>, heights: &DerivedElevationParams) -> Result<World, SimError> {
+        let dir = dir.as_ref();
+        let yaml_path = dir.join(WORLD_FILE);
+        let text = std::fs::read_to_string(&yaml_path).map_err(io_err(&yaml_path))?;
+        let desc: WorldFile = serde_saphyr::from_str(&text)
+            .map_err(|e| SimError::BadYaml { path: yaml_path.clone(), message: e.to_string() })?;
+        if !(desc.resolution_m.is_finite() && desc.resolution_m > 0.0) {
+            return Err(SimError::BadYaml {
+                path: yaml_path,
+                message: format!("resolution_m must be positive, got {}", desc.resolution_m),
+            });
+        }
+        let classes = match &desc.class_table {
+            None => ClassTable::default_table(),
+            Some(ClassTableSource::Inline(t)) => checked_table(t.clone(), &yaml_path)?,
+            Some(ClassTableSource::Path(p)) => {
+                let path = dir.join(p);
+                let text = std::fs::read_to_string(&path).map_err(io_err(&path))?;
+                ClassTable::from_yaml(&text)?
+            }
+        };
+
+        let (class_path, class_img) = open_layer(dir, &desc.layers.class, "class")?;
+        let class_img = class_img.to_rgb8();
+        let spec = GridSpec::new(
+            desc.origin,
+            desc.resolution_m,
+            desc.width.unwrap_or(class_img.width()),
+            desc.height.unwrap_or(class_img.height()),
+        );
+        check_size("class", &class_path, &spec, class_img.width(), class_img.height())?;
+        let (w, h) = (spec.width as usize, spec.height as usize);
+        let mut map = AerialMap::unknown(spec);
+        let mut color_lut: Vec<([u8; 3], u8)> = classes.classes.iter().map(|c| (c.color, c.index)).collect();
+        color_lut.sort_unstable();
+        for (x, y, px) in class_img.enumerate_pixels() {
+            let rgb = px.0;
+            let Ok(k) = color_lut.binary_search_by(|(c, _)| c.cmp(&rgb)) else {
+                return Err(SimError::UnknownColor { path: class_path, x, y, color: rgb });
+            };
+            let i = (h - 1 - y as usize) * w + x as usize;
+            map.class[i] = color_lut[k].1;
+            map.rgb[i] = rgb;
+        }
+
+        match &desc.layers.elevation {
+            Some(layer) => {
+                if !(layer.scale_m.is_finite() && layer.scale_m > 0.0 && layer.offset_m.is_finite()) {
+                    return Err(SimError::BadYaml {
+                        path: yaml_path,
+                        message: "layers.elevation needs a positive scale_m and a finite offset_m".into(),
+                    });
+                }
+                let (path, img) = open_layer(dir, &layer.file, "elevation")?;
+                let image::DynamicImage::ImageLuma16(img) = img else {
+                    return Err(SimError::BadImage {
+                        path,
+                        message: format!("elevation must be a 16-bit grayscale PNG, found {:?}", img.color()),
+                    });
+                };
+                check_size("elevation", &path, &spec, img.width(), img.height())?;
+                for (x, y, px) in img.enumerate_pixels() {
+                    let i = (h - 1 - y as usize) * w + x as usize;
+                    map.elevation[i] = (layer.offset_m + px.0[0] as f64 * layer.scale_m) as f32;
+                }
+            }
+            None => {
+                let mut lut = [0.0f32; 256];
+                for c in &classes.classes {
+                    lut[c.index as usize] = heights.height_of(&c.name);
+                }
+                for (e, &c) in map.elevation.iter_mut().zip(&map.class) {
+                    *e = lut[c as usize];
+                }
+            }
+        }
+
+        if let Some(file) = &desc.layers.color {
+            let (path, img) = open_layer(dir, file, "color")?;
+            let img = img.to_rgb8();
+            check_size("color", &path, &spec, img.width(), img.height())?;
+            for (x, y, px) in img.enumerate_pixels() {
+                map.rgb[(h - 1 - y as usize) * w + x as usize] = px.0;
+            }
+        }
+        map.version = 1;
+        World::new(map, classes, desc.meta)
+    }
+
+    /// Writes the world into `dir` (created if needed): `world.yaml` with the class table
+    /// inline, `class.png`, a 16-bit `elevation.png` (1 mm per count when the relief fits) and
+    /// `color.png`.
+    pub fn save(&self, dir: impl AsRef<Path>) -> Result<(), SimError> {
+        let dir = dir.as_ref();
+        std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+        let spec = *self.spec();
+        let (w, h) = (spec.width, spec.height);
+        let lo = self.map().elevation.iter().copied().fold(f32::INFINITY, f32::min);
+        let offset_m = (lo as f64).floor();
+        let relief = self.max_elevation_m() as f64 - offset_m;
+        // Millimetres when the relief fits in 16 bits, else the smallest whole-millimetre step that fits.
+        let scale_m = ((relief / u16::MAX as f64) * 1000.0).ceil().max(1.0) / 1000.0;
+
+        let mut class_img = RgbImage::new(w, h);
+        let mut color_img = RgbImage::new(w, h);
+        let mut elev_img: ImageBuffer<Luma<u16>, Vec<u16>> = ImageBuffer::new(w, h);
+        let mut class_colors = [[0u8; 3]; 256];
+        for c in &self.classes().classes {
+            class_colors[c.index as usize] = c.color;
+        }
+        for (i, ((&class, &rgb), &e)) in
+            self.map().class.iter().zip(&self.map().rgb).zip(&self.map().elevation).enumerate()
+        {
+            let cell = spec.cell_of_index(i);
+            let (x, y) = (cell.col, h - 1 - cell.row);
+            class_img.put_pixel(x, y, Rgb(class_colors[class as usize]));
+            color_img.put_pixel(x, y, Rgb(rgb));
+            let count = ((e as f64 - offset_m) / scale_m).round().clamp(0.0, u16::MAX as f64) as u16;
+            elev_img.put_pixel(x, y, Luma([count]));
+        }
+        let save_png = |name: &str, result: Result<(), image::ImageError>| {
+            let path = dir.join(name);
+            result.map_err(image_err(&path))
+        };
+        save_png("class.png", class_img.save(dir.join("class.png")))?;
+        save_png("color.png", color_img.save(dir.join("color.png")))?;
+        save_png("elevation.png", elev_img.save(dir.join("elevation.png")))?;
+
+        let desc = WorldFile {
+            resolution_m: spec.resolution_m,
+            origin: spec.origin,
+            width: Some(w),
+            height: Some(h),
+            class_table: Some(ClassTableSource::Inline(self.classes().clone())),
+            layers: LayerFiles {
+                class: "class.png".into(),
+                elevation: Some(ElevationLayer { file: "elevation.png".into(), scale_m, offset_m }),
+                color: Some("color.png".into()),
+            },
+            meta: self.meta.clone(),
+        };
+        let yaml_path = dir.join(WORLD_FILE);
+        let text = serde_saphyr::to_string(&desc)
+            .map_err(|e| SimError::BadYaml { path: yaml_path.clone(), message: e.to_string() })?;
+        std::fs::write(&yaml_path, text).map_err(io_err(&yaml_path))
+    }
+}
+
+/// A top-down picture of a world, north up: the colour layer shaded by the relief (light from
+/// the north-west, so curbs and buildings stand out), vehicle-cluster centres marked with blue
+/// squares, roadblocks with red crosses and start poses with white dots.
+pub fn render_png(world: &World) -> RgbImage {
+    let spec = *world.spec();
+    let (w, h) = (spec.width, spec.height);
+    let res = spec.resolution_m as f32;
+    let mut img = RgbImage::new(w, h);
+    for row in 0..h as i64 {
+        for col in 0..w as i64 {
+            let e = |c: i64, r: i64| world.elevation_cell(c, r).unwrap_or(0.0);
+            let here = e(col, row);
+            // Slope towards the light (north-west), clamped: positive faces the light.
+            let facing = ((e(col + 1, row - 1) - e(col - 1, row + 1)) / (2.0 * res)).clamp(-2.0, 2.0);
+            let shade = (1.0 - 0.25 * facing).clamp(0.5, 1.4);
+            let i = row as usize * w as usize + col as usize;
+            let rgb = world.map().rgb[i];
+            let lift = (here.max(0.0) * 2.0).min(40.0);
+            let px = rgb.map(|v| ((v as f32 + lift) * shade).clamp(0.0, 255.0) as u8);
+            img.put_pixel(col as u32, (h as i64 - 1 - row) as u32, Rgb(px));
+        }
+    }
+    let mut mark = |p: Point2, color: [u8; 3], offsets: &[(i64, i64)]| {
+        let Some(cell) = spec.cell_at(p) else { return };
+        for &(dx, dy) in offsets {
+            let (x, y) = (cell.col as i64 + dx, h as i64 - 1 - cell.row as i64 - dy);
+            if x >= 0 && y >= 0 && x < w as i64 && y < h as i64 {
+                img.put_pixel(x as u32, y as u32, Rgb(color));
+            }
+        }
+    };
+    let half = (7.5 / spec.resolution_m).round() as i64;
+    let square: Vec<(i64, i64)> = (-half..=half).flat_map(|k| [(k, -half), (k, half), (-half, k), (half, k)]).collect();
+    let cross: Vec<(i64, i64)> = (-4..=4).flat_map(|k| [(k, k), (k, -k)]).collect();
+    let dot: Vec<(i64, i64)> = (-1..=1).flat_map(|a| (-1..=1).map(move |b| (a, b))).collect();
+    for &p in &world.meta.vehicle_clusters {
+        mark(p, [0, 90, 255], &square);
+    }
+    for &p in &world.meta.roadblocks {
+        mark(p, [255, 0, 0], &cross);
+    }
+    for s in &world.meta.start_poses {
+        mark(s.position(), [255, 255, 255], &dot);
+    }
+    img
+}

@@ -1,0 +1,156 @@
+//! The simulated world: a 2.5D grid (class, elevation, colour) plus the class table and the
+//! ground truth a generator knows about it.
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+use spomp_core::{AerialMap, Cell, ClassId, ClassTable, GridSpec, Point2, Pose2};
+
+use crate::error::SimError;
+
+/// What the world's author knows that the robots must find out: scoring ground truth and where
+/// a team may start.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct WorldMeta {
+    /// Centre of every vehicle cluster (ground truth for scoring goal detection), map frame.
+    pub vehicle_clusters: Vec<Point2>,
+    /// Centre of every roadblock (physically high, labelled road).
+    pub roadblocks: Vec<Point2>,
+    /// Free start poses for a team, in order of use.
+    pub start_poses: Vec<Pose2>,
+}
+
+/// The simulated world.
+///
+/// The layers live in an [`AerialMap`] whose every cell is known: the UAV reveals tiles of
+/// exactly these layers. Elevations are finite (metres above the world's datum).
+#[derive(Clone, Debug, PartialEq)]
+pub struct World {
+    /// Class, colour and elevation layers (private: the highest elevation is cached).
+    map: AerialMap,
+    /// The class table the class layer refers to.
+    classes: ClassTable,
+    /// Ground truth and start poses.
+    pub meta: WorldMeta,
+    /// Upper bound of the elevations, metres (kept for the renderer's early exit).
+    max_elevation_m: f32,
+}
+
+impl World {
+    /// A world from its layers. Checks that the layers fit the grid, the resolution is positive,
+    /// every class is in the table and every elevation is finite.
+    pub fn new(map: AerialMap, classes: ClassTable, meta: WorldMeta) -> Result<Self, SimError> {
+        let n = map.spec.len();
+        if !(map.spec.resolution_m.is_finite() && map.spec.resolution_m > 0.0) {
+            return Err(SimError::invalid("world", "resolution must be positive"));
+        }
+        if map.spec.is_empty() {
+            return Err(SimError::invalid("world", "the grid has no cells"));
+        }
+        if map.class.len() != n || map.rgb.len() != n || map.elevation.len() != n {
+            return Err(SimError::invalid("world", "layer lengths differ from the grid size"));
+        }
+        let mut known = [false; 256];
+        for c in &classes.classes {
+            known[c.index as usize] = true;
+        }
+        if let Some(i) = map.class.iter().position(|&c| !known[c as usize]) {
+            let cell = map.spec.cell_of_index(i);
+            return Err(SimError::invalid(
+                "world",
+                format!("cell ({}, {}) has class {} which is not in the table", cell.col, cell.row, map.class[i]),
+            ));
+        }
+        if let Some(i) = map.elevation.iter().position(|e| !e.is_finite()) {
+            let cell = map.spec.cell_of_index(i);
+            return Err(SimError::invalid(
+                "world",
+                format!("cell ({}, {}) has a non-finite elevation", cell.col, cell.row),
+            ));
+        }
+        let max_elevation_m = map.elevation.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        Ok(World { map, classes, meta, max_elevation_m })
+    }
+
+    /// A world of one class at one elevation (tests, toy scenes).
+    pub fn flat(spec: GridSpec, classes: ClassTable, class: ClassId, elevation_m: f32) -> Result<Self, SimError> {
+        let color = classes.get(class).map_or([0, 0, 0], |c| c.color);
+        let map = AerialMap {
+            class: vec![class; spec.len()],
+            rgb: vec![color; spec.len()],
+            elevation: vec![elevation_m; spec.len()],
+            version: 1,
+            spec,
+        };
+        World::new(map, classes, WorldMeta::default())
+    }
+
+    /// The class, colour and elevation layers.
+    #[inline]
+    pub fn map(&self) -> &AerialMap {
+        &self.map
+    }
+
+    /// The class table of the class layer.
+    #[inline]
+    pub fn classes(&self) -> &ClassTable {
+        &self.classes
+    }
+
+    /// Placement and size of the grid.
+    #[inline]
+    pub fn spec(&self) -> &GridSpec {
+        &self.map.spec
+    }
+
+    /// Highest elevation, metres (an upper bound once cells were lowered with `set_cell`).
+    #[inline]
+    pub fn max_elevation_m(&self) -> f32 {
+        self.max_elevation_m
+    }
+
+    /// Elevation of the cell containing `p`, if on the grid.
+    #[inline]
+    pub fn elevation_at(&self, p: Point2) -> Option<f32> {
+        self.map.spec.cell_at(p).map(|c| self.map.elevation[self.map.spec.index(c)])
+    }
+
+    /// Class of the cell containing `p`, if on the grid.
+    #[inline]
+    pub fn class_at(&self, p: Point2) -> Option<ClassId> {
+        self.map.spec.cell_at(p).map(|c| self.map.class[self.map.spec.index(c)])
+    }
+
+    /// Elevation at signed cell coordinates, if on the grid.
+    #[inline]
+    pub fn elevation_cell(&self, col: i64, row: i64) -> Option<f32> {
+        if self.map.spec.contains(col, row) {
+            Some(self.map.elevation[row as usize * self.map.spec.width as usize + col as usize])
+        } else {
+            None
+        }
+    }
+
+    /// Sets a cell's layers (generators and tests); ignores cells off the grid, classes not in
+    /// the table and non-finite elevations.
+    pub fn set_cell(&mut self, cell: Cell, class: ClassId, rgb: [u8; 3], elevation_m: f32) {
+        let inside = cell.col < self.map.spec.width && cell.row < self.map.spec.height;
+        if inside && elevation_m.is_finite() && self.classes.get(class).is_some() {
+            let i = self.map.spec.index(cell);
+            self.map.class[i] = class;
+            self.map.rgb[i] = rgb;
+            self.map.elevation[i] = elevation_m;
+            self.max_elevation_m = self.max_elevation_m.max(elevation_m);
+        }
+    }
+
+    /// An all-unknown aerial map over the same grid: what a team starts with.
+    pub fn unknown_map(&self) -> AerialMap {
+        AerialMap::unknown(self.map.spec)
+    }
+
+    /// The number of cells of a class.
+    pub fn count_class(&self, class: ClassId) -> usize {
+        self.map.class.iter().filter(|&&c| c == class).count()
+    }
+}

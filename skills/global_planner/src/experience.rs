@@ -1,0 +1,209 @@
+//! Edge states from experience (trav / not_trav / unk_trav) and per-cell training votes.
+
+use serde::Serialize;
+
+use crate::params::ExperienceParams;
+use crate::star::EdgeObservation;
+
+/// What experience says about an edge.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EdgeState {
+    /// Not determined yet: the edge costs what the map predicts.
+    #[default]
+    Unknown,
+    /// Observed traversable: a very high traversal probability overrides the prediction.
+    Trav,
+    /// Observed not traversable: a very low probability (removed if locked).
+    NotTrav,
+}
+
+/// Observation history of one edge.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct EdgeExperience {
+    pub state: EdgeState,
+    /// Marked not_trav from the robot's own observations: never changes again.
+    pub locked: bool,
+    trav_streak: u32,
+    not_trav_streak: u32,
+    own_not_trav_streak: u32,
+}
+
+/// Effect of an observation on an edge.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Transition {
+    /// Same state.
+    None,
+    /// The state changed (costs must be refreshed).
+    Changed,
+    /// The edge became not_trav and locked: remove it for good.
+    Removed,
+}
+
+impl EdgeExperience {
+    /// Takes one observation. Consistent observations accumulate in streaks; a contrary one
+    /// resets them; unk_trav carries no information and leaves them alone. Only the robot's own
+    /// observations can lock an edge (and so remove it).
+    pub fn observe(&mut self, obs: EdgeObservation, own: bool, p: &ExperienceParams) -> Transition {
+        if self.locked {
+            return Transition::None;
+        }
+        let before = self.state;
+        match obs {
+            EdgeObservation::UnkTrav => return Transition::None,
+            EdgeObservation::Trav => {
+                self.trav_streak = self.trav_streak.saturating_add(1);
+                self.not_trav_streak = 0;
+                self.own_not_trav_streak = 0;
+                if self.trav_streak >= p.observations_to_mark.max(1) {
+                    self.state = EdgeState::Trav;
+                }
+            }
+            EdgeObservation::NotTrav => {
+                self.trav_streak = 0;
+                self.not_trav_streak = self.not_trav_streak.saturating_add(1);
+                if own {
+                    self.own_not_trav_streak = self.own_not_trav_streak.saturating_add(1);
+                }
+                let needed = if self.state == EdgeState::Trav {
+                    p.observations_to_overturn_trav.max(1)
+                } else {
+                    p.observations_to_mark.max(1)
+                };
+                if self.own_not_trav_streak >= needed {
+                    self.state = EdgeState::NotTrav;
+                    self.locked = true;
+                    return Transition::Removed;
+                }
+                if self.not_trav_streak >= needed {
+                    self.state = EdgeState::NotTrav;
+                }
+            }
+        }
+        if self.state == before { Transition::None } else { Transition::Changed }
+    }
+}
+
+/// Per-cell votes from scans: +1 inside a safe region, −1 just beyond a known obstacle; each scan
+/// votes at most once per cell.
+#[derive(Debug, Default)]
+pub(crate) struct Votes {
+    votes: Vec<i8>,
+    last_scan: Vec<u32>,
+    touched: Vec<u32>,
+    scan_counter: u32,
+}
+
+impl Votes {
+    /// Sizes the rasters for `cells` cells (keeps votes when the size is unchanged).
+    pub fn resize(&mut self, cells: usize) {
+        if self.votes.len() != cells {
+            self.votes = vec![0; cells];
+            self.last_scan = vec![0; cells];
+            self.touched.clear();
+        }
+    }
+
+    /// Starts a new scan.
+    pub fn begin_scan(&mut self) {
+        self.scan_counter = self.scan_counter.wrapping_add(1).max(1);
+    }
+
+    /// Casts this scan's vote on a cell; returns false when the scan already voted there.
+    pub fn vote(&mut self, cell: usize, traversable: bool) -> bool {
+        let Some(stamp) = self.last_scan.get_mut(cell) else {
+            return false;
+        };
+        if *stamp == self.scan_counter {
+            return false;
+        }
+        if *stamp == 0 {
+            self.touched.push(cell as u32);
+        }
+        *stamp = self.scan_counter;
+        let v = &mut self.votes[cell];
+        *v = if traversable { v.saturating_add(1) } else { v.saturating_sub(1) };
+        true
+    }
+
+    /// Cells with at least `needed` net votes either way, with their label (true = traversable).
+    pub fn labels(&self, needed: u8) -> impl Iterator<Item = (usize, bool)> + '_ {
+        let needed = needed.max(1) as i8;
+        self.touched.iter().filter_map(move |&c| {
+            let v = self.votes[c as usize];
+            (v >= needed || v <= -needed).then_some((c as usize, v > 0))
+        })
+    }
+
+    /// Net votes of a cell.
+    pub fn net(&self, cell: usize) -> i8 {
+        self.votes.get(cell).copied().unwrap_or(0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use EdgeObservation::*;
+
+    #[test]
+    fn two_own_not_trav_observations_remove() {
+        let p = ExperienceParams::default();
+        let mut e = EdgeExperience::default();
+        assert_eq!(e.observe(NotTrav, true, &p), Transition::None);
+        assert_eq!(e.observe(NotTrav, true, &p), Transition::Removed);
+        assert!(e.locked);
+        assert_eq!(e.observe(Trav, true, &p), Transition::None, "locked forever");
+    }
+
+    #[test]
+    fn other_robots_mark_but_never_lock() {
+        let p = ExperienceParams::default();
+        let mut e = EdgeExperience::default();
+        for _ in 0..10 {
+            assert_ne!(e.observe(NotTrav, false, &p), Transition::Removed);
+        }
+        assert_eq!(e.state, EdgeState::NotTrav);
+        assert!(!e.locked);
+        e.observe(Trav, false, &p);
+        assert_eq!(e.observe(Trav, false, &p), Transition::Changed);
+        assert_eq!(e.state, EdgeState::Trav);
+    }
+
+    #[test]
+    fn trav_needs_more_evidence_to_overturn_and_contrary_evidence_resets() {
+        let p = ExperienceParams::default();
+        let mut e = EdgeExperience::default();
+        e.observe(Trav, true, &p);
+        e.observe(Trav, true, &p);
+        assert_eq!(e.state, EdgeState::Trav);
+        e.observe(NotTrav, true, &p);
+        e.observe(NotTrav, true, &p);
+        e.observe(UnkTrav, true, &p);
+        e.observe(NotTrav, true, &p);
+        assert_eq!(e.state, EdgeState::Trav, "3 < 4 observations");
+        e.observe(Trav, true, &p);
+        for _ in 0..3 {
+            e.observe(NotTrav, true, &p);
+        }
+        assert_eq!(e.state, EdgeState::Trav, "streak was reset");
+        assert_eq!(e.observe(NotTrav, true, &p), Transition::Removed);
+    }
+
+    #[test]
+    fn one_vote_per_scan_and_label_threshold() {
+        let mut v = Votes::default();
+        v.resize(4);
+        for _ in 0..3 {
+            v.begin_scan();
+            assert!(v.vote(1, true));
+            assert!(!v.vote(1, true));
+            v.vote(2, false);
+        }
+        v.begin_scan();
+        v.vote(2, true);
+        let labels: Vec<_> = v.labels(3).collect();
+        assert_eq!(labels, vec![(1, true)], "cell 2 has only 2 net votes");
+        assert!(!v.vote(99, true));
+    }
+}

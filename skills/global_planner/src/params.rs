@@ -1,0 +1,182 @@
+//! Parameters of the global planner (DESIGN.md §5 "Global planner", paper §Global Ground Planner).
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+/// All parameters of the global planner, grouped as a mission file nests them.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct GlobalPlannerParams {
+    /// Traversability graph construction over the aerial map.
+    pub graph: GraphParams,
+    /// Learned traversability (MLP over aerial features).
+    pub learning: LearningParams,
+    /// Edge updates from reachability scans.
+    pub experience: ExperienceParams,
+    /// Which reachability scans a robot shares with the team.
+    pub sharing: SharingParams,
+    /// Graph search and replanning.
+    pub search: SearchParams,
+}
+
+/// Graph construction: greedy farthest-point coverage with ray-traced visibility regions.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct GraphParams {
+    /// Radius of the region ray traced around each node, metres.
+    pub visibility_range_m: f64,
+    /// Class names covered one after the other (easiest first). Empty: the class table's
+    /// `easiest_first()` order, keeping classes with rank ≤ `max_class_rank`.
+    pub class_order: Vec<String>,
+    /// Hardest class rank the graph covers when `class_order` is empty (5 = impassable).
+    pub max_class_rank: u8,
+    /// How far from a start or goal point to look for a covered cell to attach to, metres.
+    pub attach_radius_m: f64,
+    /// Spacing of the samples along an edge at which traversability is evaluated, metres.
+    pub edge_sample_spacing_m: f64,
+}
+
+impl Default for GraphParams {
+    fn default() -> Self {
+        GraphParams {
+            visibility_range_m: 15.0,
+            class_order: Vec::new(),
+            max_class_rank: 4,
+            attach_radius_m: 5.0,
+            edge_sample_spacing_m: 1.0,
+        }
+    }
+}
+
+/// Learned traversability T(p) = f(C(p), S(p), h(p)): an MLP trained online from scans.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct LearningParams {
+    /// Learn traversability; when off, edges use the class-rank cost W = 100^T_cls − 1 + D.
+    pub enabled: bool,
+    /// Hidden-layer width (sigmoid units).
+    pub hidden_units: usize,
+    /// L2 regularisation factor on the weights.
+    pub l2_regularization: f64,
+    /// RMSProp step size.
+    pub step_size: f64,
+    /// RMSProp decay of the squared-gradient average.
+    pub rmsprop_decay: f64,
+    /// RMSProp denominator epsilon.
+    pub rmsprop_epsilon: f64,
+    /// Samples per mini-batch.
+    pub batch_size: usize,
+    /// Samples drawn (with replacement) per training round.
+    pub samples_per_round: usize,
+    /// Minimum simulated time between training rounds, seconds.
+    pub train_period_s: f64,
+    /// Net votes a cell needs before it becomes a training label.
+    pub votes_to_label: u8,
+    /// Depth beyond a known obstacle whose cells vote "not traversable", metres.
+    pub not_trav_depth_m: f64,
+    /// Scan ranges are clipped to this, metres (bounds the work per scan).
+    pub max_scan_range_m: f64,
+    /// Distance-to-class features saturate at this distance, metres.
+    pub class_distance_cap_m: f64,
+    /// Labels needed before the first training round.
+    pub min_labels: usize,
+    /// Probabilities are clamped to at least this before taking −log.
+    pub probability_floor: f64,
+}
+
+impl Default for LearningParams {
+    fn default() -> Self {
+        LearningParams {
+            enabled: true,
+            hidden_units: 10,
+            l2_regularization: 0.01,
+            step_size: 0.01,
+            rmsprop_decay: 0.99,
+            rmsprop_epsilon: 1e-8,
+            batch_size: 32,
+            samples_per_round: 8192,
+            train_period_s: 10.0,
+            votes_to_label: 3,
+            not_trav_depth_m: 3.0,
+            max_scan_range_m: 30.0,
+            class_distance_cap_m: 25.0,
+            min_labels: 20,
+            probability_floor: 1e-4,
+        }
+    }
+}
+
+/// Edge state updates from reachability scans (trav / not_trav / unk_trav).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct ExperienceParams {
+    /// Update edge states from scans; when off, edges never change state (paper ablation).
+    pub graph_updates: bool,
+    /// Consistent observations needed to mark an edge trav or not_trav.
+    pub observations_to_mark: u32,
+    /// Consistent not_trav observations needed to overturn an edge marked trav.
+    pub observations_to_overturn_trav: u32,
+    /// Δφ: half-width of the window around a single crossing searched for unknown bins, radians.
+    pub crossing_window_rad: f64,
+    /// Traversal probability per sample assumed along an edge marked trav.
+    pub trav_sample_probability: f64,
+    /// Traversal probability per sample charged (in addition) along an edge marked not_trav
+    /// that is not removed (marked from other robots' scans).
+    pub not_trav_sample_probability: f64,
+}
+
+impl Default for ExperienceParams {
+    fn default() -> Self {
+        ExperienceParams {
+            graph_updates: true,
+            observations_to_mark: 2,
+            observations_to_overturn_trav: 4,
+            crossing_window_rad: 0.3,
+            trav_sample_probability: 0.99,
+            not_trav_sample_probability: 0.01,
+        }
+    }
+}
+
+/// The paper's three terrain communication modes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum SharingMode {
+    /// Share no scans.
+    None,
+    /// Share a scan only if it is far enough from every scan shared before.
+    #[default]
+    Downsampled,
+    /// Share every scan.
+    All,
+}
+
+/// Scan sharing filter.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct SharingParams {
+    /// Communication mode.
+    pub mode: SharingMode,
+    /// In `downsampled` mode, minimum distance to every scan shared before, metres.
+    pub min_separation_m: f64,
+}
+
+impl Default for SharingParams {
+    fn default() -> Self {
+        SharingParams { mode: SharingMode::Downsampled, min_separation_m: 2.0 }
+    }
+}
+
+/// Search and replanning.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct SearchParams {
+    /// A path needs replanning when its cost rose by more than this fraction.
+    pub replan_cost_rise_ratio: f64,
+}
+
+impl Default for SearchParams {
+    fn default() -> Self {
+        SearchParams { replan_cost_rise_ratio: 0.2 }
+    }
+}

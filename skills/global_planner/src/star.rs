@@ -1,0 +1,242 @@
+//! The star-shaped safe region of a reachability scan S(φ) and the paper's edge test against it
+//! (paper §Updating Graph with Experience).
+
+use spomp_core::{Point2, ReachabilityScan, normalize_angle};
+
+use crate::error::ScanError;
+
+/// What one scan says about one edge.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EdgeObservation {
+    /// Both ends inside the safe region and no crossing of its boundary.
+    Trav,
+    /// A single crossing of the boundary where no bin within Δφ is unknown.
+    NotTrav,
+    /// Anything else: both ends outside, several crossings, or unknown bins near the crossing.
+    UnkTrav,
+}
+
+/// A scan's safe region: the polygon through the end points of the bins, star-shaped around the
+/// robot.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct StarRegion {
+    pub origin: Point2,
+    yaw: f64,
+    bin_step_rad: f64,
+    pub range_m: Vec<f64>,
+    pub obstacle: Vec<bool>,
+    ends: Vec<Point2>,
+    pub max_range_m: f64,
+}
+
+impl StarRegion {
+    /// The region of a scan; ranges that are not finite or negative count as 0 (unknown), and
+    /// ranges are clipped to `max_range_m`.
+    #[cfg(test)]
+    pub fn from_scan(scan: &ReachabilityScan, max_range_m: f64) -> Result<Self, ScanError> {
+        let mut region = StarRegion::default();
+        region.load(scan, max_range_m)?;
+        Ok(region)
+    }
+
+    /// Makes this the region of `scan`, reusing the buffers (see [`StarRegion::from_scan`]).
+    pub fn load(&mut self, scan: &ReachabilityScan, max_range_m: f64) -> Result<(), ScanError> {
+        if scan.range_m.is_empty() {
+            return Err(ScanError::Empty);
+        }
+        if scan.range_m.len() != scan.obstacle.len() {
+            return Err(ScanError::LengthMismatch { ranges: scan.range_m.len(), obstacle: scan.obstacle.len() });
+        }
+        let p = scan.pose;
+        if !(p.x.is_finite() && p.y.is_finite() && p.yaw.is_finite()) {
+            return Err(ScanError::NonFinitePose);
+        }
+        let cap = if max_range_m.is_finite() && max_range_m > 0.0 { max_range_m } else { 30.0 };
+        let n = scan.range_m.len();
+        self.origin = p.position();
+        self.yaw = p.yaw;
+        self.bin_step_rad = std::f64::consts::TAU / n as f64;
+        self.range_m.clear();
+        self.obstacle.clear();
+        self.ends.clear();
+        for (b, (&r, &o)) in scan.range_m.iter().zip(&scan.obstacle).enumerate() {
+            let r = r as f64;
+            let (range, obstacle) = if r.is_finite() && r >= 0.0 { (r.min(cap), o && r <= cap) } else { (0.0, false) };
+            self.range_m.push(range);
+            self.obstacle.push(obstacle);
+            let a = p.yaw - b as f64 * self.bin_step_rad;
+            self.ends.push(Point2::new(self.origin.x + range * a.cos(), self.origin.y + range * a.sin()));
+        }
+        self.max_range_m = self.range_m.iter().copied().fold(0.0, f64::max);
+        Ok(())
+    }
+
+    fn bins(&self) -> usize {
+        self.range_m.len()
+    }
+
+    /// Fractional bin position of the direction towards `p`, in [0, bins).
+    pub fn bin_position(&self, p: Point2) -> f64 {
+        let d = p - self.origin;
+        let a = (self.yaw - d.angle()).rem_euclid(std::f64::consts::TAU);
+        (a / self.bin_step_rad).min(self.bins() as f64 - 1e-9).max(0.0)
+    }
+
+    /// Whether `p` lies inside the safe polygon.
+    pub fn contains(&self, p: Point2) -> bool {
+        let n = self.bins();
+        let dist = p.distance(self.origin);
+        if dist > self.max_range_m {
+            return false;
+        }
+        let u = self.bin_position(p);
+        let b = (u.floor() as usize).min(n - 1);
+        let b2 = (b + 1) % n;
+        let (e1, e2) = (self.ends[b], self.ends[b2]);
+        let chord = e2 - e1;
+        let side_origin = chord.cross(self.origin - e1);
+        let side_p = chord.cross(p - e1);
+        if side_origin.abs() < 1e-12 {
+            // Degenerate sector (a zero range, or a single bin): fall back to polar interpolation.
+            let f = u - u.floor();
+            return dist <= self.range_m[b] * (1.0 - f) + self.range_m[b2] * f;
+        }
+        side_p * side_origin >= 0.0
+    }
+
+    /// The paper's classification of the segment `a`–`b` against this region.
+    pub fn classify(&self, a: Point2, b: Point2, window_rad: f64) -> EdgeObservation {
+        if segment_point_distance(a, b, self.origin) > self.max_range_m {
+            return EdgeObservation::UnkTrav;
+        }
+        let n = self.bins();
+        let mut crossings = 0usize;
+        let mut crossing = a;
+        for j in 0..n {
+            let (c, d) = (self.ends[j], self.ends[(j + 1) % n]);
+            if let Some(p) = segment_intersection(a, b, c, d) {
+                crossings += 1;
+                crossing = p;
+                if crossings > 1 {
+                    return EdgeObservation::UnkTrav;
+                }
+            }
+        }
+        match crossings {
+            0 if self.contains(a) && self.contains(b) => EdgeObservation::Trav,
+            0 => EdgeObservation::UnkTrav,
+            _ if self.unknown_near(crossing, window_rad) => EdgeObservation::UnkTrav,
+            _ => EdgeObservation::NotTrav,
+        }
+    }
+
+    /// Whether a bin within `window_rad` of the direction towards `p` ends in the unknown.
+    fn unknown_near(&self, p: Point2, window_rad: f64) -> bool {
+        let n = self.bins();
+        let u = self.bin_position(p);
+        let reach = (window_rad.abs() / self.bin_step_rad).ceil() as i64 + 1;
+        let centre = u.round() as i64;
+        for k in centre - reach..=centre + reach {
+            let bin = k.rem_euclid(n as i64) as usize;
+            let diff = normalize_angle((k as f64 - u) * self.bin_step_rad).abs();
+            if diff <= window_rad && !self.obstacle[bin] {
+                return true;
+            }
+        }
+        false
+    }
+}
+
+/// Distance from `p` to the segment `a`–`b`.
+pub(crate) fn segment_point_distance(a: Point2, b: Point2, p: Point2) -> f64 {
+    let ab = b - a;
+    let len2 = ab.dot(ab);
+    if len2 <= 0.0 {
+        return p.distance(a);
+    }
+    let t = ((p - a).dot(ab) / len2).clamp(0.0, 1.0);
+    p.distance(a + ab * t)
+}
+
+/// Intersection of segment `a`–`b` (closed) with `c`–`d` (half-open: `d` excluded, so a crossing
+/// through a polygon vertex counts once).
+fn segment_intersection(a: Point2, b: Point2, c: Point2, d: Point2) -> Option<Point2> {
+    let r = b - a;
+    let s = d - c;
+    let denom = r.cross(s);
+    if denom.abs() < 1e-12 {
+        return None;
+    }
+    let ca = c - a;
+    let t = ca.cross(s) / denom;
+    let u = ca.cross(r) / denom;
+    ((0.0..=1.0).contains(&t) && (0.0..1.0).contains(&u)).then(|| a + r * t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use spomp_core::{Pose2, RobotId, Time};
+
+    pub(crate) fn scan(pose: Pose2, range: Vec<f32>, obstacle: Vec<bool>) -> ReachabilityScan {
+        ReachabilityScan { robot: RobotId::new("ugv1"), stamp: Time::ZERO, pose, range_m: range, obstacle }
+    }
+
+    fn circle(n: usize, r: f32, obstacle: bool) -> ReachabilityScan {
+        scan(Pose2::new(0.0, 0.0, 0.0), vec![r; n], vec![obstacle; n])
+    }
+
+    #[test]
+    fn inside_and_outside_a_disc() {
+        let s = StarRegion::from_scan(&circle(360, 10.0, true), 30.0).unwrap();
+        assert!(s.contains(Point2::new(3.0, 4.0)));
+        assert!(s.contains(Point2::new(-9.9, 0.0)));
+        assert!(!s.contains(Point2::new(7.5, 7.5)));
+    }
+
+    #[test]
+    fn paper_cases() {
+        let w = 0.3;
+        let wall = StarRegion::from_scan(&circle(360, 10.0, true), 30.0).unwrap();
+        assert_eq!(wall.classify(Point2::new(-5.0, 0.0), Point2::new(5.0, 1.0), w), EdgeObservation::Trav);
+        assert_eq!(wall.classify(Point2::new(0.0, 0.0), Point2::new(20.0, 0.0), w), EdgeObservation::NotTrav);
+        assert_eq!(
+            wall.classify(Point2::new(-20.0, 0.5), Point2::new(20.0, 0.5), w),
+            EdgeObservation::UnkTrav,
+            "two crossings"
+        );
+        assert_eq!(
+            wall.classify(Point2::new(20.0, 0.0), Point2::new(20.0, 15.0), w),
+            EdgeObservation::UnkTrav,
+            "outside"
+        );
+        let open = StarRegion::from_scan(&circle(360, 10.0, false), 30.0).unwrap();
+        assert_eq!(
+            open.classify(Point2::new(0.0, 0.0), Point2::new(20.0, 0.0), w),
+            EdgeObservation::UnkTrav,
+            "ends in unknown"
+        );
+    }
+
+    #[test]
+    fn unknown_bin_within_window_makes_a_crossing_unknown() {
+        // Obstacles everywhere except bins around azimuth −0.2 rad (bin index grows clockwise).
+        let n = 360;
+        let mut obstacle = vec![true; n];
+        let unknown_bin = 11; // ≈ −0.19 rad
+        obstacle[unknown_bin] = false;
+        let s = StarRegion::from_scan(&scan(Pose2::new(0.0, 0.0, 0.0), vec![10.0; n], obstacle), 30.0).unwrap();
+        assert_eq!(s.classify(Point2::new(0.0, 0.0), Point2::new(20.0, 0.0), 0.3), EdgeObservation::UnkTrav);
+        assert_eq!(s.classify(Point2::new(0.0, 0.0), Point2::new(0.0, 20.0), 0.3), EdgeObservation::NotTrav);
+        assert_eq!(s.classify(Point2::new(0.0, 0.0), Point2::new(20.0, 0.0), 0.1), EdgeObservation::NotTrav);
+    }
+
+    #[test]
+    fn bad_scans_are_errors() {
+        assert!(matches!(StarRegion::from_scan(&circle(0, 1.0, true), 30.0), Err(ScanError::Empty)));
+        let mismatched = scan(Pose2::default(), vec![1.0; 3], vec![true; 2]);
+        assert!(matches!(StarRegion::from_scan(&mismatched, 30.0), Err(ScanError::LengthMismatch { .. })));
+        let nan = scan(Pose2::new(f64::NAN, 0.0, 0.0), vec![1.0; 3], vec![true; 3]);
+        assert!(matches!(StarRegion::from_scan(&nan, 30.0), Err(ScanError::NonFinitePose)));
+    }
+}

@@ -1,0 +1,505 @@
+//! Behaviour of the global planner on small synthetic maps.
+
+#![allow(clippy::unwrap_used)] // tests may unwrap (working rules); helpers outside #[test] fns too
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use spomp_core::{
+    AerialMap, Cell, ClassTable, GridSpec, MapTile, Point2, Pose2, ReachabilityScan, Time, UNKNOWN_CLASS,
+};
+use spomp_global_planner::synthetic::{self, CityLayout, Probe, class, color};
+use spomp_global_planner::{
+    EdgeState, GlobalPath, GlobalPlanner, GlobalPlannerParams, PathStatus, PlanError, TrainOutcome,
+};
+
+const RES: f64 = 0.5;
+
+fn blank(width: u32, height: u32, class: u8, rgb: [u8; 3]) -> AerialMap {
+    let mut m = AerialMap::unknown(GridSpec::new(Point2::new(0.0, 0.0), RES, width, height));
+    m.class.fill(class);
+    m.rgb.fill(rgb);
+    m.elevation.fill(0.0);
+    m
+}
+
+fn paint(m: &mut AerialMap, cols: std::ops::Range<u32>, rows: std::ops::Range<u32>, class: u8, rgb: [u8; 3]) {
+    for r in rows {
+        for c in cols.clone() {
+            let i = m.spec.index(Cell::new(c, r));
+            m.class[i] = class;
+            m.rgb[i] = rgb;
+        }
+    }
+}
+
+/// 80 m × 50 m of buildings with an 8 m ring road along the border.
+fn ring_map() -> AerialMap {
+    let mut m = blank(160, 100, class::BUILDING, color::BUILDING);
+    paint(&mut m, 0..160, 0..16, class::ROAD, color::ROAD);
+    paint(&mut m, 0..160, 84..100, class::ROAD, color::ROAD);
+    paint(&mut m, 0..16, 0..100, class::ROAD, color::ROAD);
+    paint(&mut m, 144..160, 0..100, class::ROAD, color::ROAD);
+    m
+}
+
+fn planner(params: GlobalPlannerParams, map: &AerialMap) -> GlobalPlanner {
+    let mut p = GlobalPlanner::new(params, ClassTable::default_table()).unwrap();
+    p.update_map(map).unwrap();
+    p
+}
+
+const RING_START: Point2 = Point2::new(4.0, 10.0);
+const RING_GOAL: Point2 = Point2::new(76.0, 10.0);
+const BLOCK_X: f64 = 40.0;
+
+/// Ground truth of the ring map with a roadblock across the southern road at x = 40 m.
+fn ring_truth(map: &AerialMap) -> impl Fn(Point2) -> Probe + '_ {
+    let base = synthetic::city_probe(map);
+    move |p: Point2| {
+        if (p.x - BLOCK_X).abs() <= 0.5 && p.y < 8.0 { Probe::Obstacle } else { base(p) }
+    }
+}
+
+fn goes_north(path: &GlobalPath) -> bool {
+    path.waypoints.iter().any(|w| w.y > 40.0)
+}
+
+/// The path edge that crosses the roadblock, and a robot pose on it 4 m before the block.
+fn pose_before_block(p: &GlobalPlanner, path: &GlobalPath) -> (spomp_global_planner::EdgeId, Pose2) {
+    for (k, &e) in path.edges.iter().enumerate() {
+        let (a, b) = (path.waypoints[k + 1], path.waypoints[k + 2]);
+        if (a.x - BLOCK_X) * (b.x - BLOCK_X) < 0.0 {
+            let (a, b) = if a.x < b.x { (a, b) } else { (b, a) };
+            let x = BLOCK_X - 4.0;
+            let t = (x - a.x) / (b.x - a.x);
+            let y = a.y + t * (b.y - a.y);
+            assert!(p.edge_state(e).is_some());
+            return (e, Pose2::new(x, y, (b - a).angle()));
+        }
+    }
+    panic!("no path edge crosses the block: {:?}", path.waypoints);
+}
+
+fn scan_at(map: &AerialMap, robot: &str, pose: Pose2) -> ReachabilityScan {
+    synthetic::raycast_scan(robot, Time::ZERO, pose, 720, 30.0, 0.25, ring_truth(map))
+}
+
+#[test]
+fn every_easy_cell_is_covered_and_touching_regions_are_connected() {
+    let map = synthetic::city_map(200, 160, CityLayout::default(), 3);
+    let p = planner(GlobalPlannerParams::default(), &map);
+    let table = ClassTable::default_table();
+    let stats = p.graph_stats();
+    assert!(stats.nodes > 5 && stats.edges >= stats.nodes - 1, "{stats:?}");
+    let w = map.spec.width;
+    for row in 0..map.spec.height {
+        for col in 0..w {
+            let cell = Cell::new(col, row);
+            let c = map.class_at(cell);
+            let here = p.covering_node(map.spec.center(cell));
+            assert_eq!(here.is_some(), table.rank(c) <= 4, "cell {cell:?} of class {c}");
+            for next in [Cell::new(col + 1, row), Cell::new(col, row + 1)] {
+                if next.col >= w || next.row >= map.spec.height {
+                    continue;
+                }
+                if let (Some(a), Some(b)) = (here, p.covering_node(map.spec.center(next)))
+                    && a != b
+                {
+                    assert!(p.edge_between(a, b).is_some(), "regions of {a:?} and {b:?} touch at {cell:?}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn road_network_is_connected_and_a_building_block_is_not_crossed() {
+    // Two ring roads side by side, separated by a wall of buildings.
+    let mut map = blank(320, 100, class::BUILDING, color::BUILDING);
+    for x0 in [0u32, 170] {
+        paint(&mut map, x0..x0 + 150, 0..16, class::ROAD, color::ROAD);
+        paint(&mut map, x0..x0 + 150, 84..100, class::ROAD, color::ROAD);
+        paint(&mut map, x0..x0 + 16, 0..100, class::ROAD, color::ROAD);
+        paint(&mut map, x0 + 134..x0 + 150, 0..100, class::ROAD, color::ROAD);
+    }
+    let mut p = planner(GlobalPlannerParams::default(), &map);
+    let path = p.plan(Point2::new(4.0, 4.0), Point2::new(70.0, 46.0)).unwrap();
+    assert!(path.length_m >= 66.0 + 42.0 - 16.0, "around the block, {}", path.length_m);
+    for w in &path.waypoints {
+        let c = map.spec.cell_at(*w).unwrap();
+        assert_eq!(map.class_at(c), class::ROAD, "waypoint {w:?} on the road");
+    }
+    assert!((path.waypoints[0].x - 4.0).abs() < 1e-9 && path.waypoints.last() == Some(&Point2::new(70.0, 46.0)));
+    assert_eq!(p.plan(Point2::new(4.0, 4.0), Point2::new(150.0, 4.0)), Err(PlanError::NoPath));
+    assert!(matches!(p.plan(Point2::new(40.0, 25.0), Point2::new(4.0, 4.0)), Err(PlanError::NotOnGraph { .. })));
+    assert!(matches!(p.plan(Point2::new(-5.0, 4.0), Point2::new(4.0, 4.0)), Err(PlanError::OffMap { .. })));
+    assert!(matches!(p.plan(Point2::new(f64::NAN, 4.0), Point2::new(4.0, 4.0)), Err(PlanError::NonFinite { .. })));
+}
+
+#[test]
+fn own_observations_of_a_roadblock_remove_the_edge_and_the_path_reroutes() {
+    let map = ring_map();
+    let mut p = planner(GlobalPlannerParams::default(), &map);
+    let path = p.plan(RING_START, RING_GOAL).unwrap();
+    assert!(!goes_north(&path), "the southern road is shorter");
+    let (edge, pose) = pose_before_block(&p, &path);
+    let scan = scan_at(&map, "ugv1", pose);
+    let first = p.add_scan(&scan, true).unwrap();
+    assert!(first.observed[1] >= 1, "the blocked edge is judged not_trav: {first:?}");
+    assert_eq!(first.edges_removed, 0, "one observation is not enough");
+    assert_eq!(p.edge_state(edge), Some(EdgeState::Unknown));
+    assert!(p.path_still_valid(&path));
+    let second = p.add_scan(&scan, true).unwrap();
+    assert!(second.edges_removed >= 1);
+    assert_eq!(p.edge_state(edge), None, "removed");
+    assert_eq!(p.path_status(&path), PathStatus::Blocked);
+    let rerouted = p.plan(RING_START, RING_GOAL).unwrap();
+    assert!(goes_north(&rerouted), "{:?}", rerouted.waypoints);
+    assert!(p.graph_stats().removed_edges >= 1);
+    // A map update does not bring the edge back.
+    let mut newer = map.clone();
+    newer.version += 1;
+    newer.rgb[0] = [1, 2, 3];
+    p.update_map(&newer).unwrap();
+    assert!(goes_north(&p.plan(RING_START, RING_GOAL).unwrap()));
+}
+
+#[test]
+fn other_robots_evidence_never_removes_an_edge() {
+    let map = ring_map();
+    let mut p = planner(GlobalPlannerParams::default(), &map);
+    let path = p.plan(RING_START, RING_GOAL).unwrap();
+    let (edge, pose) = pose_before_block(&p, &path);
+    let scan = scan_at(&map, "ugv2", pose);
+    for _ in 0..6 {
+        let u = p.add_scan(&scan, false).unwrap();
+        assert_eq!(u.edges_removed, 0);
+    }
+    assert_eq!(p.votes_at(pose.position()), 6, "other robots' scans still vote for the model");
+    assert_eq!(p.edge_state(edge), Some(EdgeState::NotTrav), "marked, but kept");
+    assert_eq!(p.graph_stats().removed_edges, 0);
+    assert!(matches!(p.path_status(&path), PathStatus::CostRose { .. }), "{:?}", p.path_status(&path));
+}
+
+#[test]
+fn graph_updates_off_freezes_edges() {
+    let map = ring_map();
+    let mut params = GlobalPlannerParams::default();
+    params.experience.graph_updates = false;
+    let mut p = planner(params, &map);
+    let path = p.plan(RING_START, RING_GOAL).unwrap();
+    let (edge, pose) = pose_before_block(&p, &path);
+    let costs_before: Vec<f64> = p.edges().map(|e| e.cost).collect();
+    for _ in 0..5 {
+        let u = p.add_scan(&scan_at(&map, "ugv1", pose), true).unwrap();
+        assert_eq!((u.edges_changed, u.observed), (0, [0, 0, 0]));
+    }
+    assert_eq!(p.edge_state(edge), Some(EdgeState::Unknown));
+    assert!(p.edges().all(|e| e.state == EdgeState::Unknown));
+    assert_eq!(p.edges().map(|e| e.cost).collect::<Vec<_>>(), costs_before);
+    assert_eq!(p.plan(RING_START, RING_GOAL).unwrap(), path);
+}
+
+/// A U-shaped road (west, south, east arms) whose two northern ends are also joined by a short
+/// gravel lane.
+fn u_road_with_gravel_shortcut() -> AerialMap {
+    let mut m = blank(120, 140, class::BUILDING, color::BUILDING);
+    paint(&mut m, 0..16, 0..140, class::ROAD, color::ROAD);
+    paint(&mut m, 104..120, 0..140, class::ROAD, color::ROAD);
+    paint(&mut m, 0..120, 0..16, class::ROAD, color::ROAD);
+    paint(&mut m, 16..104, 124..136, class::GRAVEL, color::GRAVEL);
+    m
+}
+
+#[test]
+fn learning_off_uses_the_class_rank_cost() {
+    let map = u_road_with_gravel_shortcut();
+    let (start, goal) = (Point2::new(4.0, 66.0), Point2::new(56.0, 66.0));
+    // Untrained learning: every sample costs −log 0.5, so the short gravel lane wins.
+    let mut learned = planner(GlobalPlannerParams::default(), &map);
+    let short = learned.plan(start, goal).unwrap();
+    assert!(short.length_m < 90.0, "{}", short.length_m);
+    let ln2 = std::f64::consts::LN_2;
+    for e in learned.edges() {
+        let samples = (e.from.distance(e.to) / 1.0).ceil().max(1.0) + 1.0;
+        assert!((e.cost - samples * ln2).abs() < 1e-9, "edge cost {} vs {} samples", e.cost, samples);
+    }
+    // Class rank: gravel (rank 1) costs 100¹ − 1 per edge, the road (rank 0) only D: the detour.
+    let mut params = GlobalPlannerParams::default();
+    params.learning.enabled = false;
+    let mut ranked = planner(params, &map);
+    let detour = ranked.plan(start, goal).unwrap();
+    assert!(detour.length_m > 150.0, "{}", detour.length_m);
+    for w in &detour.waypoints[1..detour.waypoints.len() - 1] {
+        assert_eq!(map.class_at(map.spec.cell_at(*w).unwrap()), class::ROAD);
+    }
+    for e in ranked.edges() {
+        let hardest = [e.from, e.to].iter().map(|p| map.class_at(map.spec.cell_at(*p).unwrap())).max().unwrap();
+        if hardest == class::ROAD && e.cost < 99.0 {
+            // W = 100⁰ − 1 + D with D ≥ 0 the distance to the nearest gravel (capped at 25 m).
+            assert!((0.0..=25.01).contains(&e.cost), "{}", e.cost);
+        }
+        if hardest == class::GRAVEL {
+            assert!(e.cost >= 99.0, "{}", e.cost);
+        }
+    }
+    // The road edge nearest the gravel lane has D = 0 where it touches it.
+    let road_only_far: Vec<f64> = ranked.edges().filter(|e| e.from.y < 20.0 && e.to.y < 20.0).map(|e| e.cost).collect();
+    assert!(!road_only_far.is_empty());
+    for c in road_only_far {
+        assert!((c - 25.0).abs() < 0.1, "southern road edges are > 25 m from gravel: {c}");
+    }
+    assert_eq!(ranked.train(Time::from_secs_f64(100.0), &mut ChaCha8Rng::seed_from_u64(1)), TrainOutcome::Disabled);
+}
+
+#[test]
+fn ramps_seen_in_one_area_rate_unseen_ramps_above_plain_curbs() {
+    // Ramps 4 m wide every 10 m along the curbs.
+    let layout = CityLayout { ramp_every_cells: 20, ramp_cells: 8, ..CityLayout::default() };
+    let map = synthetic::city_map(300, 300, layout, 11);
+    let mut p = planner(GlobalPlannerParams::default(), &map);
+    let truth = synthetic::city_probe(&map);
+    // Drive along the first horizontal road for x < 50 m, and up two ramps onto the sidewalk.
+    let mut poses: Vec<Pose2> = (0..25).map(|k| Pose2::new(2.0 + k as f64 * 2.0, 5.0, 0.0)).collect();
+    for x in [22.0, 42.0] {
+        poses.extend([7.0, 9.0, 10.25, 11.5, 12.5].map(|y| Pose2::new(x, y, std::f64::consts::FRAC_PI_2)));
+    }
+    let mut t = 0.0;
+    for pose in poses {
+        let scan = synthetic::raycast_scan("ugv1", Time::from_secs_f64(t), pose, 360, 20.0, 0.25, &truth);
+        p.add_scan(&scan, true).unwrap();
+        t += 1.0;
+    }
+    assert!(p.votes_at(Point2::new(10.0, 5.0)) >= 3, "road under the robot is voted traversable");
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let outcome = p.train(Time::from_secs_f64(t), &mut rng);
+    assert!(matches!(outcome, TrainOutcome::Trained { .. }), "{outcome:?}");
+    assert_eq!(p.train(Time::from_secs_f64(t + 5.0), &mut rng), TrainOutcome::TooSoon);
+    // The robot keeps training every 10 s on what it has seen.
+    for k in 1..=4 {
+        assert!(matches!(p.train(Time::from_secs_f64(t + 10.0 * k as f64), &mut rng), TrainOutcome::Trained { .. }));
+    }
+    // Far from where the robot was (x, y > 75 m), compare ramps and curbs.
+    let (mut ramp, mut curb) = (Vec::new(), Vec::new());
+    for row in 150..300u32 {
+        for col in 150..300u32 {
+            let cell = Cell::new(col, row);
+            let i = map.spec.index(cell);
+            let pt = map.spec.center(cell);
+            match map.rgb[i] {
+                color::RAMP => ramp.push(p.traversability_at(pt).unwrap()),
+                color::CURB => curb.push(p.traversability_at(pt).unwrap()),
+                _ => {}
+            }
+        }
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    assert!(!ramp.is_empty() && !curb.is_empty());
+    let (r, c) = (mean(&ramp), mean(&curb));
+    assert!(r > c + 0.2, "unseen ramps {r:.3} vs curbs {c:.3}");
+    let road = p.traversability_at(Point2::new(120.0, 5.0)).unwrap();
+    assert!(road > 0.8 && road > c, "unseen road {road:.3}");
+}
+
+#[test]
+fn the_graph_grows_with_the_map_without_losing_edge_states() {
+    let full = ring_map();
+    // First only the western half is mapped.
+    let mut partial = AerialMap::unknown(full.spec);
+    let west = MapTile {
+        col0: 0,
+        row0: 0,
+        width: 80,
+        height: 100,
+        class: (0..100u32)
+            .flat_map(|r| (0..80u32).map(move |c| (c, r)))
+            .map(|(c, r)| full.class_at(Cell::new(c, r)))
+            .collect(),
+        rgb: vec![color::ROAD; 8000],
+        elevation: vec![0.0; 8000],
+    };
+    assert!(partial.apply_tile(&west) > 0);
+    let mut p = planner(GlobalPlannerParams::default(), &partial);
+    let before = p.graph_stats();
+    // Drive the western road, marking edges trav.
+    for k in 0..8 {
+        let pose = Pose2::new(4.0, 8.0 + 4.0 * k as f64, std::f64::consts::FRAC_PI_2);
+        let scan = synthetic::raycast_scan("ugv1", Time::ZERO, pose, 360, 20.0, 0.25, synthetic::city_probe(&partial));
+        p.add_scan(&scan, true).unwrap();
+        p.add_scan(&scan, true).unwrap();
+    }
+    let marked: Vec<_> = p.edges().filter(|e| e.state == EdgeState::Trav).collect();
+    assert!(!marked.is_empty());
+    assert!(p.plan(RING_START, RING_GOAL).is_err(), "east not mapped yet");
+    let east = MapTile {
+        col0: 80,
+        row0: 0,
+        width: 80,
+        height: 100,
+        class: (0..100u32)
+            .flat_map(|r| (80..160u32).map(move |c| (c, r)))
+            .map(|(c, r)| full.class_at(Cell::new(c, r)))
+            .collect(),
+        rgb: vec![color::ROAD; 8000],
+        elevation: vec![0.0; 8000],
+    };
+    partial.apply_tile(&east);
+    let grown = p.update_map(&partial).unwrap();
+    assert!(grown.nodes_added > 0 && grown.edges_added > 0, "{grown:?}");
+    let after = p.graph_stats();
+    assert!(after.nodes > before.nodes);
+    for e in &marked {
+        assert_eq!(p.edge_state(e.id), Some(EdgeState::Trav), "edge {:?} kept its state", e.id);
+    }
+    assert_eq!(p.edges().filter(|e| e.state == EdgeState::Trav).count(), marked.len());
+    assert!(p.plan(RING_START, RING_GOAL).is_ok());
+    for (i, &c) in partial.class.iter().enumerate() {
+        if c == class::ROAD {
+            assert!(p.covering_node(partial.spec.center(partial.spec.cell_of_index(i))).is_some());
+        }
+    }
+    // A map on another grid is refused.
+    let other = blank(10, 10, class::ROAD, color::ROAD);
+    assert!(p.update_map(&other).is_err());
+}
+
+#[test]
+fn unknown_cells_are_not_covered_and_edge_costs_skip_them() {
+    let mut map = ring_map();
+    paint(&mut map, 60..70, 0..16, UNKNOWN_CLASS, [0, 0, 0]);
+    let mut p = planner(GlobalPlannerParams::default(), &map);
+    assert!(p.covering_node(Point2::new(32.0, 4.0)).is_none());
+    assert!(p.traversability_at(Point2::new(32.0, 4.0)).is_none());
+    assert!(p.traversability_at(Point2::new(-1.0, 4.0)).is_none());
+    assert_eq!(p.traversability_at(Point2::new(4.0, 4.0)), Some(0.5), "untrained prior");
+    assert!(p.plan(RING_START, RING_GOAL).is_ok());
+}
+
+#[test]
+fn params_deserialize_with_defaults_and_reject_unknown_keys() {
+    let p: GlobalPlannerParams =
+        serde_json::from_str(r#"{"learning": {"enabled": false}, "sharing": {"mode": "all"}}"#).unwrap();
+    assert!(!p.learning.enabled);
+    assert_eq!(p.learning.hidden_units, 10);
+    assert_eq!(p.experience.observations_to_mark, 2);
+    assert!((p.experience.crossing_window_rad - 0.3).abs() < 1e-12);
+    assert!(serde_json::from_str::<GlobalPlannerParams>(r#"{"graph": {"visibility": 3}}"#).is_err());
+    let mut bad = GlobalPlannerParams::default();
+    bad.graph.class_order = vec!["lava".into()];
+    assert!(GlobalPlanner::new(bad, ClassTable::default_table()).is_err());
+}
+
+#[test]
+fn learned_edge_cost_is_the_mean_over_mapped_samples_times_the_sample_count() {
+    // A uniform 100 m road: every mapped cell has the same features, hence the same T.
+    let mut map = blank(200, 20, class::ROAD, color::ROAD);
+    let mut p = planner(GlobalPlannerParams::default(), &map);
+    let free = |_: Point2| Probe::Free;
+    for k in 0..3 {
+        let scan = synthetic::raycast_scan("ugv1", Time::ZERO, Pose2::new(50.0, 5.0, 0.0), 360, 8.0, 0.25, free);
+        assert!(p.add_scan(&scan, true).unwrap().cells_voted > 100, "scan {k}");
+    }
+    assert!(matches!(p.train(Time::ZERO, &mut ChaCha8Rng::seed_from_u64(2)), TrainOutcome::Trained { .. }));
+    let t = p.traversability_at(Point2::new(20.0, 5.0)).unwrap();
+    assert!(t > 0.5, "trained on traversable labels only: {t}");
+    let edge = p.edges().max_by(|a, b| a.from.distance(a.to).total_cmp(&b.from.distance(b.to))).unwrap();
+    let samples = edge.from.distance(edge.to).ceil() + 1.0;
+    let per_sample = -t.ln();
+    assert!((edge.cost - samples * per_sample).abs() < 0.05 * per_sample, "{} vs {}", edge.cost, samples * per_sample);
+    // Unmap the middle of the edge: the known samples' mean is scaled back up to all samples.
+    let mid = edge.from + (edge.to - edge.from) * 0.5;
+    let cell = map.spec.cell_at(mid).unwrap();
+    paint(&mut map, cell.col - 3..cell.col + 4, 0..20, UNKNOWN_CLASS, [0, 0, 0]);
+    map.version += 1;
+    p.update_map(&map).unwrap();
+    assert!(p.traversability_at(mid).is_none(), "samples in the middle are unmapped now");
+    let after = p.edges().find(|e| e.id == edge.id).unwrap();
+    let per_sample = -p.traversability_at(Point2::new(20.0, 5.0)).unwrap().ln();
+    // Three or more samples are unmapped; summing only the mapped ones would miss them.
+    assert!(
+        (after.cost - samples * per_sample).abs() < 0.05 * per_sample,
+        "{} vs {}",
+        after.cost,
+        samples * per_sample
+    );
+}
+
+#[test]
+fn same_inputs_and_seed_give_the_same_planner() {
+    let map = synthetic::city_map(200, 200, CityLayout::default(), 4);
+    let run = || {
+        let mut p = planner(GlobalPlannerParams::default(), &map);
+        let truth = synthetic::city_probe(&map);
+        for k in 0..10 {
+            let pose = Pose2::new(2.0 + 3.0 * k as f64, 5.0, 0.0);
+            p.add_scan(&synthetic::raycast_scan("ugv1", Time::ZERO, pose, 256, 20.0, 0.25, &truth), true).unwrap();
+        }
+        let outcome = p.train(Time::ZERO, &mut ChaCha8Rng::seed_from_u64(9));
+        assert!(matches!(outcome, TrainOutcome::Trained { .. }), "{outcome:?}");
+        (p.edges().collect::<Vec<_>>(), p.plan(Point2::new(3.0, 3.0), Point2::new(53.0, 53.0)).unwrap())
+    };
+    assert_eq!(run(), run());
+}
+
+mod prop {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn any_f32() -> impl Strategy<Value = f32> {
+        prop_oneof![Just(f32::NAN), Just(f32::INFINITY), Just(-1.0f32), 0.0f32..60.0]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+        #[test]
+        fn arbitrary_scans_and_queries_never_panic(
+            ranges in proptest::collection::vec(any_f32(), 0..64),
+            flags in proptest::collection::vec(any::<bool>(), 0..64),
+            x in prop_oneof![Just(f64::NAN), -20.0..100.0f64],
+            y in -20.0..60.0f64,
+            yaw in prop_oneof![Just(f64::INFINITY), -10.0..10.0f64],
+            own in any::<bool>(),
+        ) {
+            thread_local! {
+                static PLANNER: std::cell::RefCell<GlobalPlanner> = std::cell::RefCell::new(planner(GlobalPlannerParams::default(), &ring_map()));
+            }
+            let scan = ReachabilityScan { robot: "r".into(), stamp: Time::ZERO, pose: Pose2::new(x, y, yaw), range_m: ranges.clone(), obstacle: flags.clone() };
+            PLANNER.with(|p| {
+                let mut p = p.borrow_mut();
+                let consistent = !ranges.is_empty() && ranges.len() == flags.len() && x.is_finite() && yaw.is_finite();
+                prop_assert_eq!(p.add_scan(&scan, own).is_ok(), consistent);
+                let _ = p.plan(Point2::new(x, y), RING_GOAL);
+                let _ = p.traversability_at(Point2::new(x, y));
+                Ok(())
+            })?;
+        }
+
+        #[test]
+        fn arbitrary_small_maps_are_covered_and_queries_never_panic(
+            w in 1u32..24,
+            h in 1u32..24,
+            cells in proptest::collection::vec(prop_oneof![Just(0u8), Just(2), Just(3), Just(6), Just(5), Just(255)], 576),
+            a in (-2.0..14.0f64, -2.0..14.0f64),
+            b in (-2.0..14.0f64, -2.0..14.0f64),
+        ) {
+            let mut map = blank(w, h, 0, color::ROAD);
+            let n = (w * h) as usize;
+            map.class.copy_from_slice(&cells[..n]);
+            let table = ClassTable::default_table();
+            let mut p = planner(GlobalPlannerParams::default(), &map);
+            for i in 0..n {
+                let c = map.class[i];
+                let covered = p.covering_node(map.spec.center(map.spec.cell_of_index(i))).is_some();
+                let coverable = c != UNKNOWN_CLASS && table.rank(c) <= 4 && !table.is_ignored(c);
+                prop_assert_eq!(covered, coverable, "cell {} class {}", i, c);
+            }
+            if let Ok(path) = p.plan(Point2::new(a.0, a.1), Point2::new(b.0, b.1)) {
+                prop_assert!(path.cost.is_finite() && path.cost >= 0.0);
+                prop_assert_eq!(p.path_status(&path), PathStatus::Valid);
+            }
+            let mut broken = map.clone();
+            broken.rgb.pop();
+            prop_assert!(p.update_map(&broken).is_err());
+        }
+    }
+}

@@ -1,0 +1,280 @@
+//! Goal detection in the aerial class map (paper §High-Level Coordination, DESIGN.md §5).
+//!
+//! 1. Binary mask of the goal class.
+//! 2. Morphological open (removes specks), then close (dilate, erode) with a disk of half the
+//!    merge distance. DESIGN.md fixes this order (the paper's text says close then open).
+//! 3. Clusters: 8-connected components of the *dilated* mask (the first half of the close), so
+//!    that blobs whose gap is at most the merge distance join; closing alone would not join
+//!    thin objects such as a row of cars, because the eroding disk fits through the gap beside
+//!    them. Each cluster is the closed mask within one such component; it counts if the larger
+//!    side of its bounding box is at least the minimum size. One goal per cluster.
+//! 4. Placement: among known cells within the placement region of the component that are not
+//!    obstacles (impassable rank, unknown, or the goal class itself), try classes from easiest
+//!    to hardest rank; the first class with a cell at least `min_clearance_m` from every
+//!    obstacle gives the goal, at its cell farthest from obstacles (Euclidean distance
+//!    transform). Without such a cell the clearest admissible cell of any class is used.
+//! 5. Goals within the deconfliction radius of a known goal, or of a goal detected before them
+//!    in the same pass, are dropped.
+
+use image::{GrayImage, Luma};
+use imageproc::distance_transform::{Norm, euclidean_squared_distance_transform};
+use imageproc::morphology::{dilate, erode, open_mut};
+use imageproc::region_labelling::{Connectivity, connected_components};
+use spomp_core::{AerialMap, Cell, ClassId, ClassTable, Point2, UNKNOWN_CLASS};
+
+use crate::error::MappingError;
+use crate::params::GoalDetectionParams;
+
+/// A goal found in the map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DetectedGoal {
+    /// Map-frame position (cell centre).
+    pub position: Point2,
+    /// The cell.
+    pub cell: Cell,
+    /// Class of the cell the goal is on.
+    pub class: ClassId,
+    /// Distance from the goal to the nearest obstacle, metres.
+    pub clearance_m: f64,
+    /// Centroid of the cluster (after merging).
+    pub cluster_centroid: Point2,
+    /// Larger side of the cluster's bounding box, metres.
+    pub cluster_size_m: f64,
+    /// Cells of goal class inside the cluster.
+    pub class_cells: usize,
+}
+
+/// What one detection pass found.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Detection {
+    /// New goals, in raster order of their clusters.
+    pub goals: Vec<DetectedGoal>,
+    /// Clusters smaller than the minimum size.
+    pub too_small: usize,
+    /// Clusters with no admissible cell in their placement region.
+    pub unplaceable: usize,
+    /// Goals dropped because a known (or earlier detected) goal is within the deconfliction
+    /// radius.
+    pub duplicates: usize,
+}
+
+/// Per-component statistics gathered in one raster pass.
+#[derive(Clone, Copy, Debug)]
+struct Component {
+    min_c: u32,
+    min_r: u32,
+    max_c: u32,
+    max_r: u32,
+    cells: usize,
+    class_cells: usize,
+    sum_c: f64,
+    sum_r: f64,
+}
+
+/// Finds goals in aerial maps. Holds the resolved class and rank tables and reusable buffers.
+#[derive(Clone, Debug)]
+pub struct GoalDetector {
+    params: GoalDetectionParams,
+    target: ClassId,
+    /// Candidate classes for placement, easiest first.
+    placement_order: Vec<ClassId>,
+    /// Obstacle flag per class index (impassable rank, unknown, the target class).
+    obstacle_lut: [bool; 256],
+    /// Scratch: component statistics.
+    components: Vec<Component>,
+}
+
+impl GoalDetector {
+    /// A detector for `params.class` from `classes`.
+    pub fn new(params: GoalDetectionParams, classes: &ClassTable) -> Result<Self, MappingError> {
+        params.validate()?;
+        let target = classes
+            .by_name(&params.class)
+            .ok_or_else(|| MappingError::UnknownClass {
+                name: params.class.clone(),
+                known: classes.names().join(", "),
+            })?
+            .index;
+        let rank = classes.rank_lut();
+        let impassable = spomp_core::classes::IMPASSABLE_RANK;
+        let mut obstacle_lut = [false; 256];
+        for (i, flag) in obstacle_lut.iter_mut().enumerate() {
+            *flag = rank[i] >= impassable || i == target as usize || i == UNKNOWN_CLASS as usize;
+        }
+        let placement_order = classes.easiest_first().into_iter().filter(|&c| !obstacle_lut[c as usize]).collect();
+        Ok(GoalDetector { params, target, placement_order, obstacle_lut, components: Vec::new() })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &GoalDetectionParams {
+        &self.params
+    }
+
+    /// Detects goals in `map`, dropping those within the deconfliction radius of `known_goals`.
+    pub fn detect(&mut self, map: &AerialMap, known_goals: &[Point2]) -> Result<Detection, MappingError> {
+        let spec = map.spec;
+        let (w, h) = (spec.width, spec.height);
+        if map.class.len() != spec.len() {
+            return Err(MappingError::InconsistentMap("class layer does not match the grid".into()));
+        }
+        let res = spec.resolution_m;
+        if !(res.is_finite() && res > 0.0) {
+            return Err(MappingError::InconsistentMap(format!("resolution {res} m")));
+        }
+        let mut detection = Detection::default();
+        if spec.is_empty() {
+            return Ok(detection);
+        }
+
+        // 1–2. Class mask, open, close.
+        let mask: Vec<u8> = map.class.iter().map(|&c| if c == self.target { 255 } else { 0 }).collect();
+        let Some(mut mask) = GrayImage::from_raw(w, h, mask) else {
+            return Err(MappingError::InconsistentMap("grid too large".into()));
+        };
+        let to_px = |m: f64| (m / res).round().clamp(0.0, 255.0) as u8;
+        let open_px = to_px(self.params.open_radius_m);
+        if open_px > 0 {
+            // imageproc rounds L2 distances up, so for radii ≤ 2 L1 gives the same disk and its
+            // integer two-pass transform is much cheaper than the exact Euclidean one.
+            let norm = if open_px <= 2 { Norm::L1 } else { Norm::L2 };
+            open_mut(&mut mask, norm, open_px);
+        }
+        let close_px = to_px(self.params.merge_distance_m / 2.0);
+        let (dilated, closed) = if close_px > 0 {
+            let dilated = dilate(&mask, Norm::L2, close_px);
+            let closed = erode(&dilated, Norm::L2, close_px);
+            (dilated, closed)
+        } else {
+            (mask.clone(), mask)
+        };
+
+        // 3. Clusters: components of the dilated mask, restricted to the closed mask.
+        let labels = connected_components(&dilated, Connectivity::Eight, Luma([0u8]));
+        self.components.clear();
+        for (i, (&label, &inside)) in labels.as_raw().iter().zip(closed.as_raw()).enumerate() {
+            if label == 0 || inside == 0 {
+                continue;
+            }
+            let (c, r) = ((i % w as usize) as u32, (i / w as usize) as u32);
+            let k = label as usize - 1;
+            if self.components.len() <= k {
+                let empty = Component {
+                    min_c: u32::MAX,
+                    min_r: u32::MAX,
+                    max_c: 0,
+                    max_r: 0,
+                    cells: 0,
+                    class_cells: 0,
+                    sum_c: 0.0,
+                    sum_r: 0.0,
+                };
+                self.components.resize(k + 1, empty);
+            }
+            let comp = &mut self.components[k];
+            comp.min_c = comp.min_c.min(c);
+            comp.min_r = comp.min_r.min(r);
+            comp.max_c = comp.max_c.max(c);
+            comp.max_r = comp.max_r.max(r);
+            comp.cells += 1;
+            comp.class_cells += usize::from(map.class.get(i) == Some(&self.target));
+            comp.sum_c += c as f64;
+            comp.sum_r += r as f64;
+        }
+        if self.components.iter().all(|c| c.cells == 0) {
+            return Ok(detection);
+        }
+
+        // Clearance: distance from every cell to the nearest obstacle.
+        let obstacles: Vec<u8> =
+            map.class.iter().map(|&c| if self.obstacle_lut[c as usize] { 255 } else { 0 }).collect();
+        let Some(obstacles) = GrayImage::from_raw(w, h, obstacles) else {
+            return Err(MappingError::InconsistentMap("grid too large".into()));
+        };
+        let clearance_sq = euclidean_squared_distance_transform(&obstacles);
+
+        let region_px = self.params.placement_region_m / res;
+        let margin = region_px.ceil() as i64 + 1;
+        let min_clear_sq = (self.params.min_clearance_m / res).powi(2);
+        let radius = self.params.deconfliction_radius_m;
+        let mut accepted: Vec<Point2> = Vec::new();
+
+        for (k, comp) in self.components.iter().enumerate() {
+            if comp.cells == 0 {
+                continue;
+            }
+            let size_m = ((comp.max_c - comp.min_c).max(comp.max_r - comp.min_r) + 1) as f64 * res;
+            if size_m < self.params.min_size_m {
+                detection.too_small += 1;
+                continue;
+            }
+            let label = k as u32 + 1;
+            // Crop around the component, grown by the placement region.
+            let c0 = (comp.min_c as i64 - margin).max(0) as u32;
+            let r0 = (comp.min_r as i64 - margin).max(0) as u32;
+            let c1 = (comp.max_c as i64 + margin).min(w as i64 - 1) as u32;
+            let r1 = (comp.max_r as i64 + margin).min(h as i64 - 1) as u32;
+            let (cw, ch) = (c1 - c0 + 1, r1 - r0 + 1);
+            let crop = GrayImage::from_fn(cw, ch, |x, y| {
+                let member = labels.get_pixel(x + c0, y + r0)[0] == label && closed.get_pixel(x + c0, y + r0)[0] != 0;
+                Luma([if member { 255 } else { 0 }])
+            });
+            let to_cluster_sq = euclidean_squared_distance_transform(&crop);
+            let centroid = (comp.sum_c / comp.cells as f64, comp.sum_r / comp.cells as f64);
+
+            // Best cell per class: (clearance², −distance² to centroid, cell) maximised.
+            let mut best: Vec<Option<(f64, f64, Cell)>> = vec![None; self.placement_order.len()];
+            for y in 0..ch {
+                for x in 0..cw {
+                    if to_cluster_sq.get_pixel(x, y)[0] > region_px * region_px {
+                        continue;
+                    }
+                    let (c, r) = (x + c0, y + r0);
+                    let i = r as usize * w as usize + c as usize;
+                    let class = map.class.get(i).copied().unwrap_or(UNKNOWN_CLASS);
+                    let Some(slot) = self.placement_order.iter().position(|&p| p == class) else {
+                        continue;
+                    };
+                    let clear = clearance_sq.get_pixel(c, r)[0];
+                    let d_centroid = (c as f64 - centroid.0).powi(2) + (r as f64 - centroid.1).powi(2);
+                    let better = match best[slot] {
+                        None => true,
+                        Some((bc, bd, _)) => clear > bc || (clear == bc && d_centroid < bd),
+                    };
+                    if better {
+                        best[slot] = Some((clear, d_centroid, Cell::new(c, r)));
+                    }
+                }
+            }
+            let chosen = best
+                .iter()
+                .flatten()
+                .find(|b| b.0 >= min_clear_sq)
+                .or_else(|| best.iter().flatten().max_by(|a, b| a.0.total_cmp(&b.0).then_with(|| b.1.total_cmp(&a.1))))
+                .copied();
+            let Some((clear_sq, _, cell)) = chosen else {
+                detection.unplaceable += 1;
+                continue;
+            };
+            let position = spec.center(cell);
+            if known_goals.iter().chain(&accepted).any(|g| g.distance(position) <= radius) {
+                detection.duplicates += 1;
+                continue;
+            }
+            accepted.push(position);
+            let class = map.class_at(cell);
+            detection.goals.push(DetectedGoal {
+                position,
+                cell,
+                class,
+                clearance_m: clear_sq.sqrt() * res,
+                cluster_centroid: Point2::new(
+                    spec.origin.x + (centroid.0 + 0.5) * res,
+                    spec.origin.y + (centroid.1 + 0.5) * res,
+                ),
+                cluster_size_m: size_m,
+                class_cells: comp.class_cells,
+            });
+        }
+        Ok(detection)
+    }
+}

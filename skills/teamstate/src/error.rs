@@ -1,0 +1,67 @@
+//! Errors of the team database.
+
+use spomp_core::GoalId;
+
+/// What a local mutation or a query can fail with.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TeamStateError {
+    /// A parameter is out of range.
+    #[error("invalid team-state parameters: {0}")]
+    InvalidParams(String),
+    /// The goal id is not in the database.
+    #[error("unknown goal {0}")]
+    UnknownGoal(GoalId),
+    /// The goal (or a goal within the deconfliction radius) was visited already.
+    #[error("goal {0} was already visited")]
+    AlreadyVisited(GoalId),
+    /// A robot with higher priority holds the goal.
+    #[error("goal {goal} is held by higher-priority robot {robot}")]
+    ClaimedByOther {
+        /// Canonical id of the goal.
+        goal: GoalId,
+        /// The holder.
+        robot: spomp_core::RobotId,
+    },
+    /// A position, pose or scan has non-finite or out-of-range values.
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
+}
+
+/// Why a sync message was rejected. A rejected message changes nothing.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SyncError {
+    /// More bytes than the configured maximum.
+    #[error("message of {size} bytes exceeds the limit of {limit} bytes")]
+    Oversized {
+        /// Size of the message, bytes.
+        size: usize,
+        /// The limit, bytes.
+        limit: usize,
+    },
+    /// Not a team-state message (wrong magic) or an unknown format version.
+    #[error("not a team-state sync message (bad header)")]
+    BadHeader,
+    /// The payload does not decode.
+    #[error("malformed sync message: {0}")]
+    Malformed(String),
+    /// The message is addressed to another robot or claims another sender.
+    #[error("message from {claimed} to {to} delivered as from {actual} to {me}")]
+    WrongAddress {
+        /// Sender named in the message.
+        claimed: String,
+        /// Addressee named in the message.
+        to: String,
+        /// Sender the transport reported.
+        actual: String,
+        /// This robot.
+        me: String,
+    },
+    /// A record in the message is inconsistent (e.g. key and body disagree, non-finite values).
+    #[error("invalid record {index}: {reason}")]
+    InvalidRecord {
+        /// Position of the record in the message.
+        index: usize,
+        /// What is wrong.
+        reason: String,
+    },
+}

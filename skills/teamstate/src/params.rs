@@ -1,0 +1,59 @@
+//! Parameters of the team database (DESIGN.md §5 "Team state", "Goal coordination").
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::error::TeamStateError;
+
+/// Parameters of the replicated team database.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct TeamStateParams {
+    /// Goals closer than this to each other are one goal for deconfliction (paper: 10 m), metres.
+    pub deconfliction_radius_m: f64,
+    /// A robot shares a new reachability scan only if it lies at least this far from every scan
+    /// it shared before (paper §Communication: 2 m); 0 shares every scan, metres.
+    pub scan_min_spacing_m: f64,
+    /// Largest encoded sync message `apply_bytes` accepts, bytes.
+    pub max_message_bytes: usize,
+    /// Most bins a reachability scan may have to be accepted.
+    pub max_scan_bins: usize,
+    /// Largest aerial-map blob accepted, bytes.
+    pub max_map_blob_bytes: usize,
+    /// Sent messages kept per peer awaiting acknowledgement before the oldest is presumed lost
+    /// (at most 64, the width of the acknowledgement window).
+    pub max_in_flight_messages: usize,
+}
+
+impl Default for TeamStateParams {
+    fn default() -> Self {
+        TeamStateParams {
+            deconfliction_radius_m: 10.0,
+            scan_min_spacing_m: 2.0,
+            max_message_bytes: 16 * 1024 * 1024,
+            max_scan_bins: 8192,
+            max_map_blob_bytes: 8 * 1024 * 1024,
+            max_in_flight_messages: 64,
+        }
+    }
+}
+
+impl TeamStateParams {
+    /// Checks ranges; returns the first problem found.
+    pub fn validate(&self) -> Result<(), TeamStateError> {
+        let bad = |what: &str| Err(TeamStateError::InvalidParams(what.to_string()));
+        if !(self.deconfliction_radius_m.is_finite() && self.deconfliction_radius_m >= 0.0) {
+            return bad("deconfliction_radius_m must be finite and ≥ 0");
+        }
+        if !(self.scan_min_spacing_m.is_finite() && self.scan_min_spacing_m >= 0.0) {
+            return bad("scan_min_spacing_m must be finite and ≥ 0");
+        }
+        if self.max_message_bytes == 0 || self.max_scan_bins == 0 || self.max_map_blob_bytes == 0 {
+            return bad("max_message_bytes, max_scan_bins and max_map_blob_bytes must be > 0");
+        }
+        if !(1..=64).contains(&self.max_in_flight_messages) {
+            return bad("max_in_flight_messages must be in 1..=64");
+        }
+        Ok(())
+    }
+}

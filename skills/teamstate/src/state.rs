@@ -1,0 +1,743 @@
+//! The team database of one robot.
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+
+use spomp_core::{GoalId, Point2, Pose2, ReachabilityScan, RobotId, Time};
+
+use crate::error::{SyncError, TeamStateError};
+use crate::params::TeamStateParams;
+use crate::record::{
+    ClaimRecord, GoalOrigin, GoalRecord, Limits, MapVersion, Record, RecordBody, RecordKey, RobotRecord, TierSet,
+    UnreachableRecord, VisitRecord, check_scan, finite_pose,
+};
+use crate::sync::{HEADER_BYTES, InFlight, PeerState, SyncMessage};
+use crate::view::{GoalIndex, GoalView, build_goal_index};
+
+/// Writer name of goals listed in the mission file: every robot loads them identically.
+pub const MISSION_WRITER: &str = "mission";
+
+/// Result of [`TeamState::identify_goal`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum IdentifyOutcome {
+    /// A new goal was added.
+    New(GoalId),
+    /// A known goal lies within the deconfliction radius; nothing was added.
+    Existing(GoalId),
+}
+
+impl IdentifyOutcome {
+    /// The id of the goal, new or existing.
+    pub fn id(&self) -> &GoalId {
+        match self {
+            IdentifyOutcome::New(id) | IdentifyOutcome::Existing(id) => id,
+        }
+    }
+}
+
+/// Result of [`TeamState::claim`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ClaimOutcome {
+    /// Canonical id of the claimed goal.
+    pub goal: GoalId,
+}
+
+/// What applying a sync message did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ApplyReport {
+    /// Records that changed this robot's state.
+    pub records_changed: usize,
+    /// Records already known (duplicates, stale copies).
+    pub records_ignored: usize,
+    /// Goals this robot released because it learned that a higher-priority robot claims them or
+    /// someone visited them (canonical ids).
+    pub released: Vec<GoalId>,
+    /// Goals new to this robot (canonical ids as of after the merge).
+    pub new_goals: Vec<GoalId>,
+    /// Reachability scans new to this robot.
+    pub new_scans: usize,
+    /// Map origins whose version this robot did not have.
+    pub new_maps: Vec<RobotId>,
+}
+
+/// A robot's last known state, as recorded in the team state.
+pub type RobotStatus = RobotRecord;
+
+/// The replicated team database of one robot (the paper's MOCHA role), transport-free.
+///
+/// Local mutations write records this robot owns; [`TeamState::make_sync`] and
+/// [`TeamState::apply`] exchange records with peers; every query reads the merged state.
+#[derive(Clone, Debug)]
+pub struct TeamState {
+    self_id: RobotId,
+    priority: u32,
+    params: TeamStateParams,
+    /// This robot's logical counter: the dot of its last write.
+    clock: u64,
+    next_goal_seq: u32,
+    next_scan_seq: u64,
+    records: BTreeMap<RecordKey, Record>,
+    goal_index: GoalIndex,
+    /// Scans in local arrival order, for `scans_since`.
+    scan_log: Vec<Arc<ReachabilityScan>>,
+    /// Positions of the scans this robot shared, for the spacing rule.
+    own_scan_positions: Vec<Point2>,
+    peers: HashMap<RobotId, PeerState>,
+    /// Local change log: change number → key, one entry per key (its latest change), so a peer
+    /// only looks at what changed since it last looked.
+    changes: BTreeMap<u64, RecordKey>,
+    change_of: HashMap<RecordKey, u64>,
+    change_seq: u64,
+}
+
+impl TeamState {
+    /// An empty database for robot `self_id` with claim priority `priority` (lower = higher).
+    pub fn new(self_id: RobotId, priority: u32, params: TeamStateParams) -> Result<Self, TeamStateError> {
+        params.validate()?;
+        Ok(TeamState {
+            self_id,
+            priority,
+            params,
+            clock: 0,
+            next_goal_seq: 0,
+            next_scan_seq: 0,
+            records: BTreeMap::new(),
+            goal_index: GoalIndex::default(),
+            scan_log: Vec::new(),
+            own_scan_positions: Vec::new(),
+            peers: HashMap::new(),
+            changes: BTreeMap::new(),
+            change_of: HashMap::new(),
+            change_seq: 0,
+        })
+    }
+
+    /// This robot's id.
+    pub fn self_id(&self) -> &RobotId {
+        &self.self_id
+    }
+
+    /// This robot's claim priority.
+    pub fn priority(&self) -> u32 {
+        self.priority
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &TeamStateParams {
+        &self.params
+    }
+
+    // ------------------------------------------------------------------ local writes
+
+    fn tick(&mut self) -> u64 {
+        self.clock += 1;
+        self.clock
+    }
+
+    /// Inserts a record this robot wrote (or a mission record) and keeps derived state current.
+    fn put(&mut self, key: RecordKey, dot: u64, body: RecordBody) {
+        let rec = Record { key: key.clone(), dot, body };
+        let goal_related = key.goal().is_some() || matches!(key, RecordKey::RetryEpoch(_));
+        if let RecordBody::Scan(s) = &rec.body {
+            self.scan_log.push(s.clone());
+        }
+        self.note_change(&key);
+        self.records.insert(key, rec);
+        if goal_related {
+            self.rebuild_goals();
+        }
+    }
+
+    fn note_change(&mut self, key: &RecordKey) {
+        self.change_seq += 1;
+        if let Some(old) = self.change_of.insert(key.clone(), self.change_seq) {
+            self.changes.remove(&old);
+        }
+        self.changes.insert(self.change_seq, key.clone());
+    }
+
+    fn rebuild_goals(&mut self) {
+        self.goal_index = build_goal_index(&self.records, self.params.deconfliction_radius_m);
+    }
+
+    fn own_robot_record(&self) -> RobotRecord {
+        match self.records.get(&RecordKey::Robot(self.self_id.clone())).map(|r| &r.body) {
+            Some(RecordBody::Robot(r)) => r.clone(),
+            _ => RobotRecord {
+                pose: None,
+                stamp: Time::ZERO,
+                priority: self.priority,
+                current_goal: None,
+                path_end: None,
+            },
+        }
+    }
+
+    fn write_robot(&mut self, update: impl FnOnce(&mut RobotRecord)) {
+        let mut rec = self.own_robot_record();
+        update(&mut rec);
+        let dot = self.tick();
+        self.put(RecordKey::Robot(self.self_id.clone()), dot, RecordBody::Robot(rec));
+    }
+
+    /// Records a goal this robot identified (detected in the aerial map, or entered at the
+    /// basestation). If a known goal lies within the deconfliction radius, nothing is added and
+    /// that goal is returned.
+    pub fn identify_goal(
+        &mut self,
+        position: Point2,
+        origin: GoalOrigin,
+        stamp: Time,
+    ) -> Result<IdentifyOutcome, TeamStateError> {
+        if !(position.x.is_finite() && position.y.is_finite()) {
+            return Err(TeamStateError::InvalidInput("goal position is not finite".into()));
+        }
+        if let Some(v) = self.goal_near(position) {
+            return Ok(IdentifyOutcome::Existing(v.id.clone()));
+        }
+        let id = GoalId { origin: self.self_id.clone(), seq: self.next_goal_seq };
+        self.next_goal_seq += 1;
+        let body = RecordBody::Goal(GoalRecord { position, origin, identified_at: stamp });
+        self.put(RecordKey::Goal(id.clone()), 1, body);
+        self.resolve_own_conflicts();
+        Ok(IdentifyOutcome::New(id))
+    }
+
+    /// Adds goal number `index` of the mission file. Every robot adds the same mission goals
+    /// under the same ids (`mission/index`), so they never duplicate.
+    pub fn add_mission_goal(&mut self, index: u32, position: Point2) -> Result<GoalId, TeamStateError> {
+        if !(position.x.is_finite() && position.y.is_finite()) {
+            return Err(TeamStateError::InvalidInput("goal position is not finite".into()));
+        }
+        let id = GoalId { origin: RobotId::new(MISSION_WRITER), seq: index };
+        let body = RecordBody::Goal(GoalRecord { position, origin: GoalOrigin::Mission, identified_at: Time::ZERO });
+        self.put(RecordKey::Goal(id.clone()), 1, body);
+        self.resolve_own_conflicts();
+        Ok(id)
+    }
+
+    fn view_of(&self, goal: &GoalId) -> Result<&GoalView, TeamStateError> {
+        self.goal(goal).ok_or_else(|| TeamStateError::UnknownGoal(goal.clone()))
+    }
+
+    /// This robot's active claims (goal ids as written).
+    fn own_active_claims(&self) -> Vec<GoalId> {
+        self.records
+            .values()
+            .filter_map(|r| match (&r.key, &r.body) {
+                (RecordKey::Claim { goal, claimant }, RecordBody::Claim(c))
+                    if c.active && claimant == &self.self_id =>
+                {
+                    Some(goal.clone())
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn write_release(&mut self, goal: GoalId, stamp: Time) {
+        let dot = self.tick();
+        let key = RecordKey::Claim { goal, claimant: self.self_id.clone() };
+        let body = RecordBody::Claim(ClaimRecord { active: false, priority: self.priority, stamp });
+        self.put(key, dot, body);
+    }
+
+    /// Releases every own claim on the goal group of `canonical` (or on all goals if None).
+    fn release_own(&mut self, canonical: Option<&GoalId>, stamp: Time) -> bool {
+        let mut released = false;
+        for g in self.own_active_claims() {
+            let in_group = match canonical {
+                None => true,
+                Some(c) => self.goal(&g).is_some_and(|v| &v.id == c),
+            };
+            if in_group {
+                self.write_release(g, stamp);
+                released = true;
+            }
+        }
+        released
+    }
+
+    /// Claims a goal for this robot (it is heading there). Any other claim of this robot is
+    /// released: a robot pursues one goal at a time. Fails if the goal is unknown or visited, or
+    /// if a robot with higher priority holds it. Taking a goal from a lower-priority robot is
+    /// allowed: that robot releases it when it learns of this claim.
+    pub fn claim(&mut self, goal: &GoalId, stamp: Time) -> Result<ClaimOutcome, TeamStateError> {
+        let view = self.view_of(goal)?;
+        if view.status == crate::view::GoalStatus::Visited {
+            return Err(TeamStateError::AlreadyVisited(view.id.clone()));
+        }
+        if let Some(holder) = view
+            .claimant
+            .as_ref()
+            .filter(|c| c.robot != self.self_id && (c.priority, &c.robot) < (self.priority, &self.self_id))
+        {
+            return Err(TeamStateError::ClaimedByOther { goal: view.id.clone(), robot: holder.robot.clone() });
+        }
+        let canonical = view.id.clone();
+        let others: Vec<GoalId> =
+            self.own_active_claims().into_iter().filter(|g| self.goal(g).is_none_or(|v| v.id != canonical)).collect();
+        for g in others {
+            self.write_release(g, stamp);
+        }
+        let dot = self.tick();
+        let key = RecordKey::Claim { goal: canonical.clone(), claimant: self.self_id.clone() };
+        let body = RecordBody::Claim(ClaimRecord { active: true, priority: self.priority, stamp });
+        self.put(key, dot, body);
+        let c = canonical.clone();
+        self.write_robot(|r| r.current_goal = Some(c));
+        Ok(ClaimOutcome { goal: canonical })
+    }
+
+    /// Releases this robot's claim on a goal (and its aliases) so others may take it.
+    pub fn release(&mut self, goal: &GoalId, stamp: Time) -> Result<(), TeamStateError> {
+        let canonical = self.view_of(goal)?.id.clone();
+        self.release_own(Some(&canonical), stamp);
+        self.clear_current_goal_if(&canonical);
+        Ok(())
+    }
+
+    fn clear_current_goal_if(&mut self, canonical: &GoalId) {
+        let rec = self.own_robot_record();
+        let heading_there = rec
+            .current_goal
+            .as_ref()
+            .is_some_and(|g| g == canonical || self.goal(g).is_some_and(|v| &v.id == canonical));
+        if heading_there {
+            self.write_robot(|r| r.current_goal = None);
+        }
+    }
+
+    /// Records that this robot reached a goal; releases its claim. A visit is permanent.
+    pub fn mark_visited(&mut self, goal: &GoalId, stamp: Time) -> Result<(), TeamStateError> {
+        let canonical = self.view_of(goal)?.id.clone();
+        let key = RecordKey::Visit { goal: canonical.clone(), robot: self.self_id.clone() };
+        if !self.records.contains_key(&key) {
+            self.put(key, 1, RecordBody::Visit(VisitRecord { stamp }));
+        }
+        self.release_own(Some(&canonical), stamp);
+        self.clear_current_goal_if(&canonical);
+        Ok(())
+    }
+
+    fn retry_epoch(&self, robot: &RobotId) -> u64 {
+        match self.records.get(&RecordKey::RetryEpoch(robot.clone())).map(|r| &r.body) {
+            Some(RecordBody::RetryEpoch(e)) => *e,
+            _ => 0,
+        }
+    }
+
+    /// Marks a goal unreachable for this robot (no path, failure or time limit) and releases it
+    /// so others may try.
+    pub fn mark_unreachable(&mut self, goal: &GoalId, stamp: Time) -> Result<(), TeamStateError> {
+        let canonical = self.view_of(goal)?.id.clone();
+        let epoch = self.retry_epoch(&self.self_id);
+        let dot = self.tick();
+        let key = RecordKey::Unreachable { goal: canonical.clone(), robot: self.self_id.clone() };
+        self.put(key, dot, RecordBody::Unreachable(UnreachableRecord { epoch, stamp }));
+        self.release_own(Some(&canonical), stamp);
+        self.clear_current_goal_if(&canonical);
+        Ok(())
+    }
+
+    /// Clears every "unreachable" mark of this robot (it retries them when nothing else is
+    /// left) by starting a new retry epoch; marks made in earlier epochs stop counting.
+    pub fn clear_unreachable(&mut self) {
+        let epoch = self.retry_epoch(&self.self_id) + 1;
+        let dot = self.tick();
+        self.put(RecordKey::RetryEpoch(self.self_id.clone()), dot, RecordBody::RetryEpoch(epoch));
+    }
+
+    /// Updates this robot's last known pose. A pose older than the recorded one is ignored
+    /// (returns false).
+    pub fn set_pose(&mut self, pose: Pose2, stamp: Time) -> Result<bool, TeamStateError> {
+        if !finite_pose(&pose) {
+            return Err(TeamStateError::InvalidInput("pose is not finite".into()));
+        }
+        let key = RecordKey::Robot(self.self_id.clone());
+        if self.records.contains_key(&key) && stamp < self.own_robot_record().stamp {
+            return Ok(false);
+        }
+        self.write_robot(|r| {
+            r.pose = Some(pose);
+            r.stamp = stamp;
+        });
+        Ok(true)
+    }
+
+    /// Publishes the end of this robot's current global path (the UAV seeks it when the pose is
+    /// stale), or clears it.
+    pub fn set_path_end(&mut self, end: Option<Point2>) -> Result<(), TeamStateError> {
+        if end.is_some_and(|p| !(p.x.is_finite() && p.y.is_finite())) {
+            return Err(TeamStateError::InvalidInput("path end is not finite".into()));
+        }
+        self.write_robot(|r| r.path_end = end);
+        Ok(())
+    }
+
+    /// Offers a reachability scan this robot took. It is shared only if it lies at least
+    /// `scan_min_spacing_m` from every scan this robot shared before; returns whether it was.
+    pub fn add_scan(&mut self, scan: ReachabilityScan) -> Result<bool, TeamStateError> {
+        if scan.robot != self.self_id {
+            return Err(TeamStateError::InvalidInput(format!(
+                "scan of {} offered to the team state of {}",
+                scan.robot, self.self_id
+            )));
+        }
+        check_scan(&scan, self.params.max_scan_bins).map_err(TeamStateError::InvalidInput)?;
+        let here = scan.pose.position();
+        let spacing = self.params.scan_min_spacing_m;
+        if self.own_scan_positions.iter().any(|p| p.distance(here) < spacing) {
+            return Ok(false);
+        }
+        self.own_scan_positions.push(here);
+        let seq = self.next_scan_seq;
+        self.next_scan_seq += 1;
+        let key = RecordKey::Scan { robot: self.self_id.clone(), seq };
+        self.put(key, 1, RecordBody::Scan(Arc::new(scan)));
+        Ok(true)
+    }
+
+    /// Publishes a new aerial-map version (compressed layers from `spomp-mapping`). Versions not
+    /// newer than the current one are ignored (returns false).
+    pub fn add_map_version(&mut self, version: u64, stamp: Time, blob: Vec<u8>) -> Result<bool, TeamStateError> {
+        if blob.len() > self.params.max_map_blob_bytes {
+            return Err(TeamStateError::InvalidInput(format!(
+                "map blob of {} bytes exceeds max_map_blob_bytes",
+                blob.len()
+            )));
+        }
+        if self.latest_map(&self.self_id.clone()).is_some_and(|m| m.version >= version) {
+            return Ok(false);
+        }
+        let dot = self.tick();
+        let body = RecordBody::Map(MapVersion { version, stamp, blob: Arc::new(blob) });
+        self.put(RecordKey::Map(self.self_id.clone()), dot, body);
+        Ok(true)
+    }
+
+    // ------------------------------------------------------------------ queries
+
+    /// Every goal, deduplicated (aliases merged), in order of identification.
+    pub fn goals(&self) -> &[GoalView] {
+        &self.goal_index.views
+    }
+
+    /// The goal with this id, or the goal it is an alias of.
+    pub fn goal(&self, id: &GoalId) -> Option<&GoalView> {
+        self.goal_index.by_id.get(id).and_then(|&i| self.goal_index.views.get(i))
+    }
+
+    /// The known goal within the deconfliction radius of `position`, if any (nearest).
+    pub fn goal_near(&self, position: Point2) -> Option<&GoalView> {
+        let r = self.params.deconfliction_radius_m;
+        self.goals()
+            .iter()
+            .filter(|v| v.position.distance(position) <= r)
+            .min_by(|a, b| a.position.distance(position).total_cmp(&b.position.distance(position)))
+    }
+
+    /// Goals `robot` may claim, nearest to `position` first: not visited, not unreachable for
+    /// it, and not claimed by another robot.
+    pub fn claimable_goals_for(&self, robot: &RobotId, position: Point2) -> Vec<&GoalView> {
+        let mut out: Vec<&GoalView> = self
+            .goals()
+            .iter()
+            .filter(|v| v.visited.is_none())
+            .filter(|v| !v.is_unreachable_for(robot))
+            .filter(|v| v.claims.iter().all(|c| &c.robot == robot))
+            .collect();
+        out.sort_by(|a, b| {
+            a.position.distance(position).total_cmp(&b.position.distance(position)).then_with(|| a.id.cmp(&b.id))
+        });
+        out
+    }
+
+    /// Whether every goal is visited (and there is at least one).
+    pub fn all_goals_visited(&self) -> bool {
+        !self.goals().is_empty() && self.goals().iter().all(|v| v.visited.is_some())
+    }
+
+    /// The last known state (pose, stamp, current goal, path end) of a robot.
+    pub fn robot_status(&self, id: &RobotId) -> Option<&RobotStatus> {
+        match self.records.get(&RecordKey::Robot(id.clone())).map(|r| &r.body) {
+            Some(RecordBody::Robot(r)) => Some(r),
+            _ => None,
+        }
+    }
+
+    /// The last known pose of a robot and its stamp.
+    pub fn robot_pose(&self, id: &RobotId) -> Option<(Pose2, Time)> {
+        self.robot_status(id).and_then(|r| r.pose.map(|p| (p, r.stamp)))
+    }
+
+    /// Every robot with a known state.
+    pub fn robots(&self) -> Vec<(&RobotId, &RobotStatus)> {
+        self.records
+            .values()
+            .filter_map(|r| match (&r.key, &r.body) {
+                (RecordKey::Robot(id), RecordBody::Robot(s)) => Some((id, s)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Scans that arrived (locally or from peers) after `cursor`, and the new cursor. Start
+    /// with cursor 0.
+    pub fn scans_since(&self, cursor: usize) -> (&[Arc<ReachabilityScan>], usize) {
+        let from = cursor.min(self.scan_log.len());
+        (&self.scan_log[from..], self.scan_log.len())
+    }
+
+    /// Number of scans held.
+    pub fn scan_count(&self) -> usize {
+        self.scan_log.len()
+    }
+
+    /// The latest map version published by `origin`.
+    pub fn latest_map(&self, origin: &RobotId) -> Option<&MapVersion> {
+        match self.records.get(&RecordKey::Map(origin.clone())).map(|r| &r.body) {
+            Some(RecordBody::Map(m)) => Some(m),
+            _ => None,
+        }
+    }
+
+    /// The newest map version held, over all origins (highest version, ties by origin).
+    pub fn newest_map(&self) -> Option<(&RobotId, &MapVersion)> {
+        self.records
+            .values()
+            .filter_map(|r| match (&r.key, &r.body) {
+                (RecordKey::Map(o), RecordBody::Map(m)) => Some((o, m)),
+                _ => None,
+            })
+            .max_by(|a, b| a.1.version.cmp(&b.1.version).then_with(|| b.0.cmp(a.0)))
+    }
+
+    /// Every record held, in key order (for inspection, logging and tests).
+    pub fn records(&self) -> impl Iterator<Item = &Record> {
+        self.records.values()
+    }
+
+    /// Whether two databases hold exactly the same records.
+    pub fn same_records(&self, other: &TeamState) -> bool {
+        self.records == other.records
+    }
+
+    // ------------------------------------------------------------------ sync
+
+    fn peer_has_all(&self, peer: &PeerState) -> bool {
+        // Only records changed since the peer's cursor, pending ones and in-flight ones can be
+        // missing at the peer.
+        let unseen = self.changes.range(peer.change_cursor + 1..).map(|(_, k)| k);
+        let held_by_peer = |key: &RecordKey| {
+            let Some(rec) = self.records.get(key) else { return true };
+            let held = peer.confirmed.get(key).copied().unwrap_or(0);
+            // Poses change every tick; any version counts, or a sync would never complete.
+            match key {
+                RecordKey::Robot(_) => held > 0,
+                _ => held >= rec.dot,
+            }
+        };
+        unseen.chain(&peer.pending).chain(peer.sent.keys()).all(held_by_peer)
+    }
+
+    /// Builds the next message for `peer`: records of the allowed tiers the peer is not known to
+    /// hold, highest priority first (tier, then goals before claims before poses; scans oldest
+    /// first), within `byte_budget` encoded bytes; plus acknowledgements. Records larger than
+    /// the remaining budget are skipped. None when there is nothing to say.
+    pub fn make_sync(&mut self, peer: &RobotId, allowed_tiers: TierSet, byte_budget: usize) -> Option<SyncMessage> {
+        if peer == &self.self_id {
+            return None;
+        }
+        let state = self.peers.entry(peer.clone()).or_default();
+        for (_, key) in self.changes.range(state.change_cursor + 1..) {
+            state.pending.insert(key.clone());
+        }
+        state.change_cursor = self.change_seq;
+        // Drop pending records the peer holds (or will, from in-flight messages).
+        let records = &self.records;
+        let mut pending = std::mem::take(&mut state.pending);
+        pending.retain(|k| records.get(k).is_some_and(|r| r.dot > state.known_dot(k)));
+        state.pending = pending;
+        let mut candidates: Vec<&Record> =
+            state.pending.iter().filter_map(|k| records.get(k)).filter(|r| allowed_tiers.contains(r.tier())).collect();
+        candidates.sort_by(|a, b| {
+            (a.tier(), a.key.send_rank()).cmp(&(b.tier(), b.key.send_rank())).then_with(|| a.key.cmp(&b.key))
+        });
+
+        let mut msg = SyncMessage {
+            from: self.self_id.clone(),
+            to: peer.clone(),
+            seq: state.last_sent_seq.wrapping_add(1).max(1),
+            ack: state.received,
+            peer_has_all: false,
+            records: Vec::new(),
+        };
+        // Header, envelope and the record-count varint (≤ 5 bytes).
+        let mut used = HEADER_BYTES + postcard::experimental::serialized_size(&msg).unwrap_or(0) + 5;
+        for rec in candidates {
+            let size = postcard::experimental::serialized_size(rec).unwrap_or(usize::MAX);
+            if used.saturating_add(size) <= byte_budget {
+                used += size;
+                msg.records.push(rec.clone());
+            }
+        }
+        let flag = {
+            let state = self.peers.get(peer)?;
+            self.peer_has_all(state)
+        };
+        let state = self.peers.get_mut(peer)?;
+        if msg.records.is_empty() && !state.ack_owed && state.last_flag_sent == Some(flag) {
+            return None;
+        }
+        msg.peer_has_all = flag;
+        state.last_sent_seq = msg.seq;
+        state.ack_owed = false;
+        state.last_flag_sent = Some(flag);
+        if !msg.records.is_empty() {
+            let sent: Vec<(RecordKey, u64)> = msg.records.iter().map(|r| (r.key.clone(), r.dot)).collect();
+            for (k, d) in &sent {
+                state.sent.insert(k.clone(), (*d, msg.seq));
+                state.pending.remove(k);
+            }
+            state.in_flight.push_back(InFlight { seq: msg.seq, records: sent });
+            state.trim(self.params.max_in_flight_messages);
+        }
+        Some(msg)
+    }
+
+    /// Decodes and applies a message, rejecting messages over `max_message_bytes`.
+    pub fn apply_bytes(&mut self, from: &RobotId, bytes: &[u8]) -> Result<ApplyReport, SyncError> {
+        let msg = SyncMessage::decode_with_limit(bytes, self.params.max_message_bytes)?;
+        self.apply(from, &msg)
+    }
+
+    /// Merges a message from `from`. Everything is validated first: a malformed message is
+    /// rejected with an error and changes nothing. Own claims that lost to a higher-priority
+    /// claim, or whose goal was visited, are released at once (listed in the report).
+    pub fn apply(&mut self, from: &RobotId, msg: &SyncMessage) -> Result<ApplyReport, SyncError> {
+        if &msg.from != from || msg.to != self.self_id || from == &self.self_id {
+            return Err(SyncError::WrongAddress {
+                claimed: msg.from.to_string(),
+                to: msg.to.to_string(),
+                actual: from.to_string(),
+                me: self.self_id.to_string(),
+            });
+        }
+        if msg.seq == 0 {
+            return Err(SyncError::Malformed("message sequence number 0".into()));
+        }
+        let limits =
+            Limits { max_scan_bins: self.params.max_scan_bins, max_map_blob_bytes: self.params.max_map_blob_bytes };
+        for (index, rec) in msg.records.iter().enumerate() {
+            rec.validate(&limits).map_err(|reason| SyncError::InvalidRecord { index, reason })?;
+        }
+
+        // Merge.
+        let goals_before: Vec<GoalId> = self.goals().iter().map(|v| v.id.clone()).collect();
+        let mut report = ApplyReport::default();
+        let mut goals_touched = false;
+        for rec in &msg.records {
+            // A relayed copy of our own record newer than our counter means we lost our counter
+            // (restart): continue above it so our next writes win.
+            if rec.key.writer() == &self.self_id && !rec.is_immutable() {
+                self.clock = self.clock.max(rec.dot);
+            }
+            let newer = match self.records.get(&rec.key) {
+                None => true,
+                Some(cur) => crate::record::compare_copies(rec, cur).is_gt(),
+            };
+            if !newer {
+                report.records_ignored += 1;
+                continue;
+            }
+            report.records_changed += 1;
+            goals_touched |= rec.key.goal().is_some() || matches!(rec.key, RecordKey::RetryEpoch(_));
+            match &rec.body {
+                RecordBody::Scan(s) => {
+                    self.scan_log.push(s.clone());
+                    report.new_scans += 1;
+                }
+                RecordBody::Map(_) => report.new_maps.push(rec.key.writer().clone()),
+                _ => {}
+            }
+            if let RecordKey::Goal(g) = &rec.key
+                && g.origin == self.self_id
+            {
+                self.next_goal_seq = self.next_goal_seq.max(g.seq.saturating_add(1));
+            }
+            if let RecordKey::Scan { robot, seq } = &rec.key
+                && robot == &self.self_id
+            {
+                self.next_scan_seq = self.next_scan_seq.max(seq.saturating_add(1));
+            }
+            self.note_change(&rec.key);
+            self.records.insert(rec.key.clone(), rec.clone());
+        }
+        if goals_touched {
+            self.rebuild_goals();
+            report.new_goals =
+                self.goals().iter().filter(|v| !goals_before.contains(&v.id)).map(|v| v.id.clone()).collect();
+        }
+
+        // Peer bookkeeping.
+        let max_in_flight = self.params.max_in_flight_messages;
+        let state = self.peers.entry(from.clone()).or_default();
+        state.process_ack(msg.ack, max_in_flight);
+        for rec in &msg.records {
+            let c = state.confirmed.entry(rec.key.clone()).or_insert(0);
+            *c = (*c).max(rec.dot);
+        }
+        // A re-delivered message was acknowledged already (or will be with the original).
+        let duplicate = state.received.covers(msg.seq);
+        state.received.record(msg.seq);
+        if msg.seq >= state.newest_from_peer {
+            let news = msg.peer_has_all != state.peer_says_we_have_all;
+            state.newest_from_peer = msg.seq;
+            state.peer_says_we_have_all = msg.peer_has_all;
+            state.ack_owed |= news;
+        }
+        if !msg.records.is_empty() && !duplicate {
+            state.ack_owed = true;
+        }
+
+        // Coordination: give up own claims that lost or whose goal was visited.
+        if goals_touched {
+            report.released = self.resolve_own_conflicts();
+        }
+        Ok(report)
+    }
+
+    /// Releases own claims whose goal group is visited or held by a higher-priority robot;
+    /// returns the canonical ids released.
+    fn resolve_own_conflicts(&mut self) -> Vec<GoalId> {
+        // No clock here: the release is stamped with the robot's latest pose time.
+        let stamp = self.own_robot_record().stamp;
+        let mut released = Vec::new();
+        for g in self.own_active_claims() {
+            let Some(view) = self.goal(&g) else { continue };
+            if view.visited.is_some() || !view.is_held_by(&self.self_id) {
+                let canonical = view.id.clone();
+                self.write_release(g, stamp);
+                self.clear_current_goal_if(&canonical);
+                if !released.contains(&canonical) {
+                    released.push(canonical);
+                }
+            }
+        }
+        released
+    }
+
+    /// Whether a full sync with `peer` has completed: the peer acknowledged every record this
+    /// robot holds (any version of a pose), and the peer's newest message said the same of this
+    /// robot. The UAV waits on this before it returns to exploring.
+    pub fn sync_complete_with(&self, peer: &RobotId) -> bool {
+        self.peers.get(peer).is_some_and(|p| p.peer_says_we_have_all && self.peer_has_all(p))
+    }
+
+    /// Forgets what is known about `peer`'s holdings (e.g. the peer restarted); everything is
+    /// offered again on the next sync.
+    pub fn reset_peer(&mut self, peer: &RobotId) {
+        self.peers.remove(peer);
+    }
+}

@@ -1,0 +1,200 @@
+//! Sync messages, their wire format, and what a robot remembers about each peer.
+//!
+//! Wire format: the 4 bytes `SPTS`, a format version byte, then the message in
+//! [postcard](https://docs.rs/postcard) (serde, varint integers, no field names). A binary format
+//! because scans and map blobs dominate the traffic and JSON would triple their size; postcard
+//! because it is compact, schema-free for our own types and rejects trailing or truncated input.
+
+use std::collections::{BTreeSet, HashMap, VecDeque};
+
+use serde::{Deserialize, Serialize};
+use spomp_core::RobotId;
+
+use crate::error::SyncError;
+use crate::record::{Record, RecordKey};
+
+const MAGIC: &[u8; 4] = b"SPTS";
+const FORMAT_VERSION: u8 = 1;
+/// Bytes before the postcard payload.
+pub(crate) const HEADER_BYTES: usize = MAGIC.len() + 1;
+
+/// Which of the receiver's messages the sender has received: `upto` and, in bit `i` of `mask`,
+/// message `upto − i` (a 64-message window, so reordering and loss are both visible).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Ack {
+    /// Highest message sequence number received from the addressee (0 = none yet).
+    pub upto: u32,
+    /// Bit i set: message `upto − i` was received.
+    pub mask: u64,
+}
+
+impl Ack {
+    /// Whether message `seq` is acknowledged.
+    pub fn covers(&self, seq: u32) -> bool {
+        seq != 0 && seq <= self.upto && (self.upto - seq) < 64 && self.mask >> (self.upto - seq) & 1 == 1
+    }
+
+    /// Records the receipt of message `seq`.
+    pub(crate) fn record(&mut self, seq: u32) {
+        if seq == 0 {
+            return;
+        }
+        if seq > self.upto {
+            let shift = seq - self.upto;
+            self.mask = if shift >= 64 { 0 } else { self.mask << shift };
+            self.mask |= 1;
+            self.upto = seq;
+        } else if self.upto - seq < 64 {
+            self.mask |= 1 << (self.upto - seq);
+        }
+    }
+}
+
+/// One pairwise sync message.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SyncMessage {
+    /// Sender.
+    pub from: RobotId,
+    /// Addressee.
+    pub to: RobotId,
+    /// Sender's sequence number for messages to this addressee (from 1).
+    pub seq: u32,
+    /// Which of the addressee's messages the sender has received.
+    pub ack: Ack,
+    /// The sender knows (from acknowledgements) that the addressee holds everything the sender
+    /// holds. Together with the same statement the other way, this is "sync complete".
+    pub peer_has_all: bool,
+    /// Records the addressee is not known to hold, highest priority first.
+    pub records: Vec<Record>,
+}
+
+impl SyncMessage {
+    /// Encodes the message (see the module doc for the format).
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(HEADER_BYTES + 64);
+        out.extend_from_slice(MAGIC);
+        out.push(FORMAT_VERSION);
+        // Serialising plain data into a Vec cannot fail; fall back to the bare header if it ever
+        // did, which any decoder rejects as malformed.
+        postcard::to_extend(self, out).unwrap_or_else(|_| {
+            let mut h = MAGIC.to_vec();
+            h.push(FORMAT_VERSION);
+            h
+        })
+    }
+
+    /// Decodes a message, rejecting anything longer than `max_bytes`.
+    pub fn decode_with_limit(bytes: &[u8], max_bytes: usize) -> Result<SyncMessage, SyncError> {
+        if bytes.len() > max_bytes {
+            return Err(SyncError::Oversized { size: bytes.len(), limit: max_bytes });
+        }
+        Self::decode(bytes)
+    }
+
+    /// Decodes a message.
+    pub fn decode(bytes: &[u8]) -> Result<SyncMessage, SyncError> {
+        let payload = match bytes.split_at_checked(HEADER_BYTES) {
+            Some((head, payload)) if &head[..4] == MAGIC && head[4] == FORMAT_VERSION => payload,
+            _ => return Err(SyncError::BadHeader),
+        };
+        let (msg, rest) =
+            postcard::take_from_bytes::<SyncMessage>(payload).map_err(|e| SyncError::Malformed(e.to_string()))?;
+        if !rest.is_empty() {
+            return Err(SyncError::Malformed(format!("{} trailing bytes", rest.len())));
+        }
+        Ok(msg)
+    }
+}
+
+/// Encodes a message (free-function form of [`SyncMessage::encode`]).
+pub fn encode(msg: &SyncMessage) -> Vec<u8> {
+    msg.encode()
+}
+
+/// Decodes a message (free-function form of [`SyncMessage::decode`]).
+pub fn decode(bytes: &[u8]) -> Result<SyncMessage, SyncError> {
+    SyncMessage::decode(bytes)
+}
+
+/// A sent message whose fate is not known yet.
+#[derive(Clone, Debug)]
+pub(crate) struct InFlight {
+    pub seq: u32,
+    pub records: Vec<(RecordKey, u64)>,
+}
+
+/// What this robot knows about one peer.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct PeerState {
+    /// Sequence number of the last message made for the peer.
+    pub last_sent_seq: u32,
+    /// Sent messages with records, not yet acknowledged or presumed lost.
+    pub in_flight: VecDeque<InFlight>,
+    /// Record dots the peer is known to hold (acknowledged, or received from it).
+    pub confirmed: HashMap<RecordKey, u64>,
+    /// Record dots sent in messages still in flight, with the message's seq.
+    pub sent: HashMap<RecordKey, (u64, u32)>,
+    /// Records that may still have to go to the peer (changed since they were last considered,
+    /// skipped for tier or budget, or in a lost message).
+    pub pending: BTreeSet<RecordKey>,
+    /// Position in the local change log up to which changes were moved into `pending`.
+    pub change_cursor: u64,
+    /// Receipts of the peer's messages.
+    pub received: Ack,
+    /// The peer sent records (or news) we have not acknowledged yet.
+    pub ack_owed: bool,
+    /// `peer_has_all` of the peer's newest message.
+    pub peer_says_we_have_all: bool,
+    /// Seq of the peer's newest message.
+    pub newest_from_peer: u32,
+    /// `peer_has_all` we last told the peer.
+    pub last_flag_sent: Option<bool>,
+}
+
+impl PeerState {
+    /// Highest dot of `key` the peer holds or will hold if in-flight messages arrive.
+    pub fn known_dot(&self, key: &RecordKey) -> u64 {
+        let confirmed = self.confirmed.get(key).copied().unwrap_or(0);
+        let sent = self.sent.get(key).map_or(0, |s| s.0);
+        confirmed.max(sent)
+    }
+
+    /// Processes the peer's acknowledgement of our messages.
+    pub fn process_ack(&mut self, ack: Ack, max_in_flight: usize) {
+        let mut keep = VecDeque::with_capacity(self.in_flight.len());
+        while let Some(msg) = self.in_flight.pop_front() {
+            if msg.seq > ack.upto {
+                keep.push_back(msg);
+                continue;
+            }
+            let delivered = ack.covers(msg.seq);
+            self.resolve(msg, delivered);
+        }
+        self.in_flight = keep;
+        self.trim(max_in_flight);
+    }
+
+    /// Drops the oldest in-flight messages beyond the limit, presuming them lost.
+    pub fn trim(&mut self, max_in_flight: usize) {
+        while self.in_flight.len() > max_in_flight {
+            if let Some(msg) = self.in_flight.pop_front() {
+                self.resolve(msg, false);
+            }
+        }
+    }
+
+    fn resolve(&mut self, msg: InFlight, delivered: bool) {
+        for (key, dot) in msg.records {
+            if delivered {
+                let c = self.confirmed.entry(key.clone()).or_insert(0);
+                *c = (*c).max(dot);
+            }
+            if self.sent.get(&key).is_some_and(|s| s.1 == msg.seq) {
+                self.sent.remove(&key);
+                if !delivered {
+                    self.pending.insert(key);
+                }
+            }
+        }
+    }
+}
