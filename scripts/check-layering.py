@@ -6,7 +6,8 @@ Layers, bottom to top: core < skills < behaviors < adapters < the CLI (root pack
 - a skill depends only on core and other skills (never behaviours or adapters);
 - behaviours depend on core and skills, never on adapters;
 - an adapter depends on core, skills and behaviours, never on another adapter;
-- only the root `spomp` package wires adapters together.
+- only the root `spomp` package wires adapters together;
+- tools (benchmark support) depend on no spomp crate and are used as dev-dependencies only.
 Every spomp crate must live in a known layer directory. Exit 1 on any violation.
 """
 import json
@@ -29,10 +30,13 @@ def layer_of(manifest_dir: str, root: str) -> str:
         return "adapter"
     if rel == "tests" or rel.startswith("tests" + os.sep):
         return "tests"
+    if rel.startswith("tools" + os.sep):
+        return "tool"
     return "unknown:" + rel
 
 
 ALLOWED = {
+    "tool": set(),
     "core": set(),
     "skill": {"core", "skill"},
     "behaviors": {"core", "skill"},
@@ -58,9 +62,16 @@ def main() -> int:
             problems.append(f"{name}: lives in {layer[8:]}, which is no layer directory")
             continue
         for dep in pkg["dependencies"]:
-            if dep["name"] not in ours or dep.get("kind") == "dev":
+            if dep["name"] not in ours:
                 continue
             dep_layer = ours[dep["name"]]
+            is_dev = dep.get("kind") == "dev"
+            if dep_layer == "tool":
+                if not is_dev and layer != "tool":
+                    problems.append(f"{name} ({layer}) may use the tool {dep['name']} as a dev-dependency only")
+                continue
+            if is_dev:
+                continue
             if dep_layer not in ALLOWED[layer]:
                 problems.append(f"{name} ({layer}) must not depend on {dep['name']} ({dep_layer})")
     for p in problems:

@@ -60,8 +60,12 @@ pub fn schema() -> Result<ExitCode> {
 }
 
 /// `spomp nodes`.
-pub fn nodes(json: bool, only: Option<&str>) -> Result<ExitCode> {
+pub fn nodes(json: bool, markdown: bool, only: Option<&str>) -> Result<ExitCode> {
     let registry = builtin_registry();
+    if markdown {
+        print!("{}", registry.reference_markdown());
+        return Ok(ExitCode::SUCCESS);
+    }
     if let Some(name) = only
         && registry.get(name).is_none()
     {

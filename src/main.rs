@@ -3,9 +3,24 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{Parser, Subcommand, ValueEnum};
+use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
+use spomp_core::{Point2, Pose2};
 
+/// `println!` that stops quietly when stdout is closed (e.g. piped into `head`) instead of
+/// panicking.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout().lock(), $($arg)*);
+    }};
+}
+
+mod args;
 mod commands;
+mod plan_cmd;
+mod terrain_cmd;
+mod world_cmd;
 
 /// Mission framework for air–ground robot teams.
 #[derive(Parser, Debug)]
@@ -33,9 +48,179 @@ enum Command {
         /// Print the node manifest as JSON.
         #[arg(long)]
         json: bool,
+        /// Print the node reference as Markdown (docs/nodes.md is generated with it).
+        #[arg(long, conflicts_with = "json")]
+        markdown: bool,
         /// Show one node type only.
         name: Option<String>,
     },
+    /// Generate, inspect and render simulator worlds.
+    World {
+        #[command(subcommand)]
+        action: WorldCommand,
+    },
+    /// Run terrain analysis on a depth panorama (16-bit PNG of range counts), timing each stage.
+    Terrain {
+        /// Depth panorama: 16-bit grayscale PNG, rows = elevation (row 0 looks up), 0 = no return.
+        pano: PathBuf,
+        /// Metres per count.
+        #[arg(long = "range-scale", default_value_t = DEFAULT_RANGE_SCALE_M)]
+        range_scale_m: f64,
+        /// Vertical field of view of the panorama, degrees.
+        #[arg(long, default_value_t = 90.0)]
+        v_fov_deg: f64,
+        /// YAML file of terrain parameters (unknown keys rejected, missing keys default).
+        #[arg(long)]
+        params: Option<PathBuf>,
+        /// Start from the paper's simulation values (slope 0.25, inflation 0.75 m).
+        #[arg(long, conflicts_with = "params")]
+        simulation: bool,
+        /// Runs; the stage timings are medians over them.
+        #[arg(long, default_value_t = 1)]
+        repeat: usize,
+        /// Folder for the stage images.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print {rows, cols, timings_ms, reachability, traversable_pixels} as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Build the global planner's graph on a world's map and plan on it.
+    Plan {
+        /// World folder.
+        dir: PathBuf,
+        /// Start X,Y (metres, map frame).
+        #[arg(long, value_parser = args::point, allow_hyphen_values = true, requires = "to", required_unless_present = "random_pairs")]
+        from: Option<Point2>,
+        /// Goal X,Y (metres, map frame).
+        #[arg(long, value_parser = args::point, allow_hyphen_values = true, requires = "from")]
+        to: Option<Point2>,
+        /// Plan between N random pairs of cells on the easiest classes instead of --from/--to.
+        #[arg(long, conflicts_with_all = ["from", "to"])]
+        random_pairs: Option<usize>,
+        /// Seed of the random pairs.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Hardest class rank a random start or goal may stand on (0 road, 1 gravel, ...).
+        #[arg(long, default_value_t = 1)]
+        pair_max_rank: u8,
+        /// Learned traversability cost (on) or the class-rank ablation (off).
+        #[arg(long, value_enum)]
+        learning: Option<OnOff>,
+        /// YAML file of global planner parameters.
+        #[arg(long)]
+        params: Option<PathBuf>,
+        /// Folder for plan.png (map, graph edges, path).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// `on` / `off`.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum OnOff {
+    On,
+    Off,
+}
+
+#[derive(Subcommand, Debug)]
+enum WorldCommand {
+    /// Generate a procedural city and write it as a world folder.
+    Generate {
+        /// City seed.
+        #[arg(long)]
+        seed: u64,
+        /// World extent W,H in metres (default 400,300).
+        #[arg(long, value_parser = args::size)]
+        size_m: Option<(f64, f64)>,
+        /// Vehicle clusters (default 15).
+        #[arg(long)]
+        clusters: Option<usize>,
+        /// Roadblocks (default 6).
+        #[arg(long)]
+        roadblocks: Option<usize>,
+        /// Output world folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Load a world folder, print what it holds and write its top-down render.
+    Show {
+        /// World folder.
+        dir: PathBuf,
+        /// Output PNG (default DIR/render.png).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Render the depth panorama seen from a pose as a 16-bit PNG of range counts.
+    Pano {
+        /// World folder.
+        dir: PathBuf,
+        /// Sensor pose X,Y,YAW (metres, radians, map frame).
+        #[arg(long, value_parser = args::pose, allow_hyphen_values = true)]
+        at: Pose2,
+        /// Rows (default 256).
+        #[arg(long)]
+        rows: Option<usize>,
+        /// Columns (default 1024).
+        #[arg(long)]
+        cols: Option<usize>,
+        /// Vertical field of view, degrees (default 90).
+        #[arg(long)]
+        v_fov_deg: Option<f64>,
+        /// Sensor height above the ground, metres (default 0.4).
+        #[arg(long)]
+        sensor_height_m: Option<f64>,
+        /// Longest range, metres (default 50).
+        #[arg(long)]
+        max_range_m: Option<f64>,
+        /// Metres per count.
+        #[arg(long = "range-scale", default_value_t = DEFAULT_RANGE_SCALE_M)]
+        range_scale_m: f64,
+        /// Output PNG.
+        #[arg(long)]
+        out: PathBuf,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn run_world(action: WorldCommand) -> anyhow::Result<ExitCode> {
+    match action {
+        WorldCommand::Generate { seed, size_m, clusters, roadblocks, out, json } => {
+            world_cmd::generate(&world_cmd::GenerateArgs { seed, size_m, clusters, roadblocks, out, json })
+        }
+        WorldCommand::Show { dir, out, json } => world_cmd::show(&dir, out.as_deref(), json),
+        WorldCommand::Pano {
+            dir,
+            at,
+            rows,
+            cols,
+            v_fov_deg,
+            sensor_height_m,
+            max_range_m,
+            range_scale_m,
+            out,
+            json,
+        } => {
+            let mut sensor = spomp_sim::SensorParams::default();
+            sensor.rows = rows.unwrap_or(sensor.rows);
+            sensor.cols = cols.unwrap_or(sensor.cols);
+            sensor.v_fov_deg = v_fov_deg.unwrap_or(sensor.v_fov_deg);
+            sensor.sensor_height_m = sensor_height_m.unwrap_or(sensor.sensor_height_m);
+            sensor.max_range_m = max_range_m.unwrap_or(sensor.max_range_m);
+            world_cmd::pano(&world_cmd::PanoArgs { dir, at, sensor, range_scale_m, out, json })
+        }
+    }
 }
 
 fn main() -> ExitCode {
@@ -50,7 +235,32 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Validate { files, json } => commands::validate(&files, json),
         Command::Schema => commands::schema(),
-        Command::Nodes { json, name } => commands::nodes(json, name.as_deref()),
+        Command::Nodes { json, markdown, name } => commands::nodes(json, markdown, name.as_deref()),
+        Command::World { action } => run_world(action),
+        Command::Terrain { pano, range_scale_m, v_fov_deg, params, simulation, repeat, out, json } => {
+            terrain_cmd::terrain(&terrain_cmd::TerrainArgs {
+                pano,
+                range_scale_m,
+                v_fov_deg,
+                params,
+                simulation,
+                repeat,
+                out,
+                json,
+            })
+        }
+        Command::Plan { dir, from, to, random_pairs, seed, pair_max_rank, learning, params, out, json } => {
+            let queries = match (random_pairs, from, to) {
+                (Some(count), _, _) => plan_cmd::Queries::RandomPairs { count, seed, max_rank: pair_max_rank },
+                (None, Some(from), Some(to)) => plan_cmd::Queries::Single { from, to },
+                _ => {
+                    eprintln!("error: give --from and --to, or --random-pairs N");
+                    return ExitCode::from(2);
+                }
+            };
+            let learning = learning.map(|l| matches!(l, OnOff::On));
+            plan_cmd::plan(&plan_cmd::PlanArgs { dir, queries, learning, params, out, json })
+        }
     };
     match result {
         Ok(code) => code,

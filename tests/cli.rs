@@ -60,6 +60,17 @@ fn shipped_schema_is_current() {
 }
 
 #[test]
+fn node_reference_docs_are_current() {
+    let out = spomp().args(["nodes", "--markdown"]).output().unwrap();
+    assert!(out.status.success());
+    let shipped = std::fs::read_to_string(root().join("docs/nodes.md")).unwrap();
+    assert!(
+        String::from_utf8_lossy(&out.stdout) == shipped,
+        "docs/nodes.md is stale: run `cargo run -- nodes --markdown > docs/nodes.md`"
+    );
+}
+
+#[test]
 fn nodes_catalogue_lists_ports() {
     let out = spomp().args(["nodes", "--json"]).output().unwrap();
     assert!(out.status.success());

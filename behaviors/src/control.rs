@@ -11,20 +11,39 @@
 use crate::node::{Behavior, Slot, TickContext, halt_all, reset_all};
 use crate::status::Status;
 
-/// Ticks children in order; fails on the first failure; succeeds when all succeed.
-pub struct Sequence {
+/// `sequence` and `fallback`: tick children in order, resuming at the running one. The node
+/// finishes with `decisive` as soon as a child reports it (Failure for a sequence, Success for a
+/// fallback), and with the opposite outcome when every child reported the opposite.
+pub struct Ordered {
     children: Vec<Slot>,
+    decisive: Status,
     current: usize,
 }
 
-impl Sequence {
-    /// A sequence.
-    pub fn new(children: Vec<Slot>) -> Self {
-        Sequence { children, current: 0 }
+impl Ordered {
+    /// A sequence: fails on the first failure, succeeds when all succeed.
+    pub fn sequence(children: Vec<Slot>) -> Self {
+        Ordered { children, decisive: Status::Failure, current: 0 }
+    }
+
+    /// A fallback: succeeds on the first success, fails when all fail.
+    pub fn fallback(children: Vec<Slot>) -> Self {
+        Ordered { children, decisive: Status::Success, current: 0 }
+    }
+
+    fn finish(&mut self, outcome: Status, ctx: &mut TickContext<'_>) -> Status {
+        reset_all(&mut self.children, ctx);
+        self.current = 0;
+        outcome
     }
 }
 
-impl Behavior for Sequence {
+/// The outcome opposite to a decisive one.
+fn opposite(s: Status) -> Status {
+    if s == Status::Success { Status::Failure } else { Status::Success }
+}
+
+impl Behavior for Ordered {
     fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
         if prev != Status::Running {
             self.current = 0;
@@ -32,17 +51,11 @@ impl Behavior for Sequence {
         while self.current < self.children.len() {
             match self.children[self.current].tick(ctx) {
                 Status::Running => return Status::Running,
-                Status::Failure => {
-                    reset_all(&mut self.children, ctx);
-                    self.current = 0;
-                    return Status::Failure;
-                }
-                Status::Success | Status::Idle => self.current += 1,
+                s if s == self.decisive => return self.finish(s, ctx),
+                _ => self.current += 1,
             }
         }
-        reset_all(&mut self.children, ctx);
-        self.current = 0;
-        Status::Success
+        self.finish(opposite(self.decisive), ctx)
     }
     fn halt(&mut self, ctx: &mut TickContext<'_>) {
         halt_all(&mut self.children, ctx);
@@ -56,104 +69,27 @@ impl Behavior for Sequence {
     }
 }
 
-/// Ticks children in order; succeeds on the first success; fails when all fail.
-pub struct Fallback {
+/// `reactive_sequence` and `reactive_fallback`: like [`Ordered`], but every tick restarts from
+/// the first child, so conditions before a running child are re-checked; a later child that was
+/// running is halted as soon as an earlier one runs or decides the outcome.
+pub struct Reactive {
     children: Vec<Slot>,
-    current: usize,
+    decisive: Status,
 }
 
-impl Fallback {
-    /// A fallback.
-    pub fn new(children: Vec<Slot>) -> Self {
-        Fallback { children, current: 0 }
-    }
-}
-
-impl Behavior for Fallback {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
-        if prev != Status::Running {
-            self.current = 0;
-        }
-        while self.current < self.children.len() {
-            match self.children[self.current].tick(ctx) {
-                Status::Running => return Status::Running,
-                Status::Success => {
-                    reset_all(&mut self.children, ctx);
-                    self.current = 0;
-                    return Status::Success;
-                }
-                Status::Failure | Status::Idle => self.current += 1,
-            }
-        }
-        reset_all(&mut self.children, ctx);
-        self.current = 0;
-        Status::Failure
-    }
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
-        halt_all(&mut self.children, ctx);
-        self.current = 0;
-    }
-    fn reset(&mut self) {
-        self.current = 0;
-    }
-    fn children(&self) -> &[Slot] {
-        &self.children
-    }
-}
-
-/// A sequence that re-checks earlier children every tick (conditions guarding an action).
-pub struct ReactiveSequence {
-    children: Vec<Slot>,
-}
-
-impl ReactiveSequence {
+impl Reactive {
     /// A reactive sequence.
-    pub fn new(children: Vec<Slot>) -> Self {
-        ReactiveSequence { children }
+    pub fn sequence(children: Vec<Slot>) -> Self {
+        Reactive { children, decisive: Status::Failure }
     }
-}
 
-impl Behavior for ReactiveSequence {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
-        for i in 0..self.children.len() {
-            match self.children[i].tick(ctx) {
-                Status::Running => {
-                    // Anything after a running child must not keep running.
-                    halt_all(&mut self.children[i + 1..], ctx);
-                    return Status::Running;
-                }
-                Status::Failure => {
-                    halt_all(&mut self.children[i + 1..], ctx);
-                    reset_all(&mut self.children, ctx);
-                    return Status::Failure;
-                }
-                Status::Success | Status::Idle => {}
-            }
-        }
-        reset_all(&mut self.children, ctx);
-        Status::Success
-    }
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
-        halt_all(&mut self.children, ctx);
-    }
-    fn children(&self) -> &[Slot] {
-        &self.children
-    }
-}
-
-/// A fallback that re-tries earlier children every tick (preferred option first).
-pub struct ReactiveFallback {
-    children: Vec<Slot>,
-}
-
-impl ReactiveFallback {
     /// A reactive fallback.
-    pub fn new(children: Vec<Slot>) -> Self {
-        ReactiveFallback { children }
+    pub fn fallback(children: Vec<Slot>) -> Self {
+        Reactive { children, decisive: Status::Success }
     }
 }
 
-impl Behavior for ReactiveFallback {
+impl Behavior for Reactive {
     fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
         for i in 0..self.children.len() {
             match self.children[i].tick(ctx) {
@@ -161,16 +97,16 @@ impl Behavior for ReactiveFallback {
                     halt_all(&mut self.children[i + 1..], ctx);
                     return Status::Running;
                 }
-                Status::Success => {
+                s if s == self.decisive => {
                     halt_all(&mut self.children[i + 1..], ctx);
                     reset_all(&mut self.children, ctx);
-                    return Status::Success;
+                    return s;
                 }
-                Status::Failure | Status::Idle => {}
+                _ => {}
             }
         }
         reset_all(&mut self.children, ctx);
-        Status::Failure
+        opposite(self.decisive)
     }
     fn halt(&mut self, ctx: &mut TickContext<'_>) {
         halt_all(&mut self.children, ctx);

@@ -36,15 +36,21 @@ fn one(child: &mut [Slot]) -> &mut Slot {
     &mut child[0]
 }
 
+/// Ticks the child and, when it finished, resets it so the next run starts fresh.
+fn tick_once(child: &mut [Slot], ctx: &mut TickContext<'_>) -> Status {
+    let c = one(child);
+    let s = c.tick(ctx);
+    if s.is_done() {
+        c.reset(ctx);
+    }
+    s
+}
+
 impl Behavior for MapResult {
     fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
-        let c = one(&mut self.child);
-        let s = c.tick(ctx);
-        if !s.is_done() {
-            return s;
-        }
-        c.reset(ctx);
+        let s = tick_once(&mut self.child, ctx);
         match (self.map, s) {
+            (_, Status::Running | Status::Idle) => s,
             (ResultMap::Invert, Status::Success) => Status::Failure,
             (ResultMap::Invert, _) => Status::Success,
             (ResultMap::ForceSuccess, _) => Status::Success,
@@ -78,16 +84,11 @@ impl Behavior for Timeout {
         if prev != Status::Running {
             self.deadline = ctx.now + self.duration;
         }
-        let c = one(&mut self.child);
         if ctx.now >= self.deadline {
-            c.halt(ctx);
+            one(&mut self.child).halt(ctx);
             return Status::Failure;
         }
-        let s = c.tick(ctx);
-        if s.is_done() {
-            c.reset(ctx);
-        }
-        s
+        tick_once(&mut self.child, ctx)
     }
     fn halt(&mut self, ctx: &mut TickContext<'_>) {
         one(&mut self.child).halt(ctx);
@@ -215,10 +216,8 @@ impl Behavior for RunOnce {
         if let Some(s) = self.outcome {
             return s;
         }
-        let c = one(&mut self.child);
-        let s = c.tick(ctx);
+        let s = tick_once(&mut self.child, ctx);
         if s.is_done() {
-            c.reset(ctx);
             self.outcome = Some(s);
         }
         s
@@ -253,12 +252,7 @@ impl Behavior for Delay {
         if ctx.now < self.start_at {
             return Status::Running;
         }
-        let c = one(&mut self.child);
-        let s = c.tick(ctx);
-        if s.is_done() {
-            c.reset(ctx);
-        }
-        s
+        tick_once(&mut self.child, ctx)
     }
     fn halt(&mut self, ctx: &mut TickContext<'_>) {
         one(&mut self.child).halt(ctx);
@@ -292,12 +286,7 @@ impl Behavior for RateLimit {
             return Status::Running;
         }
         self.next_at = Some(ctx.now + self.period);
-        let c = one(&mut self.child);
-        let s = c.tick(ctx);
-        if s.is_done() {
-            c.reset(ctx);
-        }
-        s
+        tick_once(&mut self.child, ctx)
     }
     fn halt(&mut self, ctx: &mut TickContext<'_>) {
         one(&mut self.child).halt(ctx);

@@ -88,3 +88,43 @@ pub fn render_tree(root: &Slot) -> String {
     });
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::blackboard::Blackboard;
+    use crate::control::Ordered;
+    use crate::node::{Behavior, NodeInfo, TickContext};
+
+    struct Run;
+    impl Behavior for Run {
+        fn tick(&mut self, _prev: Status, _ctx: &mut TickContext<'_>) -> Status {
+            Status::Running
+        }
+    }
+
+    fn slot(name: &str, b: Box<dyn Behavior>) -> Slot {
+        Slot::new(NodeInfo { id: 0, type_name: name.into(), path: name.into() }, b)
+    }
+
+    #[test]
+    fn line_printer_and_tree_render_show_transitions() {
+        let mut root = slot("sequence", Box::new(Ordered::sequence(vec![slot("wait", Box::new(Run))])));
+        let mut out = Vec::new();
+        {
+            let mut printer = LinePrinter::new(&mut out, "ugv1");
+            let mut bb = Blackboard::new();
+            let mut ctx = TickContext {
+                now: Time::from_millis(100),
+                tick: 1,
+                blackboard: &mut bb,
+                env: &mut (),
+                observer: Some(&mut printer),
+            };
+            root.tick(&mut ctx);
+        }
+        let text = String::from_utf8(out).unwrap();
+        assert!(text.contains("ugv1 #1") && text.contains("wait idle -> running"), "{text}");
+        assert_eq!(render_tree(&root), "▶ sequence [running]\n  ▶ wait [running]\n");
+    }
+}

@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use spomp_behaviors::blackboard::Blackboard;
-use spomp_behaviors::control::{Fallback, Parallel, ReactiveFallback, ReactiveSequence, Sequence};
+use spomp_behaviors::control::{Ordered, Parallel, Reactive};
 use spomp_behaviors::decorators::{Delay, MapResult, RateLimit, Repeat, ResultMap, Retry, RunOnce, Timeout};
 use spomp_behaviors::job::{Job, JobPoll, JobRunner};
 use spomp_behaviors::node::{Behavior, NodeInfo, Slot, TickContext};
@@ -73,7 +73,7 @@ use Status::{Failure as F, Running as R, Success as S};
 fn sequence_resumes_at_the_running_child() {
     let (a, la) = leaf("a", &[S]);
     let (b, lb) = leaf("b", &[R, R, S]);
-    let (statuses, _) = run(slot("seq", Box::new(Sequence::new(vec![a, b]))), 3);
+    let (statuses, _) = run(slot("seq", Box::new(Ordered::sequence(vec![a, b]))), 3);
     assert_eq!(statuses, vec![R, R, S]);
     assert_eq!(la.lock().unwrap().ticks, 1, "a finished child is not re-ticked");
     assert_eq!(lb.lock().unwrap().starts, 1);
@@ -84,7 +84,7 @@ fn sequence_fails_on_first_failure_and_restarts() {
     let (a, la) = leaf("a", &[S]);
     let (b, _) = leaf("b", &[F]);
     let (c, lc) = leaf("c", &[S]);
-    let (statuses, _) = run(slot("seq", Box::new(Sequence::new(vec![a, b, c]))), 2);
+    let (statuses, _) = run(slot("seq", Box::new(Ordered::sequence(vec![a, b, c]))), 2);
     assert_eq!(statuses, vec![F, F]);
     assert_eq!(la.lock().unwrap().ticks, 2, "a failed sequence starts over");
     assert_eq!(lc.lock().unwrap().ticks, 0);
@@ -95,7 +95,7 @@ fn fallback_stops_at_first_success() {
     let (a, _) = leaf("a", &[F]);
     let (b, _) = leaf("b", &[R, S]);
     let (c, lc) = leaf("c", &[S]);
-    let (statuses, _) = run(slot("fb", Box::new(Fallback::new(vec![a, b, c]))), 2);
+    let (statuses, _) = run(slot("fb", Box::new(Ordered::fallback(vec![a, b, c]))), 2);
     assert_eq!(statuses, vec![R, S]);
     assert_eq!(lc.lock().unwrap().ticks, 0);
 }
@@ -104,7 +104,7 @@ fn fallback_stops_at_first_success() {
 fn reactive_sequence_halts_running_child_when_condition_fails() {
     let (cond, lcond) = leaf("cond", &[S, S, F]);
     let (act, lact) = leaf("act", &[R]);
-    let (statuses, _) = run(slot("rs", Box::new(ReactiveSequence::new(vec![cond, act]))), 3);
+    let (statuses, _) = run(slot("rs", Box::new(Reactive::sequence(vec![cond, act]))), 3);
     assert_eq!(statuses, vec![R, R, F]);
     assert_eq!(lcond.lock().unwrap().ticks, 3, "the condition is re-checked every tick");
     let la = lact.lock().unwrap();
@@ -117,7 +117,7 @@ fn reactive_sequence_halts_running_child_when_condition_fails() {
 fn reactive_fallback_halts_fallback_when_preferred_option_succeeds() {
     let (preferred, _) = leaf("preferred", &[F, F, S]);
     let (backup, lb) = leaf("backup", &[R]);
-    let (statuses, _) = run(slot("rf", Box::new(ReactiveFallback::new(vec![preferred, backup]))), 3);
+    let (statuses, _) = run(slot("rf", Box::new(Reactive::fallback(vec![preferred, backup]))), 3);
     assert_eq!(statuses, vec![R, R, S]);
     assert_eq!(lb.lock().unwrap().halts, 1);
 }
@@ -289,8 +289,8 @@ fn unhandled_outcome_ends_the_machine() {
 #[test]
 fn halting_is_recursive_and_observed() {
     let (a, la) = leaf("a", &[R]);
-    let inner = slot("inner", Box::new(Sequence::new(vec![a])));
-    let root = slot("outer", Box::new(Sequence::new(vec![inner])));
+    let inner = slot("inner", Box::new(Ordered::sequence(vec![a])));
+    let root = slot("outer", Box::new(Ordered::sequence(vec![inner])));
     let mut ex = RobotExecutor::from_root(root, Blackboard::new());
     let mut rec = Recorder::default();
     ex.tick(Time::ZERO, &mut (), Some(&mut rec));

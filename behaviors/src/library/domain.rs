@@ -14,22 +14,9 @@ use crate::node::{Behavior, TickContext};
 use crate::registry::{Category, NodeRegistry, NodeTypeSpec, PortSpec};
 use crate::status::Status;
 
-/// Names of the domain nodes declared here.
-pub const DOMAIN_NODE_NAMES: &[&str] = &[
-    "detect_goals",
-    "claim_goal",
-    "goal_still_mine",
-    "navigate_to",
-    "navigate_local",
-    "mark_visited",
-    "release_goal",
-    "clear_unreachable",
-    "has_claimable_goal",
-    "return_home",
-    "follow_waypoints",
-    "seek_robot",
-    "wait_for_sync",
-];
+/// Names of the domain nodes declared here (not yet implemented in this build).
+pub const DOMAIN_NODE_NAMES: &[&str] =
+    &["navigate_to", "navigate_local", "return_home", "follow_waypoints", "seek_robot", "wait_for_sync"];
 
 struct NotImplemented(&'static str);
 
@@ -48,60 +35,10 @@ macro_rules! declared {
 
 /// Registers the domain node declarations (all unimplemented until a skill build replaces them).
 pub fn register_domain_declarations(r: &mut NodeRegistry) {
-    use Category::{Action, Condition};
-    use PortType::{Bool, Float, Goal, Int, Params, Point, Points, Robot, String as Str};
-    use RobotKind::{Basestation, Uav, Ugv};
+    use Category::Action;
+    use PortType::{Bool, Float, Int, Params, Point, Points, Robot, String as Str};
+    use RobotKind::{Uav, Ugv};
 
-    r.register(
-        declared!(
-            "detect_goals",
-            Action,
-            "Detects clusters of `class` in this robot's copy of the aerial map (open, then close with `merge_distance_m`, components of at least `min_size_m`), places one goal per cluster at the point farthest from obstacles within `placement_region_m`, trying easier classes first, and adds new ones (deduplicated within the deconfliction radius) to the team state. Succeeds after one pass; writes the number of new goals.",
-            vec![
-                PortSpec::input("class", Str, "Semantic class to cluster.").with_default(json!("vehicle")),
-                PortSpec::input("merge_distance_m", Float, "Vehicles closer than this merge into one cluster.").with_default(json!(15.0)),
-                PortSpec::input("min_size_m", Float, "Smallest cluster extent kept.").with_default(json!(8.0)),
-                PortSpec::input("placement_region_m", Float, "Goal placed within this distance of the cluster.").with_default(json!(7.0)),
-                PortSpec::output("new_goals", Int, "Goals added by this pass."),
-            ]
-        )
-        .for_kinds(&[Ugv, Basestation])
-        .using_skills(&["mapping", "teamstate"]),
-    );
-    r.register(
-        declared!(
-            "claim_goal",
-            Action,
-            "Picks the nearest goal (Euclidean) that is not visited, not unreachable for this robot, and not claimed by a higher-priority robot within `deconfliction_radius_m`; claims it in the team state. Fails when there is none.",
-            vec![
-                PortSpec::input("deconfliction_radius_m", Float, "Goals closer than this are the same goal.").with_default(json!(10.0)),
-                PortSpec::output("goal", Goal, "The claimed goal."),
-                PortSpec::output("goal_position", Point, "Where it is (map frame)."),
-            ]
-        )
-        .for_kinds(&[Ugv])
-        .using_skills(&["teamstate"]),
-    );
-    r.register(
-        declared!(
-            "goal_still_mine",
-            Condition,
-            "Succeeds while this robot still holds `goal`: fails as soon as it learns that a higher-priority robot claims, or anyone visited, a goal within the deconfliction radius of it. Guard `navigate_to` with it in a `reactive_sequence` for preemption.",
-            vec![PortSpec::input("goal", Goal, "The goal held.")]
-        )
-        .for_kinds(&[Ugv])
-        .using_skills(&["teamstate"]),
-    );
-    r.register(
-        declared!(
-            "has_claimable_goal",
-            Condition,
-            "Succeeds if some goal is neither visited, nor claimed by a higher-priority robot, nor unreachable for this robot.",
-            vec![]
-        )
-        .for_kinds(&[Ugv])
-        .using_skills(&["teamstate"]),
-    );
     r.register(
         declared!(
             "navigate_to",
@@ -134,39 +71,6 @@ pub fn register_domain_declarations(r: &mut NodeRegistry) {
         )
         .for_kinds(&[Ugv])
         .using_skills(&["local_planner"]),
-    );
-    r.register(
-        declared!(
-            "mark_visited",
-            Action,
-            "Marks `goal` visited by this robot in the team state (visited is final).",
-            vec![PortSpec::input("goal", Goal, "The goal reached.")]
-        )
-        .for_kinds(&[Ugv])
-        .using_skills(&["teamstate"]),
-    );
-    r.register(
-        declared!(
-            "release_goal",
-            Action,
-            "Releases this robot's claim on `goal` so others may take it; with `mark_unreachable` (after a failure or time-out) it is also marked unreachable for this robot. A goal already taken over by a higher-priority robot or visited is only released.",
-            vec![
-                PortSpec::input("goal", Goal, "The goal to release."),
-                PortSpec::input("mark_unreachable", Bool, "Also mark it unreachable for this robot.").with_default(json!(true)),
-            ]
-        )
-        .for_kinds(&[Ugv])
-        .using_skills(&["teamstate"]),
-    );
-    r.register(
-        declared!(
-            "clear_unreachable",
-            Action,
-            "Clears this robot's unreachable marks so goals are retried (when nothing else is left).",
-            vec![]
-        )
-        .for_kinds(&[Ugv])
-        .using_skills(&["teamstate"]),
     );
     r.register(
         declared!(

@@ -1,7 +1,7 @@
 //! Turns a compiled tree into live nodes bound to a robot's blackboard.
 
 use crate::blackboard::{Binding, Blackboard};
-use crate::control::{Fallback, Parallel, ReactiveFallback, ReactiveSequence, Sequence};
+use crate::control::{Ordered, Parallel, Reactive};
 use crate::decorators::{Delay, MapResult, RateLimit, Repeat, ResultMap, Retry, RunOnce, Timeout};
 use crate::library::{ControlType, DecoratorType};
 use crate::node::{Behavior, NodeInfo, Slot};
@@ -63,10 +63,10 @@ fn build(
         IrKind::Control { ty, children, success_threshold, failure_threshold } => {
             let kids = children.iter().map(|c| build(c, registry, bb, opts, next_id)).collect::<Result<Vec<_>, _>>()?;
             match ty {
-                ControlType::Sequence => Box::new(Sequence::new(kids)),
-                ControlType::Fallback => Box::new(Fallback::new(kids)),
-                ControlType::ReactiveSequence => Box::new(ReactiveSequence::new(kids)),
-                ControlType::ReactiveFallback => Box::new(ReactiveFallback::new(kids)),
+                ControlType::Sequence => Box::new(Ordered::sequence(kids)),
+                ControlType::Fallback => Box::new(Ordered::fallback(kids)),
+                ControlType::ReactiveSequence => Box::new(Reactive::sequence(kids)),
+                ControlType::ReactiveFallback => Box::new(Reactive::fallback(kids)),
                 ControlType::Parallel => Box::new(Parallel::new(kids, *success_threshold, *failure_threshold)),
             }
         }

@@ -1,8 +1,6 @@
 //! One DWA step (10 × 4 samples, 15 roll-out steps) against the safe region of a street-like
 //! panorama, and local goal selection (1000 samples).
 
-mod cpu_time;
-
 use std::hint::black_box;
 
 use criterion::Criterion;
@@ -36,10 +34,6 @@ fn bench<M: Measurement + 'static>(c: &mut Criterion<M>) {
 }
 
 fn main() {
-    if cpu_time::cpu_clock_requested() {
-        bench(&mut cpu_time::cpu_criterion());
-    } else {
-        bench(&mut Criterion::default().configure_from_args());
-    }
-    Criterion::default().configure_from_args().final_summary();
+    // `SPOMP_BENCH_CLOCK=cpu` reports the thread's CPU time (see spomp-bench-clock).
+    spomp_bench_clock::run_with_requested_clock(bench, bench);
 }

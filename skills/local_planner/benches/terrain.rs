@@ -1,7 +1,5 @@
 //! Terrain analysis (stages 1–6) on a 256 × 1024 street-like synthetic panorama.
 
-mod cpu_time;
-
 use std::hint::black_box;
 
 use criterion::Criterion;
@@ -62,10 +60,6 @@ fn bench<M: Measurement + 'static>(c: &mut Criterion<M>) {
 }
 
 fn main() {
-    if cpu_time::cpu_clock_requested() {
-        bench(&mut cpu_time::cpu_criterion());
-    } else {
-        bench(&mut Criterion::default().configure_from_args());
-    }
-    Criterion::default().configure_from_args().final_summary();
+    // `SPOMP_BENCH_CLOCK=cpu` reports the thread's CPU time (see spomp-bench-clock).
+    spomp_bench_clock::run_with_requested_clock(bench, bench);
 }

@@ -328,7 +328,8 @@ impl TerrainAnalyzer {
         };
         let step = std::f32::consts::TAU / cols as f32;
         let d_max = p.max_obstacle_distance_m as f32;
-        let nearest = distance_scratch.reset(cols);
+        let (nearest, block) = distance_scratch.reset(cols);
+        let block_width = stages::BLOCK_ROWS * cols;
         for row in 0..rows {
             let span = row * cols..(row + 1) * cols;
             let (sin_e, cos_e) = (tables.row_sin[row], tables.row_cos[row]);
@@ -346,9 +347,19 @@ impl TerrainAnalyzer {
             stages::obstacles(gradient, rho, cols, p.slope_threshold as f32, p.min_obstacle_run_m as f32, obstacle);
             let d_a = &mut out.column_distance_m[span.clone()];
             stages::column_pass_row(rho, obstacle, nearest, d_max, d_a);
-            let distance = &mut out.distance_m[span.clone()];
-            stages::row_passes(rho, d_a, distance, step, d_max);
-            stages::traversable(rho, distance, p.inflation_m as f32, &mut out.traversable[span]);
+            // Algorithm 1's row passes run on blocks of rows, one per SIMD lane, as soon as a block
+            // has its column pass; rows past the last full block run alone.
+            if (row + 1) % stages::BLOCK_ROWS == 0 {
+                let block_span = (row + 1) * cols - block_width..(row + 1) * cols;
+                let (rho, d_a) = (&out.ranges_m[block_span.clone()], &out.column_distance_m[block_span.clone()]);
+                let distance = &mut out.distance_m[block_span.clone()];
+                stages::row_passes_block(rho, d_a, distance, cols, step, d_max, block);
+                stages::traversable(rho, distance, p.inflation_m as f32, &mut out.traversable[block_span]);
+            } else if row >= rows / stages::BLOCK_ROWS * stages::BLOCK_ROWS {
+                let distance = &mut out.distance_m[span.clone()];
+                stages::row_passes(rho, d_a, distance, step, d_max);
+                stages::traversable(rho, distance, p.inflation_m as f32, &mut out.traversable[span]);
+            }
         }
     }
 

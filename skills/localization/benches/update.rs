@@ -7,74 +7,12 @@ mod common;
 use std::hint::black_box;
 
 use common::{World, frame, render};
-use criterion::measurement::{Measurement, ValueFormatter};
-use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use criterion::Criterion;
+use criterion::measurement::Measurement;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use spomp_core::{ClassTable, PanoramaGeometry, Pose2, Time};
 use spomp_localization::{CrossViewLocalizer, LocalizationParams, PosePrior};
-
-/// CPU time of the benchmarking thread, from the kernel's scheduler statistics (nanoseconds on
-/// a CPU). The machine these figures come from is shared and loaded, so wall-clock time
-/// overstates the cost; this counts only the time the thread actually ran.
-struct ThreadCpuTime;
-
-fn thread_cpu_ns() -> u64 {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()
-        .and_then(|s| s.split_whitespace().next().and_then(|v| v.parse().ok()))
-        .unwrap_or(0)
-}
-
-struct NanosFormatter;
-
-impl ValueFormatter for NanosFormatter {
-    fn scale_values(&self, typical: f64, values: &mut [f64]) -> &'static str {
-        let (div, unit) = if typical < 1e3 {
-            (1.0, "ns")
-        } else if typical < 1e6 {
-            (1e3, "µs")
-        } else if typical < 1e9 {
-            (1e6, "ms")
-        } else {
-            (1e9, "s")
-        };
-        values.iter_mut().for_each(|v| *v /= div);
-        unit
-    }
-
-    fn scale_throughputs(&self, _typical: f64, _throughput: &Throughput, values: &mut [f64]) -> &'static str {
-        values.iter_mut().for_each(|v| *v = 1e9 / *v);
-        "iter/s"
-    }
-
-    fn scale_for_machines(&self, _values: &mut [f64]) -> &'static str {
-        "ns"
-    }
-}
-
-impl Measurement for ThreadCpuTime {
-    type Intermediate = u64;
-    type Value = u64;
-    fn start(&self) -> u64 {
-        thread_cpu_ns()
-    }
-    fn end(&self, start: u64) -> u64 {
-        thread_cpu_ns().saturating_sub(start)
-    }
-    fn add(&self, a: &u64, b: &u64) -> u64 {
-        a + b
-    }
-    fn zero(&self) -> u64 {
-        0
-    }
-    fn to_f64(&self, v: &u64) -> f64 {
-        *v as f64
-    }
-    fn formatter(&self) -> &dyn ValueFormatter {
-        &NanosFormatter
-    }
-}
 
 fn bench_update<M: Measurement>(c: &mut Criterion<M>, label: &str) {
     let world = World::tiled(800, 600);
@@ -113,18 +51,7 @@ fn bench_update<M: Measurement>(c: &mut Criterion<M>, label: &str) {
     group.finish();
 }
 
-fn wall(c: &mut Criterion) {
-    bench_update(c, "wall");
+fn main() {
+    // `SPOMP_BENCH_CLOCK=cpu` reports the thread's CPU time (see spomp-bench-clock).
+    spomp_bench_clock::run_with_requested_clock(|c| bench_update(c, "thread_cpu"), |c| bench_update(c, "wall"));
 }
-
-fn cpu(c: &mut Criterion<ThreadCpuTime>) {
-    bench_update(c, "thread_cpu");
-}
-
-criterion_group!(wall_time, wall);
-criterion_group! {
-    name = cpu_time;
-    config = Criterion::default().with_measurement(ThreadCpuTime);
-    targets = cpu
-}
-criterion_main!(wall_time, cpu_time);

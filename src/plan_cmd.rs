@@ -1,0 +1,225 @@
+//! `spomp plan`: builds the global planner's traversability graph on a world's full aerial map
+//! and plans on it, one query or many random ones.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use image::{Rgb, RgbImage};
+use imageproc::drawing::{draw_filled_circle_mut, draw_line_segment_mut};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde_json::json;
+use spomp_core::{GridSpec, Point2};
+use spomp_global_planner::{EdgeState, GlobalPath, GlobalPlanner, GlobalPlannerParams};
+use spomp_sim::{World, render_png};
+
+use crate::world_cmd::load_world;
+
+/// What to plan.
+pub enum Queries {
+    /// One query.
+    Single {
+        /// Start, map frame.
+        from: Point2,
+        /// Goal, map frame.
+        to: Point2,
+    },
+    /// Random pairs of cells on the easiest classes.
+    RandomPairs {
+        /// Number of pairs.
+        count: usize,
+        /// Seed of the pair draw.
+        seed: u64,
+        /// Hardest class rank a start or goal cell may have.
+        max_rank: u8,
+    },
+}
+
+/// Options of `spomp plan`.
+pub struct PlanArgs {
+    /// World folder.
+    pub dir: PathBuf,
+    /// The queries.
+    pub queries: Queries,
+    /// Learned cost (`true`) or the class-rank ablation (`false`); `None` keeps the params'.
+    pub learning: Option<bool>,
+    /// YAML file of `GlobalPlannerParams`.
+    pub params: Option<PathBuf>,
+    /// Folder for the picture of the graph and path.
+    pub out: Option<PathBuf>,
+    /// Print JSON.
+    pub json: bool,
+}
+
+fn load_params(file: Option<&Path>) -> Result<GlobalPlannerParams> {
+    let Some(file) = file else { return Ok(GlobalPlannerParams::default()) };
+    let text = std::fs::read_to_string(file).with_context(|| format!("{}: cannot read", file.display()))?;
+    serde_saphyr::from_str(&text)
+        .with_context(|| format!("{}: not a valid global planner parameter file", file.display()))
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// `spomp plan`.
+pub fn plan(a: &PlanArgs) -> Result<ExitCode> {
+    let mut params = load_params(a.params.as_deref())?;
+    if let Some(on) = a.learning {
+        params.learning.enabled = on;
+    }
+    let world = load_world(&a.dir)?;
+
+    let start = Instant::now();
+    let mut planner = GlobalPlanner::new(params, world.classes().clone()).context("global planner parameters")?;
+    planner.update_map(world.map()).context("building the traversability graph")?;
+    let build_ms = ms_since(start);
+    let stats = planner.graph_stats();
+
+    let (pairs, single) = match a.queries {
+        Queries::Single { from, to } => (vec![(from, to)], true),
+        Queries::RandomPairs { count, seed, max_rank } => (random_pairs(&world, count, seed, max_rank)?, false),
+    };
+    let mut query_ms = Vec::with_capacity(pairs.len());
+    let mut paths: Vec<GlobalPath> = Vec::new();
+    let mut failures = Vec::new();
+    for (from, to) in &pairs {
+        let t = Instant::now();
+        let result = planner.plan(*from, *to);
+        query_ms.push(ms_since(t));
+        match result {
+            Ok(p) => paths.push(p),
+            Err(e) => failures.push(format!("({:.1}, {:.1}) → ({:.1}, {:.1}): {e}", from.x, from.y, to.x, to.y)),
+        }
+    }
+    let success_rate = if pairs.is_empty() { 0.0 } else { paths.len() as f64 / pairs.len() as f64 };
+    let query_max = query_ms.iter().copied().fold(0.0, f64::max);
+    query_ms.sort_by(f64::total_cmp);
+    let query_median = query_ms.get(query_ms.len() / 2).copied().unwrap_or(f64::NAN);
+    let single_path = if single { paths.first() } else { None };
+
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let file = dir.join("plan.png");
+        plan_image(&world, &planner, &paths).save(&file).with_context(|| format!("writing {}", file.display()))?;
+        if !a.json {
+            out!("wrote {}", file.display());
+        }
+    }
+
+    if a.json {
+        let v = json!({
+            "nodes": stats.nodes,
+            "edges": stats.edges,
+            "build_ms": build_ms,
+            "query_ms_median": query_median,
+            "query_ms_max": query_max,
+            "success_rate": success_rate,
+            "path_length_m": single_path.map(|p| p.length_m),
+            "path_cost": single_path.map(|p| p.cost),
+        });
+        out!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        out!(
+            "{}: graph of {} nodes, {} edges ({} cells covered), built in {build_ms:.1} ms (learning {})",
+            a.dir.display(),
+            stats.nodes,
+            stats.edges,
+            stats.covered_cells,
+            if planner.params().learning.enabled { "on" } else { "off" }
+        );
+        if let Some(p) = single_path {
+            out!(
+                "path: {:.1} m, cost {:.3}, {} waypoints, query {query_median:.3} ms",
+                p.length_m,
+                p.cost,
+                p.waypoints.len()
+            );
+        } else if !single {
+            out!(
+                "{} random pairs: success {:.1} %, query median {query_median:.3} ms, max {query_max:.3} ms",
+                pairs.len(),
+                success_rate * 100.0
+            );
+        }
+    }
+    for f in &failures {
+        eprintln!("no path: {f}");
+    }
+    // A single query that finds no path is a failure; random pairs report a rate.
+    Ok(if single && single_path.is_none() { ExitCode::from(1) } else { ExitCode::SUCCESS })
+}
+
+/// `count` seeded pairs of distinct cell centres whose class rank is at most `max_rank`.
+fn random_pairs(world: &World, count: usize, seed: u64, max_rank: u8) -> Result<Vec<(Point2, Point2)>> {
+    let ranks = world.classes().rank_lut();
+    let ignored: Vec<bool> = (0..=255u8).map(|c| world.classes().is_ignored(c)).collect();
+    let spec = *world.spec();
+    let cells: Vec<usize> = world
+        .map()
+        .class
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| ranks[**c as usize] <= max_rank && !ignored[**c as usize] && **c != spomp_core::UNKNOWN_CLASS)
+        .map(|(i, _)| i)
+        .collect();
+    if cells.len() < 2 {
+        bail!("{} cells of rank ≤ {max_rank}: too few to draw pairs from", cells.len());
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let centre = |i: usize| spec.center(spec.cell_of_index(i));
+    let mut pairs = Vec::with_capacity(count);
+    while pairs.len() < count {
+        let a = cells[rng.random_range(0..cells.len())];
+        let b = cells[rng.random_range(0..cells.len())];
+        if a != b {
+            pairs.push((centre(a), centre(b)));
+        }
+    }
+    Ok(pairs)
+}
+
+/// Image pixel of a map point (north up, one pixel per cell).
+fn to_pixel(spec: &GridSpec, p: Point2) -> (f32, f32) {
+    let x = (p.x - spec.origin.x) / spec.resolution_m;
+    let y = spec.height as f64 - (p.y - spec.origin.y) / spec.resolution_m;
+    (x as f32, y as f32)
+}
+
+/// The world's render with the graph's edges (white, green trav, red not_trav), its nodes and
+/// the paths (magenta, start green dot, goal red dot).
+fn plan_image(world: &World, planner: &GlobalPlanner, paths: &[GlobalPath]) -> RgbImage {
+    let spec = world.spec();
+    let mut img = render_png(world);
+    for e in planner.edges() {
+        let colour = match e.state {
+            EdgeState::Unknown => Rgb([235, 235, 235]),
+            EdgeState::Trav => Rgb([60, 200, 80]),
+            EdgeState::NotTrav => Rgb([230, 40, 40]),
+        };
+        draw_line_segment_mut(&mut img, to_pixel(spec, e.from), to_pixel(spec, e.to), colour);
+    }
+    for (_, p, _) in planner.nodes() {
+        let (x, y) = to_pixel(spec, p);
+        draw_filled_circle_mut(&mut img, (x as i32, y as i32), 1, Rgb([255, 255, 255]));
+    }
+    for path in paths {
+        for w in path.waypoints.windows(2) {
+            let (a, b) = (to_pixel(spec, w[0]), to_pixel(spec, w[1]));
+            // Three parallel lines for a thicker stroke.
+            for d in [-1.0f32, 0.0, 1.0] {
+                draw_line_segment_mut(&mut img, (a.0 + d, a.1), (b.0 + d, b.1), Rgb([230, 0, 230]));
+                draw_line_segment_mut(&mut img, (a.0, a.1 + d), (b.0, b.1 + d), Rgb([230, 0, 230]));
+            }
+        }
+        if let (Some(s), Some(g)) = (path.waypoints.first(), path.waypoints.last()) {
+            let (sx, sy) = to_pixel(spec, *s);
+            let (gx, gy) = to_pixel(spec, *g);
+            draw_filled_circle_mut(&mut img, (sx as i32, sy as i32), 4, Rgb([0, 200, 0]));
+            draw_filled_circle_mut(&mut img, (gx as i32, gy as i32), 4, Rgb([220, 0, 0]));
+        }
+    }
+    img
+}

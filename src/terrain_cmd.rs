@@ -1,0 +1,279 @@
+//! `spomp terrain`: runs the local planner's terrain analysis on a depth-panorama PNG, stage by
+//! stage, times each stage and writes the stage images.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use image::{DynamicImage, GrayImage, ImageBuffer, ImageReader, Luma, Rgb, RgbImage};
+use serde_json::json;
+use spomp_core::{DepthPanorama, PanoramaGeometry};
+use spomp_local_planner::{TerrainAnalyzer, TerrainOutput, TerrainParams, TerrainStage};
+
+/// Options of `spomp terrain`.
+pub struct TerrainArgs {
+    /// Depth panorama: 16-bit grayscale PNG of range counts.
+    pub pano: PathBuf,
+    /// Metres per count.
+    pub range_scale_m: f64,
+    /// Vertical field of view of the panorama, degrees.
+    pub v_fov_deg: f64,
+    /// YAML file of `TerrainParams`.
+    pub params: Option<PathBuf>,
+    /// Start from the paper's simulation values instead of the defaults.
+    pub simulation: bool,
+    /// Runs; timings are medians over them.
+    pub repeat: usize,
+    /// Folder for the stage images.
+    pub out: Option<PathBuf>,
+    /// Print JSON.
+    pub json: bool,
+}
+
+/// Reads a 16-bit grayscale PNG of range counts into a depth panorama.
+pub fn read_depth_png(path: &Path, range_scale_m: f64, v_fov_rad: f64) -> Result<DepthPanorama> {
+    let reader = ImageReader::open(path)
+        .with_context(|| format!("{}: cannot open", path.display()))?
+        .with_guessed_format()
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let img = reader.decode().with_context(|| format!("{}: not a readable PNG image", path.display()))?;
+    let DynamicImage::ImageLuma16(gray) = img else {
+        bail!("{}: expected a 16-bit grayscale PNG of range counts, found {:?}", path.display(), img.color());
+    };
+    let geometry = PanoramaGeometry { rows: gray.height() as usize, cols: gray.width() as usize, v_fov_rad };
+    DepthPanorama::from_counts(geometry, gray.as_raw(), range_scale_m)
+        .with_context(|| format!("{}: pixel count does not match its size", path.display()))
+}
+
+fn load_params(a: &TerrainArgs) -> Result<TerrainParams> {
+    let Some(file) = &a.params else {
+        return Ok(if a.simulation { TerrainParams::simulation() } else { TerrainParams::default() });
+    };
+    let text = std::fs::read_to_string(file).with_context(|| format!("{}: cannot read", file.display()))?;
+    let params: TerrainParams = serde_saphyr::from_str(&text)
+        .with_context(|| format!("{}: not a valid terrain parameter file", file.display()))?;
+    params.validate().with_context(|| format!("{}: bad terrain parameters", file.display()))?;
+    Ok(params)
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    if n % 2 == 1 { values[n / 2] } else { 0.5 * (values[n / 2 - 1] + values[n / 2]) }
+}
+
+/// `spomp terrain`.
+pub fn terrain(a: &TerrainArgs) -> Result<ExitCode> {
+    if !(a.range_scale_m.is_finite() && a.range_scale_m > 0.0) {
+        bail!("--range-scale must be a positive number of metres per count, got {}", a.range_scale_m);
+    }
+    if !(a.v_fov_deg.is_finite() && a.v_fov_deg > 0.0 && a.v_fov_deg <= 180.0) {
+        bail!("--v-fov-deg must be in (0, 180], got {}", a.v_fov_deg);
+    }
+    if a.repeat == 0 {
+        bail!("--repeat must be at least 1");
+    }
+    let params = load_params(a)?;
+    let depth = read_depth_png(&a.pano, a.range_scale_m, a.v_fov_deg.to_radians())?;
+    let g = depth.geometry;
+    let mut analyzer = TerrainAnalyzer::new(g, params)
+        .with_context(|| format!("{}: cannot analyse a {} × {} panorama", a.pano.display(), g.rows, g.cols))?;
+
+    // Per stage, the wall time of every run (the skill takes no clock; the CLI times it).
+    let mut stage_ms = vec![Vec::with_capacity(a.repeat); TerrainStage::ALL.len()];
+    let mut total_ms = Vec::with_capacity(a.repeat);
+    for _ in 0..a.repeat {
+        let start = Instant::now();
+        let mut last = start;
+        let mut stage_index = 0;
+        analyzer.analyze_observed(&depth, |_stage| {
+            let now = Instant::now();
+            if let Some(times) = stage_ms.get_mut(stage_index) {
+                times.push((now - last).as_secs_f64() * 1e3);
+            }
+            stage_index += 1;
+            last = now;
+        })?;
+        total_ms.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    let medians: Vec<(TerrainStage, f64)> =
+        TerrainStage::ALL.iter().zip(stage_ms.iter_mut()).map(|(s, t)| (*s, median(t))).collect();
+    let total_median = median(&mut total_ms);
+
+    let out = analyzer.output();
+    let traversable_pixels = out.traversable().iter().filter(|t| **t).count();
+    if let Some(dir) = &a.out {
+        write_stage_images(dir, out, a.range_scale_m, analyzer.params())?;
+    }
+
+    if a.json {
+        let timings: serde_json::Map<String, serde_json::Value> =
+            medians.iter().map(|(s, ms)| (s.name().to_string(), json!(ms))).collect();
+        let reach: Vec<_> = out
+            .reach_range_m()
+            .iter()
+            .zip(out.reach_obstacle())
+            .map(|(r, o)| json!({ "range_m": r, "obstacle": o }))
+            .collect();
+        let v = json!({
+            "rows": g.rows,
+            "cols": g.cols,
+            "timings_ms": timings,
+            "reachability": reach,
+            "traversable_pixels": traversable_pixels,
+        });
+        out!("{}", serde_json::to_string(&v)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+
+    out!("{}: {} × {} panorama, {}° vertical FOV", a.pano.display(), g.rows, g.cols, a.v_fov_deg);
+    out!("{:<20} {:>12}", "stage", format!("median ms (n={})", a.repeat));
+    for (s, ms) in &medians {
+        out!("{:<20} {ms:>12.3}", s.name());
+    }
+    out!("{:<20} {total_median:>12.3}", "total");
+    let reach = out.reach_range_m();
+    let obstacle_cols = out.reach_obstacle().iter().filter(|o| **o).count();
+    let finite: Vec<f32> = reach.iter().copied().filter(|r| r.is_finite()).collect();
+    let (lo, hi) = finite.iter().fold((f32::INFINITY, 0.0f32), |(lo, hi), r| (lo.min(*r), hi.max(*r)));
+    out!("reachability: {obstacle_cols} of {} columns end at an obstacle, range {lo:.2}–{hi:.2} m", reach.len());
+    out!(
+        "traversable pixels: {traversable_pixels} of {} ({:.1} %)",
+        g.len(),
+        100.0 * traversable_pixels as f64 / g.len().max(1) as f64
+    );
+    if let Some(dir) = &a.out {
+        out!("wrote {}/{{filled_depth,gradient,obstacles,distance,traversable,reachability}}.png", dir.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn unit_to_u8(v: f32) -> u8 {
+    if v.is_finite() { (v.clamp(0.0, 1.0) * 255.0).round() as u8 } else { 0 }
+}
+
+fn save_gray(dir: &Path, name: &str, cols: usize, rows: usize, pixels: Vec<u8>) -> Result<()> {
+    let path = dir.join(name);
+    let img = GrayImage::from_raw(cols as u32, rows as u32, pixels).context("stage buffer size")?;
+    img.save(&path).with_context(|| format!("writing {}", path.display()))
+}
+
+fn save_rgb(path: &Path, img: &RgbImage) -> Result<()> {
+    img.save(path).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Writes one image per stage: `filled_depth.png` (16-bit counts, same scale as the input),
+/// `gradient.png` (|∇| / 2∇_thresh), `obstacles.png` (red obstacle, black no return),
+/// `distance.png` (D / D_max), `traversable.png` and `reachability.png` (top-down S(φ)).
+fn write_stage_images(dir: &Path, out: &TerrainOutput, range_scale_m: f64, params: &TerrainParams) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let g = out.geometry();
+    let (rows, cols) = (g.rows, g.cols);
+
+    let filled = DepthPanorama { geometry: g, range_m: out.ranges_m().to_vec() };
+    let path = dir.join("filled_depth.png");
+    let img: ImageBuffer<Luma<u16>, Vec<u16>> =
+        ImageBuffer::from_raw(cols as u32, rows as u32, filled.to_counts(range_scale_m))
+            .context("stage buffer size")?;
+    img.save(&path).with_context(|| format!("writing {}", path.display()))?;
+
+    let grad_full_scale = (2.0 * params.slope_threshold) as f32;
+    save_gray(
+        dir,
+        "gradient.png",
+        cols,
+        rows,
+        out.gradient().iter().map(|v| unit_to_u8(v / grad_full_scale)).collect(),
+    )?;
+
+    let d_max = params.max_obstacle_distance_m as f32;
+    save_gray(dir, "distance.png", cols, rows, out.distance_m().iter().map(|d| unit_to_u8(d / d_max)).collect())?;
+
+    let ranges = out.ranges_m();
+    let has_return = |i: usize| ranges.get(i).is_some_and(|r| r.is_finite() && *r > 0.0);
+    let mut obstacles = RgbImage::new(cols as u32, rows as u32);
+    let mut traversable = RgbImage::new(cols as u32, rows as u32);
+    for (i, (o, t)) in out.obstacle().iter().zip(out.traversable()).enumerate() {
+        let (x, y) = ((i % cols) as u32, (i / cols) as u32);
+        let ret = has_return(i);
+        obstacles.put_pixel(
+            x,
+            y,
+            if *o {
+                Rgb([220, 40, 40])
+            } else if ret {
+                Rgb([90, 90, 90])
+            } else {
+                Rgb([0, 0, 0])
+            },
+        );
+        let colour = if *t {
+            Rgb([60, 180, 75])
+        } else if *o {
+            Rgb([220, 40, 40])
+        } else if ret {
+            Rgb([230, 160, 40])
+        } else {
+            Rgb([0, 0, 0])
+        };
+        traversable.put_pixel(x, y, colour);
+    }
+    save_rgb(&dir.join("obstacles.png"), &obstacles)?;
+    save_rgb(&dir.join("traversable.png"), &traversable)?;
+    save_rgb(&dir.join("reachability.png"), &reachability_image(out))?;
+    Ok(())
+}
+
+/// Top-down picture of the reachability polygon, robot at the centre, +x to the right, +y up:
+/// green inside S(φ), the boundary red where a column ends at an obstacle, yellow where it
+/// ends in the unknown.
+fn reachability_image(out: &TerrainOutput) -> RgbImage {
+    const SIZE: u32 = 601;
+    let g = out.geometry();
+    let reach = out.reach_range_m();
+    let farthest = reach.iter().copied().filter(|r| r.is_finite()).fold(1.0f32, f32::max) as f64;
+    let m_per_px = 2.2 * farthest / SIZE as f64;
+    let centre = (SIZE / 2) as f64;
+    let mut img = RgbImage::from_pixel(SIZE, SIZE, Rgb([25, 25, 25]));
+    if g.cols == 0 || reach.len() != g.cols {
+        return img;
+    }
+    for (px, py, pixel) in img.enumerate_pixels_mut() {
+        let x = (px as f64 - centre) * m_per_px;
+        let y = (centre - py as f64) * m_per_px;
+        let col = g.col_of_azimuth(y.atan2(x));
+        if reach.get(col).is_some_and(|r| x.hypot(y) <= *r as f64) {
+            *pixel = Rgb([60, 140, 70]);
+        }
+    }
+    for (col, (r, obstacle)) in reach.iter().zip(out.reach_obstacle()).enumerate() {
+        if !r.is_finite() {
+            continue;
+        }
+        let az = g.azimuth_of_col(col);
+        let px = centre + *r as f64 * az.cos() / m_per_px;
+        let py = centre - *r as f64 * az.sin() / m_per_px;
+        if px >= 0.0 && py >= 0.0 && px < SIZE as f64 && py < SIZE as f64 {
+            let colour = if *obstacle { Rgb([230, 40, 40]) } else { Rgb([240, 220, 60]) };
+            img.put_pixel(px as u32, py as u32, colour);
+        }
+    }
+    imageproc::drawing::draw_filled_circle_mut(&mut img, (centre as i32, centre as i32), 3, Rgb([80, 140, 255]));
+    img
+}
+
+#[cfg(test)]
+mod tests {
+    use super::median;
+
+    #[test]
+    fn median_of_odd_and_even_counts() {
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 2.5);
+        assert!(median(&mut []).is_nan());
+    }
+}
