@@ -164,16 +164,7 @@ impl NodeTypeSpec {
         ports: Vec<PortSpec>,
         factory: LeafFactory,
     ) -> Self {
-        NodeTypeSpec {
-            name,
-            category,
-            description,
-            ports,
-            robot_kinds: Vec::new(),
-            skills: Vec::new(),
-            implemented: true,
-            factory: Some(factory),
-        }
+        NodeTypeSpec { factory: Some(factory), ..Self::structural(name, category, description, ports) }
     }
 
     /// A built-in structural type (control, decorator, state machine, subtree).

@@ -256,84 +256,104 @@ pub struct StringMsg {
     pub data: String,
 }
 
-macro_rules! definition {
-    ($own:expr $(, $dep_name:literal => $dep:expr)*) => {
-        concat!($own $(, "================================================================================\n", "MSG: ", $dep_name, "\n", $dep)*)
+// ROS 2 interface definitions as `ros2msg` schemas expect them: the type's own fields, then
+// each dependency after a separator line and `MSG: pkg/Type`. The fragments are macros because
+// `concat!` only takes literals.
+macro_rules! dependency {
+    ($name:literal, $def:expr) => {
+        concat!(
+            "================================================================================\n",
+            "MSG: ",
+            $name,
+            "\n",
+            $def
+        )
+    };
+}
+macro_rules! time_dep {
+    () => {
+        dependency!("builtin_interfaces/Time", "int32 sec\nuint32 nanosec\n")
+    };
+}
+macro_rules! header_deps {
+    () => {
+        concat!(dependency!("std_msgs/Header", "builtin_interfaces/Time stamp\nstring frame_id\n"), time_dep!())
+    };
+}
+macro_rules! pose_deps {
+    () => {
+        concat!(
+            dependency!("geometry_msgs/Pose", "Point position\nQuaternion orientation\n"),
+            dependency!("geometry_msgs/Point", "float64 x\nfloat64 y\nfloat64 z\n"),
+            dependency!("geometry_msgs/Quaternion", "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n")
+        )
+    };
+}
+macro_rules! twist_deps {
+    () => {
+        concat!(
+            dependency!("geometry_msgs/Twist", "Vector3 linear\nVector3 angular\n"),
+            dependency!("geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n")
+        )
     };
 }
 
 impl RosMessage for PoseStamped {
     const TYPE_NAME: &'static str = "geometry_msgs/msg/PoseStamped";
-    const DEFINITION: &'static str = definition!(
-        "std_msgs/Header header\nPose pose\n",
-        "std_msgs/Header" => "builtin_interfaces/Time stamp\nstring frame_id\n",
-        "builtin_interfaces/Time" => "int32 sec\nuint32 nanosec\n",
-        "geometry_msgs/Pose" => "Point position\nQuaternion orientation\n",
-        "geometry_msgs/Point" => "float64 x\nfloat64 y\nfloat64 z\n",
-        "geometry_msgs/Quaternion" => "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
-    );
+    const DEFINITION: &'static str = concat!("std_msgs/Header header\nPose pose\n", header_deps!(), pose_deps!());
 }
 
 impl RosMessage for Twist {
     const TYPE_NAME: &'static str = "geometry_msgs/msg/Twist";
-    const DEFINITION: &'static str = definition!(
+    const DEFINITION: &'static str = concat!(
         "Vector3 linear\nVector3 angular\n",
-        "geometry_msgs/Vector3" => "float64 x\nfloat64 y\nfloat64 z\n"
+        dependency!("geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n")
     );
 }
 
 impl RosMessage for Odometry {
     const TYPE_NAME: &'static str = "nav_msgs/msg/Odometry";
-    const DEFINITION: &'static str = definition!(
+    const DEFINITION: &'static str = concat!(
         "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n",
-        "std_msgs/Header" => "builtin_interfaces/Time stamp\nstring frame_id\n",
-        "builtin_interfaces/Time" => "int32 sec\nuint32 nanosec\n",
-        "geometry_msgs/PoseWithCovariance" => "Pose pose\nfloat64[36] covariance\n",
-        "geometry_msgs/Pose" => "Point position\nQuaternion orientation\n",
-        "geometry_msgs/Point" => "float64 x\nfloat64 y\nfloat64 z\n",
-        "geometry_msgs/Quaternion" => "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
-        "geometry_msgs/TwistWithCovariance" => "Twist twist\nfloat64[36] covariance\n",
-        "geometry_msgs/Twist" => "Vector3 linear\nVector3 angular\n",
-        "geometry_msgs/Vector3" => "float64 x\nfloat64 y\nfloat64 z\n"
+        header_deps!(),
+        dependency!("geometry_msgs/PoseWithCovariance", "Pose pose\nfloat64[36] covariance\n"),
+        pose_deps!(),
+        dependency!("geometry_msgs/TwistWithCovariance", "Twist twist\nfloat64[36] covariance\n"),
+        twist_deps!()
     );
 }
 
 impl RosMessage for Path {
     const TYPE_NAME: &'static str = "nav_msgs/msg/Path";
-    const DEFINITION: &'static str = definition!(
+    const DEFINITION: &'static str = concat!(
         "std_msgs/Header header\ngeometry_msgs/PoseStamped[] poses\n",
-        "std_msgs/Header" => "builtin_interfaces/Time stamp\nstring frame_id\n",
-        "builtin_interfaces/Time" => "int32 sec\nuint32 nanosec\n",
-        "geometry_msgs/PoseStamped" => "std_msgs/Header header\nPose pose\n",
-        "geometry_msgs/Pose" => "Point position\nQuaternion orientation\n",
-        "geometry_msgs/Point" => "float64 x\nfloat64 y\nfloat64 z\n",
-        "geometry_msgs/Quaternion" => "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
+        header_deps!(),
+        dependency!("geometry_msgs/PoseStamped", "std_msgs/Header header\nPose pose\n"),
+        pose_deps!()
     );
 }
 
 impl RosMessage for Image {
     const TYPE_NAME: &'static str = "sensor_msgs/msg/Image";
-    const DEFINITION: &'static str = definition!(
+    const DEFINITION: &'static str = concat!(
         "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data\n",
-        "std_msgs/Header" => "builtin_interfaces/Time stamp\nstring frame_id\n",
-        "builtin_interfaces/Time" => "int32 sec\nuint32 nanosec\n"
+        header_deps!()
     );
 }
 
 impl RosMessage for LaserScan {
     const TYPE_NAME: &'static str = "sensor_msgs/msg/LaserScan";
-    const DEFINITION: &'static str = definition!(
+    const DEFINITION: &'static str = concat!(
         "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\nfloat32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\nfloat32[] ranges\nfloat32[] intensities\n",
-        "std_msgs/Header" => "builtin_interfaces/Time stamp\nstring frame_id\n",
-        "builtin_interfaces/Time" => "int32 sec\nuint32 nanosec\n"
+        header_deps!()
     );
 }
 
 impl RosMessage for Log {
     const TYPE_NAME: &'static str = "rcl_interfaces/msg/Log";
-    const DEFINITION: &'static str = definition!(
+    const DEFINITION: &'static str = concat!(
         "byte DEBUG=10\nbyte INFO=20\nbyte WARN=30\nbyte ERROR=40\nbyte FATAL=50\nbuiltin_interfaces/Time stamp\nuint8 level\nstring name\nstring msg\nstring file\nstring function\nuint32 line\n",
-        "builtin_interfaces/Time" => "int32 sec\nuint32 nanosec\n"
+        time_dep!()
     );
 }
 
