@@ -17,6 +17,17 @@ use crate::time::Time;
 /// Default metres per count of a 16-bit depth PNG.
 pub const DEFAULT_RANGE_SCALE_M: f64 = 1.0 / 512.0;
 
+/// One range as a 16-bit PNG count (`scale_m` metres per count): 0 for no return (0, negative
+/// or not finite), otherwise at least 1 and saturating at 65535.
+#[inline]
+pub fn range_to_count(range_m: f32, scale_m: f64) -> u16 {
+    if range_m.is_finite() && range_m > 0.0 {
+        (range_m as f64 / scale_m).round().clamp(1.0, u16::MAX as f64) as u16
+    } else {
+        0
+    }
+}
+
 /// The shape and angles of a panorama.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PanoramaGeometry {
@@ -104,16 +115,7 @@ impl DepthPanorama {
 
     /// Range counts for a 16-bit PNG (`scale_m` metres per count), saturating at 65535.
     pub fn to_counts(&self, scale_m: f64) -> Vec<u16> {
-        self.range_m
-            .iter()
-            .map(|&r| {
-                if r.is_finite() && r > 0.0 {
-                    (r as f64 / scale_m).round().clamp(1.0, u16::MAX as f64) as u16
-                } else {
-                    0
-                }
-            })
-            .collect()
+        self.range_m.iter().map(|&r| range_to_count(r, scale_m)).collect()
     }
 
     /// A panorama from 16-bit range counts; `None` if the count of values does not match.

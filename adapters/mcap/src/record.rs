@@ -6,7 +6,7 @@ use std::io::{Seek, Write};
 
 use byteorder::LittleEndian;
 use spomp_behaviors::trace::TransitionRecord;
-use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
+use spomp_core::panorama::{DEFAULT_RANGE_SCALE_M, range_to_count};
 use spomp_core::ros::{self, RosMessage};
 use spomp_core::{DepthPanorama, Pose2, ReachabilityScan, SemanticPanorama, Time, Twist2};
 
@@ -155,11 +155,7 @@ impl<W: Write + Seek> Recorder<W> {
         for r in (0..g.rows).step_by(k) {
             for c in (0..g.cols).step_by(k) {
                 let m = depth.range_m.get(r * g.cols + c).copied().unwrap_or(0.0);
-                let count = if m.is_finite() && m > 0.0 {
-                    (m as f64 / DEFAULT_RANGE_SCALE_M).round().clamp(1.0, 65535.0) as u16
-                } else {
-                    0
-                };
+                let count = range_to_count(m, DEFAULT_RANGE_SCALE_M);
                 data.extend_from_slice(&count.to_le_bytes());
             }
         }

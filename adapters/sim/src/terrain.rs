@@ -50,21 +50,9 @@ pub fn footprint_heights(world: &World, p: Point2, radius_m: f64) -> Option<Foot
     let (mut min_m, mut max_m) = (center_m, center_m);
     for row in r0..=r1 {
         // Nearest point of the cell's row band to the centre, in cells.
-        let dy = if fy < row as f64 {
-            row as f64 - fy
-        } else if fy > (row + 1) as f64 {
-            fy - (row + 1) as f64
-        } else {
-            0.0
-        };
+        let dy = gap_to_cell(fy, row);
         for col in c0..=c1 {
-            let dx = if fx < col as f64 {
-                col as f64 - fx
-            } else if fx > (col + 1) as f64 {
-                fx - (col + 1) as f64
-            } else {
-                0.0
-            };
+            let dx = gap_to_cell(fx, col);
             if dx * dx + dy * dy >= r2 {
                 continue;
             }
@@ -150,4 +138,16 @@ pub struct Obstacle {
     pub top_m: f32,
     /// Label it gets in semantic panoramas.
     pub class: ClassId,
+}
+
+/// Distance, in cells, from coordinate `f` (in cell units) to the band `[i, i + 1)`; 0 inside.
+fn gap_to_cell(f: f64, i: i64) -> f64 {
+    let (lo, hi) = (i as f64, (i + 1) as f64);
+    if f < lo {
+        lo - f
+    } else if f > hi {
+        f - hi
+    } else {
+        0.0
+    }
 }
