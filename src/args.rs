@@ -37,6 +37,27 @@ pub fn size(text: &str) -> Result<(f64, f64), String> {
     Ok((v[0], v[1]))
 }
 
+/// `ROBOT@SECONDS` (a kill fault).
+pub fn kill(text: &str) -> Result<(String, f64), String> {
+    let (robot, at) = text.split_once('@').ok_or_else(|| format!("expected ROBOT@SECONDS, got `{text}`"))?;
+    let at_s = at.trim().parse::<f64>().ok().filter(|v| v.is_finite() && *v >= 0.0);
+    match (robot.trim(), at_s) {
+        ("", _) => Err(format!("no robot id in `{text}`")),
+        (_, None) => Err(format!("`{at}` is not a time in seconds (expected ROBOT@SECONDS)")),
+        (r, Some(t)) => Ok((r.to_string(), t)),
+    }
+}
+
+/// `FROM..TO` seconds, FROM ≤ TO.
+pub fn window(text: &str) -> Result<(f64, f64), String> {
+    let (a, b) = text.split_once("..").ok_or_else(|| format!("expected FROM..TO seconds, got `{text}`"))?;
+    let parse = |v: &str| v.trim().parse::<f64>().ok().filter(|v| v.is_finite() && *v >= 0.0);
+    match (parse(a), parse(b)) {
+        (Some(a), Some(b)) if a <= b => Ok((a, b)),
+        _ => Err(format!("expected FROM..TO with 0 ≤ FROM ≤ TO seconds, got `{text}`")),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -53,5 +74,12 @@ mod tests {
         assert!(point("NaN,2").is_err());
         assert!(size("0,5").is_err());
         assert!(pose("1,2").is_err());
+        assert_eq!(kill("ugv2@300").unwrap(), ("ugv2".to_string(), 300.0));
+        assert!(kill("ugv2").is_err());
+        assert!(kill("@3").is_err());
+        assert!(kill("ugv2@-1").is_err());
+        assert_eq!(window("10..20").unwrap(), (10.0, 20.0));
+        assert!(window("20..10").is_err());
+        assert!(window("x..1").is_err());
     }
 }

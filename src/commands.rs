@@ -7,13 +7,41 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use spomp_behaviors::builtin_registry;
 use spomp_behaviors::mission::json_schema::mission_schema;
-use spomp_behaviors::mission::{Rendered, load_mission};
+use spomp_behaviors::mission::{LoadedMission, Rendered, load_mission};
 use spomp_behaviors::registry::PortDirection;
 
-/// `spomp validate`.
-pub fn validate(files: &[PathBuf], json: bool) -> Result<ExitCode> {
+/// Renders a mission's diagnostics with their source lines.
+fn render_diagnostics(loaded: &LoadedMission) -> String {
+    let mut human = String::new();
+    let handler = miette::GraphicalReportHandler::new_themed(miette::GraphicalTheme::unicode_nocolor());
+    for d in &loaded.diagnostics {
+        human.push_str(&format!("{d}\n"));
+        let src = loaded.source_of(&d.file).unwrap_or_default().to_string();
+        let rendered = Rendered::new(d.clone(), src);
+        let mut out = String::new();
+        if handler.render_report(&mut out, &rendered).is_ok() {
+            human.push_str(&out);
+            human.push('\n');
+        }
+    }
+    human
+}
+
+/// Prints a mission's diagnostics (for commands that refuse an invalid mission).
+pub fn print_diagnostics(loaded: &LoadedMission) {
+    let mut out = render_diagnostics(loaded);
+    if let Some(f) = loaded.files.first() {
+        out.push_str(&format!("✘ {}: {} problem(s)\n", f.display(), loaded.diagnostics.len()));
+    }
+    let _ = write!(std::io::stdout().lock(), "{out}");
+}
+
+/// `spomp validate` (with `dry_run`, valid missions also run once in the simulator).
+pub fn validate(files: &[PathBuf], json: bool, dry_run: bool) -> Result<ExitCode> {
     let registry = builtin_registry();
     let mut all = Vec::new();
+    let mut dry_runs = Vec::new();
+    let mut failed_runs = 0;
     let mut human = String::new();
     for file in files {
         let loaded = load_mission(file, &registry);
@@ -27,29 +55,34 @@ pub fn validate(files: &[PathBuf], json: bool) -> Result<ExitCode> {
                     m.roles.len()
                 ));
             }
-        } else {
-            let handler = miette::GraphicalReportHandler::new_themed(miette::GraphicalTheme::unicode_nocolor());
-            for d in &loaded.diagnostics {
-                human.push_str(&format!("{d}\n"));
-                let src = loaded.source_of(&d.file).unwrap_or_default().to_string();
-                let rendered = Rendered::new(d.clone(), src);
-                let mut out = String::new();
-                if handler.render_report(&mut out, &rendered).is_ok() {
-                    human.push_str(&out);
-                    human.push('\n');
+            if dry_run {
+                let _ = write!(std::io::stdout().lock(), "{human}");
+                human.clear();
+                let (ok, value) =
+                    crate::sim_cmd::dry_run(&loaded, json).with_context(|| format!("dry run of {}", file.display()))?;
+                if !ok {
+                    failed_runs += 1;
                 }
+                dry_runs.push(serde_json::json!({ "file": file, "dry_run": value }));
             }
+        } else {
+            human.push_str(&render_diagnostics(&loaded));
             human.push_str(&format!("✘ {}: {} problem(s)\n", file.display(), loaded.diagnostics.len()));
         }
         all.extend(loaded.diagnostics);
     }
     let mut stdout = std::io::stdout().lock();
     if json {
-        writeln!(stdout, "{}", serde_json::to_string_pretty(&all)?)?;
+        if dry_run {
+            let v = serde_json::json!({ "diagnostics": all, "dry_runs": dry_runs });
+            writeln!(stdout, "{}", serde_json::to_string_pretty(&v)?)?;
+        } else {
+            writeln!(stdout, "{}", serde_json::to_string_pretty(&all)?)?;
+        }
     } else {
         write!(stdout, "{human}")?;
     }
-    Ok(if all.is_empty() { ExitCode::SUCCESS } else { ExitCode::from(1) })
+    Ok(if all.is_empty() && failed_runs == 0 { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
 /// `spomp schema`.

@@ -178,10 +178,7 @@ pub fn pano(a: &PanoArgs) -> Result<ExitCode> {
     let mut depth = DepthPanorama::empty(g);
     let mut semantic = SemanticPanorama { geometry: g, class: vec![0; g.len()] };
     renderer.render(&world, a.at, &mut depth, &mut semantic);
-    let counts = depth.to_counts(a.range_scale_m);
-    let img: ImageBuffer<Luma<u16>, Vec<u16>> = ImageBuffer::from_raw(g.cols as u32, g.rows as u32, counts)
-        .context("panorama buffer does not match its geometry")?;
-    img.save(&a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    save_depth_png(&depth, a.range_scale_m, &a.out)?;
     let returns = depth.range_m.iter().filter(|r| **r > 0.0).count();
     if a.json {
         let v = json!({
@@ -201,4 +198,14 @@ pub fn pano(a: &PanoArgs) -> Result<ExitCode> {
         );
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Stores a depth panorama as a 16-bit PNG of range counts (`range_scale_m` metres per count,
+/// 0 = no return), the format `spomp terrain` reads.
+pub fn save_depth_png(depth: &DepthPanorama, range_scale_m: f64, path: &Path) -> Result<()> {
+    let g = depth.geometry;
+    let counts = depth.to_counts(range_scale_m);
+    let img: ImageBuffer<Luma<u16>, Vec<u16>> = ImageBuffer::from_raw(g.cols as u32, g.rows as u32, counts)
+        .context("panorama buffer does not match its geometry")?;
+    img.save(path).with_context(|| format!("writing {}", path.display()))
 }

@@ -21,7 +21,7 @@ pub use classes::{ClassId, ClassInfo, ClassTable, ClassTableError, UNKNOWN_CLASS
 pub use geometry::{Point2, Pose2, normalize_angle};
 pub use grid::{Cell, Grid, GridSpec};
 pub use ids::{GoalId, RobotId, RobotKind};
-pub use motion::{Odometry, PoseEstimate, Twist2};
+pub use motion::{FlightCommand, Odometry, PoseEstimate, Twist2};
 pub use panorama::{DepthPanorama, PanoramaFrame, PanoramaGeometry, SemanticPanorama};
 pub use platform::{MotionSink, OdometrySource, PanoramaSource, Platform, PoseSource, TeamLink};
 pub use scan::ReachabilityScan;

@@ -42,3 +42,15 @@ pub struct PoseEstimate {
     /// 0 (lost) … 1 (certain).
     pub confidence: f64,
 }
+
+/// A flight command for a multirotor UAV: fly to `target` at `altitude_m` with at most
+/// `speed_mps`; hover there once arrived.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FlightCommand {
+    /// Where to fly (map frame).
+    pub target: crate::geometry::Point2,
+    /// Altitude above the take-off point, metres.
+    pub altitude_m: f64,
+    /// Cruise speed cap, m/s.
+    pub speed_mps: f64,
+}

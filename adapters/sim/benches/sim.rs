@@ -1,5 +1,6 @@
 //! Simulator benchmarks: panorama synthesis (bar: ≤ 2 ms for 256 × 1024 on one core), city
-//! generation and a UGV step.
+//! generation, a UGV step, and the whole team (1 UAV + 5 UGVs, full stack) per 10 simulated
+//! seconds (DESIGN.md §8: ≥ 100× real time, i.e. ≤ 100 ms per 10 s).
 //!
 //! `cargo bench -p spomp-sim --bench sim -- --warm-up-time 1 --measurement-time 3`
 
@@ -7,7 +8,9 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use spomp_core::{DepthPanorama, PanoramaGeometry, Pose2, SemanticPanorama, Twist2, UNKNOWN_CLASS};
+use spomp_sim::run::{NoObserver, SimOptions, Simulation, world_for_mission};
 use spomp_sim::{CityParams, PanoramaRenderer, Ugv, UgvParams, generate_city};
+use std::sync::Arc;
 
 fn panorama(c: &mut Criterion) {
     let world = generate_city(&CityParams::default(), 1).expect("city");
@@ -52,5 +55,31 @@ fn ugv(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, panorama, city, ugv);
+/// The paper's mission with 1 UAV + 5 UGVs, past the first map delivery (UGVs driving to goals),
+/// 10 simulated seconds per iteration. The run goes on from iteration to iteration.
+fn team(c: &mut Criterion) {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/missions/team-1uav-5ugv.yaml");
+    let registry = spomp_behaviors::builtin_registry();
+    let loaded = spomp_behaviors::mission::load_mission(&path, &registry);
+    assert!(loaded.is_valid(), "{:?}", loaded.diagnostics);
+    let mission = loaded.mission.as_ref().expect("mission");
+    let options = SimOptions { seed: 1, time_limit_s: Some(1e6), ..SimOptions::default() };
+    let world = world_for_mission(mission, &loaded.base_dir(), options.seed).expect("world");
+    let mut sim = Simulation::new(&loaded, &registry, Arc::new(world), options).expect("simulation");
+    while sim.now().as_secs_f64() < 200.0 {
+        sim.step(&mut NoObserver);
+    }
+    let mut group = c.benchmark_group("team");
+    group.sample_size(10);
+    group.bench_function("1uav_5ugv_10_sim_seconds", |b| {
+        b.iter(|| {
+            for _ in 0..100 {
+                sim.step(&mut NoObserver);
+            }
+        });
+    });
+    group.finish();
+}
+
+criterion_group!(benches, panorama, city, ugv, team);
 criterion_main!(benches);

@@ -2,8 +2,7 @@
 //!
 //! The crate is an adapter: it may read and write world files, but every model is a plain,
 //! deterministic state machine stepped with the time passed in and a seeded RNG. The lockstep
-//! executor (elsewhere) owns the clock and the robots' behaviour trees and calls into these
-//! models.
+//! runner ([`run`]) owns the clock and the robots' behaviour trees and calls into these models.
 //!
 //! - [`World`]: class, elevation and colour layers at 0.5 m, the class table and ground truth;
 //!   [`generate_city`] builds one, [`World::load`] / [`World::save`] read and write world files,
@@ -14,12 +13,14 @@
 //! - [`PanoramaRenderer`]: depth + semantic panoramas in the core convention.
 //! - [`Uav`] and [`OrthoCamera`]: waypoint flight and the orthomap tiles its camera reveals.
 //! - [`Radio`] and [`Faults`]: which links carry which tiers, byte budgets, blackouts, kills.
+//! - [`run::Simulation`]: a whole mission in lockstep simulated time (the `spomp sim` engine).
 
 mod city;
 mod error;
 mod files;
 mod panorama;
 mod radio;
+pub mod run;
 mod terrain;
 mod uav;
 mod ugv;

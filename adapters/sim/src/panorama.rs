@@ -319,6 +319,18 @@ pub struct PanoramaSensor {
     period_ns: i64,
     next_due: Option<Time>,
     seq: u64,
+    /// The last render and what it saw: the world is static, so the same pose, base height
+    /// and obstacles in range give the same images, which are shared instead of re-rendered.
+    last: Option<LastRender>,
+}
+
+#[derive(Clone, Debug)]
+struct LastRender {
+    pose: Pose2,
+    base_m: f32,
+    obstacles: Vec<Obstacle>,
+    depth: Arc<DepthPanorama>,
+    semantic: Arc<SemanticPanorama>,
 }
 
 impl PanoramaSensor {
@@ -332,6 +344,7 @@ impl PanoramaSensor {
             period_ns: (p.period_s * 1e9).round().max(1.0) as i64,
             next_due: None,
             seq: 0,
+            last: None,
         })
     }
 
@@ -350,21 +363,57 @@ impl PanoramaSensor {
         base_m: f32,
         odom_pose: Pose2,
     ) -> Option<PanoramaFrame> {
+        self.poll_among(now, world, true_pose, base_m, odom_pose, &[])
+    }
+
+    /// [`Self::poll`] with other robots drawn in as obstacles.
+    pub fn poll_among(
+        &mut self,
+        now: Time,
+        world: &World,
+        true_pose: Pose2,
+        base_m: f32,
+        odom_pose: Pose2,
+        others: &[Obstacle],
+    ) -> Option<PanoramaFrame> {
         if self.next_due.is_some_and(|due| now < due) {
             return None;
         }
         self.next_due = Some(Time::from_nanos(now.nanos.saturating_add(self.period_ns)));
-        let g = self.renderer.geometry();
-        let mut depth = DepthPanorama::empty(g);
-        let mut semantic = SemanticPanorama { geometry: g, class: vec![UNKNOWN_CLASS; g.len()] };
-        self.renderer.render_from(world, true_pose, base_m, &mut depth, &mut semantic);
+        // Only obstacles that can show up matter for reuse.
+        let reach = self.renderer.max_range_m as f64;
+        let seen: Vec<Obstacle> =
+            others.iter().filter(|o| o.center.distance(true_pose.position()) <= reach + o.radius_m).copied().collect();
+        let (depth, semantic) = match &self.last {
+            Some(l) if l.pose == true_pose && l.base_m == base_m && l.obstacles == seen => {
+                (l.depth.clone(), l.semantic.clone())
+            }
+            _ => {
+                let g = self.renderer.geometry();
+                let mut depth = DepthPanorama::empty(g);
+                let mut semantic = SemanticPanorama { geometry: g, class: vec![UNKNOWN_CLASS; g.len()] };
+                self.renderer.render_from(world, true_pose, base_m, &mut depth, &mut semantic);
+                if !seen.is_empty() {
+                    self.renderer.overlay_obstacles(true_pose, base_m, &seen, &mut depth, &mut semantic);
+                }
+                let (depth, semantic) = (Arc::new(depth), Arc::new(semantic));
+                self.last = Some(LastRender {
+                    pose: true_pose,
+                    base_m,
+                    obstacles: seen,
+                    depth: depth.clone(),
+                    semantic: semantic.clone(),
+                });
+                (depth, semantic)
+            }
+        };
         let frame = PanoramaFrame {
             seq: self.seq,
             stamp: now,
             odom_pose,
             sensor_height_m: self.renderer.sensor_height_m(),
-            depth: Arc::new(depth),
-            semantic: Arc::new(semantic),
+            depth,
+            semantic,
         };
         self.seq += 1;
         Some(frame)
@@ -568,5 +617,31 @@ mod tests {
         assert_eq!(s.poll(Time::ZERO, &world, pose, 0.0, pose).map(|f| f.seq), Some(0));
         assert!(s.poll(Time::from_millis(999), &world, pose, 0.0, pose).is_none());
         assert_eq!(s.poll(Time::from_millis(1000), &world, pose, 0.0, pose).map(|f| f.seq), Some(1));
+    }
+
+    #[test]
+    fn a_still_sensor_reuses_its_render_until_something_in_range_moves() {
+        let world = flat_world();
+        let p = SensorParams { rows: 16, cols: 64, ..SensorParams::default() };
+        let mut s = PanoramaSensor::new(&p).unwrap();
+        let pose = Pose2::default();
+        let robot =
+            |x: f64| Obstacle { center: Point2::new(x, 0.0), radius_m: 0.5, bottom_m: 0.0, top_m: 1.0, class: 4 };
+        let t = |s: i64| Time::from_millis(1000 * s);
+        let a = s.poll_among(t(0), &world, pose, 0.0, pose, &[robot(5.0), robot(90.0)]).unwrap();
+        // Same pose, same obstacle in range; the far one moved: the same images.
+        let b = s.poll_among(t(1), &world, pose, 0.0, pose, &[robot(5.0), robot(95.0)]).unwrap();
+        assert!(Arc::ptr_eq(&a.depth, &b.depth) && Arc::ptr_eq(&a.semantic, &b.semantic));
+        assert_eq!(b.seq, 1);
+        // The near robot moved: a fresh render that shows it where it is now.
+        let c = s.poll_among(t(2), &world, pose, 0.0, pose, &[robot(6.0), robot(95.0)]).unwrap();
+        assert!(!Arc::ptr_eq(&a.depth, &c.depth));
+        let mut fresh = PanoramaSensor::new(&p).unwrap();
+        let d = fresh.poll_among(t(2), &world, pose, 0.0, pose, &[robot(6.0)]).unwrap();
+        assert_eq!(c.depth.range_m, d.depth.range_m);
+        // The robot itself moved: a fresh render.
+        let moved = Pose2::new(0.5, 0.0, 0.0);
+        let e = s.poll_among(t(3), &world, moved, 0.0, moved, &[robot(6.0)]).unwrap();
+        assert!(!Arc::ptr_eq(&c.depth, &e.depth));
     }
 }

@@ -63,6 +63,14 @@ impl Uav {
         self.next = 0;
     }
 
+    /// Sets the cruise speed (a flight command's cap); non-positive or non-finite values are
+    /// ignored.
+    pub fn set_speed_mps(&mut self, speed_mps: f64) {
+        if speed_mps.is_finite() && speed_mps > 0.0 {
+            self.params.speed_mps = speed_mps;
+        }
+    }
+
     /// Flies straight to one point (seeking a robot, returning to a waypoint).
     pub fn go_to(&mut self, target: Point2) {
         self.set_route(vec![target]);

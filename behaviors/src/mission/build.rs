@@ -1,6 +1,9 @@
 //! Turns a compiled tree into live nodes bound to a robot's blackboard.
 
-use crate::blackboard::{Binding, Blackboard};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use crate::blackboard::{BbValue, Binding, Blackboard};
 use crate::control::{Ordered, Parallel, Reactive};
 use crate::decorators::{Delay, MapResult, RateLimit, Repeat, ResultMap, Retry, RunOnce, Timeout};
 use crate::library::{ControlType, DecoratorType};
@@ -32,11 +35,26 @@ pub enum BuildError {
 }
 
 /// Options for building.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct BuildOptions {
     /// Build declared-but-unimplemented nodes as nodes that fail loudly when ticked, instead of
     /// refusing to build.
     pub allow_unimplemented: bool,
+    /// Folder relative file paths in the mission start from (`LoadedMission::base_dir`): a
+    /// literal string on a port whose name ends in `_file` (e.g. `follow_waypoints.plan_file`)
+    /// is resolved against it before the node's factory sees it. `None`: the process's working
+    /// directory.
+    pub base_dir: Option<PathBuf>,
+}
+
+/// A literal on a `*_file` port, resolved against the mission's folder.
+fn resolve_file_port(port: &str, value: &BbValue, opts: &BuildOptions) -> BbValue {
+    match (value, &opts.base_dir) {
+        (BbValue::Str(s), Some(base)) if port.ends_with("_file") && std::path::Path::new(&**s).is_relative() => {
+            BbValue::Str(Arc::from(base.join(&**s).to_string_lossy().as_ref()))
+        }
+        _ => value.clone(),
+    }
 }
 
 /// Builds live nodes for `ir`, declaring the blackboard entries it uses.
@@ -47,14 +65,14 @@ pub fn build_tree(
     opts: BuildOptions,
 ) -> Result<Slot, BuildError> {
     let mut next_id = 0;
-    build(ir, registry, bb, opts, &mut next_id)
+    build(ir, registry, bb, &opts, &mut next_id)
 }
 
 fn build(
     ir: &Ir,
     registry: &NodeRegistry,
     bb: &mut Blackboard,
-    opts: BuildOptions,
+    opts: &BuildOptions,
     next_id: &mut u32,
 ) -> Result<Slot, BuildError> {
     let info = NodeInfo { id: *next_id, type_name: ir.type_name.as_str().into(), path: ir.path.as_str().into() };
@@ -119,7 +137,7 @@ fn build(
             let mut bindings = PortBindings::default();
             for p in ports {
                 let b = match &p.binding {
-                    IrBinding::Literal(v) => Binding::Literal(v.clone()),
+                    IrBinding::Literal(v) => Binding::Literal(resolve_file_port(p.spec.name, v, opts)),
                     IrBinding::Ref(name) => Binding::Entry(bb.declare(name, p.spec.ty)),
                     IrBinding::Unset => Binding::Unset,
                 };

@@ -300,11 +300,42 @@ pub fn load_mission(path: &Path, registry: &NodeRegistry) -> LoadedMission {
         check_team(m, &root, path, registry, &out.roles, &mut diags);
     }
 
+    // --- build: node factories check what only they can (e.g. a plan file that must parse) ---
+    if diags.is_empty() {
+        let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        for role in out.roles.values() {
+            let opts = super::BuildOptions { base_dir: Some(base.clone()), allow_unimplemented: true };
+            let mut bb = crate::blackboard::Blackboard::new();
+            if let Err(super::BuildError::Node { path: node_path, message }) =
+                super::build_tree(&role.tree, registry, &mut bb, opts)
+            {
+                let node = find_ir(&role.tree, &node_path).unwrap_or(&role.tree);
+                let file = out.files.get(node.file).cloned().unwrap_or_else(|| path.to_path_buf());
+                diags.push(Diagnostic::new(&file, node.loc, node_path, Stage::Wiring, message));
+            }
+        }
+    }
+
     diags.sort_by_key(|d| (d.file.clone(), d.line, d.column));
     diags.dedup();
     out.diagnostics = diags;
     out.mission = mission;
     out
+}
+
+/// The node of a compiled tree with this path.
+fn find_ir<'a>(ir: &'a Ir, node_path: &str) -> Option<&'a Ir> {
+    if ir.path == node_path {
+        return Some(ir);
+    }
+    match &ir.kind {
+        IrKind::Leaf { .. } => None,
+        IrKind::Control { children, .. } => children.iter().find_map(|c| find_ir(c, node_path)),
+        IrKind::Decorator { child, .. } => find_ir(child, node_path),
+        IrKind::StateMachine { states, .. } => {
+            states.iter().filter_map(|s| s.run.as_ref()).find_map(|r| find_ir(r, node_path))
+        }
+    }
 }
 
 fn canonical(p: &Path) -> PathBuf {
@@ -525,13 +556,26 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, diags: &mut Vec<Diagn
         }
         for (i, f) in sim.faults.iter().enumerate() {
             let idx = i.to_string();
+            use super::schema::FaultSpec;
             let negative = match f {
-                super::schema::FaultSpec::Kill { at_s, .. } => *at_s < 0.0,
-                super::schema::FaultSpec::Blackout { from_s, to_s } => *from_s < 0.0 || to_s < from_s,
-                super::schema::FaultSpec::OdometryNoise { scale } => *scale < 0.0,
+                FaultSpec::Kill { at_s, .. } => *at_s < 0.0,
+                FaultSpec::Blackout { from_s, to_s, region } => {
+                    *from_s < 0.0
+                        || to_s < from_s
+                        || region.as_ref().is_some_and(|c| c.radius_m.is_nan() || c.radius_m < 0.0)
+                }
+                FaultSpec::OdometryNoise { scale } | FaultSpec::LocalizationNoise { scale } => *scale < 0.0,
             };
             if negative {
-                bad(&["sim", "faults", &idx], "times must be non-negative and in order, scales non-negative".into());
+                bad(
+                    &["sim", "faults", &idx],
+                    "times must be non-negative and in order, radii and scales non-negative".into(),
+                );
+            }
+            if let FaultSpec::Kill { robot, .. } = f
+                && !m.team.iter().any(|r| &r.id == robot)
+            {
+                bad(&["sim", "faults", &idx, "kill", "robot"], format!("no robot `{robot}` in the team"));
             }
         }
     }

@@ -310,6 +310,11 @@ pub struct SimSpec {
     /// Faults to inject.
     #[serde(default)]
     pub faults: Vec<FaultSpec>,
+    /// Every robot starts with the whole aerial map of the world, as if it had been surveyed
+    /// before the mission (the UAV, if any, still maps and shares updates). For missions
+    /// without a UAV.
+    #[serde(default)]
+    pub prior_map: bool,
 }
 
 /// Which world to simulate.
@@ -363,18 +368,38 @@ pub enum FaultSpec {
         /// When, seconds.
         at_s: f64,
     },
-    /// Radio blackout.
+    /// Radio blackout: every link (or every link with an end inside `region`) is cut.
     Blackout {
         /// Start, seconds.
         from_s: f64,
         /// End, seconds.
         to_s: f64,
+        /// Where; everywhere when absent.
+        #[serde(default)]
+        region: Option<CircleSpec>,
     },
     /// Scale odometry noise.
     OdometryNoise {
         /// Multiplier of the default noise.
         scale: f64,
     },
+    /// Scale the noise of ground-truth localization (`localization: { mode: ground_truth }`).
+    LocalizationNoise {
+        /// Multiplier of the configured noise.
+        scale: f64,
+    },
+}
+
+/// A disc in the map frame.
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CircleSpec {
+    /// Centre east, metres.
+    pub x_m: f64,
+    /// Centre north, metres.
+    pub y_m: f64,
+    /// Radius, metres.
+    pub radius_m: f64,
 }
 
 /// A file of reusable subtrees (`include:` target).

@@ -1,0 +1,1020 @@
+//! Lockstep runs of a whole mission: every robot's body, sensors and behaviour tree stepped
+//! against one simulated clock, the radio carrying team-state sync between them, faults
+//! injected on schedule. Deterministic for a seed; as fast as the CPU allows.
+//!
+//! One step (`dt_s`, 0.1 s by default):
+//! 1. bodies move with the commands of the previous tick (UGV kinematics among the others, UAV
+//!    flight toward its waypoint); kills take effect;
+//! 2. sensors: odometry, panoramas when due (other robots drawn in), the UAV camera's tiles,
+//!    GPS or ground truth where the mission asks for it — all fed to the robots' runtimes;
+//! 3. the radio: each link that is up carries one sync message each way, limited to the tiers
+//!    and bytes its range and bandwidth allow (every `sync_period_s`);
+//! 4. each robot whose tick is due ticks its tree; the nodes' commands are read back.
+//!
+//! Everything a run produces goes to a [`SimObserver`] (the CLI records it to MCAP) and into
+//! the [`RunSummary`].
+
+mod setup;
+mod summary;
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::Instant;
+
+use serde::Serialize;
+use spomp_behaviors::mission::schema::CompleteWhen;
+use spomp_behaviors::mission::{BuildOptions, LoadedMission, MissionFile};
+use spomp_behaviors::trace::{Recorder, TransitionRecord};
+use spomp_behaviors::{NodeRegistry, RobotExecutor, RobotRuntime, Status};
+use spomp_core::{
+    GoalId, Odometry, PanoramaFrame, Point2, Pose2, PoseEstimate, ReachabilityScan, RobotId, RobotKind, Time, Twist2,
+};
+use spomp_mapping::{CompressionParams, Orthomap, PngLevel};
+use spomp_teamstate::{GoalOrigin, Tier, TierSet};
+
+pub use setup::{PoseMode, faults_for_mission, radio_for_mission, runtime_config, world_for_mission};
+pub use summary::{ClusterSummary, ErrorStats, GoalSummary, Outcome, ProblemCount, RobotSummary, RunSummary};
+
+use crate::error::SimError;
+use crate::panorama::{PanoramaSensor, SensorParams};
+use crate::radio::{Faults, Link, LinkTier, Radio, RadioNode};
+use crate::terrain::Obstacle;
+use crate::uav::{OrthoCamera, Uav, UavParams};
+use crate::ugv::{NoisyPoseSource, OdometryModel, OdometryNoiseParams, PoseNoiseParams, Ugv, UgvParams};
+use crate::world::World;
+
+/// Settings of a run that are not in the mission.
+#[derive(Clone, Debug)]
+pub struct SimOptions {
+    /// Trial seed: the world (unless the mission fixes its seed), noise and every skill's RNG.
+    pub seed: u64,
+    /// Physics and sensor step, seconds.
+    pub dt_s: f64,
+    /// How often each radio link carries a sync message each way, seconds.
+    pub sync_period_s: f64,
+    /// How often the UAV publishes its map as a new version, seconds.
+    pub map_publish_period_s: f64,
+    /// PNG effort for the published map layers.
+    pub map_compression: CompressionParams,
+    /// Overrides the mission's time limit, seconds.
+    pub time_limit_s: Option<f64>,
+    /// Faults on top of the mission's.
+    pub faults: Faults,
+    /// Panoramic sensor of the UGVs.
+    pub sensor: SensorParams,
+    /// UGV body.
+    pub ugv: UgvParams,
+    /// UAV flight and camera.
+    pub uav: UavParams,
+    /// Odometry noise.
+    pub odometry_noise: OdometryNoiseParams,
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        SimOptions {
+            seed: 1,
+            dt_s: 0.1,
+            sync_period_s: 0.5,
+            map_publish_period_s: 10.0,
+            // The whole map is re-encoded on every publish: favour speed over the last bytes.
+            map_compression: CompressionParams { level: PngLevel::Fast },
+            time_limit_s: None,
+            faults: Faults::default(),
+            sensor: SensorParams::default(),
+            ugv: UgvParams::default(),
+            uav: UavParams::default(),
+            odometry_noise: OdometryNoiseParams::default(),
+        }
+    }
+}
+
+/// What happened, for logs (team-level changes and faults).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum SimEvent {
+    /// A goal became known to the team.
+    GoalIdentified {
+        /// Goal id.
+        goal: String,
+        /// Who identified it.
+        by: String,
+        /// Where, metres.
+        position: [f64; 2],
+    },
+    /// A robot took a claim on a goal (as seen in its own team state).
+    GoalClaimed {
+        /// Goal id.
+        goal: String,
+        /// Claimant.
+        by: String,
+    },
+    /// A robot gave up its claim.
+    GoalReleased {
+        /// Goal id.
+        goal: String,
+        /// Former claimant.
+        by: String,
+    },
+    /// A goal was visited.
+    GoalVisited {
+        /// Goal id.
+        goal: String,
+        /// Visitor.
+        by: String,
+    },
+    /// A robot was killed (fault injection).
+    RobotKilled {
+        /// Robot id.
+        robot: String,
+    },
+    /// The mission ended.
+    MissionEnded {
+        /// How.
+        outcome: Outcome,
+    },
+}
+
+/// A robot's state at a step, for observers.
+#[derive(Clone, Copy, Debug)]
+pub struct RobotSnapshot {
+    /// What the robot is.
+    pub kind: RobotKind,
+    /// Ground-truth pose.
+    pub truth: Pose2,
+    /// Height of the body above the datum (UAV altitude, UGV ground elevation), metres.
+    pub z_m: f64,
+    /// The robot's own estimate.
+    pub estimate: Option<PoseEstimate>,
+    /// Velocity command in force (UGVs).
+    pub command: Twist2,
+}
+
+/// Receives everything a run produces. Every method has an empty default.
+pub trait SimObserver {
+    /// Each robot's state, every `record_period_s` (see [`SimObserver::record_period_s`]).
+    fn on_state(&mut self, _robot: &RobotId, _now: Time, _state: &RobotSnapshot) {}
+    /// Odometry as the robot received it (every step).
+    fn on_odometry(&mut self, _robot: &RobotId, _odom: &Odometry) {}
+    /// A panorama as the robot received it.
+    fn on_panorama(&mut self, _robot: &RobotId, _frame: &PanoramaFrame) {}
+    /// A reachability scan the robot computed.
+    fn on_scan(&mut self, _scan: &ReachabilityScan) {}
+    /// A planned path (when it changes).
+    fn on_path(&mut self, _robot: &RobotId, _now: Time, _path: &[Point2]) {}
+    /// Node transitions of one tick.
+    fn on_transitions(&mut self, _robot: &RobotId, _records: &[TransitionRecord]) {}
+    /// A team-level event.
+    fn on_event(&mut self, _now: Time, _event: &SimEvent) {}
+    /// A problem a node or skill reported.
+    fn on_problem(&mut self, _robot: &RobotId, _now: Time, _message: &str) {}
+    /// How often `on_state` is called, seconds.
+    fn record_period_s(&self) -> f64 {
+        0.1
+    }
+}
+
+/// An observer that keeps nothing.
+pub struct NoObserver;
+
+impl SimObserver for NoObserver {}
+
+enum Body {
+    Ugv {
+        ugv: Box<Ugv>,
+        odometry: Box<OdometryModel>,
+        sensor: Box<PanoramaSensor>,
+        truth_source: Option<Box<NoisyPoseSource>>,
+        last_scan_stamp: Option<Time>,
+    },
+    Uav {
+        uav: Box<Uav>,
+        camera: Box<OrthoCamera>,
+        flying_to: Option<Point2>,
+        next_publish: Time,
+        published_version: u64,
+    },
+    Fixed {
+        pose: Pose2,
+    },
+}
+
+struct SimRobot {
+    id: RobotId,
+    kind: RobotKind,
+    mode: PoseMode,
+    rt: RobotRuntime,
+    ex: RobotExecutor,
+    body: Body,
+    tick_period_ns: i64,
+    next_tick: Time,
+    kill_at: Option<Time>,
+    killed_s: Option<f64>,
+    command: Twist2,
+    /// Node ids (depth-first) that ever changed status.
+    ticked: Vec<bool>,
+    node_paths: Vec<String>,
+    /// Seconds holding a claim, per goal.
+    claim_time_s: BTreeMap<GoalId, f64>,
+    held: Option<GoalId>,
+    localization_errors: Vec<f64>,
+    last_path_len: usize,
+    trajectory: Vec<Point2>,
+}
+
+impl SimRobot {
+    fn truth(&self) -> Pose2 {
+        match &self.body {
+            Body::Ugv { ugv, .. } => ugv.pose(),
+            Body::Uav { uav, .. } => uav.pose(),
+            Body::Fixed { pose } => *pose,
+        }
+    }
+
+    fn z_m(&self) -> f64 {
+        match &self.body {
+            Body::Ugv { ugv, .. } => ugv.base_elevation_m() as f64,
+            Body::Uav { uav, .. } => uav.altitude_m(),
+            Body::Fixed { .. } => 0.0,
+        }
+    }
+
+    fn alive(&self) -> bool {
+        self.killed_s.is_none()
+    }
+}
+
+/// Everything a finished run leaves: the summary and what plots need.
+pub struct RunResult {
+    /// The summary.
+    pub summary: RunSummary,
+    /// The world it ran in.
+    pub world: Arc<World>,
+    /// Ground-truth track of each robot (id, kind, points every second).
+    pub trajectories: Vec<(RobotId, RobotKind, Vec<Point2>)>,
+}
+
+/// A mission running in the simulator.
+pub struct Simulation {
+    mission: MissionFile,
+    options: SimOptions,
+    world: Arc<World>,
+    radio: Radio,
+    ugv_to_ugv: bool,
+    robots: Vec<SimRobot>,
+    now: Time,
+    dt_ns: i64,
+    time_limit: Time,
+    next_sync: Time,
+    next_second: Time,
+    next_record: Time,
+    links: Vec<(usize, usize, Link)>,
+    goals: BTreeMap<GoalId, GoalSummary>,
+    goal_order: Vec<GoalId>,
+    /// Goal ids some robot's team state merged into another goal (alias → canonical).
+    aliases: BTreeMap<GoalId, GoalId>,
+    /// Visits each robot made itself, as its own team state recorded them: (goal, robot) → time.
+    own_visits: BTreeMap<(GoalId, usize), Time>,
+    /// Last time each pair of robots had a direct link (row-major, robot index pairs).
+    last_link: Vec<Option<Time>>,
+    problems: BTreeMap<(String, String), ProblemCount>,
+    outcome: Option<Outcome>,
+    obstacles: Vec<Obstacle>,
+}
+
+/// Most distinct problem messages kept in a summary.
+const MAX_PROBLEMS: usize = 200;
+
+impl Simulation {
+    /// Sets up a validated mission in `world`.
+    pub fn new(
+        loaded: &LoadedMission,
+        registry: &NodeRegistry,
+        world: Arc<World>,
+        options: SimOptions,
+    ) -> Result<Self, SimError> {
+        let mission = loaded
+            .mission
+            .clone()
+            .filter(|_| loaded.is_valid())
+            .ok_or_else(|| SimError::invalid("mission", "the mission is not valid; run `spomp validate` on it"))?;
+        if !(options.dt_s.is_finite() && options.dt_s > 0.0 && options.sync_period_s > 0.0) {
+            return Err(SimError::invalid("simulation options", "dt_s and sync_period_s must be positive"));
+        }
+        let faults = faults_for_mission(&mission, &options.faults);
+        let radio = Radio::new(radio_for_mission(&mission), &faults)?;
+        let mut robots = Vec::with_capacity(mission.team.len());
+        for (i, spec) in mission.team.iter().enumerate() {
+            let (config, mode) = runtime_config(&mission, i, &world, options.seed)?;
+            let start = config.start;
+            let id = config.id.clone();
+            let mut rt = RobotRuntime::from_config(config)
+                .map_err(|e| SimError::invalid("team", format!("robot `{}`: {e}", spec.id)))?;
+            let role = loaded.roles.get(&spec.role).ok_or_else(|| {
+                SimError::invalid("team", format!("robot `{}`: role `{}` did not compile", spec.id, spec.role))
+            })?;
+            let build = BuildOptions { base_dir: Some(loaded.base_dir()), ..BuildOptions::default() };
+            let ex = RobotExecutor::new(role, registry, &id, start, build)
+                .map_err(|e| SimError::invalid("team", format!("robot `{}`: {e}", spec.id)))?;
+            if let Some(goals) = &mission.goals {
+                for (k, g) in goals.manual.iter().enumerate() {
+                    rt.team
+                        .add_mission_goal(k as u32, Point2::new(g.x_m, g.y_m))
+                        .map_err(|e| SimError::invalid("goals.manual", e.to_string()))?;
+                }
+            }
+            if mission.sim.as_ref().is_some_and(|s| s.prior_map) {
+                let map = Orthomap::from_map(world.map().clone())
+                    .map_err(|e| SimError::invalid("sim.prior_map", e.to_string()))?;
+                rt.map = Some(map);
+            }
+            let seed = options.seed.wrapping_mul(31).wrapping_add(i as u64 * 7919 + 17);
+            let body = match spec.kind {
+                RobotKind::Ugv => {
+                    let ugv = Ugv::new(&world, options.ugv.clone(), start).map_err(|e| {
+                        SimError::invalid(
+                            "team",
+                            format!(
+                                "robot `{}`: start ({:.1}, {:.1}) is not drivable ground in this world: {e}",
+                                spec.id, start.x, start.y
+                            ),
+                        )
+                    })?;
+                    let truth_source = match mode {
+                        PoseMode::GroundTruth { noise_m } => Some(Box::new(NoisyPoseSource::new(
+                            PoseNoiseParams { position_std_m: noise_m, yaw_std_rad: noise_m * 0.02 },
+                            faults.localization_noise_scale,
+                            seed ^ 0x5EED,
+                        ))),
+                        PoseMode::CrossView => None,
+                    };
+                    Body::Ugv {
+                        ugv: Box::new(ugv),
+                        odometry: Box::new(OdometryModel::new(
+                            options.odometry_noise.clone(),
+                            faults.odometry_noise_scale,
+                            start,
+                            seed,
+                        )),
+                        sensor: Box::new(PanoramaSensor::new(&options.sensor)?),
+                        truth_source,
+                        last_scan_stamp: None,
+                    }
+                }
+                RobotKind::Uav => {
+                    rt.map = Some(Orthomap::new(*world.spec()));
+                    Body::Uav {
+                        uav: Box::new(Uav::new(options.uav.clone(), start)?),
+                        camera: Box::new(OrthoCamera::new(&options.uav, &world, seed)?),
+                        flying_to: None,
+                        next_publish: Time::ZERO,
+                        published_version: 0,
+                    }
+                }
+                RobotKind::Basestation => Body::Fixed { pose: start },
+            };
+            let mut node_paths = Vec::new();
+            ex.root().visit(0, &mut |slot, _| node_paths.push(slot.info().path.to_string()));
+            let hz = if role.tick_hz.is_finite() && role.tick_hz > 0.0 { role.tick_hz } else { 10.0 };
+            robots.push(SimRobot {
+                id: id.clone(),
+                kind: spec.kind,
+                mode,
+                rt,
+                ex,
+                body,
+                tick_period_ns: ((1e9 / hz).round() as i64).max(1),
+                next_tick: Time::ZERO,
+                kill_at: faults.kill_time(&id),
+                killed_s: None,
+                command: Twist2::ZERO,
+                ticked: vec![false; node_paths.len()],
+                node_paths,
+                claim_time_s: BTreeMap::new(),
+                held: None,
+                localization_errors: Vec::new(),
+                last_path_len: 0,
+                trajectory: vec![start.position()],
+            });
+        }
+        let time_limit_s = options.time_limit_s.unwrap_or(mission.time_limit_s);
+        let n_robots = robots.len();
+        Ok(Simulation {
+            ugv_to_ugv: mission.comms.ugv_to_ugv.unwrap_or(true),
+            mission,
+            dt_ns: (options.dt_s * 1e9).round() as i64,
+            options,
+            world,
+            radio,
+            robots,
+            now: Time::ZERO,
+            time_limit: Time::from_secs_f64(time_limit_s),
+            next_sync: Time::ZERO,
+            next_second: Time::ZERO,
+            next_record: Time::ZERO,
+            links: Vec::new(),
+            goals: BTreeMap::new(),
+            goal_order: Vec::new(),
+            aliases: BTreeMap::new(),
+            own_visits: BTreeMap::new(),
+            last_link: vec![None; n_robots * n_robots],
+            problems: BTreeMap::new(),
+            outcome: None,
+            obstacles: Vec::new(),
+        })
+    }
+
+    /// Simulated time now.
+    pub fn now(&self) -> Time {
+        self.now
+    }
+
+    /// The world.
+    pub fn world(&self) -> &Arc<World> {
+        &self.world
+    }
+
+    /// The outcome, once the run has ended.
+    pub fn outcome(&self) -> Option<Outcome> {
+        self.outcome
+    }
+
+    /// A robot's runtime (tests and tools).
+    pub fn runtime(&self, id: &str) -> Option<&RobotRuntime> {
+        self.robots.iter().find(|r| r.id.as_str() == id).map(|r| &r.rt)
+    }
+
+    /// A robot's ground-truth pose.
+    pub fn true_pose(&self, id: &str) -> Option<Pose2> {
+        self.robots.iter().find(|r| r.id.as_str() == id).map(SimRobot::truth)
+    }
+
+    /// Whether two robots have a radio link right now.
+    pub fn linked(&self, a: &str, b: &str) -> Option<LinkTier> {
+        let ia = self.robots.iter().position(|r| r.id.as_str() == a)?;
+        let ib = self.robots.iter().position(|r| r.id.as_str() == b)?;
+        let (i, j) = (ia.min(ib), ia.max(ib));
+        self.links.iter().find(|(x, y, _)| *x == i && *y == j).map(|(_, _, l)| l.tier)
+    }
+
+    /// Runs to the end and summarises.
+    pub fn run(mut self, observer: &mut dyn SimObserver) -> RunResult {
+        let wall = Instant::now();
+        while self.outcome.is_none() {
+            self.step(observer);
+        }
+        self.finish(observer, wall.elapsed().as_secs_f64())
+    }
+
+    /// Advances one step; a no-op once the run has ended.
+    pub fn step(&mut self, observer: &mut dyn SimObserver) {
+        if self.outcome.is_some() {
+            return;
+        }
+        self.now = Time::from_nanos(self.now.nanos + self.dt_ns);
+        let now = self.now;
+        let dt = self.options.dt_s;
+        self.apply_kills(observer);
+        self.move_bodies(dt);
+        self.sense(observer);
+        if now >= self.next_sync {
+            self.sync_radio();
+            self.next_sync = Time::from_nanos(now.nanos + (self.options.sync_period_s * 1e9).round() as i64);
+        }
+        self.tick_trees(observer);
+        if now >= self.next_record {
+            let period = observer.record_period_s().max(self.options.dt_s);
+            self.next_record = Time::from_nanos(now.nanos + (period * 1e9).round() as i64 - 1);
+            for r in &self.robots {
+                let snap = RobotSnapshot {
+                    kind: r.kind,
+                    truth: r.truth(),
+                    z_m: r.z_m(),
+                    estimate: r.rt.pose,
+                    command: r.command,
+                };
+                observer.on_state(&r.id, now, &snap);
+            }
+        }
+        if now >= self.next_second {
+            self.next_second = Time::from_nanos(now.nanos + 1_000_000_000 - 1);
+            for r in &mut self.robots {
+                r.trajectory.push(r.truth().position());
+            }
+            self.track_goals(observer);
+            self.check_end(observer);
+        }
+    }
+
+    fn apply_kills(&mut self, observer: &mut dyn SimObserver) {
+        let now = self.now;
+        for r in &mut self.robots {
+            if r.alive() && r.kill_at.is_some_and(|k| now >= k) {
+                r.killed_s = Some(now.as_secs_f64());
+                r.command = Twist2::ZERO;
+                r.ex.halt(now, &mut r.rt, None);
+                observer.on_event(now, &SimEvent::RobotKilled { robot: r.id.to_string() });
+            }
+        }
+    }
+
+    fn move_bodies(&mut self, dt: f64) {
+        // Every UGV is an obstacle for the others (and shows in their panoramas).
+        self.obstacles.clear();
+        for r in &self.robots {
+            if let Body::Ugv { ugv, .. } = &r.body {
+                let base = ugv.base_elevation_m();
+                self.obstacles.push(Obstacle {
+                    center: ugv.pose().position(),
+                    radius_m: ugv.params().limits.radius_m,
+                    bottom_m: base,
+                    top_m: base + 0.8,
+                    class: self.world.classes().by_name("vehicle").map(|c| c.index).unwrap_or(4),
+                });
+            }
+        }
+        let world = &self.world;
+        let mut ugv_index = 0;
+        for r in &mut self.robots {
+            let alive = r.alive();
+            match &mut r.body {
+                Body::Ugv { ugv, .. } => {
+                    let own = ugv_index;
+                    ugv_index += 1;
+                    let cmd = if alive { r.command } else { Twist2::ZERO };
+                    let others: Vec<Obstacle> =
+                        self.obstacles.iter().enumerate().filter(|(k, _)| *k != own).map(|(_, o)| *o).collect();
+                    ugv.step_among(world, cmd, dt, &others);
+                }
+                Body::Uav { uav, flying_to, .. } => {
+                    if !alive {
+                        continue;
+                    }
+                    match r.rt.flight {
+                        Some(cmd) => {
+                            if *flying_to != Some(cmd.target) {
+                                uav.go_to(cmd.target);
+                                *flying_to = Some(cmd.target);
+                            }
+                            uav.set_speed_mps(cmd.speed_mps);
+                            uav.step(dt);
+                        }
+                        None => *flying_to = None,
+                    }
+                }
+                Body::Fixed { .. } => {}
+            }
+        }
+    }
+
+    fn sense(&mut self, observer: &mut dyn SimObserver) {
+        let now = self.now;
+        let world = &self.world;
+        let mut ugv_index = 0;
+        for r in &mut self.robots {
+            let alive = r.alive();
+            let truth = r.truth();
+            match &mut r.body {
+                Body::Ugv { ugv, odometry, sensor, truth_source, last_scan_stamp } => {
+                    let own = ugv_index;
+                    ugv_index += 1;
+                    if !alive {
+                        continue;
+                    }
+                    let odom = odometry.update(now, truth, ugv.twist());
+                    observer.on_odometry(&r.id, &odom);
+                    r.rt.on_odometry(odom);
+                    if let Some(src) = truth_source.as_mut() {
+                        r.rt.on_external_pose(src.estimate(now, truth));
+                    }
+                    let others: Vec<Obstacle> =
+                        self.obstacles.iter().enumerate().filter(|(k, _)| *k != own).map(|(_, o)| *o).collect();
+                    if let Some(frame) =
+                        sensor.poll_among(now, world, truth, ugv.base_elevation_m(), odom.pose, &others)
+                    {
+                        let frame = Arc::new(frame);
+                        observer.on_panorama(&r.id, &frame);
+                        r.rt.on_panorama(frame);
+                        if let Some(est) = r.rt.pose {
+                            r.localization_errors.push(est.pose.position().distance(truth.position()));
+                        }
+                        if let Some(scan) = r.rt.nav.as_ref().and_then(|n| n.latest_scan.clone())
+                            && *last_scan_stamp != Some(scan.stamp)
+                        {
+                            *last_scan_stamp = Some(scan.stamp);
+                            observer.on_scan(&scan);
+                        }
+                    }
+                }
+                Body::Uav { uav, camera, next_publish, published_version, .. } => {
+                    if !alive {
+                        continue;
+                    }
+                    let pose = uav.pose();
+                    r.rt.on_external_pose(PoseEstimate { stamp: now, pose, covariance: [0.0; 9], confidence: 1.0 });
+                    let tiles = camera.reveal(world, pose);
+                    if let Some(map) = r.rt.map.as_mut() {
+                        for tile in &tiles {
+                            if let Err(e) = map.apply_tile(tile) {
+                                r.rt.problems.push(format!("camera tile rejected: {e}"));
+                            }
+                        }
+                        // The whole map each time: the team state keeps only the newest version per
+                        // publisher, so a robot that missed one still gets everything.
+                        if now >= *next_publish && map.version() != *published_version {
+                            *next_publish = Time::from_secs_f64(now.as_secs_f64() + self.options.map_publish_period_s);
+                            match map.encode(&self.options.map_compression) {
+                                Ok(blob) => {
+                                    *published_version = map.version();
+                                    if let Err(e) = r.rt.team.add_map_version(map.version(), now, blob.to_bytes()) {
+                                        r.rt.problems.push(format!("map version rejected: {e}"));
+                                    }
+                                }
+                                Err(e) => r.rt.problems.push(format!("map encoding failed: {e}")),
+                            }
+                        }
+                    }
+                }
+                Body::Fixed { pose } => {
+                    if alive {
+                        let pose = *pose;
+                        r.rt.on_external_pose(PoseEstimate { stamp: now, pose, covariance: [0.0; 9], confidence: 1.0 });
+                    }
+                }
+            }
+        }
+    }
+
+    fn sync_radio(&mut self) {
+        let nodes: Vec<RadioNode> =
+            self.robots.iter().map(|r| RadioNode { position: r.truth().position(), alive: r.alive() }).collect();
+        let mut links = std::mem::take(&mut self.links);
+        self.radio.links_into(self.now, &nodes, self.options.sync_period_s, &mut links);
+        if !self.ugv_to_ugv {
+            let robots = &self.robots;
+            links.retain(|(i, j, _)| !(robots[*i].kind == RobotKind::Ugv && robots[*j].kind == RobotKind::Ugv));
+        }
+        let n = self.robots.len();
+        for &(i, j, link) in &links {
+            for (a, b) in [(i, j), (j, i)] {
+                if let Some(slot) = self.last_link.get_mut(a * n + b) {
+                    *slot = Some(self.now);
+                }
+            }
+            let tiers = match link.tier {
+                LinkTier::All => TierSet::ALL,
+                LinkTier::Small => TierSet::only(Tier::Coordination),
+            };
+            let budget = usize::try_from(link.budget_bytes).unwrap_or(usize::MAX);
+            let (id_i, id_j) = (self.robots[i].id.clone(), self.robots[j].id.clone());
+            let to_j = self.robots[i].rt.team.make_sync(&id_j, tiers, budget);
+            let to_i = self.robots[j].rt.team.make_sync(&id_i, tiers, budget);
+            if let Some(m) = to_j
+                && let Err(e) = self.robots[j].rt.team.apply(&id_i, &m)
+            {
+                self.robots[j].rt.problems.push(format!("sync from {id_i} rejected: {e}"));
+            }
+            if let Some(m) = to_i
+                && let Err(e) = self.robots[i].rt.team.apply(&id_j, &m)
+            {
+                self.robots[i].rt.problems.push(format!("sync from {id_j} rejected: {e}"));
+            }
+        }
+        self.links = links;
+    }
+
+    fn tick_trees(&mut self, observer: &mut dyn SimObserver) {
+        let now = self.now;
+        let dt = self.options.dt_s;
+        let mut recorder = Recorder::default();
+        for r in &mut self.robots {
+            if !r.alive() {
+                continue;
+            }
+            if now >= r.next_tick {
+                r.next_tick = Time::from_nanos(now.nanos + r.tick_period_ns - 1);
+                r.rt.maintain(now);
+                r.rt.begin_tick();
+                r.ex.tick(now, &mut r.rt, Some(&mut recorder));
+                r.command = r.rt.command.unwrap_or(Twist2::ZERO);
+                if !recorder.records.is_empty() {
+                    for rec in &recorder.records {
+                        if let Some(t) = r.ticked.get_mut(rec.node_id as usize) {
+                            *t = true;
+                        }
+                    }
+                    observer.on_transitions(&r.id, &recorder.records);
+                    recorder.records.clear();
+                }
+                let path_len = r.rt.planned_path.as_ref().map_or(0, Vec::len);
+                if path_len != r.last_path_len {
+                    r.last_path_len = path_len;
+                    observer.on_path(&r.id, now, r.rt.planned_path.as_deref().unwrap_or(&[]));
+                }
+                let mut reports = r.ex.blackboard_mut().take_reports();
+                reports.append(&mut r.rt.problems);
+                for message in reports {
+                    observer.on_problem(&r.id, now, &message);
+                    let key = (r.id.to_string(), message);
+                    if let Some(p) = self.problems.get_mut(&key) {
+                        p.count += 1;
+                    } else if self.problems.len() < MAX_PROBLEMS {
+                        let p = ProblemCount {
+                            robot: key.0.clone(),
+                            message: key.1.clone(),
+                            count: 1,
+                            first_s: now.as_secs_f64(),
+                        };
+                        self.problems.insert(key, p);
+                    }
+                }
+            }
+            // Claim bookkeeping for the "time heading to a goal" metric.
+            if r.kind == RobotKind::Ugv {
+                let id = r.id.clone();
+                let held =
+                    r.rt.team.goals().iter().find(|g| g.visited.is_none() && g.is_held_by(&id)).map(|g| g.id.clone());
+                if held != r.held {
+                    if let Some(old) = &r.held {
+                        observer.on_event(now, &SimEvent::GoalReleased { goal: old.to_string(), by: id.to_string() });
+                    }
+                    if let Some(new) = &held {
+                        observer.on_event(now, &SimEvent::GoalClaimed { goal: new.to_string(), by: id.to_string() });
+                    }
+                    r.held = held.clone();
+                }
+                if let Some(g) = held {
+                    *r.claim_time_s.entry(g).or_insert(0.0) += dt;
+                }
+            }
+        }
+    }
+
+    /// Team-level goal bookkeeping (earliest identification, claim and visit over all robots).
+    fn track_goals(&mut self, observer: &mut dyn SimObserver) {
+        let now = self.now;
+        let mut own_visits = Vec::new();
+        for (ri, r) in self.robots.iter().enumerate() {
+            for g in r.rt.team.goals() {
+                for a in &g.aliases {
+                    self.aliases.insert(a.clone(), g.id.clone());
+                }
+                let entry = match self.goals.get_mut(&g.id) {
+                    Some(e) => e,
+                    None => {
+                        let summary = GoalSummary {
+                            id: g.id.to_string(),
+                            position: [g.position.x, g.position.y],
+                            origin: match g.origin {
+                                GoalOrigin::Detected => "detected",
+                                GoalOrigin::Mission => "mission",
+                                GoalOrigin::Basestation => "basestation",
+                            }
+                            .to_string(),
+                            identified_s: g.identified_at.as_secs_f64(),
+                            identified_by: g.identified_by.to_string(),
+                            claimed_s: None,
+                            claimed_by: None,
+                            visited_s: None,
+                            visited_by: None,
+                            revisits_in_contact: 0,
+                        };
+                        observer.on_event(
+                            now,
+                            &SimEvent::GoalIdentified {
+                                goal: summary.id.clone(),
+                                by: summary.identified_by.clone(),
+                                position: summary.position,
+                            },
+                        );
+                        self.goal_order.push(g.id.clone());
+                        self.goals.entry(g.id.clone()).or_insert(summary)
+                    }
+                };
+                for c in &g.claims {
+                    let t = c.stamp.as_secs_f64();
+                    if entry.claimed_s.is_none_or(|s| t < s) {
+                        entry.claimed_s = Some(t);
+                        entry.claimed_by = Some(c.robot.to_string());
+                    }
+                }
+                if let Some((t, by)) = &g.visited
+                    && by == &r.id
+                {
+                    own_visits.push((g.id.clone(), ri, *t));
+                }
+                if let Some((t, by)) = &g.visited {
+                    let t = t.as_secs_f64();
+                    if entry.visited_s.is_none() {
+                        observer.on_event(now, &SimEvent::GoalVisited { goal: entry.id.clone(), by: by.to_string() });
+                    }
+                    if entry.visited_s.is_none_or(|s| t < s) {
+                        entry.visited_s = Some(t);
+                        entry.visited_by = Some(by.to_string());
+                    }
+                }
+            }
+        }
+        self.record_own_visits(own_visits);
+    }
+
+    /// Records visits robots made themselves; a visit to a goal another robot visited earlier
+    /// counts as a revisit in contact when the two had a direct link after the first visit
+    /// (the team state should have told the second robot in time).
+    fn record_own_visits(&mut self, visits: Vec<(GoalId, usize, Time)>) {
+        let n = self.robots.len();
+        for (goal, robot, t2) in visits {
+            let canonical = self.aliases.get(&goal).cloned().unwrap_or_else(|| goal.clone());
+            if self.own_visits.contains_key(&(canonical.clone(), robot)) {
+                continue;
+            }
+            let in_contact = self.own_visits.iter().any(|((g, other), t1)| {
+                *g == canonical
+                    && *other != robot
+                    && *t1 < t2
+                    && self.last_link.get(*other * n + robot).copied().flatten().is_some_and(|l| l > *t1)
+            });
+            self.own_visits.insert((canonical, robot), t2);
+            if in_contact && let Some(entry) = self.goals.get_mut(&goal) {
+                entry.revisits_in_contact += 1;
+            }
+        }
+    }
+
+    /// The goals with the ids robots merged (identified twice within the deconfliction radius)
+    /// folded into their canonical goal: earliest identification, claim and visit win.
+    fn merged_goals(&self) -> Vec<GoalSummary> {
+        let canonical = |id: &GoalId| {
+            let mut c = id;
+            // Alias chains are short; the bound guards against a cycle in bad data.
+            for _ in 0..8 {
+                match self.aliases.get(c) {
+                    Some(next) if next != c => c = next,
+                    _ => break,
+                }
+            }
+            c.clone()
+        };
+        let mut merged: BTreeMap<GoalId, GoalSummary> = BTreeMap::new();
+        let mut order = Vec::new();
+        for id in &self.goal_order {
+            let Some(g) = self.goals.get(id) else { continue };
+            let c = canonical(id);
+            match merged.get_mut(&c) {
+                None => {
+                    let mut first = g.clone();
+                    if let Some(cg) = self.goals.get(&c) {
+                        first.id = cg.id.clone();
+                        first.position = cg.position;
+                    }
+                    merged.insert(c.clone(), first);
+                    order.push(c);
+                }
+                Some(m) => {
+                    m.revisits_in_contact += g.revisits_in_contact;
+                    if g.identified_s < m.identified_s {
+                        m.identified_s = g.identified_s;
+                        m.identified_by = g.identified_by.clone();
+                    }
+                    if let Some(t) = g.claimed_s
+                        && m.claimed_s.is_none_or(|s| t < s)
+                    {
+                        m.claimed_s = Some(t);
+                        m.claimed_by = g.claimed_by.clone();
+                    }
+                    if let Some(t) = g.visited_s
+                        && m.visited_s.is_none_or(|s| t < s)
+                    {
+                        m.visited_s = Some(t);
+                        m.visited_by = g.visited_by.clone();
+                    }
+                }
+            }
+        }
+        order.into_iter().filter_map(|c| merged.remove(&c)).collect()
+    }
+
+    fn all_goals_visited(&self) -> bool {
+        let goals = self.merged_goals();
+        if goals.is_empty() || goals.iter().any(|g| g.visited_s.is_none()) {
+            return false;
+        }
+        // With detection in a generated world, every vehicle cluster must have been found too.
+        match self.cluster_summary(&goals) {
+            Some(c) => c.visited >= c.total,
+            None => true,
+        }
+    }
+
+    fn cluster_summary(&self, goals: &[GoalSummary]) -> Option<ClusterSummary> {
+        let detect = self.mission.goals.as_ref()?.detect.as_ref()?;
+        let clusters = &self.world.meta.vehicle_clusters;
+        if clusters.is_empty() {
+            return None;
+        }
+        let match_radius_m = detect.merge_distance_m + detect.placement_region_m;
+        let near =
+            |c: &Point2, g: &GoalSummary| Point2::new(g.position[0], g.position[1]).distance(*c) <= match_radius_m;
+        let found = clusters.iter().filter(|c| goals.iter().any(|g| near(c, g))).count();
+        let visited = clusters.iter().filter(|c| goals.iter().any(|g| g.visited_s.is_some() && near(c, g))).count();
+        Some(ClusterSummary { total: clusters.len(), found, visited, match_radius_m })
+    }
+
+    fn check_end(&mut self, observer: &mut dyn SimObserver) {
+        let done = match self.mission.complete_when {
+            CompleteWhen::AllGoalsVisited => self.all_goals_visited(),
+            CompleteWhen::AllTreesDone => self
+                .robots
+                .iter()
+                .filter(|r| r.alive())
+                .all(|r| matches!(r.ex.status(), Status::Success | Status::Failure)),
+            CompleteWhen::TimeLimit => false,
+        };
+        let outcome = if done {
+            Some(Outcome::Complete)
+        } else if self.robots.iter().all(|r| !r.alive()) {
+            Some(Outcome::AllDead)
+        } else if self.now >= self.time_limit {
+            Some(Outcome::TimeLimit)
+        } else {
+            None
+        };
+        if let Some(o) = outcome {
+            self.outcome = Some(o);
+            observer.on_event(self.now, &SimEvent::MissionEnded { outcome: o });
+        }
+    }
+
+    fn finish(mut self, _observer: &mut dyn SimObserver, wall_s: f64) -> RunResult {
+        let end_s = self.now.as_secs_f64();
+        for r in &mut self.robots {
+            if r.alive() {
+                r.ex.halt(self.now, &mut r.rt, None);
+            }
+        }
+        let goals = self.merged_goals();
+        let robots = self
+            .robots
+            .iter()
+            .map(|r| {
+                let visited_goals: Vec<&GoalSummary> =
+                    goals.iter().filter(|g| g.visited_by.as_deref() == Some(r.id.as_str())).collect();
+                let heading: f64 = r
+                    .claim_time_s
+                    .iter()
+                    .filter(|(g, _)| visited_goals.iter().any(|v| v.id == g.to_string()))
+                    .fold(0.0, |acc, (_, t)| acc + t);
+                let (distance_m, collisions) = match &r.body {
+                    Body::Ugv { ugv, .. } => (ugv.distance_m(), ugv.collisions()),
+                    Body::Uav { uav, .. } => (uav.distance_m(), 0),
+                    Body::Fixed { .. } => (0.0, 0),
+                };
+                RobotSummary {
+                    id: r.id.to_string(),
+                    kind: r.kind.to_string(),
+                    distance_m,
+                    heading_to_goal_fraction: if end_s > 0.0 { heading / end_s } else { 0.0 },
+                    collisions,
+                    localization: match r.kind {
+                        RobotKind::Ugv => r.mode.name().to_string(),
+                        RobotKind::Uav => "gps".to_string(),
+                        RobotKind::Basestation => "surveyed".to_string(),
+                    },
+                    localization_error_m: ErrorStats::of(&r.localization_errors),
+                    goals_visited: visited_goals.len() as u32,
+                    killed_s: r.killed_s,
+                    tree_status: format!("{:?}", r.ex.status()).to_lowercase(),
+                }
+            })
+            .collect();
+        let nodes_total = self.robots.iter().map(|r| r.ticked.len()).sum();
+        let nodes_exercised = self.robots.iter().map(|r| r.ticked.iter().filter(|t| **t).count()).sum();
+        let nodes_never_ticked = self
+            .robots
+            .iter()
+            .flat_map(|r| {
+                r.ticked.iter().zip(&r.node_paths).filter(|(t, _)| !**t).map(move |(_, p)| format!("{}: {p}", r.id))
+            })
+            .collect();
+        let summary = RunSummary {
+            mission: self.mission.mission.clone(),
+            seed: self.options.seed,
+            outcome: self.outcome.unwrap_or(Outcome::TimeLimit),
+            end_s,
+            time_limit_s: self.time_limit.as_secs_f64(),
+            navigation: "skills (global planner graph + panorama local planner)".to_string(),
+            goals_visited: goals.iter().filter(|g| g.visited_s.is_some()).count(),
+            clusters: self.cluster_summary(&goals),
+            goals,
+            robots,
+            wall_s,
+            speedup: if wall_s > 0.0 { end_s / wall_s } else { 0.0 },
+            nodes_exercised,
+            nodes_total,
+            nodes_never_ticked,
+            problems: self.problems.into_values().collect(),
+        };
+        let trajectories = self.robots.into_iter().map(|r| (r.id, r.kind, r.trajectory)).collect();
+        RunResult { summary, world: self.world, trajectories }
+    }
+}

@@ -1,0 +1,422 @@
+//! The UGV driving nodes in closed loop with the simulator: a robot runtime fed ground-truth
+//! poses, noisy odometry and rendered panoramas, a one-node mission ticked at 10 Hz, and the
+//! skid-steer model driven by the node's commands.
+//!
+//! Shows: `navigate_to` drives down a road past a parked vehicle cluster without touching it;
+//! `navigate_local` in front of a roadblock fails as stuck instead of pushing into it;
+//! `navigate_to` discovers a roadblock on the shortest route (through its scans removing the
+//! edge, or, where the scans cannot judge the edge, through being stuck on it), replans around
+//! the block and arrives; `navigate_to` crosses generated cities (200 m × 150 m, and the full
+//! 400 m × 300 m default with roadblocks); without a map it drives on the local planner alone;
+//! halting stops the robot and clears its path; an unreachable target fails with `no_path`;
+//! `return_home` drives back only when far. `NAV_TRACE=1` prints a trace every simulated second.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
+
+use std::io::Write;
+use std::sync::Arc;
+
+use spomp_behaviors::mission::{BuildOptions, load_mission};
+use spomp_behaviors::runtime::{LocalizationSetup, NavParams, RuntimeConfig};
+use spomp_behaviors::{BbValue, RobotExecutor, RobotRuntime, Status, builtin_registry};
+use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, RobotId, RobotKind, Time, Twist2};
+use spomp_global_planner::GlobalPlannerParams;
+use spomp_local_planner::LocalPlannerParams;
+use spomp_mapping::Orthomap;
+use spomp_sim::{
+    CityParams, OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams, World, generate_city,
+    reachable_cells,
+};
+use spomp_teamstate::TeamStateParams;
+
+const ROAD: u8 = 0;
+const BUILDING: u8 = 2;
+const VEHICLE: u8 = 4;
+
+/// A robot in a world, with its runtime and a mission of one node.
+struct Run {
+    world: World,
+    ugv: Ugv,
+    odom: OdometryModel,
+    sensor: PanoramaSensor,
+    rt: RobotRuntime,
+    ex: RobotExecutor,
+    t: Time,
+    reports: Vec<String>,
+}
+
+impl Run {
+    /// `tree`: the role's tree in YAML flow style. `with_map`: give the robot the world's full
+    /// aerial map (as if the UAV had flown everything).
+    fn new(name: &str, world: World, start: Pose2, tree: &str, with_map: bool) -> Run {
+        let mission = format!(
+            "mission: {name}\nteam:\n  - {{ id: ugv1, kind: ugv, role: driver, priority: 1, start: {{ x_m: {}, y_m: {}, yaw_deg: {} }} }}\nroles:\n  driver:\n    tree:\n      {tree}\ncomplete_when: all_goals_visited\ntime_limit_s: 3000\n",
+            start.x,
+            start.y,
+            start.yaw.to_degrees()
+        );
+        let dir = std::env::temp_dir().join(format!("spomp-nav-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("mission.yaml");
+        std::fs::File::create(&path).unwrap().write_all(mission.as_bytes()).unwrap();
+        let registry = builtin_registry();
+        let loaded = load_mission(&path, &registry);
+        assert!(loaded.diagnostics.is_empty(), "{mission}\n{:#?}", loaded.diagnostics);
+        let config = RuntimeConfig {
+            id: RobotId::new("ugv1"),
+            kind: RobotKind::Ugv,
+            priority: 1,
+            start,
+            classes: world.classes().clone(),
+            map_spec: Some(*world.spec()),
+            team: TeamStateParams::default(),
+            detection: None,
+            localization: LocalizationSetup::External,
+            nav: Some(NavParams { local: LocalPlannerParams::simulation(), global: GlobalPlannerParams::default() }),
+            goal_time_per_m_s: 2.0,
+            seed: 7,
+        };
+        let mut rt = RobotRuntime::from_config(config).unwrap();
+        if with_map {
+            rt.map = Some(Orthomap::from_map(world.map().clone()).unwrap());
+        }
+        let ex =
+            RobotExecutor::new(&loaded.roles["driver"], &registry, &rt.id, start, BuildOptions::default()).unwrap();
+        let ugv = Ugv::new(&world, UgvParams::default(), start).unwrap();
+        let odom = OdometryModel::new(OdometryNoiseParams::default(), 1.0, start, 11);
+        let sensor = PanoramaSensor::new(&SensorParams::default()).unwrap();
+        Run { world, ugv, odom, sensor, rt, ex, t: Time::ZERO, reports: Vec::new() }
+    }
+
+    /// One 0.1 s period: inputs, upkeep, one tick, the robot moves.
+    fn step(&mut self) -> Status {
+        let t = self.t;
+        let pose = self.ugv.pose();
+        let odom = self.odom.update(t, pose, self.ugv.twist());
+        self.rt.on_odometry(odom);
+        self.rt.on_external_pose(PoseEstimate { stamp: t, pose, covariance: [0.0; 9], confidence: 1.0 });
+        if let Some(frame) = self.sensor.poll(t, &self.world, pose, self.ugv.base_elevation_m(), odom.pose) {
+            self.rt.on_panorama(Arc::new(frame));
+        }
+        self.rt.maintain(t);
+        self.rt.begin_tick();
+        let status = self.ex.tick(t, &mut self.rt, None);
+        self.reports.extend(self.ex.blackboard_mut().take_reports());
+        let cmd = self.rt.command.unwrap_or(Twist2::ZERO);
+        if std::env::var("NAV_TRACE").is_ok() && t.nanos % 1_000_000_000 == 0 {
+            let nav = self.rt.nav.as_deref().unwrap();
+            println!(
+                "t={:.0} pose=({:.1},{:.1},{:.2}) cmd=({:.2},{:.2}) area={:?} path={:?} graph={:?}",
+                t.as_secs_f64(),
+                pose.x,
+                pose.y,
+                pose.yaw,
+                cmd.v,
+                cmd.omega,
+                nav.view.as_ref().map(|v| v.region.area_m2() as i64),
+                self.rt.planned_path.as_ref().map(|p| p.iter().map(|q| (q.x as i32, q.y as i32)).collect::<Vec<_>>()),
+                nav.global.graph_stats()
+            );
+        }
+        self.ugv.step(&self.world, cmd, 0.1);
+        self.t = Time::from_millis(t.nanos / 1_000_000 + 100);
+        status
+    }
+
+    /// Steps until the tree finishes or `max_s` of simulated time pass.
+    fn run(&mut self, max_s: f64) -> Status {
+        while self.t.as_secs_f64() < max_s {
+            let s = self.step();
+            if s != Status::Running {
+                return s;
+            }
+        }
+        Status::Running
+    }
+
+    fn position(&self) -> Point2 {
+        self.ugv.pose().position()
+    }
+
+    fn failure_reason(&self) -> Option<String> {
+        match self.ex.blackboard().get_by_name("why") {
+            Some(BbValue::Str(s)) => Some(s.to_string()),
+            _ => None,
+        }
+    }
+
+    fn summary(&self) -> String {
+        format!(
+            "t = {:.1} s, at ({:.1}, {:.1}), driven {:.1} m, {} collisions, {} edges removed by scans, {} blocked by \
+             being stuck, reports {:?}, problems {:?}",
+            self.t.as_secs_f64(),
+            self.ugv.pose().x,
+            self.ugv.pose().y,
+            self.ugv.distance_m(),
+            self.ugv.collisions(),
+            self.rt.nav.as_deref().map_or(0, |n| n.global.graph_stats().removed_edges),
+            self.rt.nav.as_deref().map_or(0, |n| n.blocked_edges.len()),
+            self.reports,
+            self.rt.problems
+        )
+    }
+}
+
+/// Fills the cells whose centre lies in [x0, x1) × [y0, y1).
+fn fill(world: &mut World, (x0, x1): (f64, f64), (y0, y1): (f64, f64), class: u8, elevation_m: f32) {
+    let spec = *world.spec();
+    let color = world.classes().get(class).map_or([0, 0, 0], |c| c.color);
+    for row in 0..spec.height {
+        for col in 0..spec.width {
+            let cell = Cell::new(col, row);
+            let c = spec.center(cell);
+            if (x0..x1).contains(&c.x) && (y0..y1).contains(&c.y) {
+                world.set_cell(cell, class, color, elevation_m);
+            }
+        }
+    }
+}
+
+/// A 70 m street, 12 m wide (y ∈ [−6, 6)), between two rows of buildings.
+fn street() -> World {
+    let spec = GridSpec::new(Point2::new(0.0, -15.0), 0.5, 140, 60);
+    let mut w = World::flat(spec, ClassTable::default_table(), ROAD, 0.0).unwrap();
+    fill(&mut w, (0.0, 70.0), (-15.0, -6.0), BUILDING, 10.0);
+    fill(&mut w, (0.0, 70.0), (6.0, 15.0), BUILDING, 10.0);
+    w
+}
+
+fn navigate_to(x: f64, y: f64) -> String {
+    format!("navigate_to: {{ target: {{ x: {x}, y: {y} }}, failure_reason: \"{{why}}\" }}")
+}
+
+#[test]
+fn navigate_to_drives_down_a_street_past_parked_vehicles_without_touching_them() {
+    let mut w = street();
+    // A cluster of vehicles parked along the right-hand side, then one double-parked into the
+    // lane on the straight line to the goal: the robot has to swerve around it.
+    fill(&mut w, (18.0, 22.5), (-5.5, -3.5), VEHICLE, 1.5);
+    fill(&mut w, (23.5, 28.0), (-5.5, -3.5), VEHICLE, 1.5);
+    fill(&mut w, (29.0, 33.5), (-5.5, -3.5), VEHICLE, 1.5);
+    fill(&mut w, (37.0, 41.5), (-2.5, -0.5), VEHICLE, 1.5);
+    let start = Pose2::new(5.0, -1.5, 0.0);
+    let goal = Point2::new(57.0, -1.5);
+    let mut run = Run::new("street", w, start, &navigate_to(goal.x, goal.y), true);
+    let status = run.run(120.0);
+    println!("street: {status:?}, {}", run.summary());
+    assert_eq!(status, Status::Success, "{}", run.summary());
+    assert!(run.position().distance(goal) <= 2.0 + 0.2, "{}", run.summary());
+    assert_eq!(run.ugv.collisions(), 0, "{}", run.summary());
+    assert!(run.ugv.distance_m() > 50.0, "{}", run.summary());
+    // 52 m at up to 1.5 m/s, with the weaving: well within a minute.
+    assert!(run.t.as_secs_f64() < 60.0, "{}", run.summary());
+    // Halted/finished: the path is cleared and the robot told to stop.
+    assert!(run.rt.planned_path.is_none());
+    assert_eq!(run.rt.command, Some(Twist2::ZERO));
+}
+
+#[test]
+fn navigate_local_stops_at_a_roadblock_and_fails_as_stuck() {
+    let mut w = street();
+    // A 1.2 m high roadblock across the whole street at x ∈ [30, 31), labelled road.
+    fill(&mut w, (30.0, 31.0), (-6.0, 6.0), ROAD, 1.2);
+    let start = Pose2::new(5.0, 0.0, 0.0);
+    let tree = "navigate_local: { target: { x: 55, y: 0 }, stuck_timeout_s: 15 }";
+    let mut run = Run::new("roadblock", w, start, tree, false);
+    let status = run.run(120.0);
+    println!("roadblock: {status:?}, {}", run.summary());
+    assert_eq!(status, Status::Failure, "{}", run.summary());
+    assert_eq!(run.ugv.collisions(), 0, "it never pushed into the block: {}", run.summary());
+    let x = run.position().x;
+    assert!(x < 30.0 - 0.5 && x > 22.0, "it drove up to the block and stopped in front: {}", run.summary());
+    // 25 m to drive at ≤ 1.5 m/s, then 15 s without progress (plus the 1 m progress margin).
+    assert!(run.t.as_secs_f64() < 17.0 + 15.0 + 8.0, "{}", run.summary());
+    assert!(run.reports.iter().any(|r| r.contains("no safe progress")), "{:?}", run.reports);
+    assert_eq!(run.rt.command, Some(Twist2::ZERO));
+}
+
+/// A ring road around a block: the bottom street y ∈ [0, 8), the top street y ∈ [20, 28), the
+/// side streets x ∈ [0, 8) and [52, 60); buildings fill the block and the world's edges.
+fn ring() -> World {
+    let spec = GridSpec::new(Point2::new(-4.0, -4.0), 0.5, 136, 72);
+    let mut w = World::flat(spec, ClassTable::default_table(), BUILDING, 10.0).unwrap();
+    fill(&mut w, (0.0, 60.0), (0.0, 8.0), ROAD, 0.0);
+    fill(&mut w, (0.0, 60.0), (20.0, 28.0), ROAD, 0.0);
+    fill(&mut w, (0.0, 8.0), (0.0, 28.0), ROAD, 0.0);
+    fill(&mut w, (52.0, 60.0), (0.0, 28.0), ROAD, 0.0);
+    w
+}
+
+/// Drives `navigate_to` from (14, 4) to (46, 4) on the ring road with a roadblock (labelled
+/// road, so invisible in the aerial map) across the bottom street at `block_x`.
+fn detour(name: &str, block_x: f64) -> (Run, Status, Vec<Point2>, bool) {
+    let mut w = ring();
+    fill(&mut w, (block_x, block_x + 1.0), (0.0, 8.0), ROAD, 1.2);
+    let start = Pose2::new(14.0, 4.0, 0.0);
+    let goal = Point2::new(46.0, 4.0);
+    let mut run = Run::new(name, w, start, &navigate_to(goal.x, goal.y), true);
+    let mut first_path: Option<Vec<Point2>> = None;
+    let mut replanned_over_the_top = false;
+    let mut status = Status::Running;
+    while run.t.as_secs_f64() < 240.0 && status == Status::Running {
+        status = run.step();
+        if let Some(path) = &run.rt.planned_path {
+            if first_path.is_none() {
+                first_path = Some(path.clone());
+            }
+            replanned_over_the_top |= path.iter().any(|p| p.y > 18.0);
+        }
+    }
+    println!("{name}: {status:?}, {}", run.summary());
+    assert!(run.position().distance(goal) <= 2.2 || status != Status::Success);
+    (run, status, first_path.unwrap(), replanned_over_the_top)
+}
+
+#[test]
+fn navigate_to_replans_when_its_scans_remove_a_blocked_edge() {
+    // The block lies 4 m past a graph node on the bottom street: driving through the node, the
+    // robot's scans see the edge beyond it end at an obstacle and remove it (paper: two own
+    // not_trav observations), the path is blocked, and it replans over the top street.
+    let (run, status, first, over_the_top) = detour("scan-detour", 38.0);
+    assert!(first.iter().all(|p| p.y < 10.0), "the first plan takes the bottom street: {first:?}");
+    assert_eq!(status, Status::Success, "{}", run.summary());
+    assert!(over_the_top, "it replanned over the top street");
+    let nav = run.rt.nav.as_deref().unwrap();
+    assert!(nav.global.graph_stats().removed_edges >= 1, "{}", run.summary());
+    assert!(nav.blocked_edges.is_empty(), "the scans found it, not the stuck fallback: {}", run.summary());
+    assert_eq!(run.ugv.collisions(), 0, "{}", run.summary());
+}
+
+#[test]
+fn navigate_to_gets_around_a_roadblock_its_scans_cannot_judge() {
+    // The block lies mid-edge, 4 m before the node beyond it and 24 m after the one before: no
+    // scan ever has an end of that edge in its ~5 m safe region, so the edge stays unk_trav.
+    // The robot stops in front of the block (no collision), is stuck for `stuck_timeout_s`,
+    // marks the edge blocked, replans from the node behind and arrives over the top street.
+    let (run, status, first, over_the_top) = detour("stuck-detour", 30.0);
+    assert!(first.iter().all(|p| p.y < 10.0), "the first plan takes the bottom street: {first:?}");
+    assert_eq!(status, Status::Success, "{}", run.summary());
+    assert!(over_the_top, "it replanned over the top street");
+    assert_eq!(run.rt.nav.as_deref().unwrap().blocked_edges.len(), 1, "{}", run.summary());
+    assert_eq!(run.ugv.collisions(), 0, "{}", run.summary());
+    assert!(run.ugv.distance_m() > 70.0, "it drove around: {}", run.summary());
+}
+
+/// The farthest road cell the robot can really reach from `start`, at most `max_m` away.
+fn far_road_goal(world: &World, start: Pose2, max_m: f64) -> Point2 {
+    let reach = reachable_cells(world, &UgvParams::default().limits, start.position());
+    let spec = *world.spec();
+    let mut goal = start.position();
+    for row in 0..spec.height {
+        for col in 0..spec.width {
+            let cell = Cell::new(col, row);
+            let i = spec.index(cell);
+            let c = spec.center(cell);
+            let d = c.distance(start.position());
+            if reach.data[i] && world.map().class[i] == ROAD && d < max_m && d > goal.distance(start.position()) {
+                goal = c;
+            }
+        }
+    }
+    goal
+}
+
+fn cross_city(name: &str, params: &CityParams, seed: u64, max_m: f64, max_s: f64) -> Run {
+    let world = generate_city(params, seed).unwrap();
+    let start = world.meta.start_poses[0];
+    let goal = far_road_goal(&world, start, max_m);
+    let straight = goal.distance(start.position());
+    assert!(straight > 0.7 * max_m, "goal {goal:?} from {start:?}");
+    let mut run = Run::new(name, world, start, &navigate_to(goal.x, goal.y), true);
+    let status = run.run(max_s);
+    println!("{name}: {status:?}, straight line {straight:.1} m, {}", run.summary());
+    assert_eq!(status, Status::Success, "{}", run.summary());
+    assert!(run.position().distance(goal) <= 2.2);
+    assert_eq!(run.ugv.collisions(), 0, "{}", run.summary());
+    run
+}
+
+#[test]
+fn navigate_to_crosses_a_generated_city() {
+    let params =
+        CityParams { width_m: 200.0, height_m: 150.0, vehicle_clusters: 6, roadblocks: 0, ..Default::default() };
+    cross_city("city", &params, 3, 110.0, 300.0);
+}
+
+/// The full default city (400 m × 300 m, 15 vehicle clusters, 6 roadblocks), a goal up to
+/// 300 m away (about 3 s in the dev profile).
+#[test]
+fn navigate_to_crosses_a_full_city_with_roadblocks() {
+    cross_city("full city", &CityParams::default(), 1, 300.0, 900.0);
+}
+
+#[test]
+fn without_a_map_navigate_to_drives_on_the_local_planner_alone() {
+    let start = Pose2::new(5.0, 0.0, 0.0);
+    let goal = Point2::new(45.0, 2.0);
+    let mut run = Run::new("no-map", street(), start, &navigate_to(goal.x, goal.y), false);
+    let status = run.run(60.0);
+    println!("no map: {status:?}, {}", run.summary());
+    assert_eq!(status, Status::Success, "{}", run.summary());
+    assert_eq!(run.ugv.collisions(), 0);
+    assert!(run.position().distance(goal) <= 2.2);
+}
+
+#[test]
+fn halting_navigate_to_stops_the_robot_and_clears_its_path() {
+    let start = Pose2::new(5.0, 0.0, 0.0);
+    let tree = format!("timeout: {{ duration_s: 5, child: {{ {} }} }}", navigate_to(60.0, 0.0));
+    let mut run = Run::new("halt", street(), start, &tree, true);
+    let mut saw_path = false;
+    let mut status = Status::Running;
+    while status == Status::Running && run.t.as_secs_f64() < 10.0 {
+        status = run.step();
+        saw_path |= run.rt.planned_path.is_some();
+        if status == Status::Running {
+            assert!(run.rt.command.is_some_and(|c| c.v >= 0.0), "the node commands the robot while running");
+        }
+    }
+    assert_eq!(status, Status::Failure, "the timeout halted it");
+    assert!(saw_path);
+    assert_eq!(run.rt.command, Some(Twist2::ZERO), "halted: stop");
+    assert!(run.rt.planned_path.is_none(), "halted: no path");
+    assert!(run.position().x > 8.0, "it was driving: {}", run.summary());
+    // The robot comes to rest under the (absent) commands of the next ticks.
+    for _ in 0..20 {
+        run.rt.begin_tick();
+        run.ugv.step(&run.world, run.rt.command.unwrap_or(Twist2::ZERO), 0.1);
+    }
+    assert_eq!(run.ugv.twist().v, 0.0);
+}
+
+#[test]
+fn navigate_to_reports_no_path_for_an_unreachable_target() {
+    let start = Pose2::new(5.0, 0.0, 0.0);
+    // Deep inside the buildings north of the street: no graph node covers it.
+    let mut run = Run::new("no-path", street(), start, &navigate_to(35.0, 13.0), true);
+    let status = run.run(5.0);
+    assert_eq!(status, Status::Failure, "{}", run.summary());
+    assert_eq!(run.failure_reason().as_deref(), Some("no_path"), "{:?}", run.reports);
+    assert_eq!(run.ugv.distance_m(), 0.0);
+}
+
+#[test]
+fn return_home_drives_back_to_the_start_only_when_far() {
+    let home = Pose2::new(8.0, 0.0, 0.0);
+    let far = Pose2::new(40.0, 1.0, std::f64::consts::PI);
+    let tree = "return_home: { min_distance_m: 5, tolerance_m: 2 }";
+    let mut run = Run::new("home", street(), home, tree, true);
+    run.ugv = Ugv::new(&run.world, UgvParams::default(), far).unwrap();
+    run.odom = OdometryModel::new(OdometryNoiseParams::default(), 1.0, far, 5);
+    let status = run.run(60.0);
+    println!("home: {status:?}, {}", run.summary());
+    assert_eq!(status, Status::Success, "{}", run.summary());
+    assert!(run.position().distance(home.position()) <= 2.2, "{}", run.summary());
+    assert_eq!(run.ugv.collisions(), 0);
+
+    // Already home (within 5 m): succeeds at once without moving.
+    let mut near = Run::new("home-near", street(), home, tree, true);
+    near.ugv = Ugv::new(&near.world, UgvParams::default(), Pose2::new(11.0, 0.0, 0.0)).unwrap();
+    assert_eq!(near.step(), Status::Success);
+    assert_eq!(near.ugv.distance_m(), 0.0);
+}

@@ -1,0 +1,152 @@
+//! Whole missions in the lockstep runner: the radio's ranges decide what flows between team
+//! states, a killed robot stops sharing, and identical seeds give identical runs.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use spomp_behaviors::builtin_registry;
+use spomp_behaviors::mission::{LoadedMission, load_mission};
+use spomp_behaviors::trace::TransitionRecord;
+use spomp_core::{RobotId, Time};
+use spomp_sim::LinkTier;
+use spomp_sim::run::{NoObserver, Outcome, RobotSnapshot, SimObserver, SimOptions, Simulation, world_for_mission};
+
+fn write_mission(name: &str, text: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("spomp-run-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(format!("{name}.yaml"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn load(path: &Path) -> LoadedMission {
+    let loaded = load_mission(path, &builtin_registry());
+    assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
+    loaded
+}
+
+fn simulation(loaded: &LoadedMission, options: SimOptions) -> Simulation {
+    let world = world_for_mission(loaded.mission.as_ref().unwrap(), &loaded.base_dir(), options.seed).unwrap();
+    Simulation::new(loaded, &builtin_registry(), Arc::new(world), options).unwrap()
+}
+
+/// A basestation and a hovering UAV `distance_m` apart, both idle.
+fn pair_mission(distance_m: f64) -> String {
+    format!(
+        r#"
+mission: radio-pair
+team:
+  - {{ id: base, kind: basestation, role: idle, start: {{ x_m: 10, y_m: 50 }} }}
+  - {{ id: uav1, kind: uav, role: idle, start: {{ x_m: {x}, y_m: 50 }} }}
+roles:
+  idle: {{ tree: {{ wait: {{ duration_s: 1000 }} }} }}
+complete_when: time_limit
+time_limit_s: 6
+sim: {{ world: {{ generate: {{ size_m: [120, 100], vehicle_clusters: 1, roadblocks: 0, seed: 3 }} }} }}
+"#,
+        x = 10.0 + distance_m
+    )
+}
+
+fn run_for(sim: &mut Simulation, seconds: f64) {
+    let end = Time::from_secs_f64(sim.now().as_secs_f64() + seconds);
+    while sim.now() < end && sim.outcome().is_none() {
+        sim.step(&mut NoObserver);
+    }
+}
+
+#[test]
+fn radio_ranges_decide_what_flows() {
+    // 20 m: everything (the UAV's map reaches the basestation); 40 m: poses and claims only;
+    // 60 m: nothing.
+    for (distance, tier, pose_flows, map_flows) in [
+        (20.0, Some(LinkTier::All), true, true),
+        (40.0, Some(LinkTier::Small), true, false),
+        (60.0, None, false, false),
+    ] {
+        let path = write_mission(&format!("pair{distance}"), &pair_mission(distance));
+        let loaded = load(&path);
+        let mut sim = simulation(&loaded, SimOptions { map_publish_period_s: 1.0, ..SimOptions::default() });
+        run_for(&mut sim, 4.0);
+        assert_eq!(sim.linked("base", "uav1"), tier, "at {distance} m");
+        let base = sim.runtime("base").unwrap();
+        let uav = RobotId::new("uav1");
+        assert_eq!(base.team.robot_pose(&uav).is_some(), pose_flows, "pose at {distance} m");
+        assert_eq!(base.team.latest_map(&uav).is_some(), map_flows, "map at {distance} m");
+        assert!(sim.runtime("uav1").unwrap().team.latest_map(&uav).is_some(), "the UAV published its map");
+    }
+}
+
+#[test]
+fn a_killed_robot_stops_sharing() {
+    let text = r#"
+mission: kill
+team:
+  - { id: base, kind: basestation, role: idle, start: { x_m: 10, y_m: 50 } }
+  - { id: uav1, kind: uav, role: idle, start: { x_m: 20, y_m: 50 } }
+  - { id: uav2, kind: uav, role: idle, start: { x_m: 15, y_m: 55 } }
+roles:
+  idle: { tree: { wait: { duration_s: 1000 } } }
+complete_when: time_limit
+time_limit_s: 20
+sim:
+  world: { generate: { size_m: [120, 100], vehicle_clusters: 1, roadblocks: 0, seed: 3 } }
+  faults: [ { kill: { robot: uav2, at_s: 3 } } ]
+"#;
+    let loaded = load(&write_mission("kill", text));
+    let mut sim = simulation(&loaded, SimOptions::default());
+    run_for(&mut sim, 10.0);
+    let base = sim.runtime("base").unwrap();
+    let (_, alive_stamp) = base.team.robot_pose(&RobotId::new("uav1")).unwrap();
+    let (_, dead_stamp) = base.team.robot_pose(&RobotId::new("uav2")).unwrap();
+    assert!(alive_stamp.as_secs_f64() > 9.0, "the live UAV keeps sharing: {alive_stamp:?}");
+    assert!(dead_stamp.as_secs_f64() <= 3.0, "nothing new from the dead UAV after 3 s: {dead_stamp:?}");
+    assert_eq!(sim.linked("base", "uav2"), None);
+}
+
+/// Everything observable about a run, in order.
+#[derive(Default)]
+struct Transcript {
+    lines: Vec<String>,
+}
+
+impl SimObserver for Transcript {
+    fn on_state(&mut self, robot: &RobotId, now: Time, s: &RobotSnapshot) {
+        self.lines.push(format!(
+            "{} {robot} {:?} {:?} {:?}",
+            now.nanos,
+            s.truth,
+            s.estimate.map(|e| e.pose),
+            s.command
+        ));
+    }
+    fn on_transitions(&mut self, robot: &RobotId, records: &[TransitionRecord]) {
+        for r in records {
+            self.lines.push(format!("{robot} {r:?}"));
+        }
+    }
+}
+
+fn shipped(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../missions").join(name)
+}
+
+#[test]
+fn identical_seeds_give_identical_runs() {
+    let loaded = load(&shipped("visit-all-vehicle-clusters.yaml"));
+    let options = SimOptions { seed: 7, time_limit_s: Some(25.0), ..SimOptions::default() };
+    let mut a = Transcript::default();
+    let ra = simulation(&loaded, options.clone()).run(&mut a);
+    let mut b = Transcript::default();
+    let rb = simulation(&loaded, options.clone()).run(&mut b);
+    assert_eq!(ra.summary.outcome, Outcome::TimeLimit);
+    assert!(a.lines.len() > 1000, "the run produced a transcript");
+    assert_eq!(a.lines, b.lines, "same seed, same transcript");
+    assert_eq!(ra.summary.deterministic_part(), rb.summary.deterministic_part());
+    // A different seed changes the noise, so the transcript differs.
+    let mut c = Transcript::default();
+    simulation(&loaded, SimOptions { seed: 8, ..options }).run(&mut c);
+    assert_ne!(a.lines, c.lines);
+}

@@ -1,0 +1,359 @@
+//! QGroundControl `.plan` files: the waypoint list (and exclusion geofences) of the UAV's
+//! exploration, in the map frame.
+//!
+//! The plan's `mission.plannedHomePosition` `[lat, lon, alt]` is the map origin (0, 0); latitude
+//! and longitude become metres on the local tangent plane there (x east, y north), by the
+//! equirectangular approximation on the WGS-84 equatorial radius — exact to well under a metre
+//! over the few kilometres a mission spans (plans reaching farther than [`MAX_EXTENT_M`] are
+//! refused).
+//!
+//! Mission items:
+//! - `SimpleItem` with command 16 (`NAV_WAYPOINT`) or 82 (`NAV_SPLINE_WAYPOINT`, flown as a
+//!   straight leg): a waypoint at `params[4]`/`params[5]` (latitude, longitude), altitude
+//!   `params[6]`;
+//! - loiters 17/18/19/31 (`NAV_LOITER_*`): the UAV flies to the position; the hold itself is not
+//!   applied (exploration time is governed by the mission's state machine);
+//! - 22/84 (`NAV_TAKEOFF`, `NAV_VTOL_TAKEOFF`): skipped, the UAV takes off where it stands;
+//! - commands 100 and above (`CONDITION_*`, `DO_*`, camera and gimbal commands) do not move the
+//!   vehicle and are skipped;
+//! - every other navigation command (below 100: land, return to launch, …) and every
+//!   `ComplexItem` (survey, corridor or structure scan) is refused with an error naming the item:
+//!   spomp would otherwise fly a different route than the operator planned.
+//!
+//! Geofences: exclusion polygons become no-fly zones; exclusion circles become the 16-gon that
+//! circumscribes them; inclusion fences are refused (spomp only routes around zones).
+//! Rally points are ignored.
+
+use std::f64::consts::PI;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use serde_json::Value;
+use spomp_core::Point2;
+
+/// Radius of the WGS-84 ellipsoid at the equator, metres.
+pub(crate) const EARTH_RADIUS_M: f64 = 6_378_137.0;
+
+/// Farthest a waypoint or fence vertex may lie from the plan's home, metres.
+pub(crate) const MAX_EXTENT_M: f64 = 50_000.0;
+
+/// A waypoint of a plan, in the map frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct PlanWaypoint {
+    /// Position, metres (x east, y north of the plan's home).
+    pub position: Point2,
+    /// Altitude the plan gives for it, metres.
+    pub altitude_m: f64,
+}
+
+/// The parts of a `.plan` file the UAV flies.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct QgcPlan {
+    /// Waypoints in flight order.
+    pub waypoints: Vec<PlanWaypoint>,
+    /// Exclusion geofences as polygons in the map frame.
+    pub no_fly: Vec<Vec<Point2>>,
+}
+
+/// Why a plan file cannot be flown.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct PlanError {
+    /// The file.
+    pub path: PathBuf,
+    /// What is wrong, and where in the file.
+    pub message: String,
+}
+
+impl fmt::Display for PlanError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "QGroundControl plan `{}`: {}", self.path.display(), self.message)
+    }
+}
+
+impl std::error::Error for PlanError {}
+
+/// Reads and interprets a `.plan` file.
+pub(crate) fn load_plan(path: &Path) -> Result<QgcPlan, PlanError> {
+    let error = |message: String| PlanError { path: path.to_path_buf(), message };
+    let text = std::fs::read_to_string(path).map_err(|e| error(format!("cannot read the file: {e}")))?;
+    parse_plan(&text).map_err(error)
+}
+
+/// Interprets the text of a `.plan` file; errors say where in the file the problem is.
+pub(crate) fn parse_plan(text: &str) -> Result<QgcPlan, String> {
+    let root: Value = serde_json::from_str(text).map_err(|e| format!("not valid JSON: {e}"))?;
+    let Some(obj) = root.as_object() else {
+        return Err(format!("expected a JSON object with `fileType: \"Plan\"`, found {}", kind(&root)));
+    };
+    match obj.get("fileType").and_then(Value::as_str) {
+        Some("Plan") => {}
+        Some(other) => return Err(format!("`fileType` is `{other}`, expected `Plan`")),
+        None => return Err("missing `fileType: \"Plan\"`; is this a QGroundControl plan?".into()),
+    }
+    let mission = obj.get("mission").ok_or("missing the `mission` section")?;
+    let home = mission.get("plannedHomePosition").ok_or("missing `mission.plannedHomePosition` (the map origin)")?;
+    let origin = home_of(home)?;
+
+    let items = mission.get("items").and_then(Value::as_array).ok_or("`mission.items` must be a list of items")?;
+    let mut plan = QgcPlan::default();
+    for (i, item) in items.iter().enumerate() {
+        let at = format!("mission.items[{i}]");
+        if let Some(wp) = item_waypoint(item, &origin).map_err(|e| format!("{at}: {e}"))? {
+            plan.waypoints.push(wp);
+        }
+    }
+    if let Some(fence) = obj.get("geoFence") {
+        plan.no_fly = fences(fence, &origin)?;
+    }
+    Ok(plan)
+}
+
+/// The local tangent plane at the plan's home.
+struct Origin {
+    lat0: f64,
+    lon0: f64,
+    cos_lat0: f64,
+}
+
+impl Origin {
+    /// Latitude/longitude in degrees to metres east/north of the origin.
+    fn to_local(&self, lat: f64, lon: f64) -> Result<Point2, String> {
+        check_lat_lon(lat, lon)?;
+        let dlon = (lon - self.lon0 + 540.0).rem_euclid(360.0) - 180.0;
+        let p = Point2::new(
+            EARTH_RADIUS_M * dlon.to_radians() * self.cos_lat0,
+            EARTH_RADIUS_M * (lat - self.lat0).to_radians(),
+        );
+        if p.norm() > MAX_EXTENT_M {
+            return Err(format!(
+                "({lat}, {lon}) lies {:.0} km from the plan's home; plans must stay within {:.0} km",
+                p.norm() / 1000.0,
+                MAX_EXTENT_M / 1000.0
+            ));
+        }
+        Ok(p)
+    }
+}
+
+fn check_lat_lon(lat: f64, lon: f64) -> Result<(), String> {
+    if !(lat.is_finite() && (-90.0..=90.0).contains(&lat)) {
+        return Err(format!("latitude {lat} is not within [-90, 90] degrees"));
+    }
+    if !(lon.is_finite() && (-180.0..=180.0).contains(&lon)) {
+        return Err(format!("longitude {lon} is not within [-180, 180] degrees"));
+    }
+    Ok(())
+}
+
+fn home_of(home: &Value) -> Result<Origin, String> {
+    let bad = || format!("`mission.plannedHomePosition` must be [latitude, longitude, altitude], found {home}");
+    let arr = home.as_array().ok_or_else(bad)?;
+    let lat = arr.first().and_then(Value::as_f64).ok_or_else(bad)?;
+    let lon = arr.get(1).and_then(Value::as_f64).ok_or_else(bad)?;
+    check_lat_lon(lat, lon).map_err(|e| format!("`mission.plannedHomePosition`: {e}"))?;
+    if lat.abs() > 85.0 {
+        return Err(format!("`mission.plannedHomePosition`: latitude {lat} is too close to a pole for a flat map"));
+    }
+    Ok(Origin { lat0: lat, lon0: lon, cos_lat0: lat.to_radians().cos() })
+}
+
+fn kind(v: &Value) -> &'static str {
+    crate::blackboard::json_kind(v)
+}
+
+/// Navigation commands flown as a waypoint at the item's position.
+const FLOWN: &[(u64, &str)] = &[
+    (16, "NAV_WAYPOINT"),
+    (17, "NAV_LOITER_UNLIM"),
+    (18, "NAV_LOITER_TURNS"),
+    (19, "NAV_LOITER_TIME"),
+    (31, "NAV_LOITER_TO_ALT"),
+    (82, "NAV_SPLINE_WAYPOINT"),
+];
+/// Navigation commands skipped: the UAV is already airborne where it starts.
+const SKIPPED: &[(u64, &str)] = &[(22, "NAV_TAKEOFF"), (84, "NAV_VTOL_TAKEOFF")];
+/// Names of refused navigation commands, for the error message.
+const REFUSED: &[(u64, &str)] = &[
+    (20, "NAV_RETURN_TO_LAUNCH"),
+    (21, "NAV_LAND"),
+    (85, "NAV_VTOL_LAND"),
+    (93, "NAV_DELAY"),
+    (80, "NAV_ROI"),
+    (81, "NAV_PATHPLANNING"),
+];
+/// MAVLink frames with global latitude/longitude coordinates.
+const GLOBAL_FRAMES: &[u64] = &[0, 3, 5, 6, 10, 11];
+
+fn item_waypoint(item: &Value, origin: &Origin) -> Result<Option<PlanWaypoint>, String> {
+    let ty = item.get("type").and_then(Value::as_str).ok_or("missing the item `type` (SimpleItem or ComplexItem)")?;
+    match ty {
+        "SimpleItem" => {}
+        "ComplexItem" => {
+            let what = item.get("complexItemType").and_then(Value::as_str).unwrap_or("unknown");
+            return Err(format!(
+                "complex item `{what}` is not supported; spomp flies simple waypoints only — replace the pattern with \
+                 waypoints (e.g. a lawnmower of NAV_WAYPOINT items)"
+            ));
+        }
+        other => return Err(format!("unknown item type `{other}` (expected SimpleItem or ComplexItem)")),
+    }
+    let command = item.get("command").and_then(Value::as_u64).ok_or("missing the MAVLink `command` number")?;
+    if command >= 100 {
+        return Ok(None); // CONDITION_*, DO_*, camera: they do not move the vehicle
+    }
+    if SKIPPED.iter().any(|(c, _)| *c == command) {
+        return Ok(None);
+    }
+    if !FLOWN.iter().any(|(c, _)| *c == command) {
+        let name = REFUSED.iter().find(|(c, _)| *c == command).map_or("", |(_, n)| *n);
+        let flown: Vec<String> = FLOWN.iter().map(|(c, n)| format!("{c} {n}")).collect();
+        return Err(format!(
+            "navigation command {command} {name} is not supported (flown: {}; skipped: 22 NAV_TAKEOFF, \
+             84 NAV_VTOL_TAKEOFF, and non-navigation commands ≥ 100)",
+            flown.join(", ")
+        ));
+    }
+    let frame = match item.get("frame") {
+        None => 3,
+        Some(f) => f.as_u64().ok_or_else(|| format!("`frame` must be a MAVLink frame number, found {f}"))?,
+    };
+    if !GLOBAL_FRAMES.contains(&frame) {
+        return Err(format!(
+            "frame {frame} is not a global (latitude/longitude) frame; supported frames: {GLOBAL_FRAMES:?}"
+        ));
+    }
+    let params = item.get("params").and_then(Value::as_array).ok_or("missing the 7 `params` of the command")?;
+    if params.len() != 7 {
+        return Err(format!("a command has 7 `params`, found {}", params.len()));
+    }
+    let number = |i: usize, what: &str| {
+        params.get(i).and_then(Value::as_f64).ok_or_else(|| format!("params[{i}] ({what}) must be a number"))
+    };
+    let lat = number(4, "latitude")?;
+    let lon = number(5, "longitude")?;
+    let altitude_m = match params.get(6).and_then(Value::as_f64) {
+        Some(a) if a.is_finite() => a,
+        _ => item.get("Altitude").and_then(Value::as_f64).ok_or("params[6] (altitude) must be a number")?,
+    };
+    Ok(Some(PlanWaypoint { position: origin.to_local(lat, lon)?, altitude_m }))
+}
+
+/// Number of sides of the polygon that replaces a circular fence.
+const CIRCLE_SIDES: usize = 16;
+
+fn fences(fence: &Value, origin: &Origin) -> Result<Vec<Vec<Point2>>, String> {
+    let mut zones = Vec::new();
+    let inclusion = |v: &Value, at: &str| -> Result<(), String> {
+        match v.get("inclusion").and_then(Value::as_bool) {
+            Some(false) => Ok(()),
+            Some(true) => {
+                Err(format!("{at}: inclusion geofences are not supported; spomp only routes around exclusion zones"))
+            }
+            None => Err(format!("{at}: missing `inclusion` (true or false)")),
+        }
+    };
+    let latlon = |v: &Value, at: &str| -> Result<Point2, String> {
+        let arr =
+            v.as_array().filter(|a| a.len() >= 2).ok_or_else(|| format!("{at}: expected [latitude, longitude]"))?;
+        let lat = arr.first().and_then(Value::as_f64).ok_or_else(|| format!("{at}: latitude must be a number"))?;
+        let lon = arr.get(1).and_then(Value::as_f64).ok_or_else(|| format!("{at}: longitude must be a number"))?;
+        origin.to_local(lat, lon).map_err(|e| format!("{at}: {e}"))
+    };
+    if let Some(polys) = fence.get("polygons") {
+        let polys = polys.as_array().ok_or("`geoFence.polygons` must be a list")?;
+        for (i, p) in polys.iter().enumerate() {
+            let at = format!("geoFence.polygons[{i}]");
+            inclusion(p, &at)?;
+            let verts = p.get("polygon").and_then(Value::as_array).ok_or_else(|| format!("{at}: missing `polygon`"))?;
+            if verts.len() < 3 {
+                return Err(format!("{at}: a polygon needs at least 3 vertices, found {}", verts.len()));
+            }
+            let pts = verts
+                .iter()
+                .enumerate()
+                .map(|(j, v)| latlon(v, &format!("{at}.polygon[{j}]")))
+                .collect::<Result<Vec<_>, _>>()?;
+            zones.push(pts);
+        }
+    }
+    if let Some(circles) = fence.get("circles") {
+        let circles = circles.as_array().ok_or("`geoFence.circles` must be a list")?;
+        for (i, c) in circles.iter().enumerate() {
+            let at = format!("geoFence.circles[{i}]");
+            inclusion(c, &at)?;
+            let circle = c.get("circle").ok_or_else(|| format!("{at}: missing `circle`"))?;
+            let center = latlon(circle.get("center").unwrap_or(&Value::Null), &format!("{at}.circle.center"))?;
+            let radius = circle
+                .get("radius")
+                .and_then(Value::as_f64)
+                .filter(|r| r.is_finite() && *r > 0.0)
+                .ok_or_else(|| format!("{at}.circle.radius: expected a positive number of metres"))?;
+            let r = radius / (PI / CIRCLE_SIDES as f64).cos();
+            zones.push(
+                (0..CIRCLE_SIDES)
+                    .map(|k| {
+                        let a = 2.0 * PI * k as f64 / CIRCLE_SIDES as f64;
+                        Point2::new(center.x + r * a.cos(), center.y + r * a.sin())
+                    })
+                    .collect(),
+            );
+        }
+    }
+    Ok(zones)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plan(items: &str, fence: &str) -> String {
+        format!(
+            r#"{{"fileType": "Plan", "geoFence": {fence}, "mission": {{"items": [{items}],
+               "plannedHomePosition": [39.9526, -75.1652, 0]}}}}"#
+        )
+    }
+
+    fn wp(command: u32, lat: f64, lon: f64) -> String {
+        format!(
+            r#"{{"type": "SimpleItem", "command": {command}, "frame": 3, "params": [0, 0, 0, null, {lat}, {lon}, 60]}}"#
+        )
+    }
+
+    #[test]
+    fn waypoints_are_metres_on_the_tangent_plane_and_non_navigation_items_are_skipped() {
+        let items =
+            [wp(22, 0.0, 0.0), wp(16, 39.95273475, -75.16502422), wp(178, 0.0, 0.0), wp(16, 39.95300424, -75.16068838)]
+                .join(",");
+        let p = parse_plan(&plan(&items, "{}")).unwrap();
+        assert_eq!(p.waypoints.len(), 2);
+        let a = p.waypoints[0].position;
+        let b = p.waypoints[1].position;
+        assert!((a.x - 15.0).abs() < 0.01 && (a.y - 15.0).abs() < 0.01, "{a:?}");
+        assert!((b.x - 385.0).abs() < 0.01 && (b.y - 45.0).abs() < 0.01, "{b:?}");
+        assert_eq!(p.waypoints[0].altitude_m, 60.0);
+    }
+
+    #[test]
+    fn exclusion_fences_become_zones_and_inclusion_fences_are_refused() {
+        let fence = r#"{"version": 2, "polygons": [{"inclusion": false, "version": 1,
+            "polygon": [[39.9527, -75.1650], [39.9527, -75.1640], [39.9530, -75.1640]]}],
+            "circles": [{"inclusion": false, "version": 1, "circle": {"center": [39.9530, -75.1630], "radius": 10}}]}"#;
+        let p = parse_plan(&plan(&wp(16, 39.9527, -75.1651), fence)).unwrap();
+        assert_eq!(p.no_fly.len(), 2);
+        assert_eq!(p.no_fly[1].len(), CIRCLE_SIDES);
+        let inc = fence.replacen("\"inclusion\": false", "\"inclusion\": true", 1);
+        let e = parse_plan(&plan(&wp(16, 39.9527, -75.1651), &inc)).unwrap_err();
+        assert!(e.contains("geoFence.polygons[0]") && e.contains("inclusion"), "{e}");
+    }
+
+    #[test]
+    fn unsupported_items_are_named() {
+        let e = parse_plan(&plan(&wp(21, 39.9527, -75.1651), "{}")).unwrap_err();
+        assert!(e.contains("mission.items[0]") && e.contains("21 NAV_LAND"), "{e}");
+        let survey = r#"{"type": "ComplexItem", "complexItemType": "survey"}"#;
+        let e = parse_plan(&plan(survey, "{}")).unwrap_err();
+        assert!(e.contains("complex item `survey`"), "{e}");
+        let far = parse_plan(&plan(&wp(16, 41.0, -75.1651), "{}")).unwrap_err();
+        assert!(far.contains("km from the plan's home"), "{far}");
+    }
+}

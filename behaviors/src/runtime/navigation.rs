@@ -1,0 +1,271 @@
+//! A UGV's navigation stack inside its runtime: terrain analysis on every panorama (the safe
+//! region for the controller, the reachability scan for the team and the global planner), the
+//! global planner kept current with the map copy, the team's scans and its training schedule.
+//! The driving nodes (`navigate_to`, `navigate_local`, `return_home`) use it.
+
+use std::sync::Arc;
+
+use rand_chacha::ChaCha8Rng;
+use spomp_core::{ClassTable, PanoramaFrame, Point2, Pose2, PoseEstimate, ReachabilityScan, RobotId, Time};
+use spomp_global_planner::{GlobalPath, GlobalPlanner, GlobalPlannerParams, NodeId, PlanError, ScanSharer};
+use spomp_local_planner::{Dwa, LocalPlannerParams, SafeRegion, TerrainAnalyzer};
+use spomp_mapping::Orthomap;
+use spomp_teamstate::TeamState;
+
+use super::RuntimeError;
+
+/// Navigation parameters of a UGV.
+#[derive(Clone, Debug, Default)]
+pub struct NavParams {
+    /// Local planner (terrain analysis, local goal, DWA).
+    pub local: LocalPlannerParams,
+    /// Global planner (graph, learning, experience, sharing, search).
+    pub global: GlobalPlannerParams,
+}
+
+/// The latest terrain analysis, with where the robot was when the panorama was taken.
+#[derive(Clone, Debug)]
+pub struct LocalView {
+    /// Safe region in the robot frame at the panorama.
+    pub region: SafeRegion,
+    /// Map-frame pose estimate at the panorama.
+    pub pose: PoseEstimate,
+    /// Odometry-frame pose at the panorama (compose with later odometry to express the region
+    /// in the current robot frame).
+    pub odom_pose: Pose2,
+    /// When the panorama was taken.
+    pub stamp: Time,
+}
+
+/// Navigation state of one UGV.
+pub struct NavStack {
+    /// Parameters.
+    pub params: NavParams,
+    /// Terrain analysis (created for the panorama geometry at the first panorama).
+    pub terrain: Option<TerrainAnalyzer>,
+    /// The latest safe region.
+    pub view: Option<LocalView>,
+    /// The latest reachability scan (map frame).
+    pub latest_scan: Option<Arc<ReachabilityScan>>,
+    /// The global planner.
+    pub global: GlobalPlanner,
+    /// The DWA controller.
+    pub dwa: Dwa,
+    /// Which scans go to the team (the paper's communication modes).
+    pub sharer: ScanSharer,
+    /// Graph edges (node pairs) this robot failed to get across while driving them: the
+    /// driving nodes' experience of a blockage the scans could not judge (see [`NavStack::plan`]).
+    pub blocked_edges: Vec<(NodeId, NodeId)>,
+    map_version_seen: Option<u64>,
+    team_scan_cursor: usize,
+}
+
+impl NavStack {
+    /// A stack with no map and no experience.
+    pub fn new(params: NavParams, classes: &ClassTable) -> Result<Self, RuntimeError> {
+        let skill = |skill: &'static str| {
+            move |e: &dyn std::fmt::Display| RuntimeError::Skill { skill, message: e.to_string() }
+        };
+        params.local.validate().map_err(|e| skill("local_planner")(&e))?;
+        let global =
+            GlobalPlanner::new(params.global.clone(), classes.clone()).map_err(|e| skill("global_planner")(&e))?;
+        let dwa = Dwa::new(params.local.dwa.clone()).map_err(|e| skill("local_planner")(&e))?;
+        let sharer = ScanSharer::new(params.global.sharing.clone());
+        Ok(NavStack {
+            params,
+            terrain: None,
+            view: None,
+            latest_scan: None,
+            global,
+            dwa,
+            sharer,
+            blocked_edges: Vec::new(),
+            map_version_seen: None,
+            team_scan_cursor: 0,
+        })
+    }
+
+    /// Terrain analysis of a new panorama taken at `pose`: updates the safe region, gives the
+    /// scan to the global planner as the robot's own experience, and shares it on the team
+    /// state when the sharing filter lets it through.
+    pub fn on_panorama(
+        &mut self,
+        robot: &RobotId,
+        frame: &PanoramaFrame,
+        pose: PoseEstimate,
+        map: Option<&Orthomap>,
+        team: &mut TeamState,
+        _rng: &mut ChaCha8Rng,
+    ) -> Result<(), String> {
+        let geometry = frame.depth.geometry;
+        if self.terrain.as_ref().is_none_or(|t| t.geometry() != geometry) {
+            self.terrain =
+                Some(TerrainAnalyzer::new(geometry, self.params.local.terrain.clone()).map_err(|e| e.to_string())?);
+        }
+        let Some(terrain) = self.terrain.as_mut() else { return Ok(()) };
+        let output = terrain.analyze(&frame.depth).map_err(|e| e.to_string())?;
+        let region = SafeRegion::from_terrain(output, &self.params.local.terrain).map_err(|e| e.to_string())?;
+        let scan = Arc::new(output.to_scan(robot.clone(), frame.stamp, pose.pose));
+        self.view = Some(LocalView { region, pose, odom_pose: frame.odom_pose, stamp: frame.stamp });
+        if map.is_some() {
+            self.global.add_scan(&scan, true).map_err(|e| e.to_string())?;
+        }
+        if self.sharer.should_share(&scan) {
+            team.add_scan((*scan).clone()).map_err(|e| e.to_string())?;
+        }
+        self.latest_scan = Some(scan);
+        Ok(())
+    }
+
+    /// Keeps the global planner current: a new map version grows the graph; scans other robots
+    /// shared since the last call update the model and the edges (never removing one); a
+    /// training round runs when due.
+    pub fn maintain(
+        &mut self,
+        now: Time,
+        map: Option<&Orthomap>,
+        team: &TeamState,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<(), String> {
+        let Some(map) = map else { return Ok(()) };
+        if self.map_version_seen != Some(map.version()) {
+            self.global.update_map(map.map()).map_err(|e| e.to_string())?;
+            self.map_version_seen = Some(map.version());
+        }
+        let (scans, cursor) = team.scans_since(self.team_scan_cursor);
+        let own = team.self_id().clone();
+        for scan in scans.iter().filter(|s| s.robot != own) {
+            // A malformed scan from a peer is skipped; it must not stop the robot.
+            let _ = self.global.add_scan(scan, false);
+        }
+        self.team_scan_cursor = cursor;
+        self.global.train(now, rng);
+        Ok(())
+    }
+
+    /// Whether the global planner has a graph yet (an aerial map arrived).
+    pub fn has_graph(&self) -> bool {
+        self.global.nodes().next().is_some()
+    }
+
+    /// Records that the robot could not get across the edge between `a` and `b`.
+    pub fn block_edge(&mut self, a: NodeId, b: NodeId) {
+        let key = if a.0 <= b.0 { (a, b) } else { (b, a) };
+        if !self.blocked_edges.contains(&key) {
+            self.blocked_edges.push(key);
+        }
+    }
+
+    /// Plans from `from` to `to` on the global planner. When the robot has blocked edges
+    /// ([`NavStack::block_edge`]) and the planner's path uses one, searches again (Dijkstra on
+    /// the planner's live edges and costs) without them — a local workaround until the planner
+    /// can take such experience itself. Allocates; call on start and replans only.
+    pub fn plan(&mut self, from: Point2, to: Point2) -> Result<GlobalPath, PlanError> {
+        let path = self.global.plan(from, to)?;
+        let blocked = |a: NodeId, b: NodeId| {
+            let key = if a.0 <= b.0 { (a, b) } else { (b, a) };
+            self.blocked_edges.contains(&key)
+        };
+        if !path.nodes.windows(2).any(|w| blocked(w[0], w[1])) {
+            return Ok(path);
+        }
+        let (Some(&start), Some(&goal)) = (path.nodes.first(), path.nodes.last()) else {
+            return Err(PlanError::NoPath);
+        };
+        let nodes: Vec<(NodeId, Point2)> = self.global.nodes().map(|(id, p, _)| (id, p)).collect();
+        let size = nodes.iter().map(|(id, _)| id.0 as usize + 1).max().unwrap_or(0);
+        let mut position = vec![None; size];
+        let mut by_point = std::collections::HashMap::with_capacity(nodes.len());
+        for &(id, p) in &nodes {
+            position[id.0 as usize] = Some(p);
+            by_point.insert((p.x.to_bits(), p.y.to_bits()), id);
+        }
+        let mut adjacency: Vec<Vec<(usize, f64)>> = vec![Vec::new(); size];
+        for e in self.global.edges() {
+            let (Some(&a), Some(&b)) = (
+                by_point.get(&(e.from.x.to_bits(), e.from.y.to_bits())),
+                by_point.get(&(e.to.x.to_bits(), e.to.y.to_bits())),
+            ) else {
+                continue;
+            };
+            if blocked(a, b) || !(e.cost.is_finite() && e.cost >= 0.0) {
+                continue;
+            }
+            adjacency[a.0 as usize].push((b.0 as usize, e.cost));
+            adjacency[b.0 as usize].push((a.0 as usize, e.cost));
+        }
+        let mut dist = vec![f64::INFINITY; size];
+        let mut prev = vec![usize::MAX; size];
+        let mut heap = std::collections::BinaryHeap::new();
+        let (s, g) = (start.0 as usize, goal.0 as usize);
+        if s >= size || g >= size {
+            return Err(PlanError::NoPath);
+        }
+        dist[s] = 0.0;
+        heap.push(Queued(0.0, s));
+        while let Some(Queued(d, u)) = heap.pop() {
+            if d > dist[u] {
+                continue;
+            }
+            if u == g {
+                break;
+            }
+            for &(v, c) in &adjacency[u] {
+                let nd = d + c;
+                if nd < dist[v] {
+                    dist[v] = nd;
+                    prev[v] = u;
+                    heap.push(Queued(nd, v));
+                }
+            }
+        }
+        if !dist[g].is_finite() {
+            return Err(PlanError::NoPath);
+        }
+        let mut chain = vec![g];
+        while let Some(&u) = chain.last() {
+            if u == s {
+                break;
+            }
+            if prev[u] == usize::MAX || chain.len() > size {
+                return Err(PlanError::NoPath);
+            }
+            chain.push(prev[u]);
+        }
+        chain.reverse();
+        let ids: Vec<NodeId> = chain.iter().map(|&u| NodeId(u as u32)).collect();
+        let mut edges = Vec::with_capacity(ids.len().saturating_sub(1));
+        for w in ids.windows(2) {
+            edges.push(self.global.edge_between(w[0], w[1]).ok_or(PlanError::NoPath)?);
+        }
+        let mut waypoints = Vec::with_capacity(ids.len() + 2);
+        waypoints.push(from);
+        waypoints.extend(chain.iter().filter_map(|&u| position[u]));
+        waypoints.push(to);
+        let length_m = waypoints.windows(2).map(|w| w[0].distance(w[1])).sum();
+        Ok(GlobalPath { waypoints, cost: dist[g], length_m, edges, nodes: ids, graph_cost: dist[g] })
+    }
+}
+
+/// A node in the search queue, cheapest first.
+struct Queued(f64, usize);
+
+impl PartialEq for Queued {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.total_cmp(&other.0).is_eq()
+    }
+}
+
+impl Eq for Queued {}
+
+impl PartialOrd for Queued {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Queued {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        other.0.total_cmp(&self.0).then_with(|| other.1.cmp(&self.1))
+    }
+}

@@ -1,0 +1,493 @@
+//! `spomp sim` and `spomp validate --dry-run`: run a mission in the built-in simulator, trials
+//! in parallel, each recorded to MCAP with a summary and plots.
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+
+use anyhow::{Context, Result, bail};
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use rayon::prelude::*;
+use serde::Serialize;
+use spomp_behaviors::builtin_registry;
+use spomp_behaviors::mission::{LoadedMission, load_mission};
+use spomp_behaviors::trace::TransitionRecord;
+use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
+use spomp_core::{Odometry, PanoramaFrame, Point2, ReachabilityScan, RobotId, RobotKind, Time};
+use spomp_mcap::{Recorder, RecorderOptions};
+use spomp_sim::run::{RobotSnapshot, RunResult, RunSummary, SimEvent, SimObserver, SimOptions, Simulation};
+use spomp_sim::{Blackout, Faults, KillFault};
+
+use crate::sim_plots;
+
+/// Options of `spomp sim`.
+#[derive(Debug, Clone)]
+pub struct SimArgs {
+    /// Mission file.
+    pub mission: PathBuf,
+    /// First seed (default: the mission's `sim.seed`, else 1).
+    pub seed: Option<u64>,
+    /// Trials (default: the mission's `sim.trials`, else 1).
+    pub trials: Option<u32>,
+    /// Output folder (default `runs/<mission>/`).
+    pub out: Option<PathBuf>,
+    /// Print the combined summary as JSON.
+    pub json: bool,
+    /// Override the time limit, seconds.
+    pub time_limit_s: Option<f64>,
+    /// Record one panorama per robot every this many seconds (0: none).
+    pub pano_every_s: f64,
+    /// Also save every recorded panorama as a 16-bit depth PNG.
+    pub save_panos: bool,
+    /// Skip the MCAP file.
+    pub no_mcap: bool,
+    /// Kill faults `ROBOT@SECONDS`.
+    pub kill: Vec<(String, f64)>,
+    /// Radio blackouts `FROM..TO` seconds.
+    pub blackout: Vec<(f64, f64)>,
+    /// Multiply odometry noise.
+    pub odometry_noise: Option<f64>,
+    /// Multiply ground-truth localization noise.
+    pub localization_noise: Option<f64>,
+    /// Print every node transition.
+    pub trace: bool,
+}
+
+/// The combined summary of all trials.
+#[derive(Debug, Serialize)]
+pub struct CombinedSummary {
+    /// Mission name.
+    pub mission: String,
+    /// Trials run.
+    pub trials: usize,
+    /// Trials whose mission completed.
+    pub completed: usize,
+    /// Mean fraction of world clusters visited (generated worlds), else of goals visited.
+    pub mean_visited_fraction: f64,
+    /// Mean simulated seconds per wall second.
+    pub mean_speedup: f64,
+    /// Each trial.
+    pub runs: Vec<RunSummary>,
+}
+
+/// `spomp sim`.
+pub fn sim(args: &SimArgs) -> Result<ExitCode> {
+    let registry = builtin_registry();
+    let loaded = load_mission(&args.mission, &registry);
+    if !loaded.is_valid() {
+        crate::commands::print_diagnostics(&loaded);
+        return Ok(ExitCode::from(1));
+    }
+    let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
+    let sim_spec = mission.sim.as_ref();
+    let first_seed = args.seed.or(sim_spec.and_then(|s| s.seed)).unwrap_or(1);
+    let trials = args.trials.or(sim_spec.and_then(|s| s.trials)).unwrap_or(1).max(1);
+    let out_dir = args.out.clone().unwrap_or_else(|| PathBuf::from("runs").join(&mission.mission));
+    std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    let faults = cli_faults(args);
+
+    let progress = MultiProgress::with_draw_target(if args.json || args.trace {
+        ProgressDrawTarget::hidden()
+    } else {
+        ProgressDrawTarget::stderr()
+    });
+    let overall = (trials > 1).then(|| {
+        let bar = progress.add(ProgressBar::new(u64::from(trials)));
+        bar.set_style(
+            ProgressStyle::with_template("trials {bar:30} {pos}/{len} [{elapsed_precise}]")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        bar
+    });
+    let time_limit = args.time_limit_s.unwrap_or(mission.time_limit_s);
+    let seeds: Vec<u64> = (0..u64::from(trials)).map(|k| first_seed + k).collect();
+    let results: Vec<Result<RunSummary>> = seeds
+        .par_iter()
+        .map(|&seed| {
+            let bar = progress.add(ProgressBar::new(time_limit.ceil().max(1.0) as u64));
+            bar.set_style(
+                ProgressStyle::with_template("seed {prefix:>3} {bar:30} {pos}/{len} s simulated {msg}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            bar.set_prefix(seed.to_string());
+            let r = run_trial(&loaded, seed, args, &faults, &out_dir, &bar);
+            bar.finish_and_clear();
+            progress.remove(&bar);
+            if let Some(o) = &overall {
+                o.inc(1);
+            }
+            r
+        })
+        .collect();
+    if let Some(o) = overall {
+        o.finish_and_clear();
+    }
+    let mut runs = Vec::new();
+    for r in results {
+        runs.push(r?);
+    }
+    let combined = combine(&mission.mission, runs);
+    let path = out_dir.join("summary.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&combined)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    if args.json {
+        out!("{}", serde_json::to_string_pretty(&combined)?);
+    } else {
+        for run in &combined.runs {
+            print_summary(run, &out_dir.join(format!("trial-{}", run.seed)), !args.no_mcap);
+        }
+        if combined.trials > 1 {
+            print_combined(&combined);
+        }
+        out!("summary: {}", path.display());
+    }
+    Ok(if combined.completed == combined.trials { ExitCode::SUCCESS } else { ExitCode::from(1) })
+}
+
+fn cli_faults(args: &SimArgs) -> Faults {
+    let mut f = Faults::default();
+    for (robot, at_s) in &args.kill {
+        f.kill.push(KillFault { robot: RobotId::new(robot), at_s: *at_s });
+    }
+    for (from, to) in &args.blackout {
+        f.blackouts.push(Blackout { start_s: *from, end_s: *to, region: None });
+    }
+    if let Some(s) = args.odometry_noise {
+        f.odometry_noise_scale = s;
+    }
+    if let Some(s) = args.localization_noise {
+        f.localization_noise_scale = s;
+    }
+    f
+}
+
+fn run_trial(
+    loaded: &LoadedMission,
+    seed: u64,
+    args: &SimArgs,
+    faults: &Faults,
+    out_dir: &Path,
+    bar: &ProgressBar,
+) -> Result<RunSummary> {
+    let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
+    let trial_dir = out_dir.join(format!("trial-{seed}"));
+    std::fs::create_dir_all(trial_dir.join("plots")).with_context(|| format!("creating {}", trial_dir.display()))?;
+    let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
+        .with_context(|| format!("building the world of `{}`", mission.mission))?;
+    let options = SimOptions { seed, time_limit_s: args.time_limit_s, faults: faults.clone(), ..SimOptions::default() };
+    let sim = Simulation::new(loaded, &builtin_registry(), Arc::new(world), options)
+        .with_context(|| format!("setting up `{}` (seed {seed})", mission.mission))?;
+    let mcap_path = trial_dir.join("run.mcap");
+    let recorder = if args.no_mcap {
+        None
+    } else {
+        let file = File::create(&mcap_path).with_context(|| format!("creating {}", mcap_path.display()))?;
+        Some(Recorder::new(BufWriter::new(file), RecorderOptions::default())?)
+    };
+    let panos_dir = args.save_panos.then(|| trial_dir.join("panoramas"));
+    if let Some(d) = &panos_dir {
+        std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
+    }
+    let mut observer = RunObserver {
+        recorder,
+        error: None,
+        pano_every_ns: (args.pano_every_s * 1e9) as i64,
+        last_pano: Default::default(),
+        panos_dir,
+        bar: bar.clone(),
+        trace: args.trace,
+        last_second: -1,
+    };
+    let result = sim.run(&mut observer);
+    if let Some(e) = observer.error.take() {
+        return Err(e.context(format!("recording {}", mcap_path.display())));
+    }
+    if let Some(rec) = observer.recorder.take() {
+        rec.finish().with_context(|| format!("finishing {}", mcap_path.display()))?;
+    }
+    write_trial_outputs(&result, &trial_dir)?;
+    Ok(result.summary)
+}
+
+fn write_trial_outputs(result: &RunResult, trial_dir: &Path) -> Result<()> {
+    let path = trial_dir.join("summary.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&result.summary)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    sim_plots::map_plot(result, &trial_dir.join("plots").join("map.png"))?;
+    sim_plots::goal_times_plot(&result.summary, &trial_dir.join("plots").join("goal_visits.png"))?;
+    Ok(())
+}
+
+/// Records a run to MCAP and drives the progress bar.
+struct RunObserver {
+    recorder: Option<Recorder<BufWriter<File>>>,
+    error: Option<anyhow::Error>,
+    pano_every_ns: i64,
+    last_pano: std::collections::HashMap<RobotId, i64>,
+    panos_dir: Option<PathBuf>,
+    bar: ProgressBar,
+    trace: bool,
+    last_second: i64,
+}
+
+impl RunObserver {
+    fn record(&mut self, f: impl FnOnce(&mut Recorder<BufWriter<File>>) -> Result<(), spomp_mcap::RecordError>) {
+        if self.error.is_some() {
+            return;
+        }
+        if let Some(rec) = self.recorder.as_mut()
+            && let Err(e) = f(rec)
+        {
+            self.error = Some(e.into());
+        }
+    }
+}
+
+impl SimObserver for RunObserver {
+    fn on_state(&mut self, robot: &RobotId, now: Time, state: &RobotSnapshot) {
+        let second = now.nanos / 1_000_000_000;
+        if second != self.last_second {
+            self.last_second = second;
+            self.bar.set_position(second.max(0) as u64);
+        }
+        self.record(|r| {
+            r.pose(robot.as_str(), now, state.truth, state.z_m)?;
+            if let Some(est) = state.estimate {
+                r.log(
+                    &format!("/{robot}/pose_estimate"),
+                    now,
+                    &spomp_core::ros::PoseStamped {
+                        header: spomp_core::ros::Header::new(now, "map"),
+                        pose: spomp_core::ros::Pose::from_pose2(est.pose, state.z_m),
+                    },
+                )?;
+            }
+            if state.kind == RobotKind::Ugv {
+                r.command(robot.as_str(), now, state.command)?;
+            }
+            Ok(())
+        });
+    }
+
+    fn on_odometry(&mut self, robot: &RobotId, odom: &Odometry) {
+        self.record(|r| r.odometry(robot.as_str(), odom));
+    }
+
+    fn on_panorama(&mut self, robot: &RobotId, frame: &PanoramaFrame) {
+        if self.pano_every_ns <= 0 {
+            return;
+        }
+        let last = self.last_pano.get(robot).copied();
+        if last.is_some_and(|t| frame.stamp.nanos - t < self.pano_every_ns) {
+            return;
+        }
+        self.last_pano.insert(robot.clone(), frame.stamp.nanos);
+        self.record(|r| r.panorama(robot.as_str(), frame.stamp, &frame.depth, Some(&frame.semantic)));
+        if let Some(dir) = &self.panos_dir {
+            let path = dir.join(format!("{robot}-{:06}.png", frame.stamp.nanos / 1_000_000_000));
+            if let Err(e) = crate::world_cmd::save_depth_png(&frame.depth, DEFAULT_RANGE_SCALE_M, &path) {
+                self.error.get_or_insert(e);
+            }
+        }
+    }
+
+    fn on_scan(&mut self, scan: &ReachabilityScan) {
+        self.record(|r| r.reachability(scan));
+    }
+
+    fn on_path(&mut self, robot: &RobotId, now: Time, path: &[Point2]) {
+        self.record(|r| r.path(robot.as_str(), now, path));
+    }
+
+    fn on_transitions(&mut self, robot: &RobotId, records: &[TransitionRecord]) {
+        if self.trace {
+            for t in records {
+                self.bar.suspend(|| {
+                    out!("{:>9.1}s {robot} {} {} -> {}", t.time.as_secs_f64(), t.path, t.from, t.to);
+                });
+            }
+        }
+        self.record(|r| r.transitions(robot.as_str(), records));
+    }
+
+    fn on_event(&mut self, now: Time, event: &SimEvent) {
+        self.record(|r| r.json("/team/events", now, event));
+    }
+
+    fn on_problem(&mut self, robot: &RobotId, now: Time, message: &str) {
+        self.record(|r| {
+            r.log(
+                &format!("/{robot}/rosout"),
+                now,
+                &spomp_core::ros::Log {
+                    stamp: now.into(),
+                    level: 30,
+                    name: robot.to_string(),
+                    msg: message.to_string(),
+                    file: String::new(),
+                    function: String::new(),
+                    line: 0,
+                },
+            )
+        });
+    }
+}
+
+fn combine(mission: &str, runs: Vec<RunSummary>) -> CombinedSummary {
+    let n = runs.len().max(1) as f64;
+    let fraction = |r: &RunSummary| match r.clusters {
+        Some(c) if c.total > 0 => c.visited as f64 / c.total as f64,
+        _ if !r.goals.is_empty() => r.goals_visited as f64 / r.goals.len() as f64,
+        _ => 0.0,
+    };
+    CombinedSummary {
+        mission: mission.to_string(),
+        trials: runs.len(),
+        completed: runs.iter().filter(|r| r.outcome.succeeded()).count(),
+        mean_visited_fraction: runs.iter().map(fraction).sum::<f64>() / n,
+        mean_speedup: runs.iter().map(|r| r.speedup).sum::<f64>() / n,
+        runs,
+    }
+}
+
+fn fmt_time(t: Option<f64>) -> String {
+    t.map_or_else(|| "—".to_string(), |s| format!("{s:.0} s"))
+}
+
+fn print_summary(run: &RunSummary, trial_dir: &Path, with_mcap: bool) {
+    out!("");
+    out!(
+        "mission `{}`, seed {}: {:?} at {:.0} s of {:.0} s ({:.0}× real time, {:.1} s wall)",
+        run.mission,
+        run.seed,
+        run.outcome,
+        run.end_s,
+        run.time_limit_s,
+        run.speedup,
+        run.wall_s
+    );
+    out!("navigation: {}", run.navigation);
+    if let Some(c) = run.clusters {
+        out!("vehicle clusters: {} in the world, {} found, {} visited", c.total, c.found, c.visited);
+    }
+    out!("");
+    out!("{:<14} {:>16} {:>12} {:>16} {:>12} {:>10}", "goal", "position", "identified", "claimed", "visited", "by");
+    for g in &run.goals {
+        out!(
+            "{:<14} {:>16} {:>12} {:>16} {:>12} {:>10}",
+            g.id,
+            format!("({:.0}, {:.0})", g.position[0], g.position[1]),
+            fmt_time(Some(g.identified_s)),
+            match (&g.claimed_s, &g.claimed_by) {
+                (Some(t), Some(b)) => format!("{t:.0} s {b}"),
+                _ => "—".to_string(),
+            },
+            fmt_time(g.visited_s),
+            g.visited_by.as_deref().unwrap_or("—")
+        );
+    }
+    out!("goals visited: {}/{}", run.goals_visited, run.goals.len());
+    out!("");
+    out!(
+        "{:<8} {:<12} {:>11} {:>9} {:>11} {:>8} {:<12} {:>16}",
+        "robot",
+        "kind",
+        "distance",
+        "visited",
+        "heading to",
+        "collis.",
+        "localization",
+        "error med/max"
+    );
+    for r in &run.robots {
+        out!(
+            "{:<8} {:<12} {:>9.0} m {:>9} {:>10.0}% {:>8} {:<12} {:>16}{}",
+            r.id,
+            r.kind,
+            r.distance_m,
+            r.goals_visited,
+            r.heading_to_goal_fraction * 100.0,
+            r.collisions,
+            r.localization,
+            r.localization_error_m.map_or_else(|| "—".to_string(), |e| format!("{:.2}/{:.2} m", e.median, e.max)),
+            r.killed_s.map_or_else(String::new, |t| format!("  (killed at {t:.0} s)"))
+        );
+    }
+    out!("nodes exercised: {}/{}", run.nodes_exercised, run.nodes_total);
+    if !run.problems.is_empty() {
+        out!("problems reported ({} distinct; all in summary.json):", run.problems.len());
+        for p in run.problems.iter().take(5) {
+            out!("  {} ×{} (first at {:.0} s): {}", p.robot, p.count, p.first_s, p.message);
+        }
+    }
+    let mcap = if with_mcap { " run.mcap," } else { "" };
+    out!("wrote {}/{{summary.json,{mcap} plots/}}", trial_dir.display());
+}
+
+fn print_combined(c: &CombinedSummary) {
+    out!("");
+    out!("{:<6} {:<12} {:>8} {:>10} {:>10} {:>9}", "seed", "outcome", "end", "clusters", "goals", "speed");
+    for r in &c.runs {
+        out!(
+            "{:<6} {:<12} {:>6.0} s {:>10} {:>10} {:>8.0}×",
+            r.seed,
+            format!("{:?}", r.outcome),
+            r.end_s,
+            r.clusters.map_or_else(|| "—".to_string(), |k| format!("{}/{}", k.visited, k.total)),
+            format!("{}/{}", r.goals_visited, r.goals.len()),
+            r.speedup
+        );
+    }
+    out!(
+        "{} of {} trials completed; mean visited fraction {:.0}%; mean speed {:.0}× real time",
+        c.completed,
+        c.trials,
+        c.mean_visited_fraction * 100.0,
+        c.mean_speedup
+    );
+}
+
+/// `spomp validate --dry-run` for one valid mission: runs it once in the simulator and reports
+/// whether it ends within its time limit, which nodes were ticked and the outcome.
+pub fn dry_run(loaded: &LoadedMission, json: bool) -> Result<(bool, serde_json::Value)> {
+    let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
+    let seed = mission.sim.as_ref().and_then(|s| s.seed).unwrap_or(1);
+    let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
+        .with_context(|| format!("building the world of `{}`", mission.mission))?;
+    let sim =
+        Simulation::new(loaded, &builtin_registry(), Arc::new(world), SimOptions { seed, ..SimOptions::default() })?;
+    let result = sim.run(&mut spomp_sim::run::NoObserver);
+    let s = &result.summary;
+    let ok = s.outcome.succeeded();
+    if !json {
+        out!(
+            "  dry run (seed {seed}): {:?} at {:.0} s of {:.0} s; {}/{} nodes ticked; {}/{} goals visited",
+            s.outcome,
+            s.end_s,
+            s.time_limit_s,
+            s.nodes_exercised,
+            s.nodes_total,
+            s.goals_visited,
+            s.goals.len()
+        );
+        if !s.nodes_never_ticked.is_empty() {
+            out!("  never ticked:");
+            for n in &s.nodes_never_ticked {
+                out!("    {n}");
+            }
+        }
+    }
+    let value = serde_json::json!({
+        "outcome": s.outcome,
+        "terminated_within_time_limit": ok,
+        "end_s": s.end_s,
+        "nodes_ticked": s.nodes_exercised,
+        "nodes_total": s.nodes_total,
+        "never_ticked": s.nodes_never_ticked,
+        "goals_visited": s.goals_visited,
+        "goals": s.goals.len(),
+    });
+    Ok((ok, value))
+}
