@@ -277,10 +277,17 @@ pub struct Simulation {
     own_visits: BTreeMap<(GoalId, usize), Time>,
     /// Last time each pair of robots had a direct link (row-major, robot index pairs).
     last_link: Vec<Option<Time>>,
+    /// Bytes each directed link may still carry (row-major, sender × receiver).
+    link_credit: Vec<u64>,
+    /// When the radio last carried sync messages.
+    last_sync: Time,
     problems: BTreeMap<(String, String), ProblemCount>,
     outcome: Option<Outcome>,
     obstacles: Vec<Obstacle>,
 }
+
+/// Most bytes a link can bank for later (a few full map versions).
+const MAX_LINK_CREDIT_BYTES: u64 = 32 * 1024 * 1024;
 
 /// Most distinct problem messages kept in a summary.
 const MAX_PROBLEMS: usize = 200;
@@ -418,6 +425,8 @@ impl Simulation {
             aliases: BTreeMap::new(),
             own_visits: BTreeMap::new(),
             last_link: vec![None; n_robots * n_robots],
+            link_credit: vec![0; n_robots * n_robots],
+            last_sync: Time::from_nanos(-1),
             problems: BTreeMap::new(),
             outcome: None,
             obstacles: Vec::new(),
@@ -655,31 +664,48 @@ impl Simulation {
             links.retain(|(i, j, _)| !(robots[*i].kind == RobotKind::Ugv && robots[*j].kind == RobotKind::Ugv));
         }
         let n = self.robots.len();
+        // Unused bytes of a link carry over while it stays up, so an item larger than one
+        // period's budget (a map version) goes through after enough periods, as on a real
+        // link; the credit is lost when the link drops.
+        let mut credit = vec![0u64; n * n];
         for &(i, j, link) in &links {
-            for (a, b) in [(i, j), (j, i)] {
-                if let Some(slot) = self.last_link.get_mut(a * n + b) {
-                    *slot = Some(self.now);
-                }
-            }
             let tiers = match link.tier {
                 LinkTier::All => TierSet::ALL,
                 LinkTier::Small => TierSet::only(Tier::Coordination),
             };
-            let budget = usize::try_from(link.budget_bytes).unwrap_or(usize::MAX);
-            let (id_i, id_j) = (self.robots[i].id.clone(), self.robots[j].id.clone());
-            let to_j = self.robots[i].rt.team.make_sync(&id_j, tiers, budget);
-            let to_i = self.robots[j].rt.team.make_sync(&id_i, tiers, budget);
-            if let Some(m) = to_j
-                && let Err(e) = self.robots[j].rt.team.apply(&id_i, &m)
-            {
-                self.robots[j].rt.problems.push(format!("sync from {id_i} rejected: {e}"));
+            for (a, b) in [(i, j), (j, i)] {
+                let k = a * n + b;
+                let was_up = self.last_link.get(k).copied().flatten() == Some(self.last_sync);
+                let carried = if was_up { self.link_credit.get(k).copied().unwrap_or(0) } else { 0 };
+                if let Some(c) = credit.get_mut(k) {
+                    *c = carried.saturating_add(link.budget_bytes).min(MAX_LINK_CREDIT_BYTES);
+                }
+                if let Some(slot) = self.last_link.get_mut(k) {
+                    *slot = Some(self.now);
+                }
             }
-            if let Some(m) = to_i
-                && let Err(e) = self.robots[i].rt.team.apply(&id_j, &m)
-            {
-                self.robots[i].rt.problems.push(format!("sync from {id_j} rejected: {e}"));
+            for (a, b) in [(i, j), (j, i)] {
+                let k = a * n + b;
+                let budget = credit.get(k).copied().unwrap_or(0);
+                let from = self.robots[a].id.clone();
+                let to = self.robots[b].id.clone();
+                let Some(msg) =
+                    self.robots[a].rt.team.make_sync(&to, tiers, usize::try_from(budget).unwrap_or(usize::MAX))
+                else {
+                    continue;
+                };
+                // Over the wire: encoded, decoded and checked by the receiver.
+                let bytes = msg.encode();
+                if let Some(c) = credit.get_mut(k) {
+                    *c = c.saturating_sub(bytes.len() as u64);
+                }
+                if let Err(e) = self.robots[b].rt.team.apply_bytes(&from, &bytes) {
+                    self.robots[b].rt.problems.push(format!("sync from {from} rejected: {e}"));
+                }
             }
         }
+        self.link_credit = credit;
+        self.last_sync = self.now;
         self.links = links;
     }
 
