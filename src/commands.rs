@@ -56,8 +56,10 @@ pub fn validate(files: &[PathBuf], json: bool, dry_run: bool) -> Result<ExitCode
                 ));
             }
             if dry_run {
-                let _ = write!(std::io::stdout().lock(), "{human}");
-                human.clear();
+                if !json {
+                    let _ = write!(std::io::stdout().lock(), "{human}");
+                    human.clear();
+                }
                 let (ok, value) =
                     crate::sim_cmd::dry_run(&loaded, json).with_context(|| format!("dry run of {}", file.display()))?;
                 if !ok {

@@ -130,6 +130,20 @@ impl Ugv {
         self.pose
     }
 
+    /// Moves the robot to `pose` at once, stopped (the "kidnapped robot" test); an error, and
+    /// no change, if it cannot stand there.
+    pub fn teleport(&mut self, world: &World, pose: Pose2) -> Result<(), SimError> {
+        let base = world.elevation_at(pose.position()).unwrap_or(f32::NAN);
+        let base_m = self.params.limits.admits(world, pose.position(), base).ok_or_else(|| {
+            SimError::invalid("teleport", format!("the robot cannot stand at ({:.2}, {:.2})", pose.x, pose.y))
+        })?;
+        self.pose = pose;
+        self.base_m = base_m;
+        self.twist = Twist2::ZERO;
+        self.contact = None;
+        Ok(())
+    }
+
     /// Actual velocity.
     pub fn twist(&self) -> Twist2 {
         self.twist
@@ -287,6 +301,11 @@ impl OdometryModel {
     /// The latest odometry-frame pose.
     pub fn pose(&self) -> Pose2 {
         self.odom
+    }
+
+    /// The robot was moved without driving (teleported): odometry does not see the jump.
+    pub fn carried_to(&mut self, true_pose: Pose2) {
+        self.last_true = true_pose;
     }
 }
 

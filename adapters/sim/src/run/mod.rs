@@ -458,6 +458,24 @@ impl Simulation {
         self.robots.iter().find(|r| r.id.as_str() == id).map(SimRobot::truth)
     }
 
+    /// Moves a UGV to `pose` at once without its odometry noticing (the kidnapped-robot test).
+    pub fn teleport(&mut self, id: &str, pose: Pose2) -> Result<(), SimError> {
+        let world = self.world.clone();
+        let robot = self
+            .robots
+            .iter_mut()
+            .find(|r| r.id.as_str() == id)
+            .ok_or_else(|| SimError::invalid("teleport", format!("no robot `{id}`")))?;
+        match &mut robot.body {
+            Body::Ugv { ugv, odometry, .. } => {
+                ugv.teleport(&world, pose)?;
+                odometry.carried_to(pose);
+                Ok(())
+            }
+            _ => Err(SimError::invalid("teleport", format!("`{id}` is not a UGV"))),
+        }
+    }
+
     /// Whether two robots have a radio link right now.
     pub fn linked(&self, a: &str, b: &str) -> Option<LinkTier> {
         let ia = self.robots.iter().position(|r| r.id.as_str() == a)?;

@@ -1,0 +1,112 @@
+//! `spomp sim` and `spomp validate --dry-run` as a user runs them: outputs on disk, JSON
+//! summaries, exit codes, fault flags and bad input.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
+
+use std::path::Path;
+
+use assert_cmd::Command;
+
+fn spomp() -> Command {
+    Command::cargo_bin("spomp").unwrap()
+}
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn sim_writes_summaries_log_and_plots_for_every_trial() {
+    let out_dir = tempfile::tempdir().unwrap();
+    let out = spomp()
+        .current_dir(root())
+        .args(["sim", "missions/patrol-return-home.yaml", "--time-limit-s", "20", "--trials", "2", "--seed", "4"])
+        .args(["--json", "--out"])
+        .arg(out_dir.path())
+        .output()
+        .unwrap();
+    // Twenty seconds do not finish the patrol: the mission did not complete, exit 1.
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+    let combined: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(combined["trials"], 2);
+    let runs = combined["runs"].as_array().unwrap();
+    assert_eq!(runs.iter().map(|r| r["seed"].as_u64().unwrap()).collect::<Vec<_>>(), vec![4, 5]);
+    for run in runs {
+        assert_eq!(run["outcome"], "time_limit");
+        assert!((run["end_s"].as_f64().unwrap() - 20.0).abs() < 1.0);
+        let ugv1 = run["robots"].as_array().unwrap().iter().find(|r| r["id"] == "ugv1").unwrap();
+        assert!(ugv1["distance_m"].as_f64().unwrap() > 5.0, "the patroller drove: {ugv1}");
+        assert_eq!(ugv1["localization"], "ground_truth");
+    }
+    assert!(out_dir.path().join("summary.json").is_file());
+    for seed in [4, 5] {
+        let trial = out_dir.path().join(format!("trial-{seed}"));
+        for f in ["summary.json", "run.mcap", "plots/map.png", "plots/goal_visits.png"] {
+            let p = trial.join(f);
+            assert!(p.metadata().map(|m| m.len() > 0).unwrap_or(false), "{} missing or empty", p.display());
+        }
+        let mcap = std::fs::read(trial.join("run.mcap")).unwrap();
+        assert!(mcap.starts_with(b"\x89MCAP0\r\n"), "an MCAP file");
+    }
+}
+
+#[test]
+fn sim_refuses_invalid_missions_and_bad_flags() {
+    let out = spomp().current_dir(root()).args(["sim", "tests/missions/invalid-unknown-port.yaml"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("invalid-unknown-port.yaml:"));
+    spomp().current_dir(root()).args(["sim", "missions/manual-goals.yaml", "--kill", "ugv1"]).assert().code(2);
+    spomp().current_dir(root()).args(["sim", "missions/manual-goals.yaml", "--blackout", "9..3"]).assert().code(2);
+}
+
+#[test]
+fn killed_robot_stops_where_the_flag_says() {
+    let out_dir = tempfile::tempdir().unwrap();
+    let out = spomp()
+        .current_dir(root())
+        .args(["sim", "missions/patrol-return-home.yaml", "--time-limit-s", "15", "--no-mcap", "--json"])
+        .args(["--kill", "ugv1@5", "--out"])
+        .arg(out_dir.path())
+        .output()
+        .unwrap();
+    let combined: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let robots = combined["runs"][0]["robots"].as_array().unwrap().clone();
+    let ugv1 = robots.iter().find(|r| r["id"] == "ugv1").unwrap();
+    assert!((ugv1["killed_s"].as_f64().unwrap() - 5.0).abs() < 0.2, "{ugv1}");
+    // At most 1.5 m/s for 5 s.
+    assert!(ugv1["distance_m"].as_f64().unwrap() <= 7.6, "{ugv1}");
+    assert!(!out_dir.path().join("trial-1/run.mcap").exists());
+}
+
+#[test]
+fn dry_run_reports_outcome_and_unticked_nodes() {
+    let dir = tempfile::tempdir().unwrap();
+    let mission = dir.path().join("short.yaml");
+    std::fs::write(
+        &mission,
+        r#"
+mission: short
+team:
+  - { id: ugv1, kind: ugv, role: r, priority: 1, start: { x_m: 12, y_m: 2.5 }, localization: { mode: ground_truth } }
+roles:
+  r:
+    tree:
+      fallback:
+        - wait: { duration_s: 2 }
+        - fail:
+complete_when: all_trees_done
+time_limit_s: 30
+sim: { world: { generate: { size_m: [120, 100], vehicle_clusters: 1, roadblocks: 0 } } }
+"#,
+    )
+    .unwrap();
+    let out = spomp().args(["validate", "--dry-run", "--json"]).arg(&mission).output().unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stdout));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let run = &v["dry_runs"][0]["dry_run"];
+    assert_eq!(run["outcome"], "complete");
+    assert!(run["end_s"].as_f64().unwrap() < 5.0);
+    let never: Vec<String> =
+        run["never_ticked"].as_array().unwrap().iter().map(|s| s.as_str().unwrap().to_string()).collect();
+    assert_eq!(never, vec!["ugv1: r/fallback[1]/fail".to_string()]);
+}
