@@ -15,7 +15,7 @@ use spomp_behaviors::builtin_registry;
 use spomp_behaviors::mission::{LoadedMission, load_mission};
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
-use spomp_core::{Odometry, PanoramaFrame, Point2, ReachabilityScan, RobotId, RobotKind, Time};
+use spomp_core::{Odometry, PanoramaFrame, PanoramaGeometry, Point2, ReachabilityScan, RobotId, RobotKind, Time};
 use spomp_mcap::{Recorder, RecorderOptions};
 use spomp_sim::run::{RobotSnapshot, RunResult, RunSummary, SimEvent, SimObserver, SimOptions, Simulation};
 use spomp_sim::{Blackout, Faults, KillFault};
@@ -290,6 +290,13 @@ impl SimObserver for RunObserver {
             if let Err(e) = crate::world_cmd::save_depth_png(&frame.depth, DEFAULT_RANGE_SCALE_M, &path) {
                 self.error.get_or_insert(e);
             }
+        }
+    }
+
+    fn on_terrain(&mut self, robot: &RobotId, stamp: Time, geometry: PanoramaGeometry, obstacle: &[bool]) {
+        // Same rate as the panoramas: only for the frame just recorded.
+        if self.pano_every_ns > 0 && self.last_pano.get(robot) == Some(&stamp.nanos) {
+            self.record(|r| r.obstacle_panorama(robot.as_str(), stamp, geometry, obstacle));
         }
     }
 

@@ -191,6 +191,37 @@ impl<W: Write + Seek> Recorder<W> {
         Ok(())
     }
 
+    /// The obstacle mask of a terrain analysis (`/R/terrain/obstacles`, mono8 in the panorama's
+    /// layout, 255 = obstacle), downsampled like the panoramas but keeping a block an obstacle
+    /// if any of its pixels is one, so thin obstacles stay visible.
+    pub fn obstacle_panorama(
+        &mut self,
+        robot: &str,
+        time: Time,
+        geometry: spomp_core::PanoramaGeometry,
+        obstacle: &[bool],
+    ) -> Result<(), RecordError> {
+        let k = self.options.panorama_downsample.max(1);
+        let (rows, cols) = (geometry.rows.div_ceil(k), geometry.cols.div_ceil(k));
+        let mut data = vec![0u8; rows * cols];
+        for (i, _) in obstacle.iter().enumerate().filter(|(_, o)| **o).take(geometry.len()) {
+            let (r, c) = (i / geometry.cols.max(1), i % geometry.cols.max(1));
+            if let Some(px) = data.get_mut((r / k) * cols + c / k) {
+                *px = 255;
+            }
+        }
+        let img = ros::Image {
+            header: ros::Header::new(time, format!("{robot}/lidar")),
+            height: rows as u32,
+            width: cols as u32,
+            encoding: "mono8".into(),
+            is_bigendian: 0,
+            step: cols as u32,
+            data,
+        };
+        self.log(&format!("/{robot}/terrain/obstacles"), time, &img)
+    }
+
     /// A reachability scan (`/R/reachability`, LaserScan in the robot frame: bin i at angle
     /// −i·2π/N, intensity 1 where a known obstacle ends the bin).
     pub fn reachability(&mut self, scan: &ReachabilityScan) -> Result<(), RecordError> {

@@ -131,3 +131,20 @@ fn huge_record_length_inside_a_chunk_is_an_error_not_an_abort() {
     let err = McapLog::from_bytes(bytes).messages().unwrap_err();
     assert!(err.to_string().contains("declares"), "{err}");
 }
+
+#[test]
+fn obstacle_mask_keeps_single_pixels_when_downsampled() {
+    let mut buf = Cursor::new(Vec::new());
+    let mut rec = Recorder::new(&mut buf, RecorderOptions::default()).unwrap();
+    let g = PanoramaGeometry { rows: 8, cols: 16, v_fov_rad: 1.0 };
+    let mut mask = vec![false; g.len()];
+    mask[5 * 16 + 13] = true; // row 5, column 13 → block (1, 3) at 4× downsampling
+    rec.obstacle_panorama("ugv1", Time::from_millis(500), g, &mask).unwrap();
+    rec.finish().unwrap();
+    let msgs = McapLog::from_bytes(buf.into_inner()).messages().unwrap();
+    let m = msgs.iter().find(|m| m.topic == "/ugv1/terrain/obstacles").unwrap();
+    let img: Image = decode_cdr(&m.topic, &m.data).unwrap();
+    assert_eq!((img.height, img.width, img.encoding.as_str()), (2, 4, "mono8"));
+    let lit: Vec<usize> = img.data.iter().enumerate().filter(|(_, v)| **v == 255).map(|(i, _)| i).collect();
+    assert_eq!(lit, vec![4 + 3]);
+}

@@ -27,7 +27,8 @@ use spomp_behaviors::mission::{BuildOptions, LoadedMission, MissionFile};
 use spomp_behaviors::trace::{Recorder, TransitionRecord};
 use spomp_behaviors::{NodeRegistry, RobotExecutor, RobotRuntime, Status};
 use spomp_core::{
-    GoalId, Odometry, PanoramaFrame, Point2, Pose2, PoseEstimate, ReachabilityScan, RobotId, RobotKind, Time, Twist2,
+    GoalId, Odometry, PanoramaFrame, PanoramaGeometry, Point2, Pose2, PoseEstimate, ReachabilityScan, RobotId,
+    RobotKind, Time, Twist2,
 };
 use spomp_mapping::{CompressionParams, Orthomap, PngLevel};
 use spomp_teamstate::{GoalOrigin, Tier, TierSet};
@@ -158,6 +159,8 @@ pub trait SimObserver {
     fn on_odometry(&mut self, _robot: &RobotId, _odom: &Odometry) {}
     /// A panorama as the robot received it.
     fn on_panorama(&mut self, _robot: &RobotId, _frame: &PanoramaFrame) {}
+    /// The obstacle mask of the terrain analysis of a panorama (row-major in its geometry).
+    fn on_terrain(&mut self, _robot: &RobotId, _stamp: Time, _geometry: PanoramaGeometry, _obstacle: &[bool]) {}
     /// A reachability scan the robot computed.
     fn on_scan(&mut self, _scan: &ReachabilityScan) {}
     /// A planned path (when it changes).
@@ -625,11 +628,15 @@ impl Simulation {
                         if let Some(est) = r.rt.pose {
                             r.localization_errors.push(est.pose.position().distance(truth.position()));
                         }
-                        if let Some(scan) = r.rt.nav.as_ref().and_then(|n| n.latest_scan.clone())
+                        if let Some(nav) = r.rt.nav.as_deref()
+                            && let Some(scan) = nav.latest_scan.as_ref()
                             && *last_scan_stamp != Some(scan.stamp)
                         {
                             *last_scan_stamp = Some(scan.stamp);
-                            observer.on_scan(&scan);
+                            observer.on_scan(scan);
+                            if let Some(t) = nav.terrain.as_ref() {
+                                observer.on_terrain(&r.id, scan.stamp, t.geometry(), t.output().obstacle());
+                            }
                         }
                     }
                 }
