@@ -49,6 +49,18 @@ impl Run {
     /// `tree`: the role's tree in YAML flow style. `with_map`: give the robot the world's full
     /// aerial map (as if the UAV had flown everything).
     fn new(name: &str, world: World, start: Pose2, tree: &str, with_map: bool) -> Run {
+        Run::with_global(name, world, start, tree, with_map, GlobalPlannerParams::default())
+    }
+
+    /// [`Run::new`] with these global planner parameters.
+    fn with_global(
+        name: &str,
+        world: World,
+        start: Pose2,
+        tree: &str,
+        with_map: bool,
+        global: GlobalPlannerParams,
+    ) -> Run {
         let mission = format!(
             "mission: {name}\nteam:\n  - {{ id: ugv1, kind: ugv, role: driver, priority: 1, start: {{ x_m: {}, y_m: {}, yaw_deg: {} }} }}\nroles:\n  driver:\n    tree:\n      {tree}\ncomplete_when: all_goals_visited\ntime_limit_s: 3000\n",
             start.x,
@@ -72,7 +84,7 @@ impl Run {
             team: TeamStateParams::default(),
             detection: None,
             localization: LocalizationSetup::External,
-            nav: Some(NavParams { local: LocalPlannerParams::simulation(), global: GlobalPlannerParams::default() }),
+            nav: Some(NavParams { local: LocalPlannerParams::simulation(), global }),
             goal_time_per_m_s: 2.0,
             seed: 7,
         };
@@ -249,12 +261,12 @@ fn ring() -> World {
 
 /// Drives `navigate_to` from (14, 4) to (46, 4) on the ring road with a roadblock (labelled
 /// road, so invisible in the aerial map) across the bottom street at `block_x`.
-fn detour(name: &str, block_x: f64) -> (Run, Status, Vec<Point2>, bool) {
+fn detour(name: &str, block_x: f64, global: GlobalPlannerParams) -> (Run, Status, Vec<Point2>, bool) {
     let mut w = ring();
     fill(&mut w, (block_x, block_x + 1.0), (0.0, 8.0), ROAD, 1.2);
     let start = Pose2::new(14.0, 4.0, 0.0);
     let goal = Point2::new(46.0, 4.0);
-    let mut run = Run::new(name, w, start, &navigate_to(goal.x, goal.y), true);
+    let mut run = Run::with_global(name, w, start, &navigate_to(goal.x, goal.y), true, global);
     let mut first_path: Option<Vec<Point2>> = None;
     let mut replanned_over_the_top = false;
     let mut status = Status::Running;
@@ -277,7 +289,7 @@ fn navigate_to_replans_when_its_scans_remove_a_blocked_edge() {
     // The block lies 4 m past a graph node on the bottom street: driving through the node, the
     // robot's scans see the edge beyond it end at an obstacle and remove it (paper: two own
     // not_trav observations), the path is blocked, and it replans over the top street.
-    let (run, status, first, over_the_top) = detour("scan-detour", 38.0);
+    let (run, status, first, over_the_top) = detour("scan-detour", 38.0, GlobalPlannerParams::default());
     assert!(first.iter().all(|p| p.y < 10.0), "the first plan takes the bottom street: {first:?}");
     assert_eq!(status, Status::Success, "{}", run.summary());
     assert!(over_the_top, "it replanned over the top street");
@@ -289,11 +301,14 @@ fn navigate_to_replans_when_its_scans_remove_a_blocked_edge() {
 
 #[test]
 fn navigate_to_gets_around_a_roadblock_its_scans_cannot_judge() {
-    // The block lies mid-edge, 4 m before the node beyond it and 24 m after the one before: no
-    // scan ever has an end of that edge in its ~5 m safe region, so the edge stays unk_trav.
-    // The robot stops in front of the block (no collision), is stuck for `stuck_timeout_s`,
-    // marks the edge blocked, replans from the node behind and arrives over the top street.
-    let (run, status, first, over_the_top) = detour("stuck-detour", 30.0);
+    // The block lies mid-edge, 4 m before the node beyond it and 24 m after the one before: with
+    // the paper's rules only (judging edges from the robot off: `on_edge_radius_m: 0`) no scan
+    // has an end of that edge in its ~5 m safe region, so the edge stays unk_trav. The robot
+    // stops in front of the block (no collision), is stuck for `stuck_timeout_s`, marks the
+    // edge blocked, replans from the node behind and arrives over the top street.
+    let mut global = GlobalPlannerParams::default();
+    global.experience.on_edge_radius_m = 0.0;
+    let (run, status, first, over_the_top) = detour("stuck-detour", 30.0, global);
     assert!(first.iter().all(|p| p.y < 10.0), "the first plan takes the bottom street: {first:?}");
     assert_eq!(status, Status::Success, "{}", run.summary());
     assert!(over_the_top, "it replanned over the top street");

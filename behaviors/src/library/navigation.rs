@@ -16,9 +16,10 @@
 //!   their cost rises (checked at each new panorama, i.e. after each scan updated the graph) and
 //!   every [`REPLAN_PERIOD_S`], and enforces the time limit. Replans start from the node the
 //!   robot is heading to, so the edge being driven is kept and a re-attachment cannot jump past
-//!   an obstacle. When the robot is stuck on an edge the scans could not judge (the paper's
-//!   edge rules need one end inside the ~5 m safe region; a blockage on a 30 m edge with both
-//!   ends outside stays `unk_trav`), it records the edge as blocked on its `NavStack` and
+//!   an obstacle. The global planner judges the edge under the robot from the robot's position
+//!   (`experience.on_edge_radius_m`), so a block mid-edge is normally seen by the scans; should
+//!   the robot still get stuck on an edge the scans could not judge, it records the edge as
+//!   blocked on its `NavStack` (planned around with `GlobalPlanner::plan_avoiding`) and
 //!   replans from the node behind. `navigate_to` and `return_home` are thin nodes over it;
 //!   `navigate_local` is a thin node over the driver.
 //!
@@ -665,7 +666,9 @@ impl Navigator {
                     (Some(a), Some(b)) => nav.global.edge_between(a, b).is_none(),
                     _ => false,
                 };
-                if changed {
+                // The edge being driven can go while the path's graph cost does not change (its
+                // first leg, robot → node ahead, is no graph edge): that is a change too.
+                if changed || gone {
                     (Trigger::Changed, gone)
                 } else if now >= self.next_replan {
                     (Trigger::Periodic, false)

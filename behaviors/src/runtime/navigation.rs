@@ -177,116 +177,12 @@ impl NavStack {
         }
     }
 
-    /// Plans from `from` to `to` on the global planner. When the robot has blocked edges
-    /// ([`NavStack::block_edge`]) and the planner's path uses one, searches again (Dijkstra on
-    /// the planner's live edges and costs) without them — a local workaround until the planner
-    /// can take such experience itself. Allocates; call on start and replans only.
+    /// Plans from `from` to `to` on the global planner, avoiding the edges the robot recorded as
+    /// blocked ([`NavStack::block_edge`]). That record is experience too: with graph updates off
+    /// (`global.experience.graph_updates: false`, the paper's ablation) it is not used.
     pub fn plan(&mut self, from: Point2, to: Point2) -> Result<GlobalPath, PlanError> {
-        let path = self.global.plan(from, to)?;
-        let blocked = |a: NodeId, b: NodeId| {
-            let key = if a.0 <= b.0 { (a, b) } else { (b, a) };
-            self.blocked_edges.contains(&key)
-        };
-        if !path.nodes.windows(2).any(|w| blocked(w[0], w[1])) {
-            return Ok(path);
-        }
-        let (Some(&start), Some(&goal)) = (path.nodes.first(), path.nodes.last()) else {
-            return Err(PlanError::NoPath);
-        };
-        let nodes: Vec<(NodeId, Point2)> = self.global.nodes().map(|(id, p, _)| (id, p)).collect();
-        let size = nodes.iter().map(|(id, _)| id.0 as usize + 1).max().unwrap_or(0);
-        let mut position = vec![None; size];
-        let mut by_point = std::collections::HashMap::with_capacity(nodes.len());
-        for &(id, p) in &nodes {
-            position[id.0 as usize] = Some(p);
-            by_point.insert((p.x.to_bits(), p.y.to_bits()), id);
-        }
-        let mut adjacency: Vec<Vec<(usize, f64)>> = vec![Vec::new(); size];
-        for e in self.global.edges() {
-            let (Some(&a), Some(&b)) = (
-                by_point.get(&(e.from.x.to_bits(), e.from.y.to_bits())),
-                by_point.get(&(e.to.x.to_bits(), e.to.y.to_bits())),
-            ) else {
-                continue;
-            };
-            if blocked(a, b) || !(e.cost.is_finite() && e.cost >= 0.0) {
-                continue;
-            }
-            adjacency[a.0 as usize].push((b.0 as usize, e.cost));
-            adjacency[b.0 as usize].push((a.0 as usize, e.cost));
-        }
-        let mut dist = vec![f64::INFINITY; size];
-        let mut prev = vec![usize::MAX; size];
-        let mut heap = std::collections::BinaryHeap::new();
-        let (s, g) = (start.0 as usize, goal.0 as usize);
-        if s >= size || g >= size {
-            return Err(PlanError::NoPath);
-        }
-        dist[s] = 0.0;
-        heap.push(Queued(0.0, s));
-        while let Some(Queued(d, u)) = heap.pop() {
-            if d > dist[u] {
-                continue;
-            }
-            if u == g {
-                break;
-            }
-            for &(v, c) in &adjacency[u] {
-                let nd = d + c;
-                if nd < dist[v] {
-                    dist[v] = nd;
-                    prev[v] = u;
-                    heap.push(Queued(nd, v));
-                }
-            }
-        }
-        if !dist[g].is_finite() {
-            return Err(PlanError::NoPath);
-        }
-        let mut chain = vec![g];
-        while let Some(&u) = chain.last() {
-            if u == s {
-                break;
-            }
-            if prev[u] == usize::MAX || chain.len() > size {
-                return Err(PlanError::NoPath);
-            }
-            chain.push(prev[u]);
-        }
-        chain.reverse();
-        let ids: Vec<NodeId> = chain.iter().map(|&u| NodeId(u as u32)).collect();
-        let mut edges = Vec::with_capacity(ids.len().saturating_sub(1));
-        for w in ids.windows(2) {
-            edges.push(self.global.edge_between(w[0], w[1]).ok_or(PlanError::NoPath)?);
-        }
-        let mut waypoints = Vec::with_capacity(ids.len() + 2);
-        waypoints.push(from);
-        waypoints.extend(chain.iter().filter_map(|&u| position[u]));
-        waypoints.push(to);
-        let length_m = waypoints.windows(2).map(|w| w[0].distance(w[1])).sum();
-        Ok(GlobalPath { waypoints, cost: dist[g], length_m, edges, nodes: ids, graph_cost: dist[g] })
-    }
-}
-
-/// A node in the search queue, cheapest first.
-struct Queued(f64, usize);
-
-impl PartialEq for Queued {
-    fn eq(&self, other: &Self) -> bool {
-        self.0.total_cmp(&other.0).is_eq()
-    }
-}
-
-impl Eq for Queued {}
-
-impl PartialOrd for Queued {
-    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(other))
-    }
-}
-
-impl Ord for Queued {
-    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        other.0.total_cmp(&self.0).then_with(|| other.1.cmp(&self.1))
+        let avoid: &[(NodeId, NodeId)] =
+            if self.params.global.experience.graph_updates { &self.blocked_edges } else { &[] };
+        self.global.plan_avoiding(from, to, avoid)
     }
 }

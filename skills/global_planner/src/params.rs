@@ -118,6 +118,11 @@ pub struct ExperienceParams {
     pub observations_to_overturn_trav: u32,
     /// Δφ: half-width of the window around a single crossing searched for unknown bins, radians.
     pub crossing_window_rad: f64,
+    /// An edge passing within this distance of a scan's origin (the robot driving it) is judged
+    /// from the origin's projection onto the edge to each end, as the authors' implementation
+    /// judges the edge being driven from the robot's position; a blockage mid-edge is then seen
+    /// although both ends lie beyond the safe region. 0 judges every edge end to end only, metres.
+    pub on_edge_radius_m: f64,
     /// Traversal probability per sample assumed along an edge marked trav.
     pub trav_sample_probability: f64,
     /// Traversal probability per sample charged (in addition) along an edge marked not_trav
@@ -132,6 +137,7 @@ impl Default for ExperienceParams {
             observations_to_mark: 2,
             observations_to_overturn_trav: 4,
             crossing_window_rad: 0.3,
+            on_edge_radius_m: 3.0,
             trav_sample_probability: 0.99,
             not_trav_sample_probability: 0.01,
         }

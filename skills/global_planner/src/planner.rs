@@ -5,6 +5,7 @@ use std::collections::{HashMap, HashSet};
 
 use petgraph::Undirected;
 use petgraph::stable_graph::{EdgeIndex, NodeIndex, StableGraph};
+use petgraph::visit::EdgeRef;
 use rand::Rng;
 use serde::Serialize;
 use spomp_core::{AerialMap, Cell, ClassId, ClassTable, Point2, ReachabilityScan, Time, UNKNOWN_CLASS};
@@ -221,7 +222,7 @@ impl GlobalPlanner {
         let x = &params.experience;
         let in_range = |v: f64, lo: f64, hi: f64| v.is_finite() && v >= lo && v <= hi;
         // Bounds keep every buffer and loop sized sensibly whatever a mission file says.
-        let checks: [(&'static str, bool, &str); 11] = [
+        let checks: [(&'static str, bool, &str); 12] = [
             ("graph.visibility_range_m", in_range(g.visibility_range_m, 0.1, 500.0), "must be in [0.1, 500] m"),
             ("graph.edge_sample_spacing_m", in_range(g.edge_sample_spacing_m, 0.05, 100.0), "must be in [0.05, 100] m"),
             ("graph.attach_radius_m", in_range(g.attach_radius_m, 0.0, 200.0), "must be in [0, 200] m"),
@@ -232,6 +233,7 @@ impl GlobalPlanner {
             ("learning.l2_regularization", in_range(l.l2_regularization, 0.0, 100.0), "must be in [0, 100]"),
             ("learning.not_trav_depth_m", in_range(l.not_trav_depth_m, 0.0, 50.0), "must be in [0, 50] m"),
             ("learning.max_scan_range_m", in_range(l.max_scan_range_m, 0.1, 500.0), "must be in [0.1, 500] m"),
+            ("experience.on_edge_radius_m", in_range(x.on_edge_radius_m, 0.0, 50.0), "must be in [0, 50] m"),
             (
                 "experience.crossing_window_rad",
                 in_range(x.crossing_window_rad, 0.0, std::f64::consts::PI),
@@ -649,6 +651,7 @@ impl GlobalPlanner {
 
     fn judge_edges(&mut self, region: &StarRegion, own: bool, update: &mut ScanUpdate) {
         let window = self.params.experience.crossing_window_rad;
+        let on_edge = self.params.experience.on_edge_radius_m;
         let mut changed = std::mem::take(&mut self.judged);
         changed.clear();
         for e in self.graph.edge_indices() {
@@ -659,7 +662,7 @@ impl GlobalPlanner {
             if segment_point_distance(pa, pb, region.origin) > region.max_range_m {
                 continue;
             }
-            let obs = region.classify(pa, pb, window);
+            let obs = region.classify_edge(pa, pb, window, on_edge);
             update.observed[match obs {
                 EdgeObservation::Trav => 0,
                 EdgeObservation::NotTrav => 1,
@@ -802,13 +805,35 @@ impl GlobalPlanner {
     /// Plans the most probable path from `from` to `to` (A* over the graph; the start and goal
     /// attach to the nodes whose regions cover them).
     pub fn plan(&mut self, from: Point2, to: Point2) -> Result<GlobalPath, PlanError> {
+        self.plan_avoiding(from, to, &[])
+    }
+
+    /// [`GlobalPlanner::plan`] without the edges between the given node pairs (either order):
+    /// for a caller's own experience the scans could not give, such as an edge the robot failed
+    /// to get across. The edges stay in the graph, with their state; pairs that are not edges
+    /// are ignored.
+    pub fn plan_avoiding(
+        &mut self,
+        from: Point2,
+        to: Point2,
+        avoid: &[(NodeId, NodeId)],
+    ) -> Result<GlobalPath, PlanError> {
         let start = self.attach(from, "start")?;
         let goal = self.attach(to, "goal")?;
         let goal_pos = self.graph[goal].position;
         let rate = self.min_cost_per_m;
         let graph = &self.graph;
-        let (graph_cost, nodes) = petgraph::algo::astar(
+        let mut avoided: Vec<(u32, u32)> =
+            avoid.iter().map(|&(a, b)| if a.0 <= b.0 { (a.0, b.0) } else { (b.0, a.0) }).collect();
+        avoided.sort_unstable();
+        let allowed = petgraph::visit::EdgeFiltered::from_fn(
             graph,
+            |e: petgraph::stable_graph::EdgeReference<'_, EdgeData, u32>| {
+                avoided.binary_search(&pair(e.source(), e.target())).is_err()
+            },
+        );
+        let (graph_cost, nodes) = petgraph::algo::astar(
+            &allowed,
             start,
             |n| n == goal,
             |e| e.weight().cost,

@@ -130,6 +130,29 @@ impl StarRegion {
         }
     }
 
+    /// Judges the edge `a`–`b` as [`StarRegion::classify`] does, except when the region's origin
+    /// (the robot) is on the edge: within `on_edge_radius_m` of it, with its projection `q` onto
+    /// the edge inside the safe region. Then the parts `q`–`a` and `q`–`b` are judged each: not
+    /// traversable when one of them is (the robot can reach `q`, so the edge is blocked beyond
+    /// it), traversable when both are, unknown otherwise. This is how the edge a robot is
+    /// driving gets judged from where the robot is, when the safe region (≈ 5 m on flat ground)
+    /// is much shorter than the edge.
+    pub fn classify_edge(&self, a: Point2, b: Point2, window_rad: f64, on_edge_radius_m: f64) -> EdgeObservation {
+        if on_edge_radius_m > 0.0 && segment_point_distance(a, b, self.origin) <= on_edge_radius_m {
+            let q = closest_on_segment(a, b, self.origin);
+            if self.contains(q) {
+                let towards_a = self.classify(q, a, window_rad);
+                let towards_b = self.classify(q, b, window_rad);
+                return match (towards_a, towards_b) {
+                    (EdgeObservation::NotTrav, _) | (_, EdgeObservation::NotTrav) => EdgeObservation::NotTrav,
+                    (EdgeObservation::Trav, EdgeObservation::Trav) => EdgeObservation::Trav,
+                    _ => EdgeObservation::UnkTrav,
+                };
+            }
+        }
+        self.classify(a, b, window_rad)
+    }
+
     /// Whether a bin within `window_rad` of the direction towards `p` ends in the unknown.
     fn unknown_near(&self, p: Point2, window_rad: f64) -> bool {
         let n = self.bins();
@@ -147,15 +170,20 @@ impl StarRegion {
     }
 }
 
-/// Distance from `p` to the segment `a`–`b`.
-pub(crate) fn segment_point_distance(a: Point2, b: Point2, p: Point2) -> f64 {
+/// The point of the segment `a`–`b` closest to `p`.
+fn closest_on_segment(a: Point2, b: Point2, p: Point2) -> Point2 {
     let ab = b - a;
     let len2 = ab.dot(ab);
     if len2 <= 0.0 {
-        return p.distance(a);
+        return a;
     }
     let t = ((p - a).dot(ab) / len2).clamp(0.0, 1.0);
-    p.distance(a + ab * t)
+    a + ab * t
+}
+
+/// Distance from `p` to the segment `a`–`b`.
+pub(crate) fn segment_point_distance(a: Point2, b: Point2, p: Point2) -> f64 {
+    p.distance(closest_on_segment(a, b, p))
 }
 
 /// Intersection of segment `a`–`b` (closed) with `c`–`d` (half-open: `d` excluded, so a crossing
@@ -229,6 +257,27 @@ mod tests {
         assert_eq!(s.classify(Point2::new(0.0, 0.0), Point2::new(20.0, 0.0), 0.3), EdgeObservation::UnkTrav);
         assert_eq!(s.classify(Point2::new(0.0, 0.0), Point2::new(0.0, 20.0), 0.3), EdgeObservation::NotTrav);
         assert_eq!(s.classify(Point2::new(0.0, 0.0), Point2::new(20.0, 0.0), 0.1), EdgeObservation::NotTrav);
+    }
+
+    #[test]
+    fn an_edge_under_the_robot_is_judged_from_the_robot() {
+        let w = 0.3;
+        // A 6 m safe disc ending at a wall all round: the robot at the origin drives a 30 m edge
+        // from (−15, 0) to (15, 0), both ends far outside the region.
+        let wall = StarRegion::from_scan(&circle(360, 6.0, true), 30.0).unwrap();
+        let (a, b) = (Point2::new(-15.0, 0.5), Point2::new(15.0, 0.5));
+        assert_eq!(wall.classify(a, b, w), EdgeObservation::UnkTrav, "the paper's rule: two crossings");
+        assert_eq!(wall.classify_edge(a, b, w, 3.0), EdgeObservation::NotTrav, "blocked ahead of the robot");
+        assert_eq!(wall.classify_edge(a, b, w, 0.0), EdgeObservation::UnkTrav, "rule switched off");
+        // An open road ahead (unknown beyond the region): nothing is learnt.
+        let open = StarRegion::from_scan(&circle(360, 6.0, false), 30.0).unwrap();
+        assert_eq!(open.classify_edge(a, b, w, 3.0), EdgeObservation::UnkTrav);
+        // A short edge through the robot inside the region is traversable either way.
+        let (c, d) = (Point2::new(-4.0, 1.0), Point2::new(4.0, 1.0));
+        assert_eq!(open.classify_edge(c, d, w, 3.0), EdgeObservation::Trav);
+        // An edge 4 m away is not "under" the robot: the paper's rule applies.
+        let (e, f) = (Point2::new(-15.0, 4.0), Point2::new(15.0, 4.0));
+        assert_eq!(wall.classify_edge(e, f, w, 3.0), EdgeObservation::UnkTrav);
     }
 
     #[test]

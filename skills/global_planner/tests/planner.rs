@@ -503,3 +503,20 @@ mod prop {
         }
     }
 }
+
+#[test]
+fn plan_avoiding_skips_the_given_edges_and_keeps_them() {
+    let map = ring_map();
+    let mut p = planner(GlobalPlannerParams::default(), &map);
+    let direct = p.plan(RING_START, RING_GOAL).unwrap();
+    assert!(!goes_north(&direct), "the direct route takes the southern road");
+    let avoid: Vec<_> = direct.nodes.windows(2).map(|w| (w[1], w[0])).collect(); // either order
+    let around = p.plan_avoiding(RING_START, RING_GOAL, &avoid).unwrap();
+    assert!(goes_north(&around), "without the southern edges it goes round: {:?}", around.waypoints);
+    assert!(around.nodes.windows(2).all(|w| !avoid.contains(&(w[1], w[0])) && !avoid.contains(&(w[0], w[1]))));
+    // The edges are still in the graph: the plain search takes them again.
+    assert_eq!(p.plan(RING_START, RING_GOAL).unwrap().nodes, direct.nodes);
+    // Pairs that are not edges change nothing.
+    let none = [(direct.nodes[0], direct.nodes[0])];
+    assert_eq!(p.plan_avoiding(RING_START, RING_GOAL, &none).unwrap().nodes, direct.nodes);
+}
