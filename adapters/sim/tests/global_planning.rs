@@ -340,11 +340,10 @@ fn a_second_ugv_with_the_first_ones_scans_drives_less() {
 
 /// The same experiment with UGV 1 in the default downsampled sharing mode (a scan every 2 m):
 /// only one shared scan sees the block, fewer than the two consistent observations that mark an
-/// edge, so UGV 2 rediscovers the block itself. Prints the table; both must arrive. Ignored:
-/// it currently fails because `navigate_to` does not replan when the edge it is driving is
-/// removed after a replan from the node ahead (see the report), and UGV 2 ends stuck at the block.
+/// edge, so UGV 2 rediscovers the block itself and replans; both must arrive (prints the table).
+/// Regression test: `navigate_to` once missed the removal of the edge it was driving after a
+/// replan from the node ahead, and UGV 2 ended stuck at the block.
 #[test]
-#[ignore = "comparison run; blocked by a navigate_to replanning gap"]
 fn two_robots_with_downsampled_sharing() {
     two_robots(40.0, SharingMode::Downsampled);
 }
