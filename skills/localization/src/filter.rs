@@ -52,6 +52,9 @@ pub struct UpdateReport {
     pub resampled: bool,
     /// Particles replaced by global re-localisation.
     pub injected: usize,
+    /// Mean match cost of the observation under the predicted particles, as a fraction of the
+    /// cost a random pose would get (0 = perfect match, about 1 = no better than a guess).
+    pub cost_ratio: f64,
 }
 
 /// `ln(Σ exp(a_i))` of two terms, safe for −∞.
@@ -87,8 +90,11 @@ pub struct CrossViewLocalizer {
     stamp: Time,
     log_likelihood_fast: Option<f64>,
     log_likelihood_slow: Option<f64>,
+    /// Short-term average of the match cost ratio (see `UpdateReport::cost_ratio`).
+    cost_ratio_fast: Option<f64>,
     match_factor: f64,
     estimate: PoseEstimate,
+    last_report: UpdateReport,
 }
 
 impl CrossViewLocalizer {
@@ -114,8 +120,10 @@ impl CrossViewLocalizer {
             stamp: Time::ZERO,
             log_likelihood_fast: None,
             log_likelihood_slow: None,
+            cost_ratio_fast: None,
             match_factor: 1.0,
             estimate: PoseEstimate::default(),
+            last_report: UpdateReport::default(),
         })
     }
 
@@ -142,6 +150,11 @@ impl CrossViewLocalizer {
     /// The latest filtered estimate (after the last prediction or update).
     pub fn estimate(&self) -> PoseEstimate {
         self.estimate
+    }
+
+    /// What the latest measurement update did (default before the first one).
+    pub fn last_report(&self) -> UpdateReport {
+        self.last_report
     }
 
     /// Spreads the particles around a prior that holds when odometry reads `odom_pose`.
@@ -210,6 +223,9 @@ impl CrossViewLocalizer {
         self.stamp = stamp;
         self.log_likelihood_fast = None;
         self.log_likelihood_slow = None;
+        // A prior is trusted until the evidence says otherwise (a drifted prior is first
+        // corrected by its own particles); a global initialisation is lost by definition.
+        self.cost_ratio_fast = Some(1.0 - match_factor);
         self.match_factor = match_factor;
         self.refresh_estimate();
     }
@@ -328,6 +344,7 @@ impl CrossViewLocalizer {
         if self.observation.is_empty() || total_weight <= 0.0 {
             report.effective_sample_size = effective_sample_size(&self.weights);
             self.refresh_estimate();
+            self.last_report = report;
             return Ok(report);
         }
 
@@ -337,6 +354,12 @@ impl CrossViewLocalizer {
         self.scorer.score_all(field, &self.observation, &self.particles, agree_level, &mut self.scores);
         self.log_likelihoods.clear();
         self.log_likelihoods.extend(self.scores.iter().map(|s| -s.weighted_cost / total_weight * inv_temperature));
+
+        let random_cost = random_guess_cost(field, &self.observation);
+        if random_cost > 0.0 {
+            let predicted: f64 = self.weights.iter().zip(&self.scores).map(|(w, s)| w * s.weighted_cost).sum();
+            report.cost_ratio = predicted / random_cost;
+        }
 
         // Predictive likelihood of the observation, ln Σ w_i · l_i, for the re-localisation test.
         let max_ll = self.log_likelihoods.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -376,7 +399,12 @@ impl CrossViewLocalizer {
             let slow = ema(self.log_likelihood_slow, slow_rate);
             self.log_likelihood_fast = Some(fast);
             self.log_likelihood_slow = Some(slow);
-            if self.params.relocalization_enabled {
+            let ratio_fast = match self.cost_ratio_fast {
+                Some(old) => old + fast_rate * (report.cost_ratio - old),
+                None => report.cost_ratio,
+            };
+            self.cost_ratio_fast = Some(ratio_fast);
+            if self.params.relocalization_enabled && ratio_fast >= self.params.relocalization_min_cost_ratio {
                 let p_inject = (1.0 - (fast - slow).exp()).clamp(0.0, self.params.max_relocalization_fraction);
                 inject = (p_inject * self.particles.len() as f64).round() as usize;
             }
@@ -392,6 +420,7 @@ impl CrossViewLocalizer {
             report.resampled = true;
         }
         self.refresh_estimate();
+        self.last_report = report;
         Ok(report)
     }
 
@@ -537,6 +566,19 @@ fn check_pose(p: Pose2, what: &'static str) -> Result<(), LocalizationError> {
 fn agreement_level(field: &MatchField, agreement_distance_m: f64) -> u8 {
     let level = (agreement_distance_m / field.metres_per_level as f64).floor();
     level.clamp(0.0, (UNKNOWN_COST_LEVEL - 1) as f64) as u8
+}
+
+/// Σ over the observed cells of weight × the class's random-guess cost: what a random pose
+/// would score on this observation.
+fn random_guess_cost(field: &MatchField, obs: &LocalObservation) -> f64 {
+    obs.segments
+        .iter()
+        .map(|seg| {
+            let weight = field.slots.weight.get(seg.slot).copied().unwrap_or(0.0) as f64;
+            let cost = field.unknown_cost_m.get(seg.slot).copied().unwrap_or(0.0) as f64;
+            weight * cost * (seg.end - seg.start) as f64
+        })
+        .sum()
 }
 
 /// A uniformly drawn pose on a known ground cell (the field must have some).

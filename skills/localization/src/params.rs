@@ -69,6 +69,14 @@ pub struct LocalizationParams {
     pub likelihood_fast_rate: f64,
     /// Smoothing rate per update of the long-term average likelihood (α_slow).
     pub likelihood_slow_rate: f64,
+    /// Re-localisation only runs while the short-term average of the match cost ratio (the
+    /// predicted particles' mean match cost over the cost of a random pose: 0 = perfect, about
+    /// 1 = no better than a guess) is at least this. A tracking filter scores well below it
+    /// (a few hundredths in the simulator), a kidnapped one 0.2 or more even in a self-similar
+    /// city, and near 1 in a map that looks nothing alike. Without this gate the
+    /// likelihood averages, which swing with the scene, keep injecting random poses while the
+    /// filter tracks well, and in a self-similar map one of them eventually wins.
+    pub relocalization_min_cost_ratio: f64,
     /// At most this fraction of the particles is replaced by re-localisation in one update.
     pub max_relocalization_fraction: f64,
     /// Candidate poses scored per injected particle; the best candidates are injected.
@@ -136,6 +144,7 @@ impl Default for LocalizationParams {
             relocalization_enabled: true,
             likelihood_fast_rate: 0.3,
             likelihood_slow_rate: 0.01,
+            relocalization_min_cost_ratio: 0.15,
             max_relocalization_fraction: 0.25,
             relocalization_candidates_per_particle: 4,
             relocalization_same_class_fraction: 0.75,
@@ -198,6 +207,9 @@ impl LocalizationParams {
         }
         if self.relocalization_candidates_per_particle == 0 || self.relocalization_candidates_per_particle > 1000 {
             return bad("relocalization_candidates_per_particle must be in 1..=1000");
+        }
+        if !non_negative(self.relocalization_min_cost_ratio) {
+            return bad("relocalization_min_cost_ratio must be finite and ≥ 0");
         }
         if !non_negative(self.common_support_max_spread_m) {
             return bad("common_support_max_spread_m must be finite and ≥ 0");
