@@ -12,18 +12,15 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
 
-use std::io::Write;
+mod common;
+
 use std::sync::Arc;
 
-use spomp_behaviors::mission::{BuildOptions, load_mission};
-use spomp_behaviors::runtime::{LocalizationSetup, NavParams, RuntimeConfig};
-use spomp_behaviors::{RobotExecutor, RobotRuntime, Status, builtin_registry};
-use spomp_core::{
-    Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, RobotId, RobotKind, Time, Twist2, normalize_angle,
-};
+use common::fill;
+
+use spomp_behaviors::{RobotExecutor, RobotRuntime, Status};
+use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, Time, Twist2, normalize_angle};
 use spomp_global_planner::{GlobalPlannerParams, SharingMode};
-use spomp_local_planner::LocalPlannerParams;
-use spomp_mapping::Orthomap;
 use spomp_sim::{OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams, World};
 use spomp_teamstate::{TeamStateParams, TierSet};
 
@@ -57,39 +54,11 @@ impl Robot {
         global: GlobalPlannerParams,
         team: TeamStateParams,
     ) -> Robot {
-        let mission = format!(
-            "mission: gp-{id}\nteam:\n  - {{ id: {id}, kind: ugv, role: driver, priority: {priority}, start: {{ x_m: {}, \
-             y_m: {}, yaw_deg: {} }} }}\nroles:\n  driver:\n    tree:\n      {tree}\ncomplete_when: \
-             all_goals_visited\ntime_limit_s: 3000\n",
-            start.x,
-            start.y,
-            start.yaw.to_degrees()
+        let name = format!("gp-{}", tree.len());
+        let (rt, ex) = common::driver(
+            &world,
+            common::DriverSetup { name: &name, id, priority, start, tree, with_map: true, global, team },
         );
-        let dir = std::env::temp_dir().join(format!("spomp-gp-{}-{id}-{}", std::process::id(), tree.len()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("mission.yaml");
-        std::fs::File::create(&path).unwrap().write_all(mission.as_bytes()).unwrap();
-        let registry = builtin_registry();
-        let loaded = load_mission(&path, &registry);
-        assert!(loaded.diagnostics.is_empty(), "{mission}\n{:#?}", loaded.diagnostics);
-        let config = RuntimeConfig {
-            id: RobotId::new(id),
-            kind: RobotKind::Ugv,
-            priority,
-            start,
-            classes: world.classes().clone(),
-            map_spec: Some(*world.spec()),
-            team,
-            detection: None,
-            localization: LocalizationSetup::External,
-            nav: Some(NavParams { local: LocalPlannerParams::simulation(), global }),
-            goal_time_per_m_s: 2.0,
-            seed: 7,
-        };
-        let mut rt = RobotRuntime::from_config(config).unwrap();
-        rt.map = Some(Orthomap::from_map(world.map().clone()).unwrap());
-        let ex =
-            RobotExecutor::new(&loaded.roles["driver"], &registry, &rt.id, start, BuildOptions::default()).unwrap();
         let ugv = Ugv::new(&world, UgvParams::default(), start).unwrap();
         let odom = OdometryModel::new(OdometryNoiseParams::default(), 1.0, start, 11);
         let sensor = PanoramaSensor::new(&SensorParams::default()).unwrap();
@@ -185,21 +154,6 @@ impl Robot {
             self.ex.blackboard().get_by_name("why"),
             self.rt.problems
         )
-    }
-}
-
-/// Fills the cells whose centre lies in [x0, x1) × [y0, y1).
-fn fill(world: &mut World, (x0, x1): (f64, f64), (y0, y1): (f64, f64), class: u8, elevation_m: f32) {
-    let spec = *world.spec();
-    let color = world.classes().get(class).map_or([0, 0, 0], |c| c.color);
-    for row in 0..spec.height {
-        for col in 0..spec.width {
-            let cell = Cell::new(col, row);
-            let c = spec.center(cell);
-            if (x0..x1).contains(&c.x) && (y0..y1).contains(&c.y) {
-                world.set_cell(cell, class, color, elevation_m);
-            }
-        }
     }
 }
 

@@ -13,16 +13,15 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
 
-use std::io::Write;
+mod common;
+
 use std::sync::Arc;
 
-use spomp_behaviors::mission::{BuildOptions, load_mission};
-use spomp_behaviors::runtime::{LocalizationSetup, NavParams, RuntimeConfig};
-use spomp_behaviors::{BbValue, RobotExecutor, RobotRuntime, Status, builtin_registry};
-use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, RobotId, RobotKind, Time, Twist2};
+use common::fill;
+
+use spomp_behaviors::{BbValue, RobotExecutor, RobotRuntime, Status};
+use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, Time, Twist2};
 use spomp_global_planner::GlobalPlannerParams;
-use spomp_local_planner::LocalPlannerParams;
-use spomp_mapping::Orthomap;
 use spomp_sim::{
     CityParams, OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams, World, generate_city,
     reachable_cells,
@@ -62,39 +61,19 @@ impl Run {
         with_map: bool,
         global: GlobalPlannerParams,
     ) -> Run {
-        let mission = format!(
-            "mission: {name}\nteam:\n  - {{ id: ugv1, kind: ugv, role: driver, priority: 1, start: {{ x_m: {}, y_m: {}, yaw_deg: {} }} }}\nroles:\n  driver:\n    tree:\n      {tree}\ncomplete_when: all_goals_visited\ntime_limit_s: 3000\n",
-            start.x,
-            start.y,
-            start.yaw.to_degrees()
+        let (rt, ex) = common::driver(
+            &world,
+            common::DriverSetup {
+                name,
+                id: "ugv1",
+                priority: 1,
+                start,
+                tree,
+                with_map,
+                global,
+                team: TeamStateParams::default(),
+            },
         );
-        let dir = std::env::temp_dir().join(format!("spomp-nav-{}-{name}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("mission.yaml");
-        std::fs::File::create(&path).unwrap().write_all(mission.as_bytes()).unwrap();
-        let registry = builtin_registry();
-        let loaded = load_mission(&path, &registry);
-        assert!(loaded.diagnostics.is_empty(), "{mission}\n{:#?}", loaded.diagnostics);
-        let config = RuntimeConfig {
-            id: RobotId::new("ugv1"),
-            kind: RobotKind::Ugv,
-            priority: 1,
-            start,
-            classes: world.classes().clone(),
-            map_spec: Some(*world.spec()),
-            team: TeamStateParams::default(),
-            detection: None,
-            localization: LocalizationSetup::External,
-            nav: Some(NavParams { local: LocalPlannerParams::simulation(), global }),
-            goal_time_per_m_s: 2.0,
-            seed: 7,
-        };
-        let mut rt = RobotRuntime::from_config(config).unwrap();
-        if with_map {
-            rt.map = Some(Orthomap::from_map(world.map().clone()).unwrap());
-        }
-        let ex =
-            RobotExecutor::new(&loaded.roles["driver"], &registry, &rt.id, start, BuildOptions::default()).unwrap();
         let ugv = Ugv::new(&world, UgvParams::default(), start).unwrap();
         let odom = OdometryModel::new(OdometryNoiseParams::default(), 1.0, start, 11);
         let sensor = PanoramaSensor::new(&SensorParams::default()).unwrap();
@@ -172,21 +151,6 @@ impl Run {
             self.reports,
             self.rt.problems
         )
-    }
-}
-
-/// Fills the cells whose centre lies in [x0, x1) × [y0, y1).
-fn fill(world: &mut World, (x0, x1): (f64, f64), (y0, y1): (f64, f64), class: u8, elevation_m: f32) {
-    let spec = *world.spec();
-    let color = world.classes().get(class).map_or([0, 0, 0], |c| c.color);
-    for row in 0..spec.height {
-        for col in 0..spec.width {
-            let cell = Cell::new(col, row);
-            let c = spec.center(cell);
-            if (x0..x1).contains(&c.x) && (y0..y1).contains(&c.y) {
-                world.set_cell(cell, class, color, elevation_m);
-            }
-        }
     }
 }
 
