@@ -50,49 +50,7 @@ enum Command {
     },
     /// Run a mission in the built-in simulator: summary table, `summary.json`, `run.mcap` and
     /// plots per trial under the output folder.
-    Sim {
-        /// Mission file.
-        mission: PathBuf,
-        /// First seed (default: the mission's `sim.seed`, else 1); trial k uses seed + k.
-        #[arg(long)]
-        seed: Option<u64>,
-        /// Trials, run in parallel on all cores (default: the mission's `sim.trials`, else 1).
-        #[arg(long)]
-        trials: Option<u32>,
-        /// Output folder (default `runs/<mission>/`).
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// Print the combined summary as JSON.
-        #[arg(long)]
-        json: bool,
-        /// Override the mission's time limit, seconds.
-        #[arg(long)]
-        time_limit_s: Option<f64>,
-        /// Record a (downsampled) panorama per UGV every this many seconds in the MCAP (0: none).
-        #[arg(long, default_value_t = 10.0)]
-        pano_every_s: f64,
-        /// Also save the recorded panoramas as 16-bit depth PNGs (the `spomp terrain` format).
-        #[arg(long)]
-        save_panos: bool,
-        /// Do not write run.mcap.
-        #[arg(long)]
-        no_mcap: bool,
-        /// Kill a robot: ROBOT@SECONDS (repeatable).
-        #[arg(long, value_parser = args::kill)]
-        kill: Vec<(String, f64)>,
-        /// Radio blackout for everyone: FROM..TO seconds (repeatable).
-        #[arg(long, value_parser = args::window)]
-        blackout: Vec<(f64, f64)>,
-        /// Multiply the odometry noise.
-        #[arg(long)]
-        odometry_noise: Option<f64>,
-        /// Multiply the ground-truth localization noise.
-        #[arg(long)]
-        localization_noise: Option<f64>,
-        /// Print every node transition.
-        #[arg(long)]
-        trace: bool,
-    },
+    Sim(sim_cmd::SimArgs),
     /// Print the JSON Schema of the mission language (for editors' YAML language servers).
     Schema,
     /// List the node types with their ports.
@@ -286,37 +244,7 @@ fn main() -> ExitCode {
     };
     let result = match cli.command {
         Command::Validate { files, json, dry_run } => commands::validate(&files, json, dry_run),
-        Command::Sim {
-            mission,
-            seed,
-            trials,
-            out,
-            json,
-            time_limit_s,
-            pano_every_s,
-            save_panos,
-            no_mcap,
-            kill,
-            blackout,
-            odometry_noise,
-            localization_noise,
-            trace,
-        } => sim_cmd::sim(&sim_cmd::SimArgs {
-            mission,
-            seed,
-            trials,
-            out,
-            json,
-            time_limit_s,
-            pano_every_s,
-            save_panos,
-            no_mcap,
-            kill,
-            blackout,
-            odometry_noise,
-            localization_noise,
-            trace,
-        }),
+        Command::Sim(args) => sim_cmd::sim(&args),
         Command::Schema => commands::schema(),
         Command::Nodes { json, markdown, name } => commands::nodes(json, markdown, name.as_deref()),
         Command::World { action } => run_world(action),

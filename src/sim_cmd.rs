@@ -22,36 +22,49 @@ use spomp_sim::{Blackout, Faults, KillFault};
 
 use crate::sim_plots;
 
-/// Options of `spomp sim`.
-#[derive(Debug, Clone)]
+/// Options of `spomp sim` (the command line's arguments).
+#[derive(Debug, Clone, clap::Args)]
 pub struct SimArgs {
     /// Mission file.
     pub mission: PathBuf,
-    /// First seed (default: the mission's `sim.seed`, else 1).
+    /// First seed (default: the mission's `sim.seed`, else 1); trial k uses seed + k.
+    #[arg(long)]
     pub seed: Option<u64>,
-    /// Trials (default: the mission's `sim.trials`, else 1).
+    /// Trials, run in parallel on all cores (default: the mission's `sim.trials`, else 1).
+    #[arg(long)]
     pub trials: Option<u32>,
     /// Output folder (default `runs/<mission>/`).
+    #[arg(long)]
     pub out: Option<PathBuf>,
     /// Print the combined summary as JSON.
+    #[arg(long)]
     pub json: bool,
-    /// Override the time limit, seconds.
+    /// Override the mission's time limit, seconds.
+    #[arg(long)]
     pub time_limit_s: Option<f64>,
-    /// Record one panorama per robot every this many seconds (0: none).
+    /// Record a (downsampled) panorama per UGV every this many seconds in the MCAP (0: none).
+    #[arg(long, default_value_t = 10.0)]
     pub pano_every_s: f64,
-    /// Also save every recorded panorama as a 16-bit depth PNG.
+    /// Also save the recorded panoramas as 16-bit depth PNGs (the `spomp terrain` format).
+    #[arg(long)]
     pub save_panos: bool,
-    /// Skip the MCAP file.
+    /// Do not write run.mcap.
+    #[arg(long)]
     pub no_mcap: bool,
-    /// Kill faults `ROBOT@SECONDS`.
+    /// Kill a robot: ROBOT@SECONDS (repeatable).
+    #[arg(long, value_parser = crate::args::kill)]
     pub kill: Vec<(String, f64)>,
-    /// Radio blackouts `FROM..TO` seconds.
+    /// Radio blackout for everyone: FROM..TO seconds (repeatable).
+    #[arg(long, value_parser = crate::args::window)]
     pub blackout: Vec<(f64, f64)>,
-    /// Multiply odometry noise.
+    /// Multiply the odometry noise.
+    #[arg(long)]
     pub odometry_noise: Option<f64>,
-    /// Multiply ground-truth localization noise.
+    /// Multiply the ground-truth localization noise.
+    #[arg(long)]
     pub localization_noise: Option<f64>,
     /// Print every node transition.
+    #[arg(long)]
     pub trace: bool,
 }
 

@@ -4,51 +4,30 @@
 //! Shows: with the aerial map known, a UGV patrolling a loop of checkpoints stays localized
 //! (median < 2 m, max < 5 m over the whole route); without a map it falls back on odometry (no
 //! measurement update runs) and, once a UAV's map arrives over the radio, corrects the drift;
-//! a kidnapped robot (carried off 70 m, its odometry unaware) re-localizes. The runner has no
-//! teleport, so the kidnapping drives the robot runtime's localizer directly on panoramas the
-//! simulator's sensor renders.
+//! a kidnapped robot (carried off 70 m, its odometry unaware) re-localizes — tested at the
+//! runtime's localizer directly, on panoramas the simulator's sensor renders.
 //!
 //! `LOC_LAPS=N` sets the patrol laps (default 1, about 260 m); `LOC_TRACE=1` prints the error
 //! every simulated 10 s.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
 
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
+mod common;
+
+use common::{load, simulation, write_mission};
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use spomp_behaviors::builtin_registry;
-use spomp_behaviors::mission::{LoadedMission, load_mission};
 use spomp_behaviors::runtime::{Localization, LocalizationSetup, UpdateSchedule};
 use spomp_core::{Point2, Pose2, Time, Twist2};
 use spomp_localization::LocalizationParams;
-use spomp_sim::run::{NoObserver, SimOptions, Simulation, world_for_mission};
+use spomp_sim::run::{NoObserver, SimOptions, Simulation};
 use spomp_sim::{
     CityParams, Faults, OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams, generate_city,
 };
 
 /// The generated city every test runs in (the patrol mission's size, a fixed layout).
 const WORLD: &str = "{ generate: { size_m: [200, 150], vehicle_clusters: 4, roadblocks: 0, seed: 3 } }";
-
-fn write_mission(name: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("spomp-loc-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join(format!("{name}.yaml"));
-    std::fs::write(&path, text).unwrap();
-    path
-}
-
-fn load(path: &Path) -> LoadedMission {
-    let loaded = load_mission(path, &builtin_registry());
-    assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
-    loaded
-}
-
-fn simulation(loaded: &LoadedMission, options: SimOptions) -> Simulation {
-    let world = world_for_mission(loaded.mission.as_ref().unwrap(), &loaded.base_dir(), options.seed).unwrap();
-    Simulation::new(loaded, &builtin_registry(), Arc::new(world), options).unwrap()
-}
 
 /// Position error of a robot's own estimate against the simulator's truth.
 fn error_of(sim: &Simulation, id: &str) -> Option<f64> {

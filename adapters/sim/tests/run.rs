@@ -3,34 +3,16 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
 
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
+mod common;
 
-use spomp_behaviors::builtin_registry;
-use spomp_behaviors::mission::{LoadedMission, load_mission};
+use std::path::{Path, PathBuf};
+
+use common::{load, simulation, write_mission};
+
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::{RobotId, Time};
 use spomp_sim::LinkTier;
-use spomp_sim::run::{NoObserver, Outcome, RobotSnapshot, SimObserver, SimOptions, Simulation, world_for_mission};
-
-fn write_mission(name: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("spomp-run-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join(format!("{name}.yaml"));
-    std::fs::write(&path, text).unwrap();
-    path
-}
-
-fn load(path: &Path) -> LoadedMission {
-    let loaded = load_mission(path, &builtin_registry());
-    assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
-    loaded
-}
-
-fn simulation(loaded: &LoadedMission, options: SimOptions) -> Simulation {
-    let world = world_for_mission(loaded.mission.as_ref().unwrap(), &loaded.base_dir(), options.seed).unwrap();
-    Simulation::new(loaded, &builtin_registry(), Arc::new(world), options).unwrap()
-}
+use spomp_sim::run::{NoObserver, Outcome, RobotSnapshot, SimObserver, SimOptions, Simulation};
 
 /// A basestation and a hovering UAV `distance_m` apart, both idle.
 fn pair_mission(distance_m: f64) -> String {

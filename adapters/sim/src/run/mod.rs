@@ -287,6 +287,14 @@ pub struct Simulation {
     problems: BTreeMap<(String, String), ProblemCount>,
     outcome: Option<Outcome>,
     obstacles: Vec<Obstacle>,
+    /// Scratch: the obstacles other than one robot's own body.
+    others: Vec<Obstacle>,
+}
+
+/// Every UGV body but the `own`-th, into `out` (reused across steps).
+fn others_than(all: &[Obstacle], own: usize, out: &mut Vec<Obstacle>) {
+    out.clear();
+    out.extend(all.iter().enumerate().filter(|(k, _)| *k != own).map(|(_, o)| *o));
 }
 
 /// Most bytes a link can bank for later (a few full map versions).
@@ -433,6 +441,7 @@ impl Simulation {
             problems: BTreeMap::new(),
             outcome: None,
             obstacles: Vec::new(),
+            others: Vec::new(),
         })
     }
 
@@ -572,9 +581,8 @@ impl Simulation {
                     let own = ugv_index;
                     ugv_index += 1;
                     let cmd = if alive { r.command } else { Twist2::ZERO };
-                    let others: Vec<Obstacle> =
-                        self.obstacles.iter().enumerate().filter(|(k, _)| *k != own).map(|(_, o)| *o).collect();
-                    ugv.step_among(world, cmd, dt, &others);
+                    others_than(&self.obstacles, own, &mut self.others);
+                    ugv.step_among(world, cmd, dt, &self.others);
                 }
                 Body::Uav { uav, flying_to, .. } => {
                     if !alive {
@@ -617,10 +625,9 @@ impl Simulation {
                     if let Some(src) = truth_source.as_mut() {
                         r.rt.on_external_pose(src.estimate(now, truth));
                     }
-                    let others: Vec<Obstacle> =
-                        self.obstacles.iter().enumerate().filter(|(k, _)| *k != own).map(|(_, o)| *o).collect();
+                    others_than(&self.obstacles, own, &mut self.others);
                     if let Some(frame) =
-                        sensor.poll_among(now, world, truth, ugv.base_elevation_m(), odom.pose, &others)
+                        sensor.poll_among(now, world, truth, ugv.base_elevation_m(), odom.pose, &self.others)
                     {
                         let frame = Arc::new(frame);
                         observer.on_panorama(&r.id, &frame);

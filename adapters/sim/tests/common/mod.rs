@@ -1,11 +1,14 @@
-//! Shared pieces of the closed-loop driving tests: one UGV's runtime and tree built from a
-//! one-role mission, and world painting.
+//! Shared pieces of the simulator's integration tests: missions written to temporary files and
+//! run in the lockstep runner, one UGV's runtime and tree built from a one-role mission, and
+//! world painting.
 
 #![allow(dead_code, clippy::unwrap_used, clippy::expect_used)] // each test file uses a subset
 
 use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
-use spomp_behaviors::mission::{BuildOptions, load_mission};
+use spomp_behaviors::mission::{BuildOptions, LoadedMission, load_mission};
 use spomp_behaviors::runtime::{LocalizationSetup, NavParams, RuntimeConfig};
 use spomp_behaviors::{RobotExecutor, RobotRuntime, builtin_registry};
 use spomp_core::{Cell, Pose2, RobotId, RobotKind};
@@ -13,7 +16,30 @@ use spomp_global_planner::GlobalPlannerParams;
 use spomp_local_planner::LocalPlannerParams;
 use spomp_mapping::Orthomap;
 use spomp_sim::World;
+use spomp_sim::run::{SimOptions, Simulation, world_for_mission};
 use spomp_teamstate::TeamStateParams;
+
+/// Writes a mission to a temporary file named after it (unique per test process).
+pub fn write_mission(name: &str, text: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("spomp-sim-test-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(format!("{name}.yaml"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Loads a mission that must be valid.
+pub fn load(path: &Path) -> LoadedMission {
+    let loaded = load_mission(path, &builtin_registry());
+    assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
+    loaded
+}
+
+/// The mission set up in the runner, in its own world.
+pub fn simulation(loaded: &LoadedMission, options: SimOptions) -> Simulation {
+    let world = world_for_mission(loaded.mission.as_ref().unwrap(), &loaded.base_dir(), options.seed).unwrap();
+    Simulation::new(loaded, &builtin_registry(), Arc::new(world), options).unwrap()
+}
 
 /// How to set up the one driving UGV.
 pub struct DriverSetup<'a> {
