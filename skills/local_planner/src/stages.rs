@@ -11,13 +11,15 @@
 use wide::{bytemuck, f32x4};
 
 /// The SIMD vector (portable: two 4-lane halves on baseline x86-64): consecutive columns of a
-/// row in the gradient, column pass and reachability; the rows of a block, column by column, in
-/// Algorithm 1's row passes ([`row_passes_block`]).
+/// row in the gradient, column pass and reachability.
 type Lanes = wide::f32x8;
 /// Lanes per [`Lanes`] vector.
 const LANES: usize = 8;
-/// 4-lane vectors per [`Lanes`], for the 4 × 4 transposes.
-const QUADS_PER_LANES: usize = BLOCK_ROWS / 4;
+/// The SIMD vector of Algorithm 1's row passes ([`row_passes_block`]): the rows of a block,
+/// one per lane, column by column. (8 rows; 4 and 16 measured slower.)
+type BlockLanes = wide::f32x8;
+/// 4-lane vectors per [`BlockLanes`], for the 4 × 4 transposes.
+const QUADS_PER_BLOCK: usize = BLOCK_ROWS / 4;
 
 /// Per-row and per-column trigonometry and windows, computed once per panorama geometry.
 #[derive(Clone, Debug, Default)]
@@ -112,6 +114,39 @@ fn last_where<T: Copy>(values: &[T], pred: impl Fn(T) -> bool) -> Option<usize> 
     values[..head_len].iter().rposition(|&v| pred(v))
 }
 
+/// `values.iter().position(|&v| pred(v))` for a comparison `pred` that `lanes` evaluates on
+/// [`LANES`] values at once (a mask), 16 values at a time: two vector compares and a bit mask,
+/// whose lowest set bit is the position (no search loop inside a chunk).
+#[inline(always)]
+fn first_lanes(values: &[f32], lanes: impl Fn(Lanes) -> Lanes, pred: impl Fn(f32) -> bool) -> Option<usize> {
+    let chunks = values.chunks_exact(2 * LANES);
+    let tail_start = values.len() - chunks.remainder().len();
+    for (i, chunk) in chunks.enumerate() {
+        let (low, high) = chunk.split_at(LANES);
+        let mask = lanes(lanes_of(low)).to_bitmask() | (lanes(lanes_of(high)).to_bitmask() << LANES);
+        if mask != 0 {
+            return Some(i * 2 * LANES + mask.trailing_zeros() as usize);
+        }
+    }
+    values[tail_start..].iter().position(|&v| pred(v)).map(|o| tail_start + o)
+}
+
+/// `values.iter().position(|&v| v == target)`, 16 values at a time: one byte compare and a bit
+/// mask, whose lowest set bit is the position.
+#[inline(always)]
+fn first_equal(values: &[bool], target: bool) -> Option<usize> {
+    let chunks = values.chunks_exact(16);
+    let tail_start = values.len() - chunks.remainder().len();
+    let wanted = wide::u8x16::splat(target as u8);
+    for (i, chunk) in chunks.enumerate() {
+        let mask = wide::u8x16::new(std::array::from_fn(|j| chunk[j] as u8)).simd_eq(wanted).to_bitmask();
+        if mask != 0 {
+            return Some(i * 16 + mask.trailing_zeros() as usize);
+        }
+    }
+    values[tail_start..].iter().position(|&v| v == target).map(|o| tail_start + o)
+}
+
 #[inline]
 fn sanitize(range: f32) -> f32 {
     // `&` rather than `&&`: no short-circuit branch, so the loops using it vectorise.
@@ -139,9 +174,14 @@ pub fn fill_holes(input: &[f32], out: &mut [f32], cols: usize, max_gap_m: f32) {
         let mut c = first;
         while c < last {
             // `c` holds a return; find the next hole and the return that ends it.
-            let Some(offset) = first_where(&row[c..last], |r| r <= 0.0) else { break };
+            let Some(offset) = first_lanes(&row[c..last], |v| v.simd_le(Lanes::ZERO), |v| v <= 0.0) else { break };
             let start = c + offset;
-            let end = row[start..=last].iter().position(|&r| r > 0.0).map_or(last, |o| start + o);
+            // Most holes are single pixels: test the next one before searching.
+            let end = if row[start + 1] > 0.0 {
+                start + 1
+            } else {
+                first_lanes(&row[start..=last], |v| v.simd_gt(Lanes::ZERO), |v| v > 0.0).map_or(last, |o| start + o)
+            };
             fill_gap(row, start - 1, end, col_step, max_gap_m);
             c = end;
         }
@@ -160,6 +200,11 @@ fn fill_gap(row: &mut [f32], from: usize, to: usize, col_step: f32, max_gap_m: f
     let wrap = |k: usize| if k >= cols { k - cols } else { k };
     let (start, end) = (row[wrap(from)], row[wrap(to)]);
     if gap as f32 * col_step * start.max(end) > max_gap_m {
+        return;
+    }
+    if gap == 1 {
+        // The loop below for j = 1: 1·(1/2) = ½ exactly, without the division.
+        row[wrap(from + 1)] = start + (end - start) * 0.5;
         return;
     }
     let inv = 1.0 / (gap + 1) as f32;
@@ -211,6 +256,8 @@ pub struct GradientWindow {
 pub struct GradientScratch {
     /// w_a per column (an integer, as f32).
     half_window: Vec<f32>,
+    /// w_a per column as an index.
+    half_index: Vec<u32>,
     rise_a: Vec<f32>,
     /// The row's z padded on both sides with the largest w_a of columns from the other end.
     z_padded: Vec<f32>,
@@ -261,6 +308,7 @@ pub(crate) fn gradient_row(
     let (max_half, max_px) = (Lanes::splat(max_half_scalar), Lanes::splat(max_px_scalar));
     let w_over_step = Lanes::splat(window.window_m / step);
     scratch.half_window.resize(cols, 1.0);
+    scratch.half_index.resize(cols, 1);
     scratch.rise_a.resize(cols, 0.0);
     let base = row * cols;
     let z_row = &z[base..base + cols];
@@ -268,17 +316,33 @@ pub(crate) fn gradient_row(
     let noise_z = Lanes::splat(tables.noise_z_m.get(row).copied().unwrap_or(0.0));
     let noise_xy = Lanes::splat(tables.noise_xy_m.get(row).copied().unwrap_or(0.0));
     let half = &mut scratch.half_window[..cols];
+    let half_index = &mut scratch.half_index[..cols];
     let rise_a = &mut scratch.rise_a[..cols];
     let (zero, one, two) = (Lanes::ZERO, Lanes::splat(1.0), Lanes::splat(2.0));
     // w_a from the arc length on the x–y plane, s_xy = (2π/A)·r, so W/s_xy = (W/step)/r;
     // the denominator s·(2w_a + 1) uses the arc length s = (2π/A)·ρ = (2π/A)·r / cos θ.
     let cos_e = tables.row_cos.get(row).copied().unwrap_or(1.0).max(1e-6);
     let arc_per_r = Lanes::splat(step / cos_e);
-    for start in (0..cols).step_by(LANES) {
-        // Without a return r is NaN and `fast_min` yields W_max (its second operand); that
-        // pixel's gradient is 0 anyway.
-        let px = (w_over_step / load_lanes(r_row, start)).fast_min(max_px).fast_max(zero);
-        store_lanes((floor_small_lanes(px * Lanes::splat(0.5)) + one).fast_min(max_half), half, start);
+    // Without a return r is NaN and `fast_min` yields W_max (its second operand); that pixel's
+    // gradient is 0 anyway.
+    let w_a = |r: Lanes| {
+        let px = (w_over_step / r).fast_min(max_px).fast_max(zero);
+        (floor_small_lanes(px * Lanes::splat(0.5)) + one).fast_min(max_half)
+    };
+    // Whole vectors through `chunks_exact` (no bounds checks), then the partial one.
+    let full = cols / LANES * LANES;
+    let chunks = r_row[..full]
+        .chunks_exact(LANES)
+        .zip(half[..full].chunks_exact_mut(LANES).zip(half_index[..full].chunks_exact_mut(LANES)));
+    for (r, (h, index)) in chunks {
+        let v = w_a(lanes_of(r));
+        h.copy_from_slice(&v.to_array());
+        store_index_lanes(v, index, 0);
+    }
+    if full < cols {
+        let v = w_a(load_lanes(r_row, full));
+        store_lanes(v, half, full);
+        store_index_lanes(v, half_index, full);
     }
     // The row with `pad` ≥ max w_a columns of wrap-around on both sides: column c sits at
     // c + pad, and c ± w_a needs no wrap test. (The `min`s never bind; they let the compiler
@@ -289,31 +353,78 @@ pub(crate) fn gradient_row(
     padded.extend_from_slice(&z_row[cols - pad..]);
     padded.extend_from_slice(z_row);
     padded.extend_from_slice(&z_row[..pad]);
-    let last = padded.len() - 1;
-    for (c, (rise, &h)) in rise_a.iter_mut().zip(half.iter()).enumerate() {
-        let h = small_to_u32(h) as usize;
-        let (left, right) = ((c + pad - h).min(last), (c + pad + h).min(last));
-        *rise = (padded[left] - padded[right]).abs();
-    }
+    azimuth_rise(padded, pad, half_index, rise_a);
     let w_e = tables.elevation_window.get(row).copied().unwrap_or(0) as usize;
     let above = (w_e > 0 && w_e <= row).then(|| (row - w_e) * cols);
-    for start in (0..cols).step_by(LANES) {
-        let r_c = load_lanes(r_row, start);
-        let run_a = arc_per_r * r_c * (two * load_lanes(half, start) + one);
-        let (rise_a, run_a) = positive_part_lanes(load_lanes(rise_a, start) - noise_z, run_a);
-        let g = match above {
-            Some(b) => {
-                let (z_up, r_up) = (load_lanes(&z[b..b + cols], start), load_lanes(&r[b..b + cols], start));
+    // ∇_a's rise and run, clamped.
+    let azimuth = |r_c: Lanes, half: Lanes, rise: Lanes| {
+        let run_a = arc_per_r * r_c * (two * half + one);
+        positive_part_lanes(rise - noise_z, run_a)
+    };
+    // NaN (no return) becomes 0.
+    // (A gradient is NaN or ≥ +0, never −0: the same as keeping it where g ≥ 0.)
+    let finish = zero_unless_positive;
+    match above {
+        Some(b) => {
+            let (z_up, r_up) = (&z[b..b + cols], &r[b..b + cols]);
+            let gradient = |r_c: Lanes, half: Lanes, rise: Lanes, z_c: Lanes, z_up: Lanes, r_up: Lanes| {
+                let (rise_a, run_a) = azimuth(r_c, half, rise);
                 // sqrt(∇_a² + ∇_e²) with one division: sqrt((a·n_e)² + (e·n_a)²) / (n_a·n_e).
-                let rise_e = (load_lanes(z_row, start) - z_up).abs() - noise_z;
+                let rise_e = (z_c - z_up).abs() - noise_z;
                 let (rise_e, run_e) = positive_part_lanes(rise_e, (r_c - r_up).abs() + noise_xy);
                 let (ta, te) = (rise_a * run_e, rise_e * run_a);
-                (ta * ta + te * te).sqrt() / (run_a * run_e)
+                finish((ta * ta + te * te).sqrt() / (run_a * run_e))
+            };
+            let chunks = (r_row[..full].chunks_exact(LANES).zip(half[..full].chunks_exact(LANES)))
+                .zip(rise_a[..full].chunks_exact(LANES).zip(z_row[..full].chunks_exact(LANES)))
+                .zip(z_up[..full].chunks_exact(LANES).zip(r_up[..full].chunks_exact(LANES)))
+                .zip(out[..full].chunks_exact_mut(LANES));
+            for ((((r_c, h), (rise, z_c)), (z_u, r_u)), o) in chunks {
+                let g =
+                    gradient(lanes_of(r_c), lanes_of(h), lanes_of(rise), lanes_of(z_c), lanes_of(z_u), lanes_of(r_u));
+                o.copy_from_slice(&g.to_array());
             }
-            None => rise_a / run_a,
-        };
-        // NaN (no return) becomes 0.
-        store_lanes(g.simd_ge(zero) & g, out, start);
+            if full < cols {
+                let load = |values: &[f32]| load_lanes(values, full);
+                let g = gradient(load(r_row), load(half), load(rise_a), load(z_row), load(z_up), load(r_up));
+                store_lanes(g, out, full);
+            }
+        }
+        None => {
+            let gradient = |r_c: Lanes, half: Lanes, rise: Lanes| {
+                let (rise_a, run_a) = azimuth(r_c, half, rise);
+                finish(rise_a / run_a)
+            };
+            let chunks = (r_row[..full].chunks_exact(LANES).zip(half[..full].chunks_exact(LANES)))
+                .zip(rise_a[..full].chunks_exact(LANES))
+                .zip(out[..full].chunks_exact_mut(LANES));
+            for (((r_c, h), rise), o) in chunks {
+                o.copy_from_slice(&gradient(lanes_of(r_c), lanes_of(h), lanes_of(rise)).to_array());
+            }
+            if full < cols {
+                let g = gradient(load_lanes(r_row, full), load_lanes(half, full), load_lanes(rise_a, full));
+                store_lanes(g, out, full);
+            }
+        }
+    }
+}
+
+/// The [`LANES`] values of a whole chunk.
+#[inline(always)]
+fn lanes_of(chunk: &[f32]) -> Lanes {
+    Lanes::new(std::array::from_fn(|i| chunk[i]))
+}
+
+/// |z(c − w_a) − z(c + w_a)| per column c: `padded` is the row with `pad` ≥ every w_a columns of
+/// wrap-around on both sides, `half` holds w_a per column. (Its own function: inlined, the
+/// surrounding vector code leaves too few registers for this scalar loop.)
+#[inline(never)]
+fn azimuth_rise(padded: &[f32], pad: usize, half: &[u32], rise: &mut [f32]) {
+    // Column c's window is padded[c..=c + 2·pad], centred on c + pad.
+    for ((rise, &h), window) in rise.iter_mut().zip(half).zip(padded.windows(2 * pad + 1)) {
+        let h = (h as usize).min(pad);
+        let (left, right) = (&window[..=pad], &window[pad..]);
+        *rise = (left[pad - h] - right[h]).abs();
     }
 }
 
@@ -340,21 +451,62 @@ fn store_lanes(v: Lanes, values: &mut [f32], start: usize) {
     }
 }
 
-/// [`floor_small`] per lane.
+/// [`small_to_u32`] per lane (one truncating conversion, `cvttps2dq` on SSE2: exact for the
+/// integer values in [0, 2²³) it is used on), stored to `values` from `start` (dropping lanes
+/// past the end).
+#[inline(always)]
+fn store_index_lanes(v: Lanes, values: &mut [u32], start: usize) {
+    let lanes: [u32; LANES] = bytemuck::cast(v.fast_trunc_int().to_array());
+    match values.get_mut(start..start + LANES) {
+        Some(chunk) => chunk.copy_from_slice(&lanes),
+        None => values.iter_mut().skip(start).zip(lanes).for_each(|(slot, x)| *slot = x),
+    }
+}
+
+/// [`floor_small`] per lane: for 0 ≤ v < 2²³ the floor is the truncation, and one truncating
+/// conversion to integers and one back (`cvttps2dq`, `cvtdq2ps` on SSE2) are exact there.
 #[inline(always)]
 fn floor_small_lanes(v: Lanes) -> Lanes {
-    let shift = Lanes::splat(8_388_608.0); // 2²³
-    let rounded = (v + shift) - shift;
-    rounded - (rounded.simd_gt(v) & Lanes::splat(1.0))
+    Lanes::from_i32x8(v.fast_trunc_int())
 }
 
 /// Per lane (max(rise, 0), run clamped away from 0); a NaN rise (a neighbour without a return)
 /// gives rise 0, a NaN run (the pixel has no return) stays NaN so that the caller yields 0.
 #[inline(always)]
 fn positive_part_lanes(rise: Lanes, run: Lanes) -> (Lanes, Lanes) {
-    let rise = rise.simd_gt(Lanes::ZERO) & rise;
-    // `fast_max` is `max` here: `run` is not NaN where it is kept.
-    (rise, run.simd_ge(Lanes::ZERO).select(run.fast_max(Lanes::splat(1e-12)), run))
+    (zero_unless_positive(rise), clamp_run_lanes(run))
+}
+
+/// Per lane `v` where v > 0, else +0 (NaN and −0 included). With SSE one `maxps(v, 0)`, which
+/// returns its second operand (+0) when v is NaN or equal to it (±0).
+#[cfg(target_feature = "sse")]
+#[inline(always)]
+fn zero_unless_positive(v: Lanes) -> Lanes {
+    v.fast_max(Lanes::ZERO)
+}
+
+/// Per lane `v` where v > 0, else +0 (NaN and −0 included).
+#[cfg(not(target_feature = "sse"))]
+#[inline(always)]
+fn zero_unless_positive(v: Lanes) -> Lanes {
+    v.simd_gt(Lanes::ZERO) & v
+}
+
+/// Per lane max(run, 1e-12), NaN kept as NaN. With SSE one `maxps`, which returns its second
+/// operand when either is NaN. (Runs are never negative here: horizontal ranges and η·cos θ are
+/// ≥ 0 for |θ| ≤ π/2; a negative run would be clamped too.)
+#[cfg(target_feature = "sse")]
+#[inline(always)]
+fn clamp_run_lanes(run: Lanes) -> Lanes {
+    Lanes::splat(1e-12).fast_max(run)
+}
+
+/// Per lane max(run, 1e-12) where run ≥ 0, NaN kept as NaN (other backends' `fast_max` may not
+/// return its second operand for NaN).
+#[cfg(not(target_feature = "sse"))]
+#[inline(always)]
+fn clamp_run_lanes(run: Lanes) -> Lanes {
+    run.simd_ge(Lanes::ZERO).select(run.fast_max(Lanes::splat(1e-12)), run)
 }
 
 /// ⌊v⌋ for 0 ≤ v < 2²², in float arithmetic only (vectorises without SSE4.1 and without the
@@ -410,9 +562,9 @@ pub fn obstacles(
         }
         let mut c = first_free;
         while c < last_free {
-            let Some(offset) = first_where(&obs[c..last_free], |o| o) else { break };
+            let Some(offset) = first_equal(&obs[c..last_free], true) else { break };
             let start = c + offset;
-            let end = first_where(&obs[start..last_free], |o| !o).map_or(last_free, |o| start + o);
+            let end = first_equal(&obs[start..last_free], false).map_or(last_free, |o| start + o);
             if run_length(rho[start..end].iter(), step, min_run_m) < min_run_m {
                 obs[start..end].iter_mut().for_each(|o| *o = false);
             }
@@ -444,20 +596,20 @@ pub struct DistanceScratch {
 }
 
 /// Rows handled together by [`row_passes_block`], one per SIMD lane.
-pub(crate) const BLOCK_ROWS: usize = LANES;
+pub(crate) const BLOCK_ROWS: usize = std::mem::size_of::<BlockLanes>() / 4;
 
 /// A block of [`BLOCK_ROWS`] rows transposed to column-major, one row per lane, for
 /// [`row_passes_block`].
 #[derive(Clone, Debug, Default)]
 pub(crate) struct RowBlockScratch {
     /// D_a per column.
-    own: Vec<Lanes>,
+    own: Vec<BlockLanes>,
     /// s = (2π/A)·ρ per column.
-    arc: Vec<Lanes>,
+    arc: Vec<BlockLanes>,
     /// Some row of the block has D_a < D_max in this column.
     below: Vec<bool>,
     /// D per column.
-    out: Vec<Lanes>,
+    out: Vec<BlockLanes>,
 }
 
 /// Stage 5: Algorithm 1, the distance-transform approximation, capped at `max_distance_m`.
@@ -505,15 +657,15 @@ pub fn distance_transform(
 pub(crate) fn column_pass_row(rho: &[f32], obs: &[bool], nearest: &mut [f32], d_max: f32, d_a: &mut [f32]) {
     let n = rho.len().min(obs.len()).min(d_a.len()).min(nearest.len());
     let (rho, obs, nearest, d_a) = (&rho[..n], &obs[..n], &mut nearest[..n], &mut d_a[..n]);
-    let vectorised = n / BLOCK_ROWS * BLOCK_ROWS;
-    // [`BLOCK_ROWS`] columns per vector with explicit selects (as plain code the compiler turns
+    let vectorised = n / LANES * LANES;
+    // [`LANES`] columns per vector with explicit selects (as plain code the compiler turns
     // the conditional update of `nearest` into a scalarised masked store). No NaN reaches the
     // `fast_min`s: ranges are finite and `nearest` is finite or ∞.
     let d_max_lanes = Lanes::splat(d_max);
     let chunks = rho[..vectorised]
-        .chunks_exact(BLOCK_ROWS)
-        .zip(obs[..vectorised].chunks_exact(BLOCK_ROWS))
-        .zip(nearest[..vectorised].chunks_exact_mut(BLOCK_ROWS).zip(d_a[..vectorised].chunks_exact_mut(BLOCK_ROWS)));
+        .chunks_exact(LANES)
+        .zip(obs[..vectorised].chunks_exact(LANES))
+        .zip(nearest[..vectorised].chunks_exact_mut(LANES).zip(d_a[..vectorised].chunks_exact_mut(LANES)));
     for ((rho, obs), (nearest, d_a)) in chunks {
         let range = Lanes::new(std::array::from_fn(|i| rho[i]));
         let is_obstacle = Lanes::new(std::array::from_fn(|i| obs[i] as u8 as f32)).simd_gt(Lanes::ZERO);
@@ -560,7 +712,11 @@ pub(crate) fn row_passes(rho: &[f32], d_a: &[f32], d: &mut [f32], step: f32, d_m
 /// The lanes follow the scalar passes step by step, with the branches turned into selects:
 /// where the scalar pass skips a stretch because the propagated value has reached D_max, a lane
 /// instead restarts from each column's own D_a (≥ D_max over such a stretch), which writes
-/// nothing below D_max and leaves the same state at the next column with D_a < D_max.
+/// nothing below D_max and leaves the same state at the next column with D_a < D_max. A lane
+/// whose propagated value has reached D_max stays there, writes nothing and restarts at the next
+/// column where its own D_a < D_max exactly as the scalar pass does, so while every lane is
+/// there the block may jump to the next column where some lane has D_a < D_max, or not: the
+/// jump is only an optimisation, tried at columns where no lane has D_a < D_max.
 pub(crate) fn row_passes_block(
     rho: &[f32],
     d_a: &[f32],
@@ -576,43 +732,46 @@ pub(crate) fn row_passes_block(
     }
     let (rho, d_a, d) = (&rho[..width], &d_a[..width], &mut d[..width]);
     // Nothing below D_max in any of the rows: D = D_max throughout.
-    if first_where(d_a, |v| v < d_max).is_none() {
+    let d_max_lanes = Lanes::splat(d_max);
+    if first_lanes(d_a, |v| v.simd_lt(d_max_lanes), |v| v < d_max).is_none() {
         d.iter_mut().for_each(|v| *v = d_max);
         return;
     }
     let RowBlockScratch { own, arc, below, out } = scratch;
-    own.resize(cols, Lanes::ZERO);
-    arc.resize(cols, Lanes::ZERO);
+    own.resize(cols, BlockLanes::ZERO);
+    arc.resize(cols, BlockLanes::ZERO);
     below.resize(cols, false);
-    out.clear();
-    out.resize(cols, Lanes::splat(d_max));
+    out.resize(cols, BlockLanes::ZERO);
     let (own, arc, below, out) = (&mut own[..cols], &mut arc[..cols], &mut below[..cols], &mut out[..cols]);
     transpose_to_lanes(d_a, cols, own);
     transpose_to_lanes(rho, cols, arc);
-    let step_lanes = Lanes::splat(step);
-    arc.iter_mut().for_each(|a| *a *= step_lanes);
-    let d_max_lanes = Lanes::splat(d_max);
-    for (b, o) in below.iter_mut().zip(own.iter()) {
-        *b = o.simd_lt(d_max_lanes).any();
+    let (step_lanes, d_max_lanes) = (BlockLanes::splat(step), BlockLanes::splat(d_max));
+    // One sweep: s = (2π/A)·ρ, whether any row is below D_max, D initialised to D_max.
+    for (((a, o), b), d) in arc.iter_mut().zip(own.iter()).zip(below.iter_mut()).zip(out.iter_mut()) {
+        *a *= step_lanes;
+        *b = o.simd_lt(d_max_lanes).to_bitmask() != 0;
+        *d = d_max_lanes;
     }
-    block_pass::<true>(own, arc, below, out, d_max);
-    block_pass::<false>(own, arc, below, out, d_max);
+    block_passes(own, arc, below, out, d_max);
     transpose_from_lanes(out, cols, d);
 }
 
 /// Row l of the `BLOCK_ROWS × cols` block `rows` becomes lane l of `lanes` (`cols` entries),
 /// 4 × 4 tiles at a time.
-fn transpose_to_lanes(rows: &[f32], cols: usize, lanes: &mut [Lanes]) {
+fn transpose_to_lanes(rows: &[f32], cols: usize, lanes: &mut [BlockLanes]) {
     let quads: &mut [f32x4] = bytemuck::cast_slice_mut(lanes);
     let tiled = cols / 4 * 4;
-    for group in 0..QUADS_PER_LANES {
-        let block = &rows[4 * group * cols..(4 * group + 4) * cols];
-        let (r0, r1, r2, r3) = (&block[..cols], &block[cols..2 * cols], &block[2 * cols..3 * cols], &block[3 * cols..]);
-        for c in (0..tiled).step_by(4) {
-            let load = |row: &[f32]| f32x4::new([row[c], row[c + 1], row[c + 2], row[c + 3]]);
-            let tile = f32x4::transpose([load(r0), load(r1), load(r2), load(r3)]);
+    for group in 0..QUADS_PER_BLOCK {
+        let row = |i: usize| &rows[(4 * group + i) * cols..(4 * group + i) * cols + tiled];
+        let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
+        let sources = r0.chunks_exact(4).zip(r1.chunks_exact(4)).zip(r2.chunks_exact(4).zip(r3.chunks_exact(4)));
+        // Four columns: four lane vectors, of which this group fills one quad each.
+        for (out, ((a, b), (c, d))) in quads.chunks_exact_mut(4 * QUADS_PER_BLOCK).zip(sources) {
+            // One unaligned 16-byte load per row.
+            let load = |s: &[f32]| bytemuck::pod_read_unaligned::<f32x4>(bytemuck::cast_slice(s));
+            let tile = f32x4::transpose([load(a), load(b), load(c), load(d)]);
             for (j, column) in tile.into_iter().enumerate() {
-                quads[(c + j) * QUADS_PER_LANES + group] = column;
+                out[j * QUADS_PER_BLOCK + group] = column;
             }
         }
     }
@@ -625,17 +784,25 @@ fn transpose_to_lanes(rows: &[f32], cols: usize, lanes: &mut [Lanes]) {
 }
 
 /// The inverse of [`transpose_to_lanes`].
-fn transpose_from_lanes(lanes: &[Lanes], cols: usize, rows: &mut [f32]) {
+fn transpose_from_lanes(lanes: &[BlockLanes], cols: usize, rows: &mut [f32]) {
     let quads: &[f32x4] = bytemuck::cast_slice(lanes);
     let tiled = cols / 4 * 4;
-    for group in 0..QUADS_PER_LANES {
+    for group in 0..QUADS_PER_BLOCK {
         let block = &mut rows[4 * group * cols..(4 * group + 4) * cols];
-        for c in (0..tiled).step_by(4) {
-            let load = |j: usize| quads[(c + j) * QUADS_PER_LANES + group];
-            let tile = f32x4::transpose([load(0), load(1), load(2), load(3)]);
-            for (i, row_values) in tile.into_iter().enumerate() {
-                block[i * cols + c..i * cols + c + 4].copy_from_slice(&row_values.to_array());
-            }
+        let (r0, rest) = block.split_at_mut(cols);
+        let (r1, rest) = rest.split_at_mut(cols);
+        let (r2, r3) = rest.split_at_mut(cols);
+        let targets = r0[..tiled]
+            .chunks_exact_mut(4)
+            .zip(r1[..tiled].chunks_exact_mut(4))
+            .zip(r2[..tiled].chunks_exact_mut(4).zip(r3[..tiled].chunks_exact_mut(4)));
+        for (lanes, ((a, b), (c, d))) in quads.chunks_exact(4 * QUADS_PER_BLOCK).zip(targets) {
+            let column = |j: usize| lanes[j * QUADS_PER_BLOCK + group];
+            let [t0, t1, t2, t3] = f32x4::transpose([column(0), column(1), column(2), column(3)]);
+            a.copy_from_slice(&t0.to_array());
+            b.copy_from_slice(&t1.to_array());
+            c.copy_from_slice(&t2.to_array());
+            d.copy_from_slice(&t3.to_array());
         }
     }
     let flat: &[f32] = bytemuck::cast_slice(lanes);
@@ -646,39 +813,80 @@ fn transpose_from_lanes(lanes: &[Lanes], cols: usize, rows: &mut [f32]) {
     }
 }
 
-/// One direction of [`row_passes_block`] over transposed columns (slices of equal length;
-/// `below[c]`: some lane of column c has D_a < D_max).
-#[inline(always)]
-fn block_pass<const FORWARD: bool>(own: &[Lanes], arc: &[Lanes], below: &[bool], out: &mut [Lanes], d_max: f32) {
-    let cols = out.len().min(own.len()).min(arc.len()).min(below.len());
-    let col = |k: usize| {
+/// One direction of [`row_passes_block`] over transposed columns: the pass's position and, per
+/// lane, k − p_last (an integer below 2²⁴, exact in f32), D_a(p_last) and s(p_last), so that
+/// D_a(p_last) + (k − p_last)·s(p_last) is computed exactly as the scalar pass does.
+///
+/// Each step depends on the previous one through a compare and a select (the pass is bound by
+/// that latency), so [`block_passes`] runs the two directions interleaved, step for step: their
+/// writes are combined with `min`, whose result does not depend on the order.
+struct BlockPass<const FORWARD: bool> {
+    /// Unwrapped position in [0, 2·cols): the second lap is the wrap-around continuation.
+    k: usize,
+    offset: BlockLanes,
+    anchor_value: BlockLanes,
+    arc_last: BlockLanes,
+    /// Wrap-around lap: lanes whose propagated value is still below D_max.
+    alive: BlockLanes,
+}
+
+impl<const FORWARD: bool> BlockPass<FORWARD> {
+    fn new() -> Self {
+        BlockPass {
+            k: 0,
+            offset: BlockLanes::ZERO,
+            anchor_value: BlockLanes::splat(f32::INFINITY),
+            arc_last: BlockLanes::ZERO,
+            alive: BlockLanes::splat(f32::from_bits(u32::MAX)),
+        }
+    }
+
+    /// The column at unwrapped position `k`.
+    #[inline(always)]
+    fn col(k: usize, cols: usize) -> usize {
         let k = if k >= cols { k - cols } else { k };
         if FORWARD { k } else { cols - 1 - k }
-    };
-    let d_max_lanes = Lanes::splat(d_max);
-    let (infinity, one) = (Lanes::splat(f32::INFINITY), Lanes::splat(1.0));
-    // Per lane: k − p_last (an integer below 2²⁴, exact in f32), D_a(p_last) and s(p_last), so
-    // that D_a(p_last) + (k − p_last)·s(p_last) is computed exactly as the scalar pass does.
-    let (mut offset, mut anchor_value, mut arc_last) = (Lanes::ZERO, infinity, Lanes::ZERO);
-    let mut k = 0;
-    while k < cols {
-        offset += one;
-        let mut candidate = anchor_value + offset * arc_last;
-        if candidate.simd_ge(d_max_lanes).all() {
+    }
+
+    /// One column of the first lap (`self.k < cols`, slices of length `cols`); after the lap's
+    /// last column `self.k` is `cols`.
+    #[inline(always)]
+    fn first_lap_step(
+        &mut self,
+        own: &[BlockLanes],
+        arc: &[BlockLanes],
+        below: &[bool],
+        out: &mut [BlockLanes],
+        d_max: BlockLanes,
+    ) {
+        let cols = out.len();
+        // The first lap needs no wrap: the caller guarantees k < cols.
+        let c = if FORWARD { self.k } else { cols - 1 - self.k };
+        self.offset += BlockLanes::splat(1.0);
+        let candidate = self.anchor_value + self.offset * self.arc_last;
+        // The skip is an optimisation only (see [`row_passes_block`]): it is tried only at columns
+        // where no lane has D_a < D_max, which saves the test at all the others.
+        if !below[c] && candidate.simd_ge(d_max).all() {
             // Every lane has reached D_max: until some lane has D_a < D_max nothing is written and
             // each lane restarts at that column (the propagated values only grow meanwhile).
+            let k = self.k;
             let next = if FORWARD {
                 first_where(&below[k..], |b| b).map(|o| k + o)
             } else {
                 last_where(&below[..cols - k], |b| b).map(|i| cols - 1 - i)
             };
             match next {
-                Some(next) => k = next,
-                None => break,
+                // The next step's candidate is ∞ (∞ + offset·0): every lane restarts there.
+                Some(next) => {
+                    self.k = next;
+                    self.anchor_value = BlockLanes::splat(f32::INFINITY);
+                    self.arc_last = BlockLanes::ZERO;
+                    self.offset = BlockLanes::ZERO;
+                }
+                None => self.k = cols,
             }
-            candidate = infinity;
+            return;
         }
-        let c = col(k);
         let own_c = own[c];
         // Beaten by the column's own D_a. Where the candidate has reached D_max the scalar pass
         // skips to the next column with D_a < D_max and restarts there; here the candidate only
@@ -686,27 +894,63 @@ fn block_pass<const FORWARD: bool>(own: &[Lanes], arc: &[Lanes], below: &[bool],
         let restart = candidate.simd_gt(own_c);
         // The value is own where restarting, else the candidate: min(candidate, own).
         out[c] = out[c].fast_min(candidate.fast_min(own_c));
-        offset = restart.select(Lanes::ZERO, offset);
-        anchor_value = restart.select(own_c, anchor_value);
-        arc_last = restart.select(arc[c], arc_last);
-        k += 1;
+        self.offset = restart.select(BlockLanes::ZERO, self.offset);
+        self.anchor_value = restart.select(own_c, self.anchor_value);
+        self.arc_last = restart.select(arc[c], self.arc_last);
+        self.k += 1;
     }
-    // The wrap-around lap: a lane stops for good once its propagated value reaches D_max.
-    let mut alive = Lanes::splat(f32::from_bits(u32::MAX));
-    for k in cols..2 * cols {
-        let c = col(k);
-        offset += one;
-        let candidate = anchor_value + offset * arc_last;
-        alive &= candidate.simd_lt(d_max_lanes);
-        if !alive.any() {
-            break;
+
+    /// One column of the wrap-around lap (`cols ≤ self.k < 2·cols`): a lane stops for good once
+    /// its propagated value reaches D_max; when none is left, or after the lap, `self.k` is
+    /// `2·cols`.
+    #[inline(always)]
+    fn wrap_step(&mut self, own: &[BlockLanes], arc: &[BlockLanes], out: &mut [BlockLanes], d_max: BlockLanes) {
+        let cols = out.len();
+        let c = Self::col(self.k, cols);
+        self.offset += BlockLanes::splat(1.0);
+        let candidate = self.anchor_value + self.offset * self.arc_last;
+        self.alive &= candidate.simd_lt(d_max);
+        if !self.alive.any() {
+            self.k = 2 * cols;
+            return;
         }
         let own_c = own[c];
         let restart = candidate.simd_gt(own_c);
-        out[c] = out[c].fast_min(alive.select(candidate.fast_min(own_c), infinity));
-        offset = restart.select(Lanes::ZERO, offset);
-        anchor_value = restart.select(own_c, anchor_value);
-        arc_last = restart.select(arc[c], arc_last);
+        out[c] = out[c].fast_min(self.alive.select(candidate.fast_min(own_c), BlockLanes::splat(f32::INFINITY)));
+        self.offset = restart.select(BlockLanes::ZERO, self.offset);
+        self.anchor_value = restart.select(own_c, self.anchor_value);
+        self.arc_last = restart.select(arc[c], self.arc_last);
+        self.k += 1;
+    }
+}
+
+/// Both directions of [`row_passes_block`] over transposed columns (slices of equal length;
+/// `below[c]`: some lane of column c has D_a < D_max), interleaved step for step.
+#[inline(always)]
+fn block_passes(own: &[BlockLanes], arc: &[BlockLanes], below: &[bool], out: &mut [BlockLanes], d_max: f32) {
+    let cols = out.len().min(own.len()).min(arc.len()).min(below.len());
+    let (own, arc, below, out) = (&own[..cols], &arc[..cols], &below[..cols], &mut out[..cols]);
+    let d_max = BlockLanes::splat(d_max);
+    let (mut forward, mut backward) = (BlockPass::<true>::new(), BlockPass::<false>::new());
+    while forward.k < cols && backward.k < cols {
+        forward.first_lap_step(own, arc, below, out, d_max);
+        backward.first_lap_step(own, arc, below, out, d_max);
+    }
+    while forward.k < cols {
+        forward.first_lap_step(own, arc, below, out, d_max);
+    }
+    while backward.k < cols {
+        backward.first_lap_step(own, arc, below, out, d_max);
+    }
+    while forward.k < 2 * cols && backward.k < 2 * cols {
+        forward.wrap_step(own, arc, out, d_max);
+        backward.wrap_step(own, arc, out, d_max);
+    }
+    while forward.k < 2 * cols {
+        forward.wrap_step(own, arc, out, d_max);
+    }
+    while backward.k < 2 * cols {
+        backward.wrap_step(own, arc, out, d_max);
     }
 }
 
@@ -768,30 +1012,54 @@ pub fn traversable(ranges: &[f32], distance: &[f32], inflation_m: f32, out: &mut
     }
 }
 
-/// Per-column state of the reachability walk, [`Lanes`] columns per vector (the last vector
-/// padded with columns that never have a return).
+/// Per-column state of the reachability walk, [`LANES`] columns per vector (the last vector
+/// padded with columns that are not walking), and the vectors still walking.
 #[derive(Clone, Debug, Default)]
 pub struct ReachScratch {
-    r: Vec<Lanes>,
-    rho: Vec<Lanes>,
-    trav: Vec<Lanes>,
-    last_r: Vec<Lanes>,
-    active: Vec<Lanes>,
-    blocked: Vec<Lanes>,
-    range: Vec<Lanes>,
-    last_row: Vec<Lanes>,
+    state: Vec<ReachLanes>,
+    /// Indices of the vectors with a column still walking.
+    walking: Vec<u32>,
 }
 
-/// Copies `values` into `lanes` (zero-padded), [`BLOCK_ROWS`] values per vector.
-fn fill_lanes(values: impl Iterator<Item = f32>, lanes: &mut [Lanes]) {
-    let flat: &mut [f32] = bytemuck::cast_slice_mut(lanes);
-    let padded = flat.len();
-    let mut copied = 0;
-    for (slot, v) in flat.iter_mut().zip(values) {
-        *slot = v;
-        copied += 1;
+/// The walk's state for [`LANES`] columns.
+#[derive(Clone, Copy, Debug)]
+struct ReachLanes {
+    /// Still walking (mask).
+    active: Lanes,
+    /// Horizontal range of the last safe pixel (−1 before any).
+    last_r: Lanes,
+    /// An obstacle ended the walk (mask).
+    blocked: Lanes,
+    /// Largest horizontal range of the safe pixels.
+    range: Lanes,
+    /// Last safe row (`rows` before any).
+    last_row: Lanes,
+}
+
+impl ReachLanes {
+    /// One row: `horizontal` = r, `has_return` and `trav` masks.
+    #[inline(always)]
+    fn step(&mut self, horizontal: Lanes, has_return: Lanes, trav: Lanes, gap: Lanes, row_index: Lanes) {
+        let live = self.active & has_return;
+        let jump = self.last_r.simd_ge(Lanes::ZERO) & (horizontal - self.last_r).abs().simd_gt(gap);
+        let accept = live & !jump & trav;
+        // A jump ends the walk (unknown beyond), an obstacle ends it (known obstacle).
+        self.blocked |= live & !jump & !trav;
+        self.active &= !live | accept;
+        self.last_r = accept.select(horizontal, self.last_r);
+        // Accepted pixels have a return: `horizontal` is a positive number there.
+        self.range = accept.select(self.range.fast_max(horizontal), self.range);
+        self.last_row = accept.select(row_index, self.last_row);
     }
-    flat[copied.min(padded)..].iter_mut().for_each(|v| *v = 0.0);
+}
+
+/// [`LANES`] values of `values` from `start`, `pad` past the end.
+#[inline(always)]
+fn load_lanes_or<T: Copy>(values: &[T], start: usize, pad: T, map: impl Fn(T) -> f32) -> Lanes {
+    match values.get(start..start + LANES) {
+        Some(chunk) => Lanes::new(std::array::from_fn(|i| map(chunk[i]))),
+        None => Lanes::new(std::array::from_fn(|i| map(values.get(start + i).copied().unwrap_or(pad)))),
+    }
 }
 
 /// Stage 6: the reachability scan S(φ). Each column is walked up from the bottom row (nearest
@@ -802,7 +1070,7 @@ fn fill_lanes(values: impl Iterator<Item = f32>, lanes: &mut [Lanes]) {
 /// last safe row (`rows` if none).
 ///
 /// All columns advance together one row at a time, as SIMD lanes with masks for the per-column
-/// decisions, until no column is still walking.
+/// decisions; a vector of columns drops out of the walk once none of its columns is walking.
 #[allow(clippy::too_many_arguments)]
 pub fn reachability(
     r: &[f32],
@@ -821,65 +1089,61 @@ pub fn reachability(
     let width = cols;
     let rows = r.len().min(ranges.len()).min(traversable.len()) / width;
     let cols = width.min(range_m.len()).min(obstacle.len()).min(last_row.len());
-    let vectors = cols.div_ceil(BLOCK_ROWS);
-    let ReachScratch {
-        r: r_lanes,
-        rho: rho_lanes,
-        trav: trav_lanes,
-        last_r,
-        active,
-        blocked,
-        range,
-        last_row: row_lanes,
-    } = scratch;
-    for buffer in [&mut *r_lanes, &mut *rho_lanes, &mut *trav_lanes, &mut *last_r, &mut *active, &mut *blocked] {
-        buffer.clear();
-        buffer.resize(vectors, Lanes::ZERO);
-    }
-    range.clear();
-    range.resize(vectors, Lanes::ZERO);
-    row_lanes.clear();
-    row_lanes.resize(vectors, Lanes::splat(rows as f32));
-    last_r.iter_mut().for_each(|v| *v = Lanes::splat(-1.0));
-    // Padding columns are not walking.
-    fill_lanes((0..cols).map(|_| f32::from_bits(u32::MAX)), active);
+    let (vectors, full) = (cols.div_ceil(LANES), cols / LANES);
+    let ReachScratch { state, walking } = scratch;
+    let true_mask = f32::from_bits(u32::MAX);
+    state.clear();
+    state.extend((0..vectors).map(|v| ReachLanes {
+        // Padding columns are not walking.
+        active: Lanes::new(std::array::from_fn(|i| if v * LANES + i < cols { true_mask } else { 0.0 })),
+        last_r: Lanes::splat(-1.0),
+        blocked: Lanes::ZERO,
+        range: Lanes::ZERO,
+        last_row: Lanes::splat(rows as f32),
+    }));
+    walking.clear();
+    walking.extend((0..vectors).map(|v| v as u32));
     let (gap, zero) = (Lanes::splat(gap_m), Lanes::ZERO);
-    let mut walking = cols;
+    let mask_of = |t: bool| if t { true_mask } else { 0.0 };
     for row in (0..rows).rev() {
-        if walking == 0 {
+        if walking.is_empty() {
             break;
         }
         let span = row * width..row * width + cols;
-        fill_lanes(r[span.clone()].iter().copied(), r_lanes);
-        fill_lanes(ranges[span.clone()].iter().copied(), rho_lanes);
-        fill_lanes(traversable[span].iter().map(|&t| if t { f32::from_bits(u32::MAX) } else { 0.0 }), trav_lanes);
+        let (r_row, rho_row, trav_row) = (&r[span.clone()], &ranges[span.clone()], &traversable[span]);
         let row_index = Lanes::splat(row as f32);
-        let mut still = 0;
-        let state = active.iter_mut().zip(last_r.iter_mut()).zip(blocked.iter_mut()).zip(range.iter_mut());
-        let inputs = r_lanes.iter().zip(rho_lanes.iter()).zip(trav_lanes.iter()).zip(row_lanes.iter_mut());
-        for ((((active, last_r), blocked), range), (((&horizontal, &rho), &trav), last_row)) in state.zip(inputs) {
-            let live = *active & rho.simd_gt(zero);
-            let jump = last_r.simd_ge(zero) & (horizontal - *last_r).abs().simd_gt(gap);
-            let accept = live & !jump & trav;
-            // A jump ends the walk (unknown beyond), an obstacle ends it (known obstacle).
-            *blocked |= live & !jump & !trav;
-            *active &= !live | accept;
-            *last_r = accept.select(horizontal, *last_r);
-            // Accepted pixels have a return: `horizontal` is a positive number there.
-            *range = accept.select(range.fast_max(horizontal), *range);
-            *last_row = accept.select(row_index, *last_row);
-            still += active.to_bitmask().count_ones() as usize;
+        // Walk the vectors on the list, keeping those still walking (in order).
+        let mut kept = 0;
+        for i in 0..walking.len() {
+            let v = walking[i] as usize;
+            let Some(lanes) = state.get_mut(v) else { continue };
+            let start = v * LANES;
+            if v < full {
+                let (r, rho) = (lanes_of(&r_row[start..start + LANES]), lanes_of(&rho_row[start..start + LANES]));
+                let trav = &trav_row[start..start + LANES];
+                let trav = Lanes::new(std::array::from_fn(|i| trav[i] as u8 as f32)).simd_gt(zero);
+                lanes.step(r, rho.simd_gt(zero), trav, gap, row_index);
+            } else {
+                // Padding columns have no return (ρ = 0): never live.
+                let (r, rho) = (load_lanes_or(r_row, start, 0.0, |x| x), load_lanes_or(rho_row, start, 0.0, |x| x));
+                let trav = load_lanes_or(trav_row, start, false, mask_of);
+                lanes.step(r, rho.simd_gt(zero), trav, gap, row_index);
+            }
+            if lanes.active.any() {
+                walking[kept] = v as u32;
+                kept += 1;
+            }
         }
-        walking = still;
+        walking.truncate(kept);
     }
-    let range_flat: &[f32] = bytemuck::cast_slice(range);
-    let blocked_flat: &[f32] = bytemuck::cast_slice(blocked);
-    let row_flat: &[f32] = bytemuck::cast_slice(row_lanes);
-    for c in 0..cols {
-        range_m[c] = range_flat[c];
-        obstacle[c] = blocked_flat[c].to_bits() != 0;
-        // An integer-valued row index below 2²³ (or `rows`): exact.
-        last_row[c] = small_to_u32(row_flat[c]);
+    for (v, lanes) in state.iter().enumerate() {
+        let (range, blocked, last) = (lanes.range.to_array(), lanes.blocked.to_array(), lanes.last_row.to_array());
+        for (i, c) in (v * LANES..cols.min(v * LANES + LANES)).enumerate() {
+            range_m[c] = range[i];
+            obstacle[c] = blocked[i].to_bits() != 0;
+            // An integer-valued row index below 2²³ (or `rows`): exact.
+            last_row[c] = small_to_u32(last[i]);
+        }
     }
 }
 
@@ -951,6 +1215,112 @@ mod tests {
                 assert_eq!(bits(&got), bits(&expected), "cols {cols}");
             }
         }
+    }
+
+    /// [`row_passes_block`] against [`row_passes`] on blocks like a real panorama's: rows mostly
+    /// at D_max with a few obstacles or close columns (also at the seam), whole rows at D_max,
+    /// small ranges whose propagation wraps around the row, and pixels without a return: this
+    /// exercises the jumps over columns where every lane has reached D_max and the wrap-around
+    /// laps of both directions.
+    #[test]
+    fn row_block_matches_scalar_row_passes_on_sparse_rows() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let d_max = 2.0f32;
+        let mut block = RowBlockScratch::default();
+        let mut jumps = 0;
+        for cols in [5usize, 16, 64, 257, 1024] {
+            let step = std::f32::consts::TAU / cols as f32;
+            for _ in 0..30 {
+                let n = BLOCK_ROWS * cols;
+                let mut d_a = vec![d_max; n];
+                let mut rho = vec![0.0f32; n];
+                for row in 0..BLOCK_ROWS {
+                    let near = rng.random_bool(0.3);
+                    for c in 0..cols {
+                        rho[row * cols + c] = match rng.random_range(0..10) {
+                            0 => 0.0,
+                            _ if near => rng.random_range(0.01..0.3),
+                            _ => rng.random_range(0.5..20.0),
+                        };
+                    }
+                    if rng.random_bool(0.3) {
+                        continue;
+                    }
+                    for _ in 0..rng.random_range(1..4) {
+                        let c = match rng.random_range(0..4) {
+                            0 => 0,
+                            1 => cols - 1,
+                            _ => rng.random_range(0..cols),
+                        };
+                        d_a[row * cols + c] = if rng.random_bool(0.5) { 0.0 } else { rng.random_range(0.0..d_max) };
+                    }
+                }
+                // Columns where no row is below D_max, next to one where some is: a jump can happen.
+                let below: Vec<bool> = (0..cols).map(|c| (0..BLOCK_ROWS).any(|l| d_a[l * cols + c] < d_max)).collect();
+                jumps += (1..cols).filter(|&c| below[c - 1] && !below[c]).count();
+                let mut expected = vec![0.0; n];
+                for ((rho, d_a), d) in
+                    rho.chunks_exact(cols).zip(d_a.chunks_exact(cols)).zip(expected.chunks_exact_mut(cols))
+                {
+                    row_passes(rho, d_a, d, step, d_max);
+                }
+                let mut got = vec![-1.0; n];
+                row_passes_block(&rho, &d_a, &mut got, cols, step, d_max, &mut block);
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&got), bits(&expected), "cols {cols}");
+            }
+        }
+        assert!(jumps > 100, "{jumps}");
+    }
+
+    /// The bit-mask searches agree with `position` at every offset and length (chunks and tails).
+    #[test]
+    fn mask_searches_find_the_first_match() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        for len in 0usize..80 {
+            for _ in 0..20 {
+                let values: Vec<f32> = (0..len).map(|_| [0.0, -1.0, 1.0, 2.5][rng.random_range(0..4)]).collect();
+                let flags: Vec<bool> = (0..len).map(|_| rng.random_bool(0.1)).collect();
+                for start in [0, len / 3, len.saturating_sub(1)] {
+                    let (values, flags) = (&values[start..], &flags[start..]);
+                    let got = first_lanes(values, |v| v.simd_le(Lanes::ZERO), |v| v <= 0.0);
+                    assert_eq!(got, values.iter().position(|&v| v <= 0.0));
+                    let got = first_lanes(values, |v| v.simd_gt(Lanes::splat(2.0)), |v| v > 2.0);
+                    assert_eq!(got, values.iter().position(|&v| v > 2.0));
+                    for target in [true, false] {
+                        assert_eq!(first_equal(flags, target), flags.iter().position(|&f| f == target));
+                    }
+                }
+            }
+        }
+    }
+
+    /// The one-instruction SSE forms keep the semantics of the selects they replace.
+    #[test]
+    fn clamps_keep_their_semantics() {
+        let inputs = [f32::NAN, -0.0, 0.0, -1.0, 1e-13, 2.5, f32::INFINITY, f32::NEG_INFINITY];
+        let positive = zero_unless_positive(Lanes::new(inputs)).to_array();
+        let expected_positive = inputs.map(|v| if v > 0.0 { v } else { 0.0 });
+        assert_eq!(positive.map(f32::to_bits), expected_positive.map(f32::to_bits));
+        let runs = [f32::NAN, 0.0, 1e-13, 1e-12, 2.5, f32::INFINITY, 3.0e-10, 7.0];
+        let clamped = clamp_run_lanes(Lanes::new(runs)).to_array();
+        for (got, run) in clamped.into_iter().zip(runs) {
+            if run.is_nan() {
+                assert!(got.is_nan());
+            } else {
+                assert_eq!(got.to_bits(), run.max(1e-12).to_bits(), "{run}");
+            }
+        }
+        let mut index = [0u32; LANES];
+        for base in [0u32, 1, 100, 1 << 20, (1 << 23) - LANES as u32] {
+            let v: [f32; LANES] = std::array::from_fn(|l| (base + l as u32) as f32);
+            store_index_lanes(Lanes::new(v), &mut index, 0);
+            assert_eq!(index, std::array::from_fn(|l| base + l as u32));
+        }
+        let large: [f32; LANES] = [4_194_303.5, 4_194_304.0, 8_388_607.0, 0.999_999_9, 1.0, 0.0, 102.4, 7.5];
+        assert_eq!(floor_small_lanes(Lanes::new(large)).to_array(), large.map(f32::floor));
     }
 
     #[test]
