@@ -571,6 +571,7 @@ impl TeamState {
             seq: state.last_sent_seq.wrapping_add(1).max(1),
             ack: state.received,
             peer_has_all: false,
+            wants_ack: false,
             records: Vec::new(),
         };
         // Header, envelope and the record-count varint (≤ 5 bytes).
@@ -587,13 +588,19 @@ impl TeamState {
             self.peer_has_all(state)
         };
         let state = self.peers.get_mut(peer)?;
-        if msg.records.is_empty() && !state.ack_owed && state.last_flag_sent == Some(flag) {
+        let flag_unconfirmed = state.last_flag_sent != Some(flag) || !state.flag_confirmed;
+        if msg.records.is_empty() && !state.ack_owed && !flag_unconfirmed {
             return None;
         }
         msg.peer_has_all = flag;
+        msg.wants_ack = !msg.records.is_empty() || flag_unconfirmed;
         state.last_sent_seq = msg.seq;
         state.ack_owed = false;
-        state.last_flag_sent = Some(flag);
+        if flag_unconfirmed {
+            state.last_flag_sent = Some(flag);
+            state.flag_seq = msg.seq;
+            state.flag_confirmed = false;
+        }
         if !msg.records.is_empty() {
             let sent: Vec<(RecordKey, u64)> = msg.records.iter().map(|r| (r.key.clone(), r.dot)).collect();
             for (k, d) in &sent {
@@ -692,12 +699,10 @@ impl TeamState {
         let duplicate = state.received.covers(msg.seq);
         state.received.record(msg.seq);
         if msg.seq >= state.newest_from_peer {
-            let news = msg.peer_has_all != state.peer_says_we_have_all;
             state.newest_from_peer = msg.seq;
             state.peer_says_we_have_all = msg.peer_has_all;
-            state.ack_owed |= news;
         }
-        if !msg.records.is_empty() && !duplicate {
+        if msg.wants_ack && !duplicate {
             state.ack_owed = true;
         }
 

@@ -14,7 +14,7 @@ use crate::error::SyncError;
 use crate::record::{Record, RecordKey};
 
 const MAGIC: &[u8; 4] = b"SPTS";
-const FORMAT_VERSION: u8 = 1;
+const FORMAT_VERSION: u8 = 2;
 /// Bytes before the postcard payload.
 pub(crate) const HEADER_BYTES: usize = MAGIC.len() + 1;
 
@@ -64,6 +64,10 @@ pub struct SyncMessage {
     /// The sender knows (from acknowledgements) that the addressee holds everything the sender
     /// holds. Together with the same statement the other way, this is "sync complete".
     pub peer_has_all: bool,
+    /// The sender needs this message acknowledged: it carries records, or a `peer_has_all` the
+    /// addressee has not acknowledged yet. Acknowledgement-only messages do not ask, so two
+    /// robots never acknowledge each other's acknowledgements forever.
+    pub wants_ack: bool,
     /// Records the addressee is not known to hold, highest priority first.
     pub records: Vec<Record>,
 }
@@ -149,6 +153,12 @@ pub(crate) struct PeerState {
     pub newest_from_peer: u32,
     /// `peer_has_all` we last told the peer.
     pub last_flag_sent: Option<bool>,
+    /// Seq of the message that last carried `last_flag_sent` while it was unacknowledged.
+    pub flag_seq: u32,
+    /// The peer acknowledged a message carrying `last_flag_sent`. Until it does, the flag goes
+    /// out again: a lost flag would otherwise leave "sync complete" false for good in a quiet
+    /// team, where no later message reveals the loss.
+    pub flag_confirmed: bool,
 }
 
 impl PeerState {
@@ -161,6 +171,9 @@ impl PeerState {
 
     /// Processes the peer's acknowledgement of our messages.
     pub fn process_ack(&mut self, ack: Ack, max_in_flight: usize) {
+        if self.flag_seq != 0 && ack.covers(self.flag_seq) {
+            self.flag_confirmed = true;
+        }
         let mut keep = VecDeque::with_capacity(self.in_flight.len());
         while let Some(msg) = self.in_flight.pop_front() {
             if msg.seq > ack.upto {

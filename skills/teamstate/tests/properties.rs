@@ -346,3 +346,26 @@ proptest! {
         }
     }
 }
+
+/// Regression (found by `replicas_converge_under_any_schedule` in CI): the first message each
+/// way — each carrying its sender's "you have all" — is lost and nothing happens afterwards.
+/// The flag used to go out only when it changed, so neither robot said anything again and
+/// "sync complete" stayed false; now a flag is repeated until acknowledged.
+#[test]
+fn sync_completes_after_the_first_messages_both_ways_are_lost() {
+    let mut w = World::new();
+    w.run(&Op::Send { from: 1, to: 0, budget: 0, coord_only: false });
+    w.run(&Op::Send { from: 0, to: 1, budget: 0, coord_only: false });
+    assert_eq!(w.air.len(), 2, "both robots had something to say");
+    w.run(&Op::Drop { pick: 0 });
+    w.run(&Op::Drop { pick: 0 });
+    w.sync_all();
+    for a in 0..3 {
+        for b in 0..3 {
+            if a != b {
+                let peer = w.robots[b].self_id().clone();
+                assert!(w.robots[a].sync_complete_with(&peer), "{a} with {b}");
+            }
+        }
+    }
+}
