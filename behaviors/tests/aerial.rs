@@ -96,6 +96,17 @@ impl Uav {
         s
     }
 
+    /// Steps at 10 Hz from t = 0 until the tree finishes, at most `max_steps` times.
+    fn run(&mut self, max_steps: usize) -> Status {
+        let mut status = Status::Running;
+        let mut n = 0;
+        while status == Status::Running && n < max_steps {
+            status = self.step(at(n));
+            n += 1;
+        }
+        status
+    }
+
     fn int(&self, name: &str) -> Option<i64> {
         match self.ex.blackboard().get_by_name(name) {
             Some(BbValue::Int(i)) => Some(*i),
@@ -347,12 +358,7 @@ time_limit_s: 100
     let zone = square(40.0, -20.0, 60.0, 20.0);
     let ex = build(&temp_dir("no-fly"), NO_FLY, "explorer", "uav1", Pose2::default());
     let mut uav = Uav::new(ex, Point2::new(0.0, 0.0));
-    let mut n = 0;
-    let mut status = Status::Running;
-    while status == Status::Running && n < 2000 {
-        status = uav.step(at(n));
-        n += 1;
-    }
+    let status = uav.run(2000);
     assert_eq!(status, Status::Success, "{:?}", uav.reports());
     assert!(uav.track.iter().all(|p| !inside_box(*p, &zone)), "the UAV entered the zone");
     // It went around a side (via two corners pushed out by the margin), both ways, and the
@@ -409,12 +415,7 @@ time_limit_s: 100
 "#;
     let ex = build(&dir, yaml, "explorer", "uav1", Pose2::default());
     let mut uav = Uav::new(ex, Point2::new(0.0, 0.0));
-    let mut n = 0;
-    let mut status = Status::Running;
-    while status == Status::Running && n < 2000 {
-        status = uav.step(at(n));
-        n += 1;
-    }
+    let status = uav.run(2000);
     assert_eq!(status, Status::Success, "{:?}", uav.reports());
     // The fence in metres: x 59.7..102.4, y -11.1..22.3 (hand-computed as above).
     let fence = square(59.7, -11.1, 102.4, 22.3);

@@ -14,85 +14,36 @@
 
 mod common;
 
-use std::sync::Arc;
+use common::{DriverSetup, DrivingRobot, fill, ring};
 
-use common::fill;
-
-use spomp_behaviors::{RobotExecutor, RobotRuntime, Status};
-use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, Time, Twist2, normalize_angle};
+use spomp_behaviors::{RobotRuntime, Status};
+use spomp_core::{Cell, Point2, Pose2, Twist2, normalize_angle};
 use spomp_global_planner::{GlobalPlannerParams, SharingMode};
-use spomp_sim::{OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams, World};
+use spomp_sim::World;
 use spomp_teamstate::{TeamStateParams, TierSet};
 
 const ROAD: u8 = 0;
-const BUILDING: u8 = 2;
 
-/// One UGV in a world: simulator models, its runtime and a one-role mission.
-struct Robot {
-    world: World,
-    ugv: Ugv,
-    odom: OdometryModel,
-    sensor: PanoramaSensor,
-    rt: RobotRuntime,
-    ex: RobotExecutor,
-    t: Time,
+/// A UGV `id` in `world` running `tree` (YAML flow style), holding the world's full aerial map.
+fn robot(id: &str, priority: u32, world: World, start: Pose2, tree: &str, global: GlobalPlannerParams) -> DrivingRobot {
+    robot_with_team(id, priority, world, start, tree, global, TeamStateParams::default())
 }
 
-impl Robot {
-    /// A UGV `id` at `start` running `tree` (YAML flow style), holding the world's full aerial map.
-    fn new(id: &str, priority: u32, world: World, start: Pose2, tree: &str, global: GlobalPlannerParams) -> Robot {
-        Robot::with_team(id, priority, world, start, tree, global, TeamStateParams::default())
-    }
+/// [`robot`] with team-state parameters.
+fn robot_with_team(
+    id: &str,
+    priority: u32,
+    world: World,
+    start: Pose2,
+    tree: &str,
+    global: GlobalPlannerParams,
+    team: TeamStateParams,
+) -> DrivingRobot {
+    let name = format!("gp-{}", tree.len());
+    DrivingRobot::new(world, DriverSetup { name: &name, id, priority, start, tree, with_map: true, global, team })
+}
 
-    /// [`Robot::new`] with team-state parameters.
-    fn with_team(
-        id: &str,
-        priority: u32,
-        world: World,
-        start: Pose2,
-        tree: &str,
-        global: GlobalPlannerParams,
-        team: TeamStateParams,
-    ) -> Robot {
-        let name = format!("gp-{}", tree.len());
-        let (rt, ex) = common::driver(
-            &world,
-            common::DriverSetup { name: &name, id, priority, start, tree, with_map: true, global, team },
-        );
-        let ugv = Ugv::new(&world, UgvParams::default(), start).unwrap();
-        let odom = OdometryModel::new(OdometryNoiseParams::default(), 1.0, start, 11);
-        let sensor = PanoramaSensor::new(&SensorParams::default()).unwrap();
-        Robot { world, ugv, odom, sensor, rt, ex, t: Time::ZERO }
-    }
-
-    /// Sensor inputs and upkeep (terrain analysis, scans into the planner, training when due).
-    fn sense(&mut self) {
-        let t = self.t;
-        let pose = self.ugv.pose();
-        let odom = self.odom.update(t, pose, self.ugv.twist());
-        self.rt.on_odometry(odom);
-        self.rt.on_external_pose(PoseEstimate { stamp: t, pose, covariance: [0.0; 9], confidence: 1.0 });
-        if let Some(frame) = self.sensor.poll(t, &self.world, pose, self.ugv.base_elevation_m(), odom.pose) {
-            self.rt.on_panorama(Arc::new(frame));
-        }
-        self.rt.maintain(t);
-    }
-
-    /// The robot moves under `cmd` for 0.1 s.
-    fn advance(&mut self, cmd: Twist2) {
-        self.ugv.step(&self.world, cmd, 0.1);
-        self.t = Time::from_millis(self.t.nanos / 1_000_000 + 100);
-    }
-
-    /// One 0.1 s period: sensor inputs, upkeep, one tick, the robot moves.
-    fn step(&mut self) -> Status {
-        self.sense();
-        self.rt.begin_tick();
-        let status = self.ex.tick(self.t, &mut self.rt, None);
-        self.advance(self.rt.command.unwrap_or(Twist2::ZERO));
-        status
-    }
-
+impl DrivingRobot {
     /// Drives through `waypoints` with a scripted turn-then-go controller (no mission tree), the
     /// runtime sensing all along; panics when a waypoint is not reached within `max_s` each.
     fn drive_through(&mut self, waypoints: &[Point2], max_s: f64) {
@@ -119,7 +70,7 @@ impl Robot {
 
     /// Steps until the tree finishes or `max_s` of simulated time pass; also reports whether a
     /// planned path ever went through `y > above_y` (the other road).
-    fn run(&mut self, max_s: f64, above_y: f64) -> (Status, bool) {
+    fn run_watching(&mut self, max_s: f64, above_y: f64) -> (Status, bool) {
         let mut other_road = false;
         while self.t.as_secs_f64() < max_s {
             let s = self.step();
@@ -130,43 +81,12 @@ impl Robot {
         }
         (Status::Running, other_road)
     }
-
-    fn position(&self) -> Point2 {
-        self.ugv.pose().position()
-    }
-
-    fn removed_edges(&self) -> usize {
-        self.rt.nav.as_deref().map_or(0, |n| n.global.graph_stats().removed_edges)
-    }
-
-    fn summary(&self) -> String {
-        let nav = self.rt.nav.as_deref().unwrap();
-        format!(
-            "t = {:.1} s, at ({:.1}, {:.1}), driven {:.1} m, {} collisions, graph {:?}, {} edges blocked by being \
-             stuck, failure {:?}, problems {:?}",
-            self.t.as_secs_f64(),
-            self.ugv.pose().x,
-            self.ugv.pose().y,
-            self.ugv.distance_m(),
-            self.ugv.collisions(),
-            nav.global.graph_stats(),
-            nav.blocked_edges.len(),
-            self.ex.blackboard().get_by_name("why"),
-            self.rt.problems
-        )
-    }
 }
 
-/// A ring road around a block of buildings: the bottom street y ∈ [0, 8), the top street
-/// y ∈ [20, 28), the side streets x ∈ [0, 8) and [52, 60); a 1.2 m roadblock across the bottom
-/// street at x ∈ [block_x, block_x + 1), labelled road (the aerial map cannot tell).
+/// [`ring`] with a 1.2 m roadblock across the bottom street at x ∈ [block_x, block_x + 1),
+/// labelled road (the aerial map cannot tell).
 fn ring_with_block(block_x: f64) -> World {
-    let spec = GridSpec::new(Point2::new(-4.0, -4.0), 0.5, 136, 72);
-    let mut w = World::flat(spec, ClassTable::default_table(), BUILDING, 10.0).unwrap();
-    fill(&mut w, (0.0, 60.0), (0.0, 8.0), ROAD, 0.0);
-    fill(&mut w, (0.0, 60.0), (20.0, 28.0), ROAD, 0.0);
-    fill(&mut w, (0.0, 8.0), (0.0, 28.0), ROAD, 0.0);
-    fill(&mut w, (52.0, 60.0), (0.0, 28.0), ROAD, 0.0);
+    let mut w = ring();
     fill(&mut w, (block_x, block_x + 1.0), (0.0, 8.0), ROAD, 1.2);
     w
 }
@@ -185,7 +105,7 @@ fn goal() -> Point2 {
     Point2::new(GOAL.0, GOAL.1)
 }
 
-fn first_plan_takes_the_bottom_street(robot: &mut Robot) {
+fn first_plan_takes_the_bottom_street(robot: &mut DrivingRobot) {
     robot.step();
     let first = robot.rt.planned_path.clone().unwrap();
     assert!(first.iter().all(|p| p.y < 10.0), "the first plan takes the bottom street: {first:?}");
@@ -194,9 +114,9 @@ fn first_plan_takes_the_bottom_street(robot: &mut Robot) {
 #[test]
 fn own_scans_remove_a_blocked_edge_and_the_robot_takes_the_other_road() {
     let start = Pose2::new(START.0, START.1, 0.0);
-    let mut robot = Robot::new("ugv1", 1, ring_with_block(BLOCK_X), start, &navigate_to_goal(), Default::default());
+    let mut robot = robot("ugv1", 1, ring_with_block(BLOCK_X), start, &navigate_to_goal(), Default::default());
     first_plan_takes_the_bottom_street(&mut robot);
-    let (status, other_road) = robot.run(240.0, 18.0);
+    let (status, other_road) = robot.run_watching(240.0, 18.0);
     println!("graph updates on: {status:?}, {}", robot.summary());
     assert_eq!(status, Status::Success, "{}", robot.summary());
     assert!(robot.position().distance(goal()) <= 2.2, "{}", robot.summary());
@@ -212,10 +132,10 @@ fn with_graph_updates_off_the_robot_never_gets_past_the_block() {
     let start = Pose2::new(START.0, START.1, 0.0);
     let mut global = GlobalPlannerParams::default();
     global.experience.graph_updates = false;
-    let mut robot = Robot::new("ugv1", 1, ring_with_block(BLOCK_X), start, &navigate_to_goal(), global);
+    let mut robot = robot("ugv1", 1, ring_with_block(BLOCK_X), start, &navigate_to_goal(), global);
     first_plan_takes_the_bottom_street(&mut robot);
     // The over-the-top route is ~112 m (≈ 90 s); give it twice that.
-    let (status, other_road) = robot.run(180.0, 18.0);
+    let (status, other_road) = robot.run_watching(180.0, 18.0);
     println!("graph updates off: {status:?}, {}", robot.summary());
     assert_ne!(status, Status::Success, "{}", robot.summary());
     assert!(robot.position().distance(goal()) > 10.0, "{}", robot.summary());
@@ -254,13 +174,13 @@ fn two_robots(block_x: f64, mode: SharingMode) -> ((f64, f64), (f64, f64)) {
         SharingMode::All => TeamStateParams { scan_min_spacing_m: 0.0, ..Default::default() },
         _ => TeamStateParams::default(),
     };
-    let mut first = Robot::with_team("ugv1", 1, ring_with_block(block_x), start, &navigate_to_goal(), sharing, team);
-    let (s1, _) = first.run(300.0, 18.0);
+    let mut first = robot_with_team("ugv1", 1, ring_with_block(block_x), start, &navigate_to_goal(), sharing, team);
+    let (s1, _) = first.run_watching(300.0, 18.0);
     println!("UGV 1: {s1:?}, {}", first.summary());
     assert_eq!(s1, Status::Success, "{}", first.summary());
 
     let mut second =
-        Robot::new("ugv2", 2, ring_with_block(block_x), start, &navigate_to_goal(), GlobalPlannerParams::default());
+        robot("ugv2", 2, ring_with_block(block_x), start, &navigate_to_goal(), GlobalPlannerParams::default());
     sync(&mut first.rt, &mut second.rt);
     let shared = first.rt.team.scan_count();
     assert!(shared > 10, "UGV 1 shared its scans: {shared}");
@@ -272,7 +192,7 @@ fn two_robots(block_x: f64, mode: SharingMode) -> ((f64, f64), (f64, f64)) {
     if mode == SharingMode::All {
         assert!(plan.iter().any(|p| p.y > 18.0), "UGV 2 plans over the top street at once: {plan:?}");
     }
-    let (s2, _) = second.run(300.0, 18.0);
+    let (s2, _) = second.run_watching(300.0, 18.0);
     println!("UGV 2: {s2:?}, {}", second.summary());
     assert_eq!(s2, Status::Success, "{}", second.summary());
 
@@ -405,7 +325,7 @@ fn after_driving_up_ramps_the_model_rates_unseen_ramps_above_plain_curbs() {
     let crossing = Point2::new(f2.x, f1.y);
     let route = [top(r1), f1, crossing, f2, top(r2), f2, crossing, f1, top(r1), f1];
     let yaw = r1.up.angle();
-    let mut robot = Robot::new(
+    let mut robot = robot(
         "ugv1",
         1,
         world,

@@ -9,22 +9,19 @@
 //! the block and arrives; `navigate_to` crosses generated cities (200 m × 150 m, and the full
 //! 400 m × 300 m default with roadblocks); without a map it drives on the local planner alone;
 //! halting stops the robot and clears its path; an unreachable target fails with `no_path`;
-//! `return_home` drives back only when far. `NAV_TRACE=1` prints a trace every simulated second.
+//! `return_home` drives back only when far.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
 
 mod common;
 
-use std::sync::Arc;
+use common::{DriverSetup, DrivingRobot, fill, ring};
 
-use common::fill;
-
-use spomp_behaviors::{BbValue, RobotExecutor, RobotRuntime, Status};
-use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, Time, Twist2};
+use spomp_behaviors::{BbValue, Status};
+use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, Twist2};
 use spomp_global_planner::GlobalPlannerParams;
 use spomp_sim::{
-    CityParams, OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams, World, generate_city,
-    reachable_cells,
+    CityParams, OdometryModel, OdometryNoiseParams, Ugv, UgvParams, World, generate_city, reachable_cells,
 };
 use spomp_teamstate::TeamStateParams;
 
@@ -33,124 +30,32 @@ const BUILDING: u8 = 2;
 const VEHICLE: u8 = 4;
 const SIDEWALK: u8 = 3;
 
-/// A robot in a world, with its runtime and a mission of one node.
-struct Run {
-    world: World,
-    ugv: Ugv,
-    odom: OdometryModel,
-    sensor: PanoramaSensor,
-    rt: RobotRuntime,
-    ex: RobotExecutor,
-    t: Time,
-    reports: Vec<String>,
+/// A robot `ugv1` in `world` running `tree` (the role's tree in YAML flow style). `with_map`:
+/// give it the world's full aerial map (as if the UAV had flown everything).
+fn one_node(name: &str, world: World, start: Pose2, tree: &str, with_map: bool) -> DrivingRobot {
+    one_node_with(name, world, start, tree, with_map, GlobalPlannerParams::default())
 }
 
-impl Run {
-    /// `tree`: the role's tree in YAML flow style. `with_map`: give the robot the world's full
-    /// aerial map (as if the UAV had flown everything).
-    fn new(name: &str, world: World, start: Pose2, tree: &str, with_map: bool) -> Run {
-        Run::with_global(name, world, start, tree, with_map, GlobalPlannerParams::default())
-    }
+/// [`one_node`] with these global planner parameters.
+fn one_node_with(
+    name: &str,
+    world: World,
+    start: Pose2,
+    tree: &str,
+    with_map: bool,
+    global: GlobalPlannerParams,
+) -> DrivingRobot {
+    let team = TeamStateParams::default();
+    DrivingRobot::new(world, DriverSetup { name, id: "ugv1", priority: 1, start, tree, with_map, global, team })
+}
 
-    /// [`Run::new`] with these global planner parameters.
-    fn with_global(
-        name: &str,
-        world: World,
-        start: Pose2,
-        tree: &str,
-        with_map: bool,
-        global: GlobalPlannerParams,
-    ) -> Run {
-        let (rt, ex) = common::driver(
-            &world,
-            common::DriverSetup {
-                name,
-                id: "ugv1",
-                priority: 1,
-                start,
-                tree,
-                with_map,
-                global,
-                team: TeamStateParams::default(),
-            },
-        );
-        let ugv = Ugv::new(&world, UgvParams::default(), start).unwrap();
-        let odom = OdometryModel::new(OdometryNoiseParams::default(), 1.0, start, 11);
-        let sensor = PanoramaSensor::new(&SensorParams::default()).unwrap();
-        Run { world, ugv, odom, sensor, rt, ex, t: Time::ZERO, reports: Vec::new() }
-    }
-
-    /// One 0.1 s period: inputs, upkeep, one tick, the robot moves.
-    fn step(&mut self) -> Status {
-        let t = self.t;
-        let pose = self.ugv.pose();
-        let odom = self.odom.update(t, pose, self.ugv.twist());
-        self.rt.on_odometry(odom);
-        self.rt.on_external_pose(PoseEstimate { stamp: t, pose, covariance: [0.0; 9], confidence: 1.0 });
-        if let Some(frame) = self.sensor.poll(t, &self.world, pose, self.ugv.base_elevation_m(), odom.pose) {
-            self.rt.on_panorama(Arc::new(frame));
-        }
-        self.rt.maintain(t);
-        self.rt.begin_tick();
-        let status = self.ex.tick(t, &mut self.rt, None);
-        self.reports.extend(self.ex.blackboard_mut().take_reports());
-        let cmd = self.rt.command.unwrap_or(Twist2::ZERO);
-        if std::env::var("NAV_TRACE").is_ok() && t.nanos % 1_000_000_000 == 0 {
-            let nav = self.rt.nav.as_deref().unwrap();
-            println!(
-                "t={:.0} pose=({:.1},{:.1},{:.2}) cmd=({:.2},{:.2}) area={:?} path={:?} graph={:?}",
-                t.as_secs_f64(),
-                pose.x,
-                pose.y,
-                pose.yaw,
-                cmd.v,
-                cmd.omega,
-                nav.view.as_ref().map(|v| v.region.area_m2() as i64),
-                self.rt.planned_path.as_ref().map(|p| p.iter().map(|q| (q.x as i32, q.y as i32)).collect::<Vec<_>>()),
-                nav.global.graph_stats()
-            );
-        }
-        self.ugv.step(&self.world, cmd, 0.1);
-        self.t = Time::from_millis(t.nanos / 1_000_000 + 100);
-        status
-    }
-
-    /// Steps until the tree finishes or `max_s` of simulated time pass.
-    fn run(&mut self, max_s: f64) -> Status {
-        while self.t.as_secs_f64() < max_s {
-            let s = self.step();
-            if s != Status::Running {
-                return s;
-            }
-        }
-        Status::Running
-    }
-
-    fn position(&self) -> Point2 {
-        self.ugv.pose().position()
-    }
-
+impl DrivingRobot {
+    /// What the node wrote to its `failure_reason` port (bound to `{why}`).
     fn failure_reason(&self) -> Option<String> {
         match self.ex.blackboard().get_by_name("why") {
             Some(BbValue::Str(s)) => Some(s.to_string()),
             _ => None,
         }
-    }
-
-    fn summary(&self) -> String {
-        format!(
-            "t = {:.1} s, at ({:.1}, {:.1}), driven {:.1} m, {} collisions, {} edges removed by scans, {} blocked by \
-             being stuck, reports {:?}, problems {:?}",
-            self.t.as_secs_f64(),
-            self.ugv.pose().x,
-            self.ugv.pose().y,
-            self.ugv.distance_m(),
-            self.ugv.collisions(),
-            self.rt.nav.as_deref().map_or(0, |n| n.global.graph_stats().removed_edges),
-            self.rt.nav.as_deref().map_or(0, |n| n.blocked_edges.len()),
-            self.reports,
-            self.rt.problems
-        )
     }
 }
 
@@ -178,7 +83,7 @@ fn navigate_to_drives_down_a_street_past_parked_vehicles_without_touching_them()
     fill(&mut w, (37.0, 41.5), (-2.5, -0.5), VEHICLE, 1.5);
     let start = Pose2::new(5.0, -1.5, 0.0);
     let goal = Point2::new(57.0, -1.5);
-    let mut run = Run::new("street", w, start, &navigate_to(goal.x, goal.y), true);
+    let mut run = one_node("street", w, start, &navigate_to(goal.x, goal.y), true);
     let status = run.run(120.0);
     println!("street: {status:?}, {}", run.summary());
     assert_eq!(status, Status::Success, "{}", run.summary());
@@ -199,7 +104,7 @@ fn navigate_local_stops_at_a_roadblock_and_fails_as_stuck() {
     fill(&mut w, (30.0, 31.0), (-6.0, 6.0), ROAD, 1.2);
     let start = Pose2::new(5.0, 0.0, 0.0);
     let tree = "navigate_local: { target: { x: 55, y: 0 }, stuck_timeout_s: 15 }";
-    let mut run = Run::new("roadblock", w, start, tree, false);
+    let mut run = one_node("roadblock", w, start, tree, false);
     let status = run.run(120.0);
     println!("roadblock: {status:?}, {}", run.summary());
     assert_eq!(status, Status::Failure, "{}", run.summary());
@@ -212,26 +117,14 @@ fn navigate_local_stops_at_a_roadblock_and_fails_as_stuck() {
     assert_eq!(run.rt.command, Some(Twist2::ZERO));
 }
 
-/// A ring road around a block: the bottom street y ∈ [0, 8), the top street y ∈ [20, 28), the
-/// side streets x ∈ [0, 8) and [52, 60); buildings fill the block and the world's edges.
-fn ring() -> World {
-    let spec = GridSpec::new(Point2::new(-4.0, -4.0), 0.5, 136, 72);
-    let mut w = World::flat(spec, ClassTable::default_table(), BUILDING, 10.0).unwrap();
-    fill(&mut w, (0.0, 60.0), (0.0, 8.0), ROAD, 0.0);
-    fill(&mut w, (0.0, 60.0), (20.0, 28.0), ROAD, 0.0);
-    fill(&mut w, (0.0, 8.0), (0.0, 28.0), ROAD, 0.0);
-    fill(&mut w, (52.0, 60.0), (0.0, 28.0), ROAD, 0.0);
-    w
-}
-
 /// Drives `navigate_to` from (14, 4) to (46, 4) on the ring road with a roadblock (labelled
 /// road, so invisible in the aerial map) across the bottom street at `block_x`.
-fn detour(name: &str, block_x: f64, global: GlobalPlannerParams) -> (Run, Status, Vec<Point2>, bool) {
+fn detour(name: &str, block_x: f64, global: GlobalPlannerParams) -> (DrivingRobot, Status, Vec<Point2>, bool) {
     let mut w = ring();
     fill(&mut w, (block_x, block_x + 1.0), (0.0, 8.0), ROAD, 1.2);
     let start = Pose2::new(14.0, 4.0, 0.0);
     let goal = Point2::new(46.0, 4.0);
-    let mut run = Run::with_global(name, w, start, &navigate_to(goal.x, goal.y), true, global);
+    let mut run = one_node_with(name, w, start, &navigate_to(goal.x, goal.y), true, global);
     let mut first_path: Option<Vec<Point2>> = None;
     let mut replanned_over_the_top = false;
     let mut status = Status::Running;
@@ -301,13 +194,13 @@ fn far_road_goal(world: &World, start: Pose2, max_m: f64) -> Point2 {
     goal
 }
 
-fn cross_city(name: &str, params: &CityParams, seed: u64, max_m: f64, max_s: f64) -> Run {
+fn cross_city(name: &str, params: &CityParams, seed: u64, max_m: f64, max_s: f64) -> DrivingRobot {
     let world = generate_city(params, seed).unwrap();
     let start = world.meta.start_poses[0];
     let goal = far_road_goal(&world, start, max_m);
     let straight = goal.distance(start.position());
     assert!(straight > 0.7 * max_m, "goal {goal:?} from {start:?}");
-    let mut run = Run::new(name, world, start, &navigate_to(goal.x, goal.y), true);
+    let mut run = one_node(name, world, start, &navigate_to(goal.x, goal.y), true);
     let status = run.run(max_s);
     println!("{name}: {status:?}, straight line {straight:.1} m, {}", run.summary());
     assert_eq!(status, Status::Success, "{}", run.summary());
@@ -334,7 +227,7 @@ fn navigate_to_crosses_a_full_city_with_roadblocks() {
 fn without_a_map_navigate_to_drives_on_the_local_planner_alone() {
     let start = Pose2::new(5.0, 0.0, 0.0);
     let goal = Point2::new(45.0, 2.0);
-    let mut run = Run::new("no-map", street(), start, &navigate_to(goal.x, goal.y), false);
+    let mut run = one_node("no-map", street(), start, &navigate_to(goal.x, goal.y), false);
     let status = run.run(60.0);
     println!("no map: {status:?}, {}", run.summary());
     assert_eq!(status, Status::Success, "{}", run.summary());
@@ -346,7 +239,7 @@ fn without_a_map_navigate_to_drives_on_the_local_planner_alone() {
 fn halting_navigate_to_stops_the_robot_and_clears_its_path() {
     let start = Pose2::new(5.0, 0.0, 0.0);
     let tree = format!("timeout: {{ duration_s: 5, child: {{ {} }} }}", navigate_to(60.0, 0.0));
-    let mut run = Run::new("halt", street(), start, &tree, true);
+    let mut run = one_node("halt", street(), start, &tree, true);
     let mut saw_path = false;
     let mut status = Status::Running;
     while status == Status::Running && run.t.as_secs_f64() < 10.0 {
@@ -373,7 +266,7 @@ fn halting_navigate_to_stops_the_robot_and_clears_its_path() {
 fn navigate_to_reports_no_path_for_an_unreachable_target() {
     let start = Pose2::new(5.0, 0.0, 0.0);
     // Deep inside the buildings north of the street: no graph node covers it.
-    let mut run = Run::new("no-path", street(), start, &navigate_to(35.0, 13.0), true);
+    let mut run = one_node("no-path", street(), start, &navigate_to(35.0, 13.0), true);
     let status = run.run(5.0);
     assert_eq!(status, Status::Failure, "{}", run.summary());
     assert_eq!(run.failure_reason().as_deref(), Some("no_path"), "{:?}", run.reports);
@@ -385,7 +278,7 @@ fn return_home_drives_back_to_the_start_only_when_far() {
     let home = Pose2::new(8.0, 0.0, 0.0);
     let far = Pose2::new(40.0, 1.0, std::f64::consts::PI);
     let tree = "return_home: { min_distance_m: 5, tolerance_m: 2 }";
-    let mut run = Run::new("home", street(), home, tree, true);
+    let mut run = one_node("home", street(), home, tree, true);
     run.ugv = Ugv::new(&run.world, UgvParams::default(), far).unwrap();
     run.odom = OdometryModel::new(OdometryNoiseParams::default(), 1.0, far, 5);
     let status = run.run(60.0);
@@ -395,7 +288,7 @@ fn return_home_drives_back_to_the_start_only_when_far() {
     assert_eq!(run.ugv.collisions(), 0);
 
     // Already home (within 5 m): succeeds at once without moving.
-    let mut near = Run::new("home-near", street(), home, tree, true);
+    let mut near = one_node("home-near", street(), home, tree, true);
     near.ugv = Ugv::new(&near.world, UgvParams::default(), Pose2::new(11.0, 0.0, 0.0)).unwrap();
     assert_eq!(near.step(), Status::Success);
     assert_eq!(near.ugv.distance_m(), 0.0);
@@ -431,7 +324,7 @@ fn facing_a_curb_it_takes_the_ramp_to_a_goal_on_the_sidewalk() {
     let start = Pose2::new(10.0, 5.0, std::f64::consts::FRAC_PI_2);
     let goal = Point2::new(10.0, 16.0);
     let tree = format!("navigate_to: {{ target: {{ x: {}, y: {} }}, time_limit_s: 170 }}", goal.x, goal.y);
-    let mut run = Run::new("curb-ramp", curb_with_ramp(), start, &tree, true);
+    let mut run = one_node("curb-ramp", curb_with_ramp(), start, &tree, true);
     let mut status = Status::Running;
     let mut crossings = Vec::new();
     let mut was_up = false;

@@ -1,6 +1,6 @@
 //! Shared pieces of the simulator's integration tests: missions written to temporary files and
-//! run in the lockstep runner, one UGV's runtime and tree built from a one-role mission, and
-//! world painting.
+//! run in the lockstep runner, one UGV's runtime and tree built from a one-role mission and
+//! driven in closed loop with the simulator's models, and world painting.
 
 #![allow(dead_code, clippy::unwrap_used, clippy::expect_used)] // each test file uses a subset
 
@@ -10,13 +10,13 @@ use std::sync::Arc;
 
 use spomp_behaviors::mission::{BuildOptions, LoadedMission, load_mission};
 use spomp_behaviors::runtime::{LocalizationSetup, NavParams, RuntimeConfig};
-use spomp_behaviors::{RobotExecutor, RobotRuntime, builtin_registry};
-use spomp_core::{Cell, Pose2, RobotId, RobotKind};
+use spomp_behaviors::{RobotExecutor, RobotRuntime, Status, builtin_registry};
+use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, RobotId, RobotKind, Time, Twist2};
 use spomp_global_planner::GlobalPlannerParams;
 use spomp_local_planner::LocalPlannerParams;
 use spomp_mapping::Orthomap;
-use spomp_sim::World;
 use spomp_sim::run::{SimOptions, Simulation, world_for_mission};
+use spomp_sim::{OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams, World};
 use spomp_teamstate::TeamStateParams;
 
 /// Writes a mission to a temporary file named after it (unique per test process).
@@ -103,6 +103,116 @@ pub fn driver(world: &World, s: DriverSetup<'_>) -> (RobotRuntime, RobotExecutor
     }
     let ex = RobotExecutor::new(&loaded.roles["driver"], &registry, &rt.id, s.start, BuildOptions::default()).unwrap();
     (rt, ex)
+}
+
+/// One UGV in closed loop with the simulator: ground-truth poses, noisy odometry and rendered
+/// panoramas into its runtime, its tree ticked at 10 Hz, the skid-steer model driven by the
+/// commands.
+pub struct DrivingRobot {
+    pub world: World,
+    pub ugv: Ugv,
+    pub odom: OdometryModel,
+    pub sensor: PanoramaSensor,
+    pub rt: RobotRuntime,
+    pub ex: RobotExecutor,
+    pub t: Time,
+    /// Everything the tree reported, in order.
+    pub reports: Vec<String>,
+}
+
+impl DrivingRobot {
+    /// The robot of `setup` in `world`.
+    pub fn new(world: World, setup: DriverSetup<'_>) -> DrivingRobot {
+        let start = setup.start;
+        let (rt, ex) = driver(&world, setup);
+        let ugv = Ugv::new(&world, UgvParams::default(), start).unwrap();
+        let odom = OdometryModel::new(OdometryNoiseParams::default(), 1.0, start, 11);
+        let sensor = PanoramaSensor::new(&SensorParams::default()).unwrap();
+        DrivingRobot { world, ugv, odom, sensor, rt, ex, t: Time::ZERO, reports: Vec::new() }
+    }
+
+    /// Sensor inputs and upkeep (terrain analysis, scans into the planner, training when due).
+    pub fn sense(&mut self) {
+        let t = self.t;
+        let pose = self.ugv.pose();
+        let odom = self.odom.update(t, pose, self.ugv.twist());
+        self.rt.on_odometry(odom);
+        self.rt.on_external_pose(PoseEstimate { stamp: t, pose, covariance: [0.0; 9], confidence: 1.0 });
+        if let Some(frame) = self.sensor.poll(t, &self.world, pose, self.ugv.base_elevation_m(), odom.pose) {
+            self.rt.on_panorama(Arc::new(frame));
+        }
+        self.rt.maintain(t);
+    }
+
+    /// The robot moves under `cmd` for 0.1 s.
+    pub fn advance(&mut self, cmd: Twist2) {
+        self.ugv.step(&self.world, cmd, 0.1);
+        self.t = Time::from_millis(self.t.nanos / 1_000_000 + 100);
+    }
+
+    /// One 0.1 s period: sensor inputs, upkeep, one tick, the robot moves.
+    pub fn step(&mut self) -> Status {
+        self.sense();
+        self.rt.begin_tick();
+        let status = self.ex.tick(self.t, &mut self.rt, None);
+        self.reports.extend(self.ex.blackboard_mut().take_reports());
+        self.advance(self.rt.command.unwrap_or(Twist2::ZERO));
+        status
+    }
+
+    /// Steps until the tree finishes or `max_s` of simulated time pass.
+    pub fn run(&mut self, max_s: f64) -> Status {
+        while self.t.as_secs_f64() < max_s {
+            let s = self.step();
+            if s != Status::Running {
+                return s;
+            }
+        }
+        Status::Running
+    }
+
+    pub fn position(&self) -> Point2 {
+        self.ugv.pose().position()
+    }
+
+    /// Edges the robot's own scans removed from its graph.
+    pub fn removed_edges(&self) -> usize {
+        self.rt.nav.as_deref().map_or(0, |n| n.global.graph_stats().removed_edges)
+    }
+
+    /// Where the robot is and what it went through, for assertion messages.
+    pub fn summary(&self) -> String {
+        let nav = self.rt.nav.as_deref();
+        format!(
+            "t = {:.1} s, at ({:.1}, {:.1}), driven {:.1} m, {} collisions, graph {:?}, {} edges removed by scans, {} \
+             blocked by being stuck, failure {:?}, reports {:?}, problems {:?}",
+            self.t.as_secs_f64(),
+            self.ugv.pose().x,
+            self.ugv.pose().y,
+            self.ugv.distance_m(),
+            self.ugv.collisions(),
+            nav.map(|n| n.global.graph_stats()),
+            self.removed_edges(),
+            nav.map_or(0, |n| n.blocked_edges.len()),
+            self.ex.blackboard().get_by_name("why"),
+            self.reports,
+            self.rt.problems
+        )
+    }
+}
+
+/// A ring road around a block: the bottom street y ∈ [0, 8), the top street y ∈ [20, 28), the
+/// side streets x ∈ [0, 8) and [52, 60); buildings (class 2, 10 m) fill the block and the
+/// world's edges; the roads are class 0.
+pub fn ring() -> World {
+    let (road, building) = (0, 2);
+    let spec = GridSpec::new(Point2::new(-4.0, -4.0), 0.5, 136, 72);
+    let mut w = World::flat(spec, ClassTable::default_table(), building, 10.0).unwrap();
+    fill(&mut w, (0.0, 60.0), (0.0, 8.0), road, 0.0);
+    fill(&mut w, (0.0, 60.0), (20.0, 28.0), road, 0.0);
+    fill(&mut w, (0.0, 8.0), (0.0, 28.0), road, 0.0);
+    fill(&mut w, (52.0, 60.0), (0.0, 28.0), road, 0.0);
+    w
 }
 
 /// Fills the cells whose centre lies in [x0, x1) × [y0, y1).
