@@ -236,9 +236,11 @@ impl RobotRuntime {
         }
     }
 
-    /// Background skill upkeep at simulated/real time `now`: the global planner takes in new
-    /// map versions and team scans and retrains on its schedule. Call once per control period.
+    /// Background upkeep at simulated/real time `now`: the team state's clock (own claims
+    /// renewed, other robots' expired claims dropped); the global planner takes in new map
+    /// versions and team scans and retrains on its schedule. Call once per control period.
     pub fn maintain(&mut self, now: Time) {
+        self.team.advance_clock(now);
         if let Some(nav) = self.nav.as_deref_mut()
             && let Err(e) = nav.maintain(now, self.map.as_ref(), &self.team, &mut self.rng)
         {

@@ -23,6 +23,11 @@ pub struct TeamStateParams {
     /// Sent messages kept per peer awaiting acknowledgement before the oldest is presumed lost
     /// (at most 64, the width of the acknowledgement window).
     pub max_in_flight_messages: usize,
+    /// A claim is a lease: its holder renews it every half lease while it holds the goal
+    /// ([`crate::TeamState::advance_clock`]); a claim of another robot not renewed for this long
+    /// no longer counts (a dead robot, or one out of contact that long, gives up its goals).
+    /// Seconds.
+    pub claim_lease_s: f64,
 }
 
 impl Default for TeamStateParams {
@@ -34,6 +39,7 @@ impl Default for TeamStateParams {
             max_scan_bins: 8192,
             max_map_blob_bytes: 8 * 1024 * 1024,
             max_in_flight_messages: 64,
+            claim_lease_s: 300.0,
         }
     }
 }
@@ -50,6 +56,9 @@ impl TeamStateParams {
         }
         if self.max_message_bytes == 0 || self.max_scan_bins == 0 || self.max_map_blob_bytes == 0 {
             return bad("max_message_bytes, max_scan_bins and max_map_blob_bytes must be > 0");
+        }
+        if !(self.claim_lease_s.is_finite() && self.claim_lease_s > 0.0) {
+            return bad("claim_lease_s must be finite and > 0");
         }
         if !(1..=64).contains(&self.max_in_flight_messages) {
             return bad("max_in_flight_messages must be in 1..=64");

@@ -12,7 +12,7 @@ use crate::record::{
     UnreachableRecord, VisitRecord, check_scan, finite_pose,
 };
 use crate::sync::{HEADER_BYTES, InFlight, PeerState, SyncMessage};
-use crate::view::{GoalIndex, GoalView, build_goal_index};
+use crate::view::{GoalIndex, GoalView, Lease, build_goal_index};
 
 /// Writer name of goals listed in the mission file: every robot loads them identically.
 pub const MISSION_WRITER: &str = "mission";
@@ -88,6 +88,8 @@ pub struct TeamState {
     changes: BTreeMap<u64, RecordKey>,
     change_of: HashMap<RecordKey, u64>,
     change_seq: u64,
+    /// The latest time given to [`TeamState::advance_clock`] (claim leases are judged by it).
+    now: Time,
 }
 
 impl TeamState {
@@ -108,6 +110,7 @@ impl TeamState {
             peers: HashMap::new(),
             changes: BTreeMap::new(),
             change_of: HashMap::new(),
+            now: Time::ZERO,
             change_seq: 0,
         })
     }
@@ -157,7 +160,47 @@ impl TeamState {
     }
 
     fn rebuild_goals(&mut self) {
-        self.goal_index = build_goal_index(&self.records, self.params.deconfliction_radius_m);
+        let lease = Lease { me: &self.self_id, now: self.now, lease_s: self.params.claim_lease_s };
+        self.goal_index = build_goal_index(&self.records, self.params.deconfliction_radius_m, &lease);
+    }
+
+    /// Moves the database's clock to `now` (the robot's time; called every step by the
+    /// runtime): renews this robot's claims older than half a lease, and drops from the goal
+    /// views the claims of other robots whose lease ran out, so their goals become claimable.
+    /// Without calls the clock stays at zero and no claim ever expires.
+    pub fn advance_clock(&mut self, now: Time) {
+        if now <= self.now {
+            return;
+        }
+        self.now = now;
+        let half = self.params.claim_lease_s / 2.0;
+        let stale_own: Vec<(GoalId, u32)> = self
+            .records
+            .values()
+            .filter_map(|r| match (&r.key, &r.body) {
+                (RecordKey::Claim { goal, claimant }, RecordBody::Claim(c))
+                    if c.active && claimant == &self.self_id && now.secs_since(c.stamp) > half =>
+                {
+                    Some((goal.clone(), c.priority))
+                }
+                _ => None,
+            })
+            .collect();
+        for (goal, priority) in stale_own {
+            let dot = self.tick();
+            let key = RecordKey::Claim { goal, claimant: self.self_id.clone() };
+            self.put(key, dot, RecordBody::Claim(ClaimRecord { active: true, priority, stamp: now }));
+        }
+        let lease_s = self.params.claim_lease_s;
+        let expired = self
+            .goal_index
+            .views
+            .iter()
+            .flat_map(|v| &v.claims)
+            .any(|c| c.robot != self.self_id && now.secs_since(c.stamp) > lease_s);
+        if expired {
+            self.rebuild_goals();
+        }
     }
 
     fn own_robot_record(&self) -> RobotRecord {

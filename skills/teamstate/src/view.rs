@@ -89,7 +89,21 @@ pub(crate) struct GoalIndex {
 }
 
 /// Builds the deduplicated goal view from the records.
-pub(crate) fn build_goal_index(records: &BTreeMap<RecordKey, Record>, radius_m: f64) -> GoalIndex {
+/// Claims of robots other than `me` whose latest record is more than `lease_s` older than
+/// `now` are left out of the views (expired leases).
+pub(crate) struct Lease<'a> {
+    pub me: &'a RobotId,
+    pub now: Time,
+    pub lease_s: f64,
+}
+
+impl Lease<'_> {
+    fn live(&self, robot: &RobotId, stamp: Time) -> bool {
+        robot == self.me || self.now.secs_since(stamp) <= self.lease_s
+    }
+}
+
+pub(crate) fn build_goal_index(records: &BTreeMap<RecordKey, Record>, radius_m: f64, lease: &Lease<'_>) -> GoalIndex {
     let mut goals: Vec<(&GoalId, &crate::record::GoalRecord)> = records
         .values()
         .filter_map(|r| match (&r.key, &r.body) {
@@ -169,7 +183,7 @@ pub(crate) fn build_goal_index(records: &BTreeMap<RecordKey, Record>, radius_m: 
         }
     }
     for ((gi, robot), (_, c)) in latest_claims {
-        if let (true, Some(view)) = (c.active, index.views.get_mut(gi)) {
+        if let (true, true, Some(view)) = (c.active, lease.live(robot, c.stamp), index.views.get_mut(gi)) {
             view.claims.push(ClaimInfo { robot: robot.clone(), priority: c.priority, stamp: c.stamp });
         }
     }

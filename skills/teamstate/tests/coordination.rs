@@ -290,3 +290,33 @@ fn nothing_to_say_means_no_message() {
     assert!(a.make_sync(&id("ugv2"), TierSet::ALL, usize::MAX).is_none());
     assert!(a.make_sync(&id("ugv1"), TierSet::ALL, usize::MAX).is_none(), "never to itself");
 }
+
+/// Claims are leases: a silent holder's claim stops counting once the lease runs out (a dead
+/// robot gives up its goal), a live holder keeps its claim by renewing it, and the renewal, once
+/// it arrives, wins back a goal a lower-priority robot took meanwhile.
+#[test]
+fn a_claim_not_renewed_within_the_lease_expires_and_a_renewed_one_wins_back() {
+    let mut a = robot("ugv1", 1);
+    let mut b = robot("ugv2", 2);
+    let g = detect(&mut a, 0.0, 0.0, 1.0);
+    a.claim(&g, t(10.0)).unwrap();
+    sync_fully(&mut a, &mut b);
+    let lease = spomp_teamstate::TeamStateParams::default().claim_lease_s;
+    b.advance_clock(t(10.0 + lease - 1.0));
+    assert!(b.claimable_goals_for(b.self_id(), Point2::new(0.0, 0.0)).is_empty(), "within the lease");
+    assert!(b.claim(&g, t(10.0 + lease - 1.0)).is_err());
+    b.advance_clock(t(10.0 + lease + 1.0));
+    assert_eq!(b.claimable_goals_for(b.self_id(), Point2::new(0.0, 0.0)).len(), 1, "expired");
+    b.claim(&g, t(10.0 + lease + 1.0)).unwrap();
+    assert!(b.goal(&g).unwrap().is_held_by(b.self_id()));
+    // The holder was alive all along, only out of contact: it renewed its lease, and once that
+    // reaches the lower-priority robot, the goal is the holder's again.
+    a.advance_clock(t(10.0 + lease / 2.0 + 1.0));
+    sync_fully(&mut a, &mut b);
+    assert!(b.goal(&g).unwrap().is_held_by(a.self_id()), "{:?}", b.goal(&g).unwrap().claims);
+    assert!(a.goal(&g).unwrap().is_held_by(a.self_id()));
+    // Without any clock, nothing expires (replicas that never call `advance_clock`).
+    let mut c = robot("ugv3", 3);
+    sync_fully(&mut a, &mut c);
+    assert!(c.claimable_goals_for(c.self_id(), Point2::new(0.0, 0.0)).is_empty());
+}
