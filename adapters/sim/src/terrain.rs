@@ -11,8 +11,11 @@ use crate::world::World;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct UgvLimits {
-    /// Highest step the robot can climb or descend, metres (a 0.15 m curb is too high).
+    /// Highest step the robot can climb, metres (a 0.15 m curb is too high).
     pub max_step_m: f64,
+    /// Highest step the robot can drive down, metres: a skid-steer robot rolls off a 0.15 m
+    /// curb, which it cannot climb back up.
+    pub max_drop_m: f64,
     /// Steepest ground under the footprint, rise over run (height spread over the diameter).
     pub max_slope: f64,
     /// Radius of the robot's disc footprint, metres.
@@ -21,7 +24,7 @@ pub struct UgvLimits {
 
 impl Default for UgvLimits {
     fn default() -> Self {
-        UgvLimits { max_step_m: 0.1, max_slope: 0.3, radius_m: 0.5 }
+        UgvLimits { max_step_m: 0.1, max_drop_m: 0.2, max_slope: 0.3, radius_m: 0.5 }
     }
 }
 
@@ -78,6 +81,49 @@ impl UgvLimits {
         if near_base && near_center && slope_ok { Some(f.center_m) } else { None }
     }
 
+    /// Whether the robot, standing at `from` at base height `base_m`, may move its footprint to
+    /// `to` (a short move: the simulator's substeps and cell-to-cell moves). Only the ground the
+    /// footprint newly covers is judged, so the rule has a direction: a cell coming under the
+    /// footprint may be at most a climb step above the base and a drop step below it, and the
+    /// ground under the new footprint no steeper than the slope limit. A robot rolling off a curb
+    /// keeps the curb under its rear until it has left it; one on the road cannot drive into the
+    /// curb. Returns the new base height (the cell under the new centre) when it may.
+    pub fn admits_move(&self, world: &World, from: Point2, to: Point2, base_m: f32) -> Option<f32> {
+        let spec = world.spec();
+        let res = spec.resolution_m;
+        let center_m = world.elevation_at(to)?;
+        let (climb, drop) = (self.max_step_m as f32 + 1e-4, self.max_drop_m as f32 + 1e-4);
+        if center_m - base_m > climb || base_m - center_m > drop {
+            return None;
+        }
+        let cells = |p: Point2| ((p.x - spec.origin.x) / res, (p.y - spec.origin.y) / res);
+        let ((fx, fy), (ox, oy)) = (cells(to), cells(from));
+        let r_cells = self.radius_m.max(0.0) / res;
+        let r2 = r_cells * r_cells;
+        let (c0, c1) = ((fx - r_cells).floor() as i64, (fx + r_cells).floor() as i64);
+        let (r0, r1) = ((fy - r_cells).floor() as i64, (fy + r_cells).floor() as i64);
+        let (mut min_m, mut max_m) = (center_m, center_m);
+        for row in r0..=r1 {
+            let (dy, old_dy) = (gap_to_cell(fy, row), gap_to_cell(oy, row));
+            for col in c0..=c1 {
+                let dx = gap_to_cell(fx, col);
+                if dx * dx + dy * dy >= r2 {
+                    continue;
+                }
+                let e = world.elevation_cell(col, row)?;
+                min_m = min_m.min(e);
+                max_m = max_m.max(e);
+                let old_dx = gap_to_cell(ox, col);
+                let newly_covered = old_dx * old_dx + old_dy * old_dy >= r2;
+                if newly_covered && (e - base_m > climb || base_m - e > drop) {
+                    return None;
+                }
+            }
+        }
+        let diameter = (2.0 * self.radius_m).max(res) as f32;
+        ((max_m - min_m) / diameter <= self.max_slope as f32 + 1e-4).then_some(center_m)
+    }
+
     /// Whether a robot could stand at `p` (its footprint fits the ground there).
     pub fn can_stand(&self, world: &World, p: Point2) -> bool {
         world.elevation_at(p).is_some_and(|base| self.admits(world, p, base).is_some())
@@ -92,7 +138,8 @@ pub fn ground_truth_traversability(world: &World, limits: &UgvLimits) -> Grid<bo
 }
 
 /// Every cell a robot starting at `start` can drive to, moving between 4-neighbouring cell
-/// centres under `limits` (ground truth for scoring and for checking generated worlds).
+/// centres under `limits` ([`UgvLimits::admits_move`]: down a curb but not up it; ground truth
+/// for scoring and for checking generated worlds).
 /// Empty if the robot cannot stand at `start`.
 pub fn reachable_cells(world: &World, limits: &UgvLimits, start: Point2) -> Grid<bool> {
     let spec = *world.spec();
@@ -115,7 +162,7 @@ pub fn reachable_cells(world: &World, limits: &UgvLimits, start: Point2) -> Grid
             if *reached.at(next) {
                 continue;
             }
-            if let Some(b) = limits.admits(world, spec.center(next), base) {
+            if let Some(b) = limits.admits_move(world, spec.center(cell), spec.center(next), base) {
                 *reached.at_mut(next) = true;
                 queue.push_back((next, b));
             }

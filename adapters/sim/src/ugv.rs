@@ -207,7 +207,8 @@ impl Ugv {
                 let after = next.position().distance(o.center);
                 after < reach && after < here.distance(o.center)
             });
-            let admitted = if bumps { None } else { self.params.limits.admits(world, next.position(), self.base_m) };
+            let admitted =
+                if bumps { None } else { self.params.limits.admits_move(world, here, next.position(), self.base_m) };
             match admitted {
                 Some(base) => {
                     moved_m += next.position().distance(self.pose.position());

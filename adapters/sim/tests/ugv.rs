@@ -1,9 +1,9 @@
-//! The ground robot: curbs stop it except at ramps, obstacles stop it, runs are deterministic.
+//! The ground robot: curbs stop it except at ramps (it may roll off one), obstacles stop it, runs are deterministic.
 
 use proptest::prelude::*;
 use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, Time, Twist2};
 use spomp_sim::{
-    CityParams, OdometryModel, OdometryNoiseParams, Ugv, UgvLimits, UgvParams, World, generate_city,
+    CityParams, OdometryModel, OdometryNoiseParams, Ugv, UgvLimits, UgvParams, World, footprint_heights, generate_city,
     ground_truth_traversability,
 };
 
@@ -53,11 +53,36 @@ fn curb_stops_the_robot_but_a_ramp_lets_it_up() {
     assert_eq!(climber.collisions(), 0);
     assert!((climber.distance_m() - (climber.pose().y - 5.0)).abs() < 1e-6);
 
-    // And it cannot drop back down the curb next to the ramp: driving south from the
-    // sidewalk at x = 5 m stops at the edge.
+    // It rolls off the curb away from the ramp (a 0.15 m drop is within `max_drop_m`), and
+    // cannot climb back up where it came down.
     let mut down = Ugv::new(&w, UgvParams::default(), Pose2::new(5.0, 15.0, -north)).unwrap();
-    drive(&w, &mut down, Twist2 { v: 1.0, omega: 0.0 }, 10.0);
-    assert!(down.pose().y > 10.45 && down.base_elevation_m() == 0.15, "{:?}", down.pose());
+    drive(&w, &mut down, Twist2 { v: 1.0, omega: 0.0 }, 8.0);
+    assert!(down.pose().y < 9.0 && down.base_elevation_m() == 0.0, "down on the road: {:?}", down.pose());
+    assert_eq!(down.collisions(), 0);
+    drive(&w, &mut down, Twist2 { v: 0.0, omega: 1.0 }, std::f64::consts::PI);
+    drive(&w, &mut down, Twist2 { v: 1.0, omega: 0.0 }, 8.0);
+    assert!(down.pose().y < 10.0 - 0.45 && down.base_elevation_m() == 0.0, "not back up: {:?}", down.pose());
+    assert_eq!(down.collisions(), 1);
+}
+
+#[test]
+fn a_drop_deeper_than_the_limit_stops_the_robot() {
+    let mut w = curb_world();
+    let spec = *w.spec();
+    // A 0.3 m ledge: the sidewalk north of y = 10 m raised to 0.3 m west of x = 10 m.
+    for row in 0..spec.height {
+        for col in 0..spec.width {
+            let c = spec.center(Cell::new(col, row));
+            if c.y > 10.0 && c.x < 10.0 {
+                w.set_cell(Cell::new(col, row), 3, [168, 168, 162], 0.3);
+            }
+        }
+    }
+    let north = std::f64::consts::FRAC_PI_2;
+    let mut robot = Ugv::new(&w, UgvParams::default(), Pose2::new(5.0, 15.0, -north)).unwrap();
+    drive(&w, &mut robot, Twist2 { v: 1.0, omega: 0.0 }, 8.0);
+    assert!(robot.pose().y > 10.45 && robot.base_elevation_m() == 0.3, "stopped at the ledge: {:?}", robot.pose());
+    assert_eq!(robot.collisions(), 1);
 }
 
 #[test]
@@ -146,15 +171,19 @@ fn odometry_drifts_with_noise_and_is_exact_without() {
 
 proptest! {
     #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
-    /// Whatever it is told, the robot only ever stands where it can stand.
+    /// Whatever it is told, the robot never enters a building, never straddles more than a curb,
+    /// and never climbs more than a step at once (it reaches the sidewalk by the ramp only).
     #[test]
     fn robot_never_enters_an_obstacle(cmds in prop::collection::vec((-2.0..3.0f64, -3.0..3.0f64), 1..120)) {
         let w = curb_world();
         let limits = UgvLimits::default();
         let mut robot = Ugv::new(&w, UgvParams::default(), Pose2::new(27.0, 5.0, 0.0)).unwrap();
         for (v, omega) in cmds {
+            let base_before = robot.base_elevation_m();
             robot.step(&w, Twist2 { v, omega }, 0.25);
-            prop_assert!(limits.can_stand(&w, robot.pose().position()));
+            let f = footprint_heights(&w, robot.pose().position(), limits.radius_m).unwrap();
+            prop_assert!(f.max_m - f.min_m <= limits.max_drop_m as f32 + 1e-4, "{f:?}");
+            prop_assert!(robot.base_elevation_m() - base_before <= limits.max_step_m as f32 + 1e-4);
             prop_assert_eq!(w.class_at(robot.pose().position()).map(|c| c != 2), Some(true));
         }
     }
