@@ -48,6 +48,12 @@ use crate::status::Status;
 pub const PROGRESS_MARGIN_M: f64 = 1.0;
 /// `navigate_to` replans at least this often even when the path looks valid, seconds.
 pub const REPLAN_PERIOD_S: f64 = 10.0;
+
+/// A robot that stays within this distance of one point ...
+pub const PINNED_RADIUS_M: f64 = 2.0;
+
+/// ... for this many stuck timeouts is stuck, and backs out along its own trail.
+pub const PINNED_TIMEOUTS: f64 = 2.0;
 /// When stuck, the blocked edge is taken this far ahead of the robot along the path, metres.
 const BLOCKAGE_PROBE_M: f64 = 2.0;
 /// How far beyond the last look-ahead point (plus the look-ahead) the path is searched, metres.
@@ -260,6 +266,10 @@ struct Driver {
     /// Smallest remaining distance seen, and when it last dropped by the margin.
     best_remaining: f64,
     best_at: Time,
+    /// Where the robot was when it last got [`PINNED_RADIUS_M`] away from the previous such
+    /// point, and when: a robot that stays near one point is stuck, whatever its route says.
+    pinned_at: Option<Point2>,
+    pinned_since: Time,
 }
 
 impl Driver {
@@ -272,6 +282,8 @@ impl Driver {
             local_goal: None,
             best_remaining: f64::INFINITY,
             best_at: Time::ZERO,
+            pinned_at: None,
+            pinned_since: Time::ZERO,
         }
     }
 
@@ -287,18 +299,34 @@ impl Driver {
         self.local_goal = None;
         self.best_remaining = f64::INFINITY;
         self.best_at = now;
+        self.pinned_at = None;
+        self.pinned_since = now;
         Ok(())
     }
 
-    /// Feeds the watchdog the remaining distance; true when no progress was made for `timeout_s`.
-    fn stuck(&mut self, now: Time, remaining: f64, timeout_s: f64) -> bool {
+    /// Feeds the watchdog the remaining distance and the robot's position; true when no
+    /// progress was made for `timeout_s`, or the robot stayed within [`PINNED_RADIUS_M`] of one
+    /// point for [`PINNED_TIMEOUTS`] of them (wiggling in a corner while replans keep changing
+    /// the route, so that the remaining distance alone would not tell).
+    fn stuck(&mut self, now: Time, here: Option<Point2>, remaining: f64, timeout_s: f64) -> bool {
         if remaining.is_finite()
             && (remaining < self.best_remaining - PROGRESS_MARGIN_M || !self.best_remaining.is_finite())
         {
             self.best_remaining = remaining;
             self.best_at = now;
         }
-        now.secs_since(self.best_at) > timeout_s
+        now.secs_since(self.best_at) > timeout_s || self.pinned(now, here, timeout_s)
+    }
+
+    /// Whether the robot stayed near one point for [`PINNED_TIMEOUTS`] × `timeout_s`.
+    fn pinned(&mut self, now: Time, here: Option<Point2>, timeout_s: f64) -> bool {
+        if let Some(p) = here
+            && self.pinned_at.is_none_or(|a| a.distance(p) > PINNED_RADIUS_M)
+        {
+            self.pinned_at = Some(p);
+            self.pinned_since = now;
+        }
+        now.secs_since(self.pinned_since) > PINNED_TIMEOUTS * timeout_s
     }
 
     /// A fresh stuck window from now, measured against `remaining` (a new route after being
@@ -306,6 +334,7 @@ impl Driver {
     fn restart_watchdog(&mut self, now: Time, remaining: f64) {
         self.best_remaining = if remaining.is_finite() { remaining } else { f64::INFINITY };
         self.best_at = now;
+        self.pinned_since = now;
     }
 
     /// Lets the watchdog measure against a new remaining distance (after a replan changed the
@@ -434,12 +463,14 @@ impl Route {
 
     /// The graph nodes at the two ends of the path segment at arc length `s`: the node behind
     /// (`None` on the first segment, which starts at the robot) and ahead (`None` on the last,
-    /// which ends at the target), both `None` without a graph path.
+    /// which ends at the target), both `None` without a graph path and on the lead-in (the
+    /// robot's own trail back to where the graph path starts).
     fn nodes_around(&self, s: f64) -> (Option<NodeId>, Option<NodeId>) {
         let Some(path) = self.path.as_ref() else { return (None, None) };
         let last = self.points.len().saturating_sub(2);
         let i = self.cumulative.partition_point(|&c| c <= s).saturating_sub(1).min(last);
-        // Segment i joins waypoints i and i + 1; waypoint k + 1 is path node k.
+        let Some(i) = i.checked_sub(path.lead_in) else { return (None, None) };
+        // Past the lead-in, segment i joins waypoints i and i + 1; waypoint k + 1 is node k.
         let behind = i.checked_sub(1).and_then(|k| path.nodes.get(k).copied());
         (behind, path.nodes.get(i).copied())
     }
@@ -602,6 +633,14 @@ impl Navigator {
         }
     }
 
+    /// A route that first backs out along the robot's trail ([`NavStack::plan_backtracking`]).
+    fn backtrack_route(rt: &mut RobotRuntime, here: Point2, target: Point2) -> Option<Route> {
+        let nav = rt.nav.as_deref_mut()?;
+        nav.note_stuck_at(here);
+        let path = nav.plan_backtracking(here, target).ok()?;
+        Some(Route::new(Some(path), here, target))
+    }
+
     fn node_position(rt: &RobotRuntime, node: Option<NodeId>) -> Option<Point2> {
         let node = node?;
         rt.nav.as_deref()?.global.nodes().find(|(id, _, _)| *id == node).map(|(_, p, _)| p)
@@ -697,7 +736,7 @@ impl Navigator {
     fn tick(&mut self, rt: &mut RobotRuntime, now: Time, req: &Request) -> Step {
         let Some(pose) = rt.pose else {
             rt.command = Some(Twist2::ZERO);
-            if self.driver.stuck(now, f64::INFINITY, req.stuck_timeout_s) {
+            if self.driver.stuck(now, None, f64::INFINITY, req.stuck_timeout_s) {
                 return Step::Failed(Reason::Stuck, "the robot has had no pose estimate".into());
             }
             return Step::Running;
@@ -724,20 +763,31 @@ impl Navigator {
             self.behind = behind;
         }
         self.ahead = ahead;
-        if self.driver.stuck(now, remaining, req.stuck_timeout_s) {
+        if self.driver.stuck(now, Some(here), remaining, req.stuck_timeout_s) {
+            let pinned = self.driver.pinned(now, Some(here), req.stuck_timeout_s);
+            if let Some(nav) = rt.nav.as_deref_mut()
+                && let (Some(a), Some(b)) = (self.behind, self.ahead)
+            {
+                nav.block_edge(a, b);
+            }
+            // Pinned in one place (a corner of a parking lot whose edges cross curbs): back out
+            // the way the robot came and plan on from there.
+            if pinned && let Some(route) = Self::backtrack_route(rt, here, req.target) {
+                let remaining = route.length();
+                self.adopt(rt, route, now, Trigger::Changed, req);
+                self.driver.restart_watchdog(now, remaining);
+                return Step::Running;
+            }
             // Stuck on a graph edge the scans could not judge (e.g. a blockage seen from too far
             // for the edge's nodes to be in the safe region): remember the edge as blocked and
             // take another route from the node behind; fail when there is none, or when stuck
             // with no node behind.
-            let (Some(a), Some(b)) = (self.behind, self.ahead) else {
+            let (Some(_), Some(_)) = (self.behind, self.ahead) else {
                 return Step::Failed(
                     Reason::Stuck,
                     format!("no progress for {:.0} s ({remaining:.1} m of path left)", req.stuck_timeout_s),
                 );
             };
-            if let Some(nav) = rt.nav.as_deref_mut() {
-                nav.block_edge(a, b);
-            }
             return match self.replan(rt, here, req.target, true) {
                 Ok(route) => {
                     let remaining = route.length();
@@ -1007,7 +1057,8 @@ impl Behavior for NavigateLocal {
             rt.command = Some(Twist2::ZERO);
             return Status::Success;
         }
-        if self.driver.stuck(now, remaining, stuck_timeout_s) {
+        let here = rt.pose.map(|p| p.pose.position());
+        if self.driver.stuck(now, here, remaining, stuck_timeout_s) {
             rt.command = Some(Twist2::ZERO);
             let why = if rt.pose.is_none() {
                 "the robot has no pose estimate".to_string()
@@ -1050,6 +1101,7 @@ mod tests {
             edges: Vec::new(),
             nodes: (0..inner as u32).map(|i| NodeId(10 + i)).collect(),
             graph_cost: 0.0,
+            lead_in: 0,
         }
     }
 
@@ -1123,10 +1175,30 @@ mod tests {
         let mut d = Driver::new(Overrides::default());
         let t = |s: f64| Time::from_secs_f64(s);
         d.best_at = t(0.0);
-        assert!(!d.stuck(t(0.0), 20.0, 10.0));
-        assert!(!d.stuck(t(8.0), 19.5, 10.0), "half a metre is not progress, but the window is not over");
-        assert!(!d.stuck(t(9.0), 18.9, 10.0), "a metre restarts the window");
-        assert!(!d.stuck(t(18.0), 18.5, 10.0));
-        assert!(d.stuck(t(19.5), 18.5, 10.0));
+        assert!(!d.stuck(t(0.0), None, 20.0, 10.0));
+        assert!(!d.stuck(t(8.0), None, 19.5, 10.0), "half a metre is not progress, but the window is not over");
+        assert!(!d.stuck(t(9.0), None, 18.9, 10.0), "a metre restarts the window");
+        assert!(!d.stuck(t(18.0), None, 18.5, 10.0));
+        assert!(d.stuck(t(19.5), None, 18.5, 10.0));
+    }
+
+    #[test]
+    fn watchdog_catches_a_robot_pinned_in_one_place_whatever_its_route_says() {
+        let mut d = Driver::new(Overrides::default());
+        let t = |s: f64| Time::from_secs_f64(s);
+        let at = |x: f64| Some(Point2::new(x, 0.0));
+        // Replans keep shortening the remaining distance, but the robot wiggles within 2 m.
+        for k in 0..=20 {
+            let s = k as f64;
+            let stuck = d.stuck(t(s), at((s * 1.7).sin()), 100.0 - 2.0 * s, 10.0);
+            assert!(!stuck, "within two timeouts: {s} s");
+        }
+        assert!(d.stuck(t(21.0), at(0.5), 50.0, 10.0), "pinned for more than 20 s");
+        // A robot that moves on is not pinned.
+        let mut moving = Driver::new(Overrides::default());
+        for k in 0..60 {
+            let s = k as f64;
+            assert!(!moving.stuck(t(s), at(0.5 * s), 100.0 - 2.0 * s, 10.0));
+        }
     }
 }

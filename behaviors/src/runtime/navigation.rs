@@ -3,6 +3,7 @@
 //! global planner kept current with the map copy, the team's scans and its training schedule.
 //! The driving nodes (`navigate_to`, `navigate_local`, `return_home`) use it.
 
+use std::collections::VecDeque;
 use std::sync::Arc;
 
 use rand_chacha::ChaCha8Rng;
@@ -15,6 +16,19 @@ use spomp_mapping::Orthomap;
 use spomp_teamstate::TeamState;
 
 use super::RuntimeError;
+
+/// Spacing of the robot's trail points, metres.
+const TRAIL_SPACING_M: f64 = 2.0;
+
+/// Trail points kept (400 m of driving at the spacing).
+const TRAIL_POINTS: usize = 200;
+
+/// A backtracking plan aims at least this far back along the trail (and this far from any place
+/// the robot got stuck), metres.
+const BACKTRACK_MIN_M: f64 = 6.0;
+
+/// Graph nodes along the trail tried as the start of a backtracking plan.
+const MAX_BACKTRACK_ATTEMPTS: usize = 12;
 
 /// Navigation parameters of a UGV.
 #[derive(Clone, Debug, Default)]
@@ -60,6 +74,11 @@ pub struct NavStack {
     /// Graph edges (node pairs) this robot failed to get across while driving them: the
     /// driving nodes' experience of a blockage the scans could not judge (see [`NavStack::plan`]).
     pub blocked_edges: Vec<(NodeId, NodeId)>,
+    /// Where the robot has been (map frame, every [`TRAIL_SPACING_M`], newest last): ground it
+    /// drove, the way back when the graph has no path from where it stands.
+    trail: VecDeque<Point2>,
+    /// Where the robot got stuck ([`NavStack::note_stuck_at`]).
+    stuck_spots: Vec<Point2>,
     map_version_seen: Option<u64>,
     team_scan_cursor: usize,
 }
@@ -85,6 +104,8 @@ impl NavStack {
             dwa,
             sharer,
             blocked_edges: Vec::new(),
+            trail: VecDeque::new(),
+            stuck_spots: Vec::new(),
             map_version_seen: None,
             team_scan_cursor: 0,
         })
@@ -126,6 +147,7 @@ impl NavStack {
             }
         };
         self.analyzed_depth = Some(frame.depth.clone());
+        self.record_trail(pose.pose.position());
         let scan = Arc::new(scan);
         self.view = Some(LocalView { region, pose, odom_pose: frame.odom_pose, stamp: frame.stamp });
         if map.is_some() {
@@ -180,9 +202,76 @@ impl NavStack {
     /// Plans from `from` to `to` on the global planner, avoiding the edges the robot recorded as
     /// blocked ([`NavStack::block_edge`]). That record is experience too: with graph updates off
     /// (`global.experience.graph_updates: false`, the paper's ablation) it is not used.
+    ///
+    /// When the graph has no path from where the robot stands (the edges of the node covering
+    /// it were all seen blocked, say inside a parking lot whose straight edges cross parked
+    /// vehicles), the robot backtracks: the path starts with its own trail back to the newest
+    /// trail point from which the graph has one ([`GlobalPath::lead_in`] counts those points).
     pub fn plan(&mut self, from: Point2, to: Point2) -> Result<GlobalPath, PlanError> {
         let avoid: &[(NodeId, NodeId)] =
             if self.params.global.experience.graph_updates { &self.blocked_edges } else { &[] };
-        self.global.plan_avoiding(from, to, avoid)
+        match self.global.plan_avoiding(from, to, avoid) {
+            Err(PlanError::NoPath) => self.plan_backtracking(from, to),
+            other => other,
+        }
+    }
+
+    /// A path that backs out along the robot's trail to the newest trail point (at least
+    /// [`BACKTRACK_MIN_M`] away, not near a place the robot got stuck) from which the graph has
+    /// a path to `to`, then follows that path; [`PlanError::NoPath`] when no trail point has one.
+    pub fn plan_backtracking(&mut self, from: Point2, to: Point2) -> Result<GlobalPath, PlanError> {
+        let avoid: &[(NodeId, NodeId)] =
+            if self.params.global.experience.graph_updates { &self.blocked_edges } else { &[] };
+        let mut tried = Vec::new();
+        tried.extend(self.global.covering_node(from));
+        for k in (0..self.trail.len()).rev() {
+            let back = self.trail[k];
+            if back.distance(from) < BACKTRACK_MIN_M
+                || self.stuck_spots.iter().any(|s| s.distance(back) < BACKTRACK_MIN_M)
+            {
+                continue;
+            }
+            // One attempt per graph node: trail points covered by a node already tried would
+            // attach the same way.
+            let Some(node) = self.global.covering_node(back) else { continue };
+            if tried.contains(&node) {
+                continue;
+            }
+            if tried.len() > MAX_BACKTRACK_ATTEMPTS {
+                break;
+            }
+            tried.push(node);
+            if let Ok(mut path) = self.global.plan_avoiding(back, to, avoid) {
+                let mut waypoints = Vec::with_capacity(self.trail.len() - k + path.waypoints.len());
+                waypoints.push(from);
+                waypoints.extend(self.trail.range(k + 1..).rev().copied());
+                path.lead_in = waypoints.len();
+                waypoints.append(&mut path.waypoints);
+                path.length_m = waypoints.windows(2).map(|w| w[0].distance(w[1])).sum();
+                path.waypoints = waypoints;
+                return Ok(path);
+            }
+        }
+        Err(PlanError::NoPath)
+    }
+
+    /// Records a place where the robot got stuck: backtracking never aims back at it.
+    pub fn note_stuck_at(&mut self, p: Point2) {
+        if self.stuck_spots.len() >= TRAIL_POINTS {
+            self.stuck_spots.remove(0);
+        }
+        self.stuck_spots.push(p);
+    }
+
+    /// Adds `p` to the trail when it is [`TRAIL_SPACING_M`] from the newest point; the trail
+    /// keeps the last [`TRAIL_POINTS`].
+    fn record_trail(&mut self, p: Point2) {
+        if !(p.x.is_finite() && p.y.is_finite()) || self.trail.back().is_some_and(|q| q.distance(p) < TRAIL_SPACING_M) {
+            return;
+        }
+        if self.trail.len() >= TRAIL_POINTS {
+            self.trail.pop_front();
+        }
+        self.trail.push_back(p);
     }
 }

@@ -63,7 +63,21 @@ pub struct GlobalPath {
     pub nodes: Vec<NodeId>,
     /// Cost of the graph edges alone when planned (compared by [`GlobalPlanner::path_status`]).
     pub graph_cost: f64,
+    /// Leading waypoints that come before the graph path's own start: a caller's route to
+    /// where the graph path begins, such as the robot's own trail (0 from the planner). Waypoint
+    /// `lead_in + k + 1` is node `k`.
+    pub lead_in: usize,
 }
+
+/// How far around a start or goal the planner looks for other nodes to attach to when the
+/// covering nodes have no path between them, metres.
+pub const DETOUR_ATTACH_M: f64 = 15.0;
+
+/// A path found around the covering nodes: start node, goal node, graph cost, nodes.
+type Detour = (NodeIndex<u32>, NodeIndex<u32>, f64, Vec<NodeIndex<u32>>);
+
+/// At most this many nodes around a start or goal are tried besides the covering node.
+const MAX_DETOUR_LEGS: usize = 6;
 
 /// Whether a planned path is still good.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -812,6 +826,13 @@ impl GlobalPlanner {
     /// for a caller's own experience the scans could not give, such as an edge the robot failed
     /// to get across. The edges stay in the graph, with their state; pairs that are not edges
     /// are ignored.
+    ///
+    /// The start and the goal attach to the nodes whose regions cover them. When no path joins
+    /// those two, the search is tried again from and to the nodes around each point (the nearest
+    /// within [`DETOUR_ATTACH_M`], by a straight leg over covered ground that the scans have not
+    /// voted untraversable), and the cheapest path wins. Without this, a robot whose covering
+    /// node lost all its edges (a parking lot whose straight edges the scans saw through parked
+    /// vehicles) could plan nowhere, although it can drive to the next node.
     pub fn plan_avoiding(
         &mut self,
         from: Point2,
@@ -820,39 +841,25 @@ impl GlobalPlanner {
     ) -> Result<GlobalPath, PlanError> {
         let start = self.attach(from, "start")?;
         let goal = self.attach(to, "goal")?;
-        let goal_pos = self.graph[goal].position;
-        let rate = self.min_cost_per_m;
-        let graph = &self.graph;
         let mut avoided: Vec<(u32, u32)> =
             avoid.iter().map(|&(a, b)| if a.0 <= b.0 { (a.0, b.0) } else { (b.0, a.0) }).collect();
         avoided.sort_unstable();
-        let allowed = petgraph::visit::EdgeFiltered::from_fn(
-            graph,
-            |e: petgraph::stable_graph::EdgeReference<'_, EdgeData, u32>| {
-                avoided.binary_search(&pair(e.source(), e.target())).is_err()
-            },
-        );
-        let (graph_cost, nodes) = petgraph::algo::astar(
-            &allowed,
-            start,
-            |n| n == goal,
-            |e| e.weight().cost,
-            |n| rate * graph[n].position.distance(goal_pos),
-        )
-        .ok_or(PlanError::NoPath)?;
+        let (start, goal, graph_cost, nodes) = match self.search(start, goal, &avoided) {
+            Some((cost, nodes)) => (start, goal, cost, nodes),
+            None => self.detour_search(from, to, start, goal, &avoided).ok_or(PlanError::NoPath)?,
+        };
         let mut edges = Vec::with_capacity(nodes.len().saturating_sub(1));
         for w in nodes.windows(2) {
-            let e = graph.find_edge(w[0], w[1]).ok_or(PlanError::NoPath)?;
+            let e = self.graph.find_edge(w[0], w[1]).ok_or(PlanError::NoPath)?;
             edges.push(EdgeId(e.index() as u32));
         }
         let mut waypoints = Vec::with_capacity(nodes.len() + 2);
         waypoints.push(from);
-        waypoints.extend(nodes.iter().map(|&n| graph[n].position));
+        waypoints.extend(nodes.iter().map(|&n| self.graph[n].position));
         waypoints.push(to);
         let length_m = waypoints.windows(2).map(|w| w[0].distance(w[1])).sum();
-        let first = self.graph[start].position;
-        let head = self.segment_samples(from, first);
-        let tail = self.segment_samples(goal_pos, to);
+        let head = self.segment_samples(from, self.graph[start].position);
+        let tail = self.segment_samples(self.graph[goal].position, to);
         let attach_cost = self.base_cost(&head) + self.base_cost(&tail);
         Ok(GlobalPath {
             waypoints,
@@ -861,6 +868,108 @@ impl GlobalPlanner {
             edges,
             nodes: nodes.iter().map(|n| NodeId(n.index() as u32)).collect(),
             graph_cost,
+            lead_in: 0,
+        })
+    }
+
+    /// A* between two nodes over the live edges minus the avoided pairs: the graph cost and
+    /// the nodes.
+    fn search(
+        &self,
+        start: NodeIndex<u32>,
+        goal: NodeIndex<u32>,
+        avoided: &[(u32, u32)],
+    ) -> Option<(f64, Vec<NodeIndex<u32>>)> {
+        let graph = &self.graph;
+        let goal_pos = graph[goal].position;
+        let rate = self.min_cost_per_m;
+        let allowed = petgraph::visit::EdgeFiltered::from_fn(
+            graph,
+            |e: petgraph::stable_graph::EdgeReference<'_, EdgeData, u32>| {
+                avoided.binary_search(&pair(e.source(), e.target())).is_err()
+            },
+        );
+        petgraph::algo::astar(
+            &allowed,
+            start,
+            |n| n == goal,
+            |e| e.weight().cost,
+            |n| rate * graph[n].position.distance(goal_pos),
+        )
+    }
+
+    /// The cheapest path over the nodes around the start and the goal (see
+    /// [`GlobalPlanner::plan_avoiding`]): start node, goal node, graph cost and nodes.
+    fn detour_search(
+        &mut self,
+        from: Point2,
+        to: Point2,
+        start: NodeIndex<u32>,
+        goal: NodeIndex<u32>,
+        avoided: &[(u32, u32)],
+    ) -> Option<Detour> {
+        let starts = self.detour_legs(from, start);
+        let goals = self.detour_legs(to, goal);
+        let mut best: Option<(f64, Detour)> = None;
+        for &(s, s_cost) in &starts {
+            for &(g, g_cost) in &goals {
+                if (s, g) == (start, goal) || best.as_ref().is_some_and(|b| s_cost + g_cost >= b.0) {
+                    continue;
+                }
+                if let Some((cost, nodes)) = self.search(s, g, avoided) {
+                    let total = s_cost + cost + g_cost;
+                    if best.as_ref().is_none_or(|b| total < b.0) {
+                        best = Some((total, (s, g, cost, nodes)));
+                    }
+                }
+            }
+        }
+        best.map(|(_, detour)| detour)
+    }
+
+    /// The attachment node of `p` and the nodes around it that a straight leg reaches over
+    /// covered ground not voted untraversable, nearest first, with the legs' costs.
+    fn detour_legs(&mut self, p: Point2, home: NodeIndex<u32>) -> Vec<(NodeIndex<u32>, f64)> {
+        let mut near: Vec<(f64, NodeIndex<u32>)> = self
+            .graph
+            .node_indices()
+            .filter(|&n| n != home)
+            .map(|n| (p.distance(self.graph[n].position), n))
+            .filter(|&(d, _)| d <= DETOUR_ATTACH_M)
+            .collect();
+        near.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut legs = vec![home];
+        legs.extend(
+            near.into_iter()
+                .map(|(_, n)| n)
+                .filter(|&n| self.graph.neighbors(n).next().is_some())
+                .filter(|&n| self.leg_is_open(p, self.graph[n].position))
+                .take(MAX_DETOUR_LEGS),
+        );
+        legs.into_iter()
+            .map(|n| {
+                let samples = self.segment_samples(p, self.graph[n].position);
+                (n, self.base_cost(&samples))
+            })
+            .collect()
+    }
+
+    /// Whether every cell of the straight leg from `p` to `node_at` lies in some node's region
+    /// (so it cuts through nothing the graph leaves out, such as a building) and none has as
+    /// many untraversable votes as a training label needs. The first metre around `p` is not
+    /// judged: a robot standing next to an obstacle sits among cells voted beyond its boundary.
+    fn leg_is_open(&self, p: Point2, node_at: Point2) -> bool {
+        let Some(map) = &self.map else { return false };
+        let judge = self.params.experience.graph_updates;
+        let blocked_votes = -(self.params.learning.votes_to_label.max(1) as i8);
+        let length = p.distance(node_at);
+        let steps = (length / map.spec.resolution_m.max(1e-3)).ceil() as usize;
+        (0..=steps).all(|k| {
+            let t = if steps == 0 { 0.0 } else { k as f64 / steps as f64 };
+            map.spec.cell_at(p + (node_at - p) * t).is_some_and(|c| {
+                let i = map.spec.index(c);
+                self.owner[i] != NO_NODE && (!judge || t * length < 1.0 || self.votes.net(i) > blocked_votes)
+            })
         })
     }
 
