@@ -230,7 +230,23 @@ fn write_trial_outputs(result: &RunResult, trial_dir: &Path) -> Result<()> {
         .with_context(|| format!("writing {}", path.display()))?;
     sim_plots::map_plot(result, &trial_dir.join("plots").join("map.png"))?;
     sim_plots::goal_times_plot(&result.summary, &trial_dir.join("plots").join("goal_visits.png"))?;
+    sim_plots::localization_error_plot(result, &trial_dir.join("plots").join("localization_error.png"))?;
+    let path = trial_dir.join("localization_error.csv");
+    std::fs::write(&path, localization_error_csv(result)).with_context(|| format!("writing {}", path.display()))?;
     Ok(())
+}
+
+/// Each UGV's localization error over time as CSV: `robot,time_s,error_m`, one row per sample
+/// (at most one a second per robot).
+fn localization_error_csv(result: &RunResult) -> String {
+    use std::fmt::Write as _;
+    let mut csv = String::from("robot,time_s,error_m\n");
+    for (id, series) in &result.localization_errors {
+        for (t, e) in series {
+            let _ = writeln!(csv, "{id},{t:.1},{e:.3}");
+        }
+    }
+    csv
 }
 
 /// Records a run to MCAP and drives the progress bar.

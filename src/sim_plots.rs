@@ -100,3 +100,45 @@ pub fn goal_times_plot(summary: &RunSummary, path: &Path) -> Result<()> {
     };
     draw().map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))
 }
+
+/// Each UGV's localization error over time (one line per UGV, in team colours), with the
+/// acceptance bars of the cross-view localizer as horizontal lines at 2 m (median) and 5 m
+/// (max). The y range covers the largest error (at least 6 m).
+pub fn localization_error_plot(result: &RunResult, path: &Path) -> Result<()> {
+    ensure_font()?;
+    let series = &result.localization_errors;
+    let x_max = result.summary.end_s.max(1.0);
+    let worst =
+        series.iter().flat_map(|(_, s)| s.iter().map(|&(_, e)| e)).filter(|e| e.is_finite()).fold(0.0, f64::max);
+    let y_max = (worst * 1.05).max(6.0);
+    let root = BitMapBackend::new(path, (800, 400)).into_drawing_area();
+    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .margin(15)
+            .x_label_area_size(35)
+            .y_label_area_size(45)
+            .build_cartesian_2d(0.0..x_max, 0.0..y_max)?;
+        chart.configure_mesh().x_desc("time (s)").y_desc("position error (m)").draw()?;
+        for (bar, label, colour) in [(2.0, "2 m (median bar)", RGBColor(230, 140, 0)), (5.0, "5 m (max bar)", RED)] {
+            let style = colour.stroke_width(2);
+            chart
+                .draw_series(DashedLineSeries::new([(0.0, bar), (x_max, bar)], 8, 5, style))?
+                .label(label)
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], style));
+        }
+        for (k, (id, points)) in series.iter().enumerate() {
+            let [r, g, b] = TRACK_COLOURS[k % TRACK_COLOURS.len()];
+            let colour = RGBColor(r, g, b);
+            let points = points.iter().copied().filter(|(t, e)| t.is_finite() && e.is_finite());
+            chart
+                .draw_series(LineSeries::new(points, colour.stroke_width(2)))?
+                .label(id.to_string())
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], colour.stroke_width(2)));
+        }
+        chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))
+}

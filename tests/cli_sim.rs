@@ -41,10 +41,27 @@ fn sim_writes_summaries_log_and_plots_for_every_trial() {
     assert!(out_dir.path().join("summary.json").is_file());
     for seed in [4, 5] {
         let trial = out_dir.path().join(format!("trial-{seed}"));
-        for f in ["summary.json", "run.mcap", "plots/map.png", "plots/goal_visits.png"] {
+        for f in ["summary.json", "run.mcap", "plots/map.png", "plots/goal_visits.png", "plots/localization_error.png"]
+        {
             let p = trial.join(f);
             assert!(p.metadata().map(|m| m.len() > 0).unwrap_or(false), "{} missing or empty", p.display());
         }
+        // The error over time of every UGV, at most once a second (20 s of the patroller's).
+        let csv = std::fs::read_to_string(trial.join("localization_error.csv")).unwrap();
+        let mut lines = csv.lines();
+        assert_eq!(lines.next(), Some("robot,time_s,error_m"));
+        let rows: Vec<(f64, f64)> = lines
+            .filter(|l| l.starts_with("ugv1,"))
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                (f[1].parse().unwrap(), f[2].parse().unwrap())
+            })
+            .collect();
+        assert!((15..=21).contains(&rows.len()), "{csv}");
+        assert!(rows.windows(2).all(|w| w[1].0 - w[0].0 >= 0.99), "at most 1 Hz: {csv}");
+        // ugv1 takes ground truth with 0.3 m noise; ugv2 (the guard) localizes cross-view.
+        assert!(rows.iter().all(|&(_, e)| (0.0..2.0).contains(&e)), "ground truth with noise: {csv}");
+        assert!(csv.lines().any(|l| l.starts_with("ugv2,")), "every UGV has a series: {csv}");
         let mcap = std::fs::read(trial.join("run.mcap")).unwrap();
         assert!(mcap.starts_with(b"\x89MCAP0\r\n"), "an MCAP file");
     }

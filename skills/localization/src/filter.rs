@@ -55,6 +55,10 @@ pub struct UpdateReport {
     /// Mean match cost of the observation under the predicted particles, as a fraction of the
     /// cost a random pose would get (0 = perfect match, about 1 = no better than a guess).
     pub cost_ratio: f64,
+    /// The robot had not moved since the last update (within `still_translation_m` and
+    /// `still_rotation_rad`) and the map was the same: the view was not fused again (no
+    /// reweighting, resampling or injection; the other fields are left at their defaults).
+    pub repeated_view: bool,
 }
 
 /// `ln(Σ exp(a_i))` of two terms, safe for −∞.
@@ -85,6 +89,16 @@ pub struct CrossViewLocalizer {
     field: Option<MatchField>,
     /// Frame time at which `field` was built by an update (None: built outside an update).
     field_built_at: Option<Time>,
+    /// Incremented whenever `field` is rebuilt.
+    field_generation: u64,
+    /// Odometry motion (composed) since the last measurement update that fused a view, and the
+    /// field generation it was fused against (None: no update since the initialisation).
+    motion_since_update: Pose2,
+    fused_on_generation: Option<u64>,
+    /// The estimate and the odometry pose at the last update that tracked well (short-term
+    /// cost ratio under `relocalization_min_cost_ratio`), or the prior: where a robot that got
+    /// lost was last known to be.
+    last_tracked: Option<(Pose2, Pose2)>,
     observation: LocalObservation,
     anchor_odom: Option<Pose2>,
     stamp: Time,
@@ -115,6 +129,10 @@ impl CrossViewLocalizer {
             order: Vec::new(),
             field: None,
             field_built_at: None,
+            field_generation: 0,
+            motion_since_update: Pose2::default(),
+            fused_on_generation: None,
+            last_tracked: None,
             observation: LocalObservation::default(),
             anchor_odom: None,
             stamp: Time::ZERO,
@@ -186,6 +204,7 @@ impl CrossViewLocalizer {
             });
         }
         self.reset_after_initialization(odom_pose, stamp, 1.0);
+        self.last_tracked = Some((prior.pose, odom_pose));
         Ok(())
     }
 
@@ -221,6 +240,9 @@ impl CrossViewLocalizer {
         self.weights.resize(n, 1.0 / n as f64);
         self.anchor_odom = Some(odom_pose);
         self.stamp = stamp;
+        self.motion_since_update = Pose2::default();
+        self.fused_on_generation = None;
+        self.last_tracked = None;
         self.log_likelihood_fast = None;
         self.log_likelihood_slow = None;
         // A prior is trusted until the evidence says otherwise (a drifted prior is first
@@ -243,6 +265,7 @@ impl CrossViewLocalizer {
         self.field = None;
         self.field_built_at = None;
         self.field = Some(MatchField::build(map, classes, &self.params)?);
+        self.field_generation += 1;
         Ok(())
     }
 
@@ -280,8 +303,25 @@ impl CrossViewLocalizer {
         if let Some(anchor) = self.anchor_odom.as_mut() {
             *anchor = anchor.compose(odom_delta);
         }
+        self.motion_since_update = self.motion_since_update.compose(odom_delta);
         self.refresh_estimate();
         Ok(())
+    }
+
+    /// Whether the robot has not moved since the last update that fused a view (within
+    /// `still_translation_m` / `still_rotation_rad`) and the map is the one it was fused with.
+    ///
+    /// The rule (as AMCL's, which updates and resamples only after motion): a second panorama
+    /// from the same pose is the same view of the same scene, its errors (labels, the map's own
+    /// mistakes) the same as the first's; fusing it again would count one observation twice,
+    /// sharpening the weights on whatever that view happened to favour, and each resampling
+    /// without motion noise afterwards draws the cloud at random from itself, so a still robot's
+    /// estimate random-walks. A changed map is new evidence on the same view and is fused.
+    fn is_repeated_view(&self) -> bool {
+        let m = self.motion_since_update;
+        self.fused_on_generation == Some(self.field_generation)
+            && m.x.hypot(m.y) < self.params.still_translation_m
+            && normalize_angle(m.yaw).abs() < self.params.still_rotation_rad
     }
 
     /// One panorama: predicts with the odometry since the previous panorama (from the frame's
@@ -316,28 +356,51 @@ impl CrossViewLocalizer {
         }
         crate::observation::check_frame(frame)?;
         self.refresh_map(map, classes, frame.stamp)?;
+        self.anchor_odom = Some(frame.odom_pose);
+        self.stamp = frame.stamp;
+        if self.is_repeated_view() {
+            let report = UpdateReport {
+                effective_sample_size: effective_sample_size(&self.weights),
+                repeated_view: true,
+                ..Default::default()
+            };
+            self.refresh_estimate();
+            self.last_report = report;
+            return Ok(report);
+        }
+        let field_generation = self.field_generation;
         let Some(field) = self.field.as_ref() else {
             return Err(LocalizationError::InvalidMap("no match field".into()));
         };
         self.observation.build(frame, &field.slots, field.spec.resolution_m, &self.params)?;
-        self.anchor_odom = Some(frame.odom_pose);
-        self.stamp = frame.stamp;
+        self.motion_since_update = Pose2::default();
+        self.fused_on_generation = Some(field_generation);
         let mut report = UpdateReport { observed_cells: self.observation.len(), ..Default::default() };
-        // Common support: score everyone on the cells that the (concentrated) estimate sees on
-        // known ground.
+        // Common support: while the particles are concentrated, score everyone on the cells that
+        // every plausible pose sees on known ground — the cells known at the estimate and at
+        // the estimate moved `common_support_sigmas` standard deviations along each principal
+        // axis of its position spread and turned as many in heading. A cell that lands on
+        // known ground for some particles and on unknown ground for others would otherwise
+        // reward the particles that put more of the view on the map (at the edge of a partly
+        // mapped area, those shifted into it along a straight road).
         let mut support_fraction = 1.0;
-        if max_xy_std(&self.estimate.covariance) <= self.params.common_support_max_spread_m {
-            let pose = self.estimate.pose;
-            let (s, c) = pose.yaw.sin_cos();
+        let spread = max_xy_std(&self.estimate.covariance);
+        if spread <= self.params.common_support_max_spread_m {
+            let poses = support_poses(&self.estimate, self.params.common_support_sigmas);
             let spec = field.spec;
             let inv_res = 1.0 / spec.resolution_m;
-            let (ox, oy) = ((pose.x - spec.origin.x) * inv_res, (pose.y - spec.origin.y) * inv_res);
+            let frames = poses.map(|p| {
+                let (s, c) = p.yaw.sin_cos();
+                ((p.x - spec.origin.x) * inv_res, (p.y - spec.origin.y) * inv_res, s, c)
+            });
             support_fraction = self.observation.retain(&field.slots.weight, |cell, slot| {
-                let u = (ox + c * cell.x as f64 - s * cell.y as f64).floor();
-                let v = (oy + s * cell.x as f64 + c * cell.y as f64).floor();
-                spec.contains(u as i64, v as i64)
-                    && field.plane(slot).get(v as usize * spec.width as usize + u as usize).copied()
-                        != Some(UNKNOWN_COST_LEVEL)
+                let plane = field.plane(slot);
+                frames.iter().all(|&(ox, oy, s, c)| {
+                    let u = (ox + c * cell.x as f64 - s * cell.y as f64).floor();
+                    let v = (oy + s * cell.x as f64 + c * cell.y as f64).floor();
+                    spec.contains(u as i64, v as i64)
+                        && plane.get(v as usize * spec.width as usize + u as usize).copied() != Some(UNKNOWN_COST_LEVEL)
+                })
             });
         }
         let total_weight = self.observation.total_weight;
@@ -380,6 +443,7 @@ impl CrossViewLocalizer {
         report.informative = known_fraction >= self.params.min_known_fraction && known_fraction > 0.0;
 
         let mut inject = 0usize;
+        let mut tracking = false;
         if report.informative {
             let agreement: f64 = self
                 .weights
@@ -404,7 +468,8 @@ impl CrossViewLocalizer {
                 None => report.cost_ratio,
             };
             self.cost_ratio_fast = Some(ratio_fast);
-            if self.params.relocalization_enabled && ratio_fast >= self.params.relocalization_min_cost_ratio {
+            tracking = ratio_fast < self.params.relocalization_min_cost_ratio;
+            if self.params.relocalization_enabled && !tracking {
                 let p_inject = (1.0 - (fast - slow).exp()).clamp(0.0, self.params.max_relocalization_fraction);
                 inject = (p_inject * self.particles.len() as f64).round() as usize;
             }
@@ -420,6 +485,9 @@ impl CrossViewLocalizer {
             report.resampled = true;
         }
         self.refresh_estimate();
+        if tracking {
+            self.last_tracked = Some((self.estimate.pose, frame.odom_pose));
+        }
         self.last_report = report;
         Ok(report)
     }
@@ -446,10 +514,28 @@ impl CrossViewLocalizer {
             .under_robot_slot
             .and_then(|slot| field.cells_of_slot.get(slot))
             .filter(|cells| !cells.is_empty());
+        let under_slot = same_class_cells.and(self.observation.under_robot_slot);
+        // Local candidates around the estimate and, as often, around where the robot was last
+        // tracked, carried on by odometry (the estimate may have wandered off since); none
+        // before the filter ever tracked (after a global initialisation the estimate is the
+        // mean of particles all over the map, a meaningless place).
+        let last_tracked = match (self.last_tracked, self.anchor_odom) {
+            (Some((pose, odom)), Some(now)) => Some(pose.compose(odom.between(now))),
+            _ => None,
+        };
+        let estimate = self.estimate.pose;
         self.candidates.clear();
         for _ in 0..n_candidates {
-            let p = match same_class_cells {
-                Some(cells) if rng.random::<f64>() < self.params.relocalization_same_class_fraction => {
+            let local = match last_tracked {
+                Some(tracked) if rng.random::<f64>() < self.params.relocalization_local_fraction => {
+                    let here = if rng.random::<bool>() { estimate } else { tracked };
+                    random_particle_near(field, here, self.params.relocalization_local_radius_m, under_slot, rng)
+                }
+                _ => None,
+            };
+            let p = match (local, same_class_cells) {
+                (Some(p), _) => p,
+                (None, Some(cells)) if rng.random::<f64>() < self.params.relocalization_same_class_fraction => {
                     random_particle_on(field, cells, rng)
                 }
                 _ => random_ground_particle(field, rng),
@@ -586,6 +672,46 @@ fn random_ground_particle<R: Rng + ?Sized>(field: &MatchField, rng: &mut R) -> P
     random_particle_on(field, &field.ground_cells, rng)
 }
 
+/// Tries to draw a pose on a known ground cell (of `slot`'s class when given) within `radius_m`
+/// of `around`: half the time with `around`'s heading give or take 0.2 rad (a robot carried
+/// off mostly keeps its heading, which odometry carries on), otherwise uniform. `None` when
+/// a few tries found no such cell.
+fn random_particle_near<R: Rng + ?Sized>(
+    field: &MatchField,
+    around: Pose2,
+    radius_m: f64,
+    slot: Option<usize>,
+    rng: &mut R,
+) -> Option<Particle> {
+    const TRIES: usize = 16;
+    let spec = field.spec;
+    for _ in 0..TRIES {
+        // Uniform over the disc.
+        let r = radius_m * rng.random::<f64>().sqrt();
+        let a = rng.random::<f64>() * std::f64::consts::TAU;
+        let (x, y) = (around.x + r * a.cos(), around.y + r * a.sin());
+        let (u, v) = ((x - spec.origin.x) / spec.resolution_m, (y - spec.origin.y) / spec.resolution_m);
+        if !(u.is_finite() && v.is_finite() && spec.contains(u.floor() as i64, v.floor() as i64)) {
+            continue;
+        }
+        let index = v.floor() as usize * spec.width as usize + u.floor() as usize;
+        let on = |s: usize| field.plane(s).get(index).copied() == Some(0);
+        let ground = match slot {
+            Some(s) => on(s),
+            None => (0..field.slots.len()).any(|s| field.slots.is_ground.get(s).copied().unwrap_or(false) && on(s)),
+        };
+        if ground {
+            let yaw = if rng.random::<bool>() {
+                around.yaw + 0.2 * rng.sample::<f64, _>(StandardNormal)
+            } else {
+                rng.random::<f64>() * std::f64::consts::TAU
+            };
+            return Some(Particle { x, y, yaw: normalize_angle(yaw) });
+        }
+    }
+    None
+}
+
 /// A pose drawn uniformly over a list of cells (should not be empty), with uniform heading.
 fn random_particle_on<R: Rng + ?Sized>(field: &MatchField, cells: &[u32], rng: &mut R) -> Particle {
     let n = cells.len().max(1);
@@ -639,6 +765,35 @@ fn weighted_mean_and_covariance(particles: &[Particle], weights: &[f64]) -> (Pos
 }
 
 /// Standard deviation of position along the widest axis of the xy covariance.
+/// The poses a cell must be known from to be in the common support: the estimate, and the
+/// estimate moved ± `sigmas` standard deviations along each principal axis of its position
+/// covariance and turned ± `sigmas` standard deviations of heading.
+fn support_poses(estimate: &PoseEstimate, sigmas: f64) -> [Pose2; 7] {
+    let p = estimate.pose;
+    let cov = &estimate.covariance;
+    let (a, b, d) = (cov[0], cov[1], cov[4]);
+    let half_trace = 0.5 * (a + d);
+    let radius = (0.25 * (a - d) * (a - d) + b * b).sqrt();
+    let finite = |v: f64| if v.is_finite() { v.max(0.0) } else { 0.0 };
+    let (l1, l2) = (finite(half_trace + radius), finite(half_trace - radius));
+    // Direction of the major axis.
+    let theta = 0.5 * (2.0 * b).atan2(a - d);
+    let theta = if theta.is_finite() { theta } else { 0.0 };
+    let (s1, s2) = (sigmas * l1.sqrt(), sigmas * l2.sqrt());
+    let (st, ct) = theta.sin_cos();
+    let yaw_step = sigmas * finite(cov[8]).sqrt();
+    let at = |dx: f64, dy: f64, dyaw: f64| Pose2::new(p.x + dx, p.y + dy, p.yaw + dyaw);
+    [
+        p,
+        at(s1 * ct, s1 * st, 0.0),
+        at(-s1 * ct, -s1 * st, 0.0),
+        at(-s2 * st, s2 * ct, 0.0),
+        at(s2 * st, -s2 * ct, 0.0),
+        at(0.0, 0.0, yaw_step),
+        at(0.0, 0.0, -yaw_step),
+    ]
+}
+
 fn max_xy_std(cov: &[f64; 9]) -> f64 {
     let (a, b, d) = (cov[0], cov[1], cov[4]);
     let half_trace = 0.5 * (a + d);

@@ -84,11 +84,23 @@ pub struct LocalizationParams {
     /// Fraction of the candidates drawn from cells of the ground class the robot sees under
     /// itself (the rest from all known ground cells).
     pub relocalization_same_class_fraction: f64,
+    /// Fraction of the candidates drawn near the current estimate (within
+    /// `relocalization_local_radius_m`) before the rest are drawn over the whole map: a robot
+    /// carried off (wheel slip, a wrong start, a kidnapping) is far more likely to be a few tens
+    /// of metres away than anywhere, and a uniform draw over a city almost never lands within a
+    /// metre and a few degrees of the truth.
+    pub relocalization_local_fraction: f64,
+    /// Radius of the local candidate draw, metres.
+    pub relocalization_local_radius_m: f64,
     /// While the particles are concentrated (position spread at most this), only the observed
-    /// cells that land on known aerial cells at the current estimate are scored, for every
-    /// particle alike: the part of the view over unmapped ground then carries no weight, instead
-    /// of pulling the particles towards the mapped area. 0 = always score every cell.
+    /// cells that land on known aerial cells from every plausible pose (the estimate and the
+    /// estimate moved `common_support_sigmas` standard deviations each way) are scored, for
+    /// every particle alike: the part of the view over unmapped ground then carries no weight,
+    /// instead of pulling the particles towards the mapped area. 0 = always score every cell.
     pub common_support_max_spread_m: f64,
+    /// How many standard deviations of position (along each principal axis) and heading the
+    /// common support reaches out from the estimate.
+    pub common_support_sigmas: f64,
     /// An update counts towards the likelihood averages (and may trigger re-localisation) only
     /// when at least this fraction of the observation lands on known aerial cells.
     pub min_known_fraction: f64,
@@ -102,6 +114,13 @@ pub struct LocalizationParams {
     /// Confidence falls off with the particle spread: factor exp(−σ / scale), σ the standard
     /// deviation of position along the widest axis.
     pub confidence_spread_scale_m: f64,
+
+    /// A robot whose odometry moved less than this since the last fused view (and turned less
+    /// than `still_rotation_rad`) has not moved: a panorama then is the same view again and is
+    /// not fused (no reweighting, resampling or injection) unless the map changed.
+    pub still_translation_m: f64,
+    /// See `still_translation_m`.
+    pub still_rotation_rad: f64,
 }
 
 /// The default class weights: roads and gravel are the most reliable aerial labels, buildings
@@ -146,12 +165,17 @@ impl Default for LocalizationParams {
             likelihood_slow_rate: 0.01,
             relocalization_min_cost_ratio: 0.15,
             max_relocalization_fraction: 0.25,
-            relocalization_candidates_per_particle: 4,
+            relocalization_candidates_per_particle: 8,
             relocalization_same_class_fraction: 0.75,
-            common_support_max_spread_m: 5.0,
+            relocalization_local_fraction: 0.5,
+            relocalization_local_radius_m: 80.0,
+            common_support_max_spread_m: 15.0,
+            common_support_sigmas: 2.0,
             min_known_fraction: 0.5,
             map_rebuild_interval_s: 5.0,
             confidence_spread_scale_m: 3.0,
+            still_translation_m: 0.01,
+            still_rotation_rad: 0.01,
         }
     }
 }
@@ -199,6 +223,7 @@ impl LocalizationParams {
             || !unit(self.max_relocalization_fraction)
             || !unit(self.min_known_fraction)
             || !unit(self.relocalization_same_class_fraction)
+            || !unit(self.relocalization_local_fraction)
         {
             return bad("fractions and rates must be in [0, 1]");
         }
@@ -211,11 +236,17 @@ impl LocalizationParams {
         if !non_negative(self.relocalization_min_cost_ratio) {
             return bad("relocalization_min_cost_ratio must be finite and ≥ 0");
         }
-        if !non_negative(self.common_support_max_spread_m) {
-            return bad("common_support_max_spread_m must be finite and ≥ 0");
+        if !non_negative(self.relocalization_local_radius_m) {
+            return bad("relocalization_local_radius_m must be finite and ≥ 0");
+        }
+        if !non_negative(self.common_support_max_spread_m) || !non_negative(self.common_support_sigmas) {
+            return bad("common_support_max_spread_m and common_support_sigmas must be finite and ≥ 0");
         }
         if !non_negative(self.map_rebuild_interval_s) {
             return bad("map_rebuild_interval_s must be finite and ≥ 0");
+        }
+        if !non_negative(self.still_translation_m) || !non_negative(self.still_rotation_rad) {
+            return bad("still_translation_m and still_rotation_rad must be finite and ≥ 0");
         }
         if !positive(self.confidence_spread_scale_m) {
             return bad("confidence_spread_scale_m must be > 0");

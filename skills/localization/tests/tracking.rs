@@ -289,3 +289,43 @@ fn south_only(world: &World) -> AerialMap {
     }
     partial
 }
+
+/// A robot that has not moved sees the same view again: it is not fused again (no reweighting,
+/// no resampling, no drift), until the robot moves or the map changes.
+#[test]
+fn the_same_view_is_not_fused_twice() {
+    let world = World::town();
+    let classes = ClassTable::default_table();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let truth = Pose2::new(30.0, 31.0, 0.2);
+    let mut loc = CrossViewLocalizer::new(LocalizationParams::default()).unwrap();
+    let prior = PosePrior { pose: Pose2::new(31.0, 30.0, 0.25), std_xy_m: 2.0, std_yaw_rad: 0.087 };
+    let odom = Pose2::new(5.0, -2.0, 1.0);
+    loc.initialize(&prior, odom, spomp_core::Time::ZERO, &mut rng).unwrap();
+    let view = |k: u64, odom: Pose2, truth: Pose2, rng: &mut ChaCha8Rng| {
+        frame(k, k as f64, odom, SENSOR_HEIGHT_M, render(&world, truth, test_geometry(), SENSOR_HEIGHT_M, 0.03, rng))
+    };
+    let first = loc.process_frame(&view(0, odom, truth, &mut rng), &world.map, &classes, &mut rng).unwrap();
+    assert!(!first.repeated_view && first.observed_cells > 0);
+    let (particles, weights) = (loc.particles().to_vec(), loc.weights().to_vec());
+    for k in 1..20 {
+        // A new rendering (new label noise) of the same scene from the same place.
+        let r = loc.process_frame(&view(k, odom, truth, &mut rng), &world.map, &classes, &mut rng).unwrap();
+        assert!(r.repeated_view && !r.resampled && r.injected == 0, "update {k}: {r:?}");
+    }
+    assert_eq!(loc.particles(), &particles[..], "the particles did not move");
+    assert_eq!(loc.weights(), &weights[..], "nor were they reweighted");
+    // A new version of the map is new evidence on the same view.
+    let mut map = world.map.clone();
+    map.version += 1;
+    map.class[0] = map.class[1];
+    loc.prepare_map(&map, &classes).unwrap();
+    let r = loc.process_frame(&view(20, odom, truth, &mut rng), &map, &classes, &mut rng).unwrap();
+    assert!(!r.repeated_view && r.observed_cells > 0, "{r:?}");
+    // So is a view after the robot moved half a metre.
+    let step = Pose2::new(0.5, 0.0, 0.0);
+    let r = loc
+        .process_frame(&view(21, odom.compose(step), truth.compose(step), &mut rng), &map, &classes, &mut rng)
+        .unwrap();
+    assert!(!r.repeated_view && r.observed_cells > 0, "{r:?}");
+}

@@ -221,6 +221,9 @@ struct SimRobot {
     claim_time_s: BTreeMap<GoalId, f64>,
     held: Option<GoalId>,
     localization_errors: Vec<f64>,
+    /// (simulated time s, position error m) of the robot's own estimate, at most once a second
+    /// (sampled at panoramas).
+    localization_error_series: Vec<(f64, f64)>,
     last_path_len: usize,
     trajectory: Vec<Point2>,
 }
@@ -255,6 +258,9 @@ pub struct RunResult {
     pub world: Arc<World>,
     /// Ground-truth track of each robot (id, kind, points every second).
     pub trajectories: Vec<(RobotId, RobotKind, Vec<Point2>)>,
+    /// Position error of each UGV's own estimate over time: (id, [(simulated time s, error m)]),
+    /// sampled at panoramas, at most once a second (see [`Simulation::localization_error_series`]).
+    pub localization_errors: Vec<(RobotId, Vec<(f64, f64)>)>,
 }
 
 /// A mission running in the simulator.
@@ -411,6 +417,7 @@ impl Simulation {
                 claim_time_s: BTreeMap::new(),
                 held: None,
                 localization_errors: Vec::new(),
+                localization_error_series: Vec::new(),
                 last_path_len: 0,
                 trajectory: vec![start.position()],
             });
@@ -468,6 +475,13 @@ impl Simulation {
     /// A robot's ground-truth pose.
     pub fn true_pose(&self, id: &str) -> Option<Pose2> {
         self.robots.iter().find(|r| r.id.as_str() == id).map(SimRobot::truth)
+    }
+
+    /// A UGV's position error (its own estimate against the truth) over the run so far:
+    /// (simulated time s, error m), sampled at its panoramas at most once a second. Empty until
+    /// the robot has an estimate; `None` for an unknown id.
+    pub fn localization_error_series(&self, id: &str) -> Option<&[(f64, f64)]> {
+        self.robots.iter().find(|r| r.id.as_str() == id).map(|r| r.localization_error_series.as_slice())
     }
 
     /// Moves a UGV to `pose` at once without its odometry noticing (the kidnapped-robot test).
@@ -633,7 +647,12 @@ impl Simulation {
                         observer.on_panorama(&r.id, &frame);
                         r.rt.on_panorama(frame);
                         if let Some(est) = r.rt.pose {
-                            r.localization_errors.push(est.pose.position().distance(truth.position()));
+                            let error = est.pose.position().distance(truth.position());
+                            r.localization_errors.push(error);
+                            let t = now.as_secs_f64();
+                            if r.localization_error_series.last().is_none_or(|&(last, _)| t - last >= 1.0 - 1e-9) {
+                                r.localization_error_series.push((t, error));
+                            }
                         }
                         if let Some(nav) = r.rt.nav.as_deref()
                             && let Some(scan) = nav.latest_scan.as_ref()
@@ -1072,7 +1091,13 @@ impl Simulation {
             nodes_never_ticked,
             problems: self.problems.into_values().collect(),
         };
+        let localization_errors = self
+            .robots
+            .iter()
+            .filter(|r| r.kind == RobotKind::Ugv)
+            .map(|r| (r.id.clone(), r.localization_error_series.clone()))
+            .collect();
         let trajectories = self.robots.into_iter().map(|r| (r.id, r.kind, r.trajectory)).collect();
-        RunResult { summary, world: self.world, trajectories }
+        RunResult { summary, world: self.world, trajectories, localization_errors }
     }
 }
