@@ -504,6 +504,12 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, diags: &mut Vec<Diagn
                 format!("expected a positive number of seconds per metre, found {}", g.time_limit_per_m_s),
             );
         }
+        if !(g.claim_lease_s.is_finite() && g.claim_lease_s > 0.0) {
+            bad(
+                &["goals", "claim_lease_s"],
+                format!("expected a positive number of seconds (the claim lease), found {}", g.claim_lease_s),
+            );
+        }
         if let Some(d) = &g.detect {
             let classes = ClassTable::default_table();
             if classes.by_name(&d.class).is_none() {

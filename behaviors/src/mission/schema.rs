@@ -162,6 +162,11 @@ pub struct GoalsSpec {
     /// Time limit per metre of planned path, seconds (the paper's per-goal time limit).
     #[serde(default = "default_time_per_m")]
     pub time_limit_per_m_s: f64,
+    /// A claim is a lease, seconds: its holder renews it while it holds the goal; a claim of
+    /// another robot not renewed for this long no longer counts, so a goal held by a dead robot
+    /// (or one out of contact that long) becomes claimable again. Must be > 0.
+    #[serde(default = "default_claim_lease")]
+    pub claim_lease_s: f64,
 }
 
 fn default_deconfliction() -> f64 {
@@ -170,6 +175,10 @@ fn default_deconfliction() -> f64 {
 
 fn default_time_per_m() -> f64 {
     2.0
+}
+
+fn default_claim_lease() -> f64 {
+    300.0
 }
 
 /// Goal detection settings.

@@ -107,7 +107,13 @@ pub fn runtime_config(
     let goals = mission.goals.as_ref();
     let deconfliction = goals.map(|g| g.deconfliction_radius_m).unwrap_or(10.0);
     // The global planner's sharing filter decides which scans are shared (one owner).
-    let team = TeamStateParams { deconfliction_radius_m: deconfliction, scan_min_spacing_m: 0.0, ..Default::default() };
+    // Claims are leases: a dead or silent holder's goal becomes claimable after the mission's lease.
+    let team = TeamStateParams {
+        deconfliction_radius_m: deconfliction,
+        scan_min_spacing_m: 0.0,
+        claim_lease_s: goals.map(|g| g.claim_lease_s).unwrap_or(TeamStateParams::default().claim_lease_s),
+        ..Default::default()
+    };
     let detection = goals.and_then(|g| g.detect.as_ref()).and_then(|d| {
         let detects = matches!(spec.kind, RobotKind::Ugv | RobotKind::Basestation);
         detects.then(|| GoalDetectionParams {
