@@ -199,7 +199,10 @@ fn plan_image(world: &World, planner: &GlobalPlanner, paths: &[GlobalPath]) -> R
             EdgeState::Trav => Rgb([60, 200, 80]),
             EdgeState::NotTrav => Rgb([230, 40, 40]),
         };
-        draw_line_segment_mut(&mut img, to_pixel(spec, e.from), to_pixel(spec, e.to), colour);
+        let points: Vec<Point2> = std::iter::once(e.from).chain(e.via.iter().copied()).chain([e.to]).collect();
+        for w in points.windows(2) {
+            draw_line_segment_mut(&mut img, to_pixel(spec, w[0]), to_pixel(spec, w[1]), colour);
+        }
     }
     for (_, p, _) in planner.nodes() {
         let (x, y) = to_pixel(spec, p);

@@ -56,6 +56,10 @@ pub const PINNED_RADIUS_M: f64 = 2.0;
 pub const PINNED_TIMEOUTS: f64 = 2.0;
 /// When stuck, the blocked edge is taken this far ahead of the robot along the path, metres.
 const BLOCKAGE_PROBE_M: f64 = 2.0;
+/// A robot this close to its look-ahead point may take one whose line is not clear of curbs.
+const LOOKAHEAD_STALL_M: f64 = 2.0;
+/// Half the width of the band along the look-ahead line that must be free of curbs, metres.
+const CLEARANCE_HALF_WIDTH_M: f64 = 1.0;
 /// How far beyond the last look-ahead point (plus the look-ahead) the path is searched, metres.
 const PROJECTION_WINDOW_M: f64 = 20.0;
 
@@ -69,7 +73,7 @@ pub fn register_navigation(r: &mut NodeRegistry) {
         NodeTypeSpec::leaf(
             "navigate_to",
             Action,
-            "Plans a path on the robot's traversability graph from its pose to `target`, follows it by giving the local planner the farthest path point within `lookahead_m` (local goal per panorama, DWA at every tick), and replans when an edge of the path is removed or the path's cost rises after a reachability scan (checked at every panorama), and every 10 s; replans keep the edge being driven (they search from the node ahead). When the remaining path length has not shrunk by 1 m for `stuck_timeout_s` on a graph edge, the robot marks that edge blocked for itself and replans from the node behind (a blockage the scans could not judge). A robot that stays within 2 m of one point for twice `stuck_timeout_s` is stuck too: it backs out along its own trail to the newest trail point from which the graph has a path (so does any plan from a place the graph has no path from, such as a node whose edges were all removed). Success within `tolerance_m`; Failure (reason in `failure_reason`) when there is no path (`no_path`, also when a blocked path has no alternative), when stuck with no edge to give up (`stuck`), or past the time limit (`time_limit`): `time_limit_s` if given, else `time_per_m_s` (unset: the mission's `goals.time_limit_per_m_s`) × the planned path length, counted from the start and extended by a replan forced by a blocked or costlier path to now + `time_per_m_s` × the new length. With no aerial map yet (empty graph) it drives toward the target with the local planner alone (time limit from the straight-line distance) and plans as soon as a graph exists. Writes the robot's planned path and publishes its end on the team state; finishing or halting stops the robot and clears both.",
+            "Plans a path on the robot's traversability graph from its pose to `target`, follows it by giving the local planner the farthest path point within `lookahead_m` that the path reaches without leaving that circle and whose straight line (widened to 1 m either side at the point) crosses no curb the aerial map shows unless the path does (a path up a curb ramp is followed, not cut across the curb) (local goal per panorama, DWA at every tick), and replans when an edge of the path is removed or the path's cost rises after a reachability scan (checked at every panorama), and every 10 s; replans keep the edge being driven (they search from the node ahead, keeping the rest of an edge routed around a curb). When the remaining path length has not shrunk by 1 m for `stuck_timeout_s` on a graph edge, the robot marks that edge blocked for itself and replans from the node behind (a blockage the scans could not judge). A robot that stays within 2 m of one point for twice `stuck_timeout_s` is stuck too: it backs out along its own trail to the newest trail point from which the graph has a path (so does any plan from a place the graph has no path from, such as a node whose edges were all removed). Success within `tolerance_m`; Failure (reason in `failure_reason`) when there is no path (`no_path`, also when a blocked path has no alternative), when stuck with no edge to give up (`stuck`), or past the time limit (`time_limit`): `time_limit_s` if given, else `time_per_m_s` (unset: the mission's `goals.time_limit_per_m_s`) × the planned path length, counted from the start and extended by a replan forced by a blocked or costlier path to now + `time_per_m_s` × the new length. With no aerial map yet (empty graph) it drives toward the target with the local planner alone (time limit from the straight-line distance) and plans as soon as a graph exists. Writes the robot's planned path and publishes its end on the team state; finishing or halting stops the robot and clears both.",
             vec![
                 PortSpec::input("target", Point, "Where to go (map frame)."),
                 PortSpec::input("tolerance_m", Float, "Arrival radius, metres.").with_default(json!(2.0)),
@@ -413,10 +417,18 @@ impl Route {
     }
 
     /// Pure pursuit: the farthest point along the path (never behind the last one, searched
-    /// within [`PROJECTION_WINDOW_M`] beyond it) that lies within `lookahead_m` of `p`, and the
+    /// within [`PROJECTION_WINDOW_M`] beyond it) that lies within `lookahead_m` of `p` without
+    /// the path leaving that circle on the way there, and that the straight line from `p`
+    /// reaches across no step unless the path to it crosses one too (`steps(a, b, half_width)`:
+    /// the aerial map shows a curb within `half_width` of the line a–b; the line from `p` must
+    /// be clear to [`CLEARANCE_HALF_WIDTH_M`] either side of the point; with none such, the
+    /// last look-ahead point again, or when the robot is within [`LOOKAHEAD_STALL_M`] of it, a
+    /// point clear along the centre line, failing that the farthest). So a path that folds back from a curb
+    /// ramp is not cut short across the curb beside it, and the robot meets the ramp head-on
+    /// rather than past the curb's corner. Returns that point and the
     /// remaining distance through it (path left after it plus the straight line to it). When no
     /// point of the path is that close (the robot strayed), the last look-ahead point again.
-    fn pursue(&mut self, p: Point2, lookahead_m: f64) -> (Point2, f64) {
+    fn pursue(&mut self, p: Point2, lookahead_m: f64, steps: impl Fn(Point2, Point2, f64) -> bool) -> (Point2, f64) {
         let n = self.points.len();
         if n < 2 {
             let q = self.points.first().copied().unwrap_or(p);
@@ -425,6 +437,12 @@ impl Route {
         let l2 = lookahead_m * lookahead_m;
         let horizon = self.reached + lookahead_m + PROJECTION_WINDOW_M;
         let mut best: Option<(usize, f64)> = None;
+        // The farthest point whose line from `p` is only clear along its centre, and the
+        // farthest at all: used when no point has a clear wedge (a robot squeezed beside a curb).
+        let mut fallback: [Option<(usize, f64)>; 2] = [None, None];
+        // Whether the path itself crosses a step up to the segment being looked at (then a
+        // line across it is no worse than the plan, such as a roadblock's the scans must judge).
+        let mut path_steps = false;
         for i in self.segment.min(n - 2)..n - 1 {
             if self.cumulative[i] > horizon {
                 break;
@@ -446,14 +464,40 @@ impl Route {
                     (near.max(0.0) <= far.min(1.0)).then_some(far.min(1.0))
                 }
             };
-            if let Some(t) = t {
-                let s = self.cumulative[i] + t * (self.cumulative[i + 1] - self.cumulative[i]);
-                if s >= self.reached {
-                    best = Some((i, s));
+            match t {
+                Some(t) => {
+                    let s = self.cumulative[i] + t * (self.cumulative[i + 1] - self.cumulative[i]);
+                    let (a, b) = (self.points[i], self.points[i + 1]);
+                    let q = a + (b - a) * t;
+                    let planned_step = path_steps || steps(a, q, 0.0);
+                    if s >= self.reached {
+                        fallback[1] = Some((i, s));
+                        if planned_step || !steps(p, q, 0.0) {
+                            fallback[0] = Some((i, s));
+                        }
+                        if planned_step || !steps(p, q, CLEARANCE_HALF_WIDTH_M) {
+                            best = Some((i, s));
+                        }
+                    }
+                    path_steps |= t >= 1.0 && planned_step;
+                    // The path leaves the circle here: where it comes back in later (a path
+                    // that folds back, to a curb ramp and back along the sidewalk) is beyond a
+                    // stretch the robot has not driven, so the look-ahead never jumps there.
+                    if t < 1.0 && fallback[1].is_some() {
+                        break;
+                    }
                 }
+                None if fallback[1].is_some() => break,
+                None => {}
             }
         }
-        if let Some((i, s)) = best {
+        // Without a point whose wedge is clear, the look-ahead stays where it was while the
+        // robot still has a way to go to it (it is heading for the foot of a ramp); only a robot
+        // that reached it takes a point clear along the centre line, then any point, rather
+        // than stall (squeezed beside a wall).
+        let stalled = self.point_at(self.reached).distance(p) < LOOKAHEAD_STALL_M;
+        let chosen = best.or(if stalled { fallback[0].or(fallback[1]) } else { None });
+        if let Some((i, s)) = chosen {
             self.segment = i;
             self.reached = s;
         }
@@ -469,10 +513,39 @@ impl Route {
         let Some(path) = self.path.as_ref() else { return (None, None) };
         let last = self.points.len().saturating_sub(2);
         let i = self.cumulative.partition_point(|&c| c <= s).saturating_sub(1).min(last);
-        let Some(i) = i.checked_sub(path.lead_in) else { return (None, None) };
-        // Past the lead-in, segment i joins waypoints i and i + 1; waypoint k + 1 is node k.
-        let behind = i.checked_sub(1).and_then(|k| path.nodes.get(k).copied());
-        (behind, path.nodes.get(i).copied())
+        if i < path.lead_in {
+            return (None, None);
+        }
+        // Segment i joins waypoints i and i + 1: the nodes around it are the last node at or
+        // before waypoint i and the first at or after waypoint i + 1 (an edge routed around a
+        // curb has waypoints of its own between its nodes).
+        let k = path.node_waypoints.partition_point(|&w| w <= i);
+        let behind = k.checked_sub(1).and_then(|k| path.nodes.get(k).copied());
+        (behind, path.nodes.get(k).copied())
+    }
+
+    /// The look-ahead point and the waypoints after it up to (not including) the first
+    /// waypoint of `node` from there on: the rest of the way to that node, which a replan from
+    /// the node keeps. Empty when `node` is not ahead on the path or is the next waypoint.
+    fn points_before(&self, node: Option<NodeId>) -> Vec<Point2> {
+        let (Some(node), Some(path)) = (node, self.path.as_ref()) else { return Vec::new() };
+        let first_ahead = self.segment + 1;
+        let Some(w) = path
+            .nodes
+            .iter()
+            .zip(&path.node_waypoints)
+            .find(|&(&n, &w)| n == node && w >= first_ahead)
+            .map(|(_, &w)| w)
+        else {
+            return Vec::new();
+        };
+        if w <= first_ahead {
+            // A straight edge: the node is the next waypoint anyway.
+            return Vec::new();
+        }
+        let mut lead = vec![self.point_at(self.reached)];
+        lead.extend_from_slice(&self.points[first_ahead..w.min(self.points.len())]);
+        lead
     }
 
     /// The point at arc length `s` (clamped to the path), from the current segment on.
@@ -611,11 +684,13 @@ impl Navigator {
     }
 
     /// A route from `here` that starts with the graph search from `origin` (a node position)
-    /// or, with none, from `here` itself.
+    /// or, with none, from `here` itself. `lead` are the points to pass between `here` and
+    /// `origin`: the rest of the edge being driven when it is routed around a curb.
     fn route_from(
         rt: &mut RobotRuntime,
         here: Point2,
         origin: Option<Point2>,
+        lead: &[Point2],
         target: Point2,
     ) -> Result<Route, String> {
         let Some(p) = origin else {
@@ -625,6 +700,12 @@ impl Navigator {
             Some(mut path) => {
                 if let Some(first) = path.waypoints.first_mut() {
                     *first = here;
+                }
+                if !lead.is_empty() {
+                    path.waypoints.splice(1..1, lead.iter().copied());
+                    for k in &mut path.node_waypoints {
+                        *k += lead.len();
+                    }
                 }
                 path.length_m = path.waypoints.windows(2).map(|w| w[0].distance(w[1])).sum();
                 Ok(Route::new(Some(path), here, target))
@@ -656,19 +737,20 @@ impl Navigator {
         target: Point2,
         avoid_current: bool,
     ) -> Result<Route, String> {
-        let mut origins: Vec<Option<Point2>> = Vec::with_capacity(3);
+        let mut origins: Vec<(Option<Point2>, Vec<Point2>)> = Vec::with_capacity(3);
         if !avoid_current && let Some(p) = Self::node_position(rt, self.ahead) {
-            origins.push(Some(p));
+            let lead = self.route.as_ref().map(|r| r.points_before(self.ahead)).unwrap_or_default();
+            origins.push((Some(p), lead));
         }
         if let Some(p) = Self::node_position(rt, self.behind) {
-            origins.push(Some(p));
+            origins.push((Some(p), Vec::new()));
         }
         if !avoid_current || origins.is_empty() {
-            origins.push(None);
+            origins.push((None, Vec::new()));
         }
         let mut last = Err("no origin to plan from".to_string());
-        for origin in origins {
-            last = Self::route_from(rt, here, origin, target);
+        for (origin, lead) in origins {
+            last = Self::route_from(rt, here, origin, &lead, target);
             if last.is_ok() {
                 break;
             }
@@ -754,7 +836,19 @@ impl Navigator {
         let Some(route) = self.route.as_mut() else {
             return Step::Failed(Reason::NoPath, "no route".into());
         };
-        let (waypoint, remaining) = route.pursue(here, req.lookahead_m);
+        let global = rt.nav.as_deref().map(|n| &n.global);
+        // Whether the aerial map shows a step on the lines from `a` to `b` and to the points
+        // `half_width_m` either side of `b` (a wedge: what lies right beside the robot, such
+        // as a wall it drives along, does not count).
+        let steps = |a: Point2, b: Point2, half_width_m: f64| {
+            global.is_some_and(|g| {
+                let d = b - a;
+                let len = d.norm();
+                let side = if len > 1e-9 { Point2::new(-d.y / len, d.x / len) * half_width_m } else { d * 0.0 };
+                [Point2::new(0.0, 0.0), side, side * -1.0].iter().any(|&o| g.crosses_step(a, b + o))
+            })
+        };
+        let (waypoint, remaining) = route.pursue(here, req.lookahead_m, steps);
         // The graph edge the robot is on: its nodes behind and ahead (kept across a replan that
         // re-attached the robot to the node it was heading to).
         let probe = (route.reached - waypoint.distance(here) + BLOCKAGE_PROBE_M).max(0.0);
@@ -1091,6 +1185,11 @@ mod tests {
 
     use super::*;
 
+    /// No curbs anywhere.
+    fn open(_: Point2, _: Point2, _: f64) -> bool {
+        false
+    }
+
     fn path(points: &[(f64, f64)]) -> GlobalPath {
         let waypoints: Vec<Point2> = points.iter().map(|&(x, y)| Point2::new(x, y)).collect();
         let inner = waypoints.len().saturating_sub(2);
@@ -1100,6 +1199,7 @@ mod tests {
             cost: 0.0,
             edges: Vec::new(),
             nodes: (0..inner as u32).map(|i| NodeId(10 + i)).collect(),
+            node_waypoints: (1..=inner).collect(),
             graph_cost: 0.0,
             lead_in: 0,
         }
@@ -1110,19 +1210,52 @@ mod tests {
         // The search attached the start to a node behind the robot: 14 → 6 → 34 → 46.
         let p = path(&[(14.0, 0.0), (6.0, 0.0), (34.0, 0.0), (46.0, 0.0)]);
         let mut route = Route::new(Some(p), Point2::new(14.0, 0.0), Point2::new(46.0, 0.0));
-        let (q, remaining) = route.pursue(Point2::new(14.0, 0.0), 8.0);
+        let (q, remaining) = route.pursue(Point2::new(14.0, 0.0), 8.0, open);
         assert!((q.x - 22.0).abs() < 1e-9 && q.y.abs() < 1e-9, "{q:?}");
         assert!((remaining - 32.0).abs() < 1e-9, "{remaining}");
         // Moving on, the point moves on; straying back does not pull it back.
-        let (q2, _) = route.pursue(Point2::new(20.0, 0.0), 8.0);
+        let (q2, _) = route.pursue(Point2::new(20.0, 0.0), 8.0, open);
         assert!((q2.x - 28.0).abs() < 1e-9);
-        let (q3, r3) = route.pursue(Point2::new(10.0, 0.0), 8.0);
+        let (q3, r3) = route.pursue(Point2::new(10.0, 0.0), 8.0, open);
         assert_eq!(q3, q2);
         assert!((r3 - (18.0 + 18.0)).abs() < 1e-9, "{r3}");
         // Near the end: the target itself.
-        let (q4, r4) = route.pursue(Point2::new(40.0, 0.0), 8.0);
+        let (q4, r4) = route.pursue(Point2::new(40.0, 0.0), 8.0, open);
         assert_eq!(q4, Point2::new(46.0, 0.0));
         assert!((r4 - 6.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn pursuit_follows_a_path_that_folds_back_instead_of_cutting_across() {
+        // Up a ramp 11 m to the side and back along the sidewalk: (10, 5) → (21, 8) → (21, 11)
+        // → (10, 12). The last leg ends 7 m from the start, across the curb.
+        let p = path(&[(10.0, 5.0), (21.0, 8.0), (21.0, 11.0), (10.0, 12.0)]);
+        let mut route = Route::new(Some(p), Point2::new(10.0, 5.0), Point2::new(10.0, 12.0));
+        let (q, _) = route.pursue(Point2::new(10.0, 5.0), 8.0, open);
+        assert!(q.y < 8.0 && q.x < 21.0, "on the first leg, not the last: {q:?}");
+        assert!((q.distance(Point2::new(10.0, 5.0)) - 8.0).abs() < 1e-9);
+        // Past the fold, the last leg is next.
+        let (q2, _) = route.pursue(Point2::new(21.0, 10.0), 8.0, open);
+        assert!(q2.y > 11.0 && q2.x < 21.0, "{q2:?}");
+
+        // A fold that stays within the circle: the ramp 3 m to the side. Only a curb along
+        // y = 9 m (x < 18.5 m) keeps the look-ahead on the way up the ramp.
+        let tight = path(&[(14.0, 5.0), (19.0, 8.0), (19.0, 10.0), (14.0, 11.0)]);
+        let curb = |a: Point2, b: Point2, _: f64| {
+            if (a.y < 9.0) == (b.y < 9.0) {
+                return false;
+            }
+            let x = a.x + (b.x - a.x) * (9.0 - a.y) / (b.y - a.y);
+            x < 18.5
+        };
+        let mut route = Route::new(Some(tight.clone()), Point2::new(14.0, 5.0), Point2::new(14.0, 11.0));
+        let (cut, _) = route.pursue(Point2::new(14.0, 5.0), 8.0, open);
+        assert_eq!(cut, Point2::new(14.0, 11.0), "without the curb the target itself is in reach");
+        let mut route = Route::new(Some(tight), Point2::new(14.0, 5.0), Point2::new(14.0, 11.0));
+        let (q3, _) = route.pursue(Point2::new(14.0, 5.0), 8.0, curb);
+        assert_eq!(q3, Point2::new(19.0, 8.0), "the foot of the ramp");
+        let (q4, _) = route.pursue(Point2::new(19.0, 9.5), 8.0, curb);
+        assert_eq!(q4, Point2::new(14.0, 11.0), "up the ramp, the target");
     }
 
     #[test]
@@ -1132,6 +1265,15 @@ mod tests {
         assert_eq!(route.nodes_around(2.0), (None, Some(NodeId(10))));
         assert_eq!(route.nodes_around(10.0), (Some(NodeId(10)), Some(NodeId(11))));
         assert_eq!(route.nodes_around(25.0), (Some(NodeId(11)), None));
+        // An edge routed around a curb has waypoints of its own between its nodes.
+        let mut routed = path(&[(0.0, 0.0), (5.0, 0.0), (10.0, 3.0), (15.0, 3.0), (20.0, 0.0), (30.0, 0.0)]);
+        routed.nodes = vec![NodeId(10), NodeId(11)];
+        routed.node_waypoints = vec![1, 4];
+        let route = Route::new(Some(routed), Point2::new(0.0, 0.0), Point2::new(30.0, 0.0));
+        assert_eq!(route.nodes_around(2.0), (None, Some(NodeId(10))));
+        assert_eq!(route.nodes_around(7.0), (Some(NodeId(10)), Some(NodeId(11))));
+        assert_eq!(route.nodes_around(13.0), (Some(NodeId(10)), Some(NodeId(11))));
+        assert_eq!(route.nodes_around(23.0), (Some(NodeId(11)), None));
         let straight = Route::new(None, Point2::new(0.0, 0.0), Point2::new(30.0, 0.0));
         assert_eq!(straight.nodes_around(10.0), (None, None));
     }

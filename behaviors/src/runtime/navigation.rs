@@ -246,6 +246,9 @@ impl NavStack {
                 waypoints.push(from);
                 waypoints.extend(self.trail.range(k + 1..).rev().copied());
                 path.lead_in = waypoints.len();
+                for k in &mut path.node_waypoints {
+                    *k += path.lead_in;
+                }
                 waypoints.append(&mut path.waypoints);
                 path.length_m = waypoints.windows(2).map(|w| w[0].distance(w[1])).sum();
                 path.waypoints = waypoints;

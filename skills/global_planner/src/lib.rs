@@ -23,6 +23,7 @@ mod features;
 mod mlp;
 mod params;
 mod planner;
+mod routing;
 mod sharing;
 mod star;
 pub mod synthetic;

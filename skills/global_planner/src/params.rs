@@ -34,6 +34,12 @@ pub struct GraphParams {
     pub attach_radius_m: f64,
     /// Spacing of the samples along an edge at which traversability is evaluated, metres.
     pub edge_sample_spacing_m: f64,
+    /// Highest elevation step between neighbouring aerial-map cells a UGV drives over, metres.
+    /// An edge whose straight line crosses a higher step (a curb, the side of a parked vehicle)
+    /// follows a step-free route through the two nodes' regions instead, when there is one (a
+    /// curb ramp); otherwise it stays straight for experience to judge. `null`: edges are
+    /// always straight (for aerial maps whose elevation cannot resolve curbs).
+    pub max_step_m: Option<f64>,
 }
 
 impl Default for GraphParams {
@@ -44,6 +50,7 @@ impl Default for GraphParams {
             max_class_rank: 4,
             attach_radius_m: 5.0,
             edge_sample_spacing_m: 1.0,
+            max_step_m: Some(0.1),
         }
     }
 }
@@ -123,6 +130,10 @@ pub struct ExperienceParams {
     /// judges the edge being driven from the robot's position; a blockage mid-edge is then seen
     /// although both ends lie beyond the safe region. 0 judges every edge end to end only, metres.
     pub on_edge_radius_m: f64,
+    /// A single crossing of the safe region's boundary nearer to the robot than this says
+    /// unknown, not blocked: so near, the boundary is the robot's own clearance from an
+    /// obstacle beside it (the local planner's inflation), not what lies along the edge, metres.
+    pub min_crossing_range_m: f64,
     /// Traversal probability per sample assumed along an edge marked trav.
     pub trav_sample_probability: f64,
     /// Traversal probability per sample charged (in addition) along an edge marked not_trav
@@ -138,6 +149,7 @@ impl Default for ExperienceParams {
             observations_to_overturn_trav: 4,
             crossing_window_rad: 0.3,
             on_edge_radius_m: 3.0,
+            min_crossing_range_m: 1.0,
             trav_sample_probability: 0.99,
             not_trav_sample_probability: 0.01,
         }

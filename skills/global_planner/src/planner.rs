@@ -17,7 +17,8 @@ use crate::experience::{EdgeExperience, EdgeState, Transition, Votes};
 use crate::features::{ClassChange, Features};
 use crate::mlp::{Mlp, TrainSettings};
 use crate::params::GlobalPlannerParams;
-use crate::star::{EdgeObservation, StarRegion, segment_point_distance};
+use crate::routing::EdgeRouter;
+use crate::star::{EdgeObservation, Judging, StarRegion, polyline_point_distance};
 
 /// Stable id of a graph node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
@@ -35,8 +36,12 @@ struct NodeData {
 
 #[derive(Clone, Debug)]
 struct EdgeData {
+    /// Interior vertices of the edge's route, from its source node to its target node; empty
+    /// for a straight edge (see [`crate::routing`]).
+    via: Vec<Point2>,
+    /// Length along the route, metres.
     length_m: f64,
-    /// Row-major cells sampled along the edge, every `edge_sample_spacing_m`, ends included.
+    /// Row-major cells sampled along the route, every `edge_sample_spacing_m`, ends included.
     samples: Vec<u32>,
     /// Normalised features of the mapped samples, `channels` per sample (learning only):
     /// reweighting after a training round only runs the network.
@@ -51,7 +56,8 @@ struct EdgeData {
 /// A planned path.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct GlobalPath {
-    /// Map-frame waypoints: the start, the graph nodes, the goal.
+    /// Map-frame waypoints: the start, the graph nodes (with the interior vertices of edges
+    /// routed around elevation steps between them), the goal.
     pub waypoints: Vec<Point2>,
     /// Total cost (−log probability of success, or class-rank weight with learning off).
     pub cost: f64,
@@ -61,11 +67,13 @@ pub struct GlobalPath {
     pub edges: Vec<EdgeId>,
     /// Graph nodes in order.
     pub nodes: Vec<NodeId>,
+    /// Index in `waypoints` of each of `nodes`.
+    pub node_waypoints: Vec<usize>,
     /// Cost of the graph edges alone when planned (compared by [`GlobalPlanner::path_status`]).
     pub graph_cost: f64,
     /// Leading waypoints that come before the graph path's own start: a caller's route to
-    /// where the graph path begins, such as the robot's own trail (0 from the planner). Waypoint
-    /// `lead_in + k + 1` is node `k`.
+    /// where the graph path begins, such as the robot's own trail (0 from the planner). A caller
+    /// that prepends waypoints shifts `node_waypoints` with them.
     pub lead_in: usize,
 }
 
@@ -96,7 +104,7 @@ pub enum PathStatus {
 }
 
 /// One edge, for drawing and inspection.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct EdgeView {
     /// Edge id.
     pub id: EdgeId,
@@ -104,6 +112,9 @@ pub struct EdgeView {
     pub from: Point2,
     /// The other end.
     pub to: Point2,
+    /// Interior vertices from `from` to `to` of an edge routed around elevation steps; empty
+    /// for a straight edge.
+    pub via: Vec<Point2>,
     /// Search cost.
     pub cost: f64,
     /// Experience state.
@@ -127,6 +138,8 @@ pub struct GraphStats {
     pub covered_cells: usize,
     /// Cells with enough votes to be training labels.
     pub labelled_cells: usize,
+    /// Edges routed around elevation steps instead of straight (ever made, removed or not).
+    pub routed_edges: usize,
     /// Training rounds run.
     pub training_rounds: usize,
 }
@@ -204,6 +217,9 @@ pub struct GlobalPlanner {
     judged: Vec<(EdgeIndex<u32>, EdgeObservation)>,
     edge_ids: Vec<EdgeIndex<u32>>,
     segment_features: Vec<f32>,
+    router: EdgeRouter,
+    /// Edges routed around elevation steps (see [`crate::routing`]).
+    routed_edges: usize,
 }
 
 /// Inclusive cell box `(col0, row0, col1, row1)` of the cells whose class differs between two
@@ -223,6 +239,27 @@ fn changed_class_box(old: &AerialMap, new: &AerialMap) -> Option<[usize; 4]> {
     b
 }
 
+/// Length of a polyline.
+fn polyline_length(points: &[Point2]) -> f64 {
+    points.windows(2).map(|w| w[0].distance(w[1])).sum()
+}
+
+/// Row-major cells under samples along a polyline, about `spacing` apart on each piece, the
+/// vertices included once each.
+fn polyline_samples(map: &AerialMap, points: &[Point2], spacing: f64) -> Vec<u32> {
+    let mut samples = Vec::new();
+    for (k, w) in points.windows(2).enumerate() {
+        let (pa, pb) = (w[0], w[1]);
+        let steps = ((pa.distance(pb) / spacing).ceil() as usize).max(1);
+        let first = if k == 0 { 0 } else { 1 };
+        samples.extend((first..=steps).filter_map(|i| {
+            let p = pa + (pb - pa) * (i as f64 / steps as f64);
+            map.spec.cell_at(p).map(|c| map.spec.index(c) as u32)
+        }));
+    }
+    samples
+}
+
 fn pair(a: NodeIndex<u32>, b: NodeIndex<u32>) -> (u32, u32) {
     let (a, b) = (a.index() as u32, b.index() as u32);
     if a < b { (a, b) } else { (b, a) }
@@ -236,7 +273,7 @@ impl GlobalPlanner {
         let x = &params.experience;
         let in_range = |v: f64, lo: f64, hi: f64| v.is_finite() && v >= lo && v <= hi;
         // Bounds keep every buffer and loop sized sensibly whatever a mission file says.
-        let checks: [(&'static str, bool, &str); 12] = [
+        let checks: [(&'static str, bool, &str); 13] = [
             ("graph.visibility_range_m", in_range(g.visibility_range_m, 0.1, 500.0), "must be in [0.1, 500] m"),
             ("graph.edge_sample_spacing_m", in_range(g.edge_sample_spacing_m, 0.05, 100.0), "must be in [0.05, 100] m"),
             ("graph.attach_radius_m", in_range(g.attach_radius_m, 0.0, 200.0), "must be in [0, 200] m"),
@@ -248,6 +285,7 @@ impl GlobalPlanner {
             ("learning.not_trav_depth_m", in_range(l.not_trav_depth_m, 0.0, 50.0), "must be in [0, 50] m"),
             ("learning.max_scan_range_m", in_range(l.max_scan_range_m, 0.1, 500.0), "must be in [0.1, 500] m"),
             ("experience.on_edge_radius_m", in_range(x.on_edge_radius_m, 0.0, 50.0), "must be in [0, 50] m"),
+            ("experience.min_crossing_range_m", in_range(x.min_crossing_range_m, 0.0, 50.0), "must be in [0, 50] m"),
             (
                 "experience.crossing_window_rad",
                 in_range(x.crossing_window_rad, 0.0, std::f64::consts::PI),
@@ -256,6 +294,14 @@ impl GlobalPlanner {
         ];
         if let Some((name, _, reason)) = checks.iter().find(|c| !c.1) {
             return Err(SetupError::InvalidParameter { name, reason: (*reason).into() });
+        }
+        if let Some(step) = g.max_step_m
+            && !(step.is_finite() && step > 0.0 && step <= 100.0)
+        {
+            return Err(SetupError::InvalidParameter {
+                name: "graph.max_step_m",
+                reason: "must be in (0, 100] m, or null to keep every edge straight".into(),
+            });
         }
         let order: Vec<ClassId> = if g.class_order.is_empty() {
             let ranks = classes.rank_lut();
@@ -308,6 +354,8 @@ impl GlobalPlanner {
             judged: Vec::new(),
             edge_ids: Vec::new(),
             segment_features: Vec::new(),
+            router: EdgeRouter::default(),
+            routed_edges: 0,
         })
     }
 
@@ -443,6 +491,11 @@ impl GlobalPlanner {
         pairs.sort_unstable();
         pairs.dedup();
         let spacing = self.params.graph.edge_sample_spacing_m;
+        let max_step = self.params.graph.max_step_m.map(|s| s as f32);
+        // Regions lie within the visibility range of their nodes.
+        let reach = self.coverage.radius_cells() + 1;
+        // The router's clearance and components are computed once per update, when first needed.
+        let mut router_ready = false;
         let mut added = 0;
         for (a, b) in pairs {
             if self.edge_of_pair.contains_key(&(a, b)) || self.removed_pairs.contains(&(a, b)) {
@@ -453,15 +506,27 @@ impl GlobalPlanner {
                 continue;
             };
             let (pa, pb) = (pa.position, pb.position);
-            let length_m = pa.distance(pb);
-            let steps = ((length_m / spacing).ceil() as usize).max(1);
-            let samples = (0..=steps)
-                .filter_map(|k| {
-                    let p = pa + (pb - pa) * (k as f64 / steps as f64);
-                    map.spec.cell_at(p).map(|c| map.spec.index(c) as u32)
-                })
-                .collect();
+            let via = match (max_step, map.spec.cell_at(pa), map.spec.cell_at(pb)) {
+                (Some(step), Some(ca), Some(cb)) if EdgeRouter::crosses_step(map, ca, cb, step) => {
+                    if !router_ready {
+                        self.router.prepare(map, &self.owner, step);
+                        router_ready = true;
+                    }
+                    self.router.route(map, &self.owner, ca, cb, reach, step).unwrap_or_default()
+                }
+                _ => Vec::new(),
+            };
+            if !via.is_empty() {
+                self.routed_edges += 1;
+            }
+            let mut points = Vec::with_capacity(via.len() + 2);
+            points.push(pa);
+            points.extend_from_slice(&via);
+            points.push(pb);
+            let length_m = polyline_length(&points);
+            let samples = polyline_samples(map, &points, spacing);
             let data = EdgeData {
+                via,
                 length_m,
                 samples,
                 features: Vec::new(),
@@ -664,19 +729,23 @@ impl GlobalPlanner {
     }
 
     fn judge_edges(&mut self, region: &StarRegion, own: bool, update: &mut ScanUpdate) {
-        let window = self.params.experience.crossing_window_rad;
-        let on_edge = self.params.experience.on_edge_radius_m;
+        let x = &self.params.experience;
+        let judging = Judging {
+            window_rad: x.crossing_window_rad,
+            on_edge_radius_m: x.on_edge_radius_m,
+            min_crossing_range_m: x.min_crossing_range_m,
+        };
         let mut changed = std::mem::take(&mut self.judged);
         changed.clear();
+        let mut points = Vec::new();
         for e in self.graph.edge_indices() {
-            let Some((a, b)) = self.graph.edge_endpoints(e) else {
-                continue;
-            };
-            let (pa, pb) = (self.graph[a].position, self.graph[b].position);
-            if segment_point_distance(pa, pb, region.origin) > region.max_range_m {
+            if !self.edge_points(e, &mut points) {
                 continue;
             }
-            let obs = region.classify_edge(pa, pb, window, on_edge);
+            if polyline_point_distance(&points, region.origin) > region.max_range_m {
+                continue;
+            }
+            let obs = region.classify_polyline(&points, &judging);
             update.observed[match obs {
                 EdgeObservation::Trav => 0,
                 EdgeObservation::NotTrav => 1,
@@ -691,7 +760,13 @@ impl GlobalPlanner {
             let Some(d) = self.graph.edge_weight_mut(e) else {
                 continue;
             };
-            match d.experience.observe(obs, own, &params) {
+            // An edge routed through a passage the aerial elevation shows (a curb ramp) is
+            // marked, never removed, by the robot's own not_trav observations, as by other
+            // robots': seen from beside the passage, a scan's safe region ends at the corner of
+            // the curb, whatever the passage holds. Being stuck on it still blocks it for the
+            // robot (the navigation's own record).
+            let removable = own && d.via.is_empty();
+            match d.experience.observe(obs, removable, &params) {
                 Transition::None => {}
                 Transition::Changed => {
                     update.edges_changed += 1;
@@ -806,6 +881,19 @@ impl GlobalPlanner {
         best.map(|(_, o)| NodeIndex::new(o as usize)).ok_or(PlanError::NotOnGraph { which, x: p.x, y: p.y })
     }
 
+    /// The vertices of edge `e` from its source node to its target node (into `out`); false
+    /// when `e` is not a live edge.
+    fn edge_points(&self, e: EdgeIndex<u32>, out: &mut Vec<Point2>) -> bool {
+        out.clear();
+        let (Some((a, b)), Some(d)) = (self.graph.edge_endpoints(e), self.graph.edge_weight(e)) else {
+            return false;
+        };
+        out.push(self.graph[a].position);
+        out.extend_from_slice(&d.via);
+        out.push(self.graph[b].position);
+        true
+    }
+
     fn segment_samples(&self, a: Point2, b: Point2) -> Vec<u32> {
         let Some(map) = &self.map else {
             return Vec::new();
@@ -854,8 +942,22 @@ impl GlobalPlanner {
             edges.push(EdgeId(e.index() as u32));
         }
         let mut waypoints = Vec::with_capacity(nodes.len() + 2);
+        let mut node_waypoints = Vec::with_capacity(nodes.len());
         waypoints.push(from);
-        waypoints.extend(nodes.iter().map(|&n| self.graph[n].position));
+        for (k, &n) in nodes.iter().enumerate() {
+            if k > 0 {
+                let e = EdgeIndex::new(edges[k - 1].0 as usize);
+                let forward = self.graph.edge_endpoints(e).is_some_and(|(src, _)| src == nodes[k - 1]);
+                let via = &self.graph[e].via;
+                if forward {
+                    waypoints.extend(via.iter().copied());
+                } else {
+                    waypoints.extend(via.iter().rev().copied());
+                }
+            }
+            node_waypoints.push(waypoints.len());
+            waypoints.push(self.graph[n].position);
+        }
         waypoints.push(to);
         let length_m = waypoints.windows(2).map(|w| w[0].distance(w[1])).sum();
         let head = self.segment_samples(from, self.graph[start].position);
@@ -867,6 +969,7 @@ impl GlobalPlanner {
             length_m,
             edges,
             nodes: nodes.iter().map(|n| NodeId(n.index() as u32)).collect(),
+            node_waypoints,
             graph_cost,
             lead_in: 0,
         })
@@ -955,11 +1058,18 @@ impl GlobalPlanner {
     }
 
     /// Whether every cell of the straight leg from `p` to `node_at` lies in some node's region
-    /// (so it cuts through nothing the graph leaves out, such as a building) and none has as
-    /// many untraversable votes as a training label needs. The first metre around `p` is not
+    /// (so it cuts through nothing the graph leaves out, such as a building), none has as
+    /// many untraversable votes as a training label needs, and it crosses no elevation step
+    /// higher than `graph.max_step_m` (a curb). The first metre around `p` is not
     /// judged: a robot standing next to an obstacle sits among cells voted beyond its boundary.
     fn leg_is_open(&self, p: Point2, node_at: Point2) -> bool {
         let Some(map) = &self.map else { return false };
+        if let (Some(step), Some(a), Some(b)) =
+            (self.params.graph.max_step_m, map.spec.cell_at(p), map.spec.cell_at(node_at))
+            && EdgeRouter::crosses_step(map, a, b, step as f32)
+        {
+            return false;
+        }
         let judge = self.params.experience.graph_updates;
         let blocked_votes = -(self.params.learning.votes_to_label.max(1) as i8);
         let length = p.distance(node_at);
@@ -971,6 +1081,17 @@ impl GlobalPlanner {
                 self.owner[i] != NO_NODE && (!judge || t * length < 1.0 || self.votes.net(i) > blocked_votes)
             })
         })
+    }
+
+    /// Whether the straight line from `a` to `b` crosses an elevation step higher than
+    /// `graph.max_step_m` on the aerial map (a curb); false without a map, off the map, or with
+    /// the step limit off.
+    pub fn crosses_step(&self, a: Point2, b: Point2) -> bool {
+        let (Some(map), Some(step)) = (&self.map, self.params.graph.max_step_m) else { return false };
+        match (map.spec.cell_at(a), map.spec.cell_at(b)) {
+            (Some(ca), Some(cb)) => EdgeRouter::crosses_step(map, ca, cb, step as f32),
+            _ => false,
+        }
     }
 
     /// Current cost of a path's graph edges; `None` when one of them has been removed.
@@ -1022,6 +1143,7 @@ impl GlobalPlanner {
                 id: EdgeId(e.index() as u32),
                 from: self.graph[a].position,
                 to: self.graph[b].position,
+                via: d.via.clone(),
                 cost: d.cost,
                 state: d.experience.state,
             })
@@ -1069,6 +1191,7 @@ impl GlobalPlanner {
             covered_cells: self.owner.iter().filter(|&&o| o != NO_NODE).count(),
             labelled_cells: self.votes.labels(self.params.learning.votes_to_label).count(),
             training_rounds: self.training_rounds,
+            routed_edges: self.routed_edges,
             ..Default::default()
         };
         for d in self.graph.edge_weights() {

@@ -16,6 +16,18 @@ pub enum EdgeObservation {
     UnkTrav,
 }
 
+/// How edges are judged against a scan's safe region.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Judging {
+    /// Δφ: half-width of the window around a single crossing searched for unknown bins.
+    pub window_rad: f64,
+    /// Within this distance of the robot an edge is judged from the robot (see
+    /// [`StarRegion::classify_polyline`]); 0 turns that off.
+    pub on_edge_radius_m: f64,
+    /// A single crossing nearer to the robot than this counts as unknown.
+    pub min_crossing_range_m: f64,
+}
+
 /// A scan's safe region: the polygon through the end points of the bins, star-shaped around the
 /// robot.
 #[derive(Debug, Clone, Default)]
@@ -105,52 +117,84 @@ impl StarRegion {
     }
 
     /// The paper's classification of the segment `a`–`b` against this region.
+    #[cfg(test)]
     pub fn classify(&self, a: Point2, b: Point2, window_rad: f64) -> EdgeObservation {
-        if segment_point_distance(a, b, self.origin) > self.max_range_m {
+        self.classify_path(&[a, b], &Judging { window_rad, on_edge_radius_m: 0.0, min_crossing_range_m: 0.0 })
+    }
+
+    /// The paper's classification of an edge, as the polyline `points` (two points for a
+    /// straight edge; more for an edge routed around elevation steps), against this region:
+    /// its boundary crossings are counted along every piece. One addition to the paper: a
+    /// single crossing nearer to the robot than `min_crossing_range_m` is unknown, since so near
+    /// the boundary is the robot's own clearance from an obstacle beside it (the bins there end
+    /// at the inflation margin, whatever lies along the edge), as at the foot of a ramp beside
+    /// the curb's corner.
+    fn classify_path(&self, points: &[Point2], judging: &Judging) -> EdgeObservation {
+        let (Some(&first), Some(&last)) = (points.first(), points.last()) else {
+            return EdgeObservation::UnkTrav;
+        };
+        if polyline_point_distance(points, self.origin) > self.max_range_m {
             return EdgeObservation::UnkTrav;
         }
         let n = self.bins();
         let mut crossings = 0usize;
-        let mut crossing = a;
-        for j in 0..n {
-            let (c, d) = (self.ends[j], self.ends[(j + 1) % n]);
-            if let Some(p) = segment_intersection(a, b, c, d) {
-                crossings += 1;
-                crossing = p;
-                if crossings > 1 {
-                    return EdgeObservation::UnkTrav;
+        let mut crossing = first;
+        for piece in points.windows(2) {
+            let (a, b) = (piece[0], piece[1]);
+            if segment_point_distance(a, b, self.origin) > self.max_range_m {
+                continue;
+            }
+            for j in 0..n {
+                let (c, d) = (self.ends[j], self.ends[(j + 1) % n]);
+                if let Some(p) = segment_intersection(a, b, c, d) {
+                    crossings += 1;
+                    crossing = p;
+                    if crossings > 1 {
+                        return EdgeObservation::UnkTrav;
+                    }
                 }
             }
         }
         match crossings {
-            0 if self.contains(a) && self.contains(b) => EdgeObservation::Trav,
+            0 if self.contains(first) && self.contains(last) => EdgeObservation::Trav,
             0 => EdgeObservation::UnkTrav,
-            _ if self.unknown_near(crossing, window_rad) => EdgeObservation::UnkTrav,
+            _ if crossing.distance(self.origin) < judging.min_crossing_range_m => EdgeObservation::UnkTrav,
+            _ if self.unknown_near(crossing, judging.window_rad) => EdgeObservation::UnkTrav,
             _ => EdgeObservation::NotTrav,
         }
     }
 
-    /// Judges the edge `a`–`b` as [`StarRegion::classify`] does, except when the region's origin
-    /// (the robot) is on the edge: within `on_edge_radius_m` of it, with its projection `q` onto
-    /// the edge inside the safe region. Then the parts `q`–`a` and `q`–`b` are judged each: not
-    /// traversable when one of them is (the robot can reach `q`, so the edge is blocked beyond
-    /// it), traversable when both are, unknown otherwise. This is how the edge a robot is
-    /// driving gets judged from where the robot is, when the safe region (≈ 5 m on flat ground)
-    /// is much shorter than the edge.
+    /// Judges the edge `a`–`b` as [`StarRegion::classify_polyline`] does.
+    #[cfg(test)]
     pub fn classify_edge(&self, a: Point2, b: Point2, window_rad: f64, on_edge_radius_m: f64) -> EdgeObservation {
-        if on_edge_radius_m > 0.0 && segment_point_distance(a, b, self.origin) <= on_edge_radius_m {
-            let q = closest_on_segment(a, b, self.origin);
-            if self.contains(q) {
-                let towards_a = self.classify(q, a, window_rad);
-                let towards_b = self.classify(q, b, window_rad);
-                return match (towards_a, towards_b) {
+        self.classify_polyline(&[a, b], &Judging { window_rad, on_edge_radius_m, min_crossing_range_m: 0.0 })
+    }
+
+    /// Judges the edge `points` (its ends and any interior vertices) as the paper does, except
+    /// when the region's origin (the robot) is on the edge: within `on_edge_radius_m` of it,
+    /// with its closest point `q` on the edge inside the safe region. Then the parts from `q`
+    /// to either end are judged each: not traversable when one of them is (the robot can reach
+    /// `q`, so the edge is blocked beyond it), traversable when both are, unknown otherwise.
+    /// This is how the edge a robot is driving gets judged from where the robot is, when the
+    /// safe region (≈ 5 m on flat ground) is much shorter than the edge.
+    pub fn classify_polyline(&self, points: &[Point2], judging: &Judging) -> EdgeObservation {
+        if judging.on_edge_radius_m > 0.0 && points.len() >= 2 {
+            let (piece, q) = closest_on_polyline(points, self.origin);
+            if q.distance(self.origin) <= judging.on_edge_radius_m && self.contains(q) {
+                let mut towards_a = Vec::with_capacity(piece + 2);
+                towards_a.push(q);
+                towards_a.extend(points[..=piece].iter().rev().copied());
+                let mut towards_b = Vec::with_capacity(points.len() - piece);
+                towards_b.push(q);
+                towards_b.extend_from_slice(&points[piece + 1..]);
+                return match (self.classify_path(&towards_a, judging), self.classify_path(&towards_b, judging)) {
                     (EdgeObservation::NotTrav, _) | (_, EdgeObservation::NotTrav) => EdgeObservation::NotTrav,
                     (EdgeObservation::Trav, EdgeObservation::Trav) => EdgeObservation::Trav,
                     _ => EdgeObservation::UnkTrav,
                 };
             }
         }
-        self.classify(a, b, window_rad)
+        self.classify_path(points, judging)
     }
 
     /// Whether a bin within `window_rad` of the direction towards `p` ends in the unknown.
@@ -184,6 +228,29 @@ fn closest_on_segment(a: Point2, b: Point2, p: Point2) -> Point2 {
 /// Distance from `p` to the segment `a`–`b`.
 pub(crate) fn segment_point_distance(a: Point2, b: Point2, p: Point2) -> f64 {
     p.distance(closest_on_segment(a, b, p))
+}
+
+/// The piece (index of its first vertex) and the point of the polyline `points` (at least two)
+/// closest to `p`.
+fn closest_on_polyline(points: &[Point2], p: Point2) -> (usize, Point2) {
+    let mut best = (0, points[0], f64::INFINITY);
+    for (k, w) in points.windows(2).enumerate() {
+        let q = closest_on_segment(w[0], w[1], p);
+        let d = q.distance(p);
+        if d < best.2 {
+            best = (k, q, d);
+        }
+    }
+    (best.0, best.1)
+}
+
+/// Distance from `p` to the polyline `points` (infinite when empty).
+pub(crate) fn polyline_point_distance(points: &[Point2], p: Point2) -> f64 {
+    match points {
+        [] => f64::INFINITY,
+        [only] => only.distance(p),
+        _ => closest_on_polyline(points, p).1.distance(p),
+    }
 }
 
 /// Intersection of segment `a`–`b` (closed) with `c`–`d` (half-open: `d` excluded, so a crossing
@@ -278,6 +345,61 @@ mod tests {
         // An edge 4 m away is not "under" the robot: the paper's rule applies.
         let (e, f) = (Point2::new(-15.0, 4.0), Point2::new(15.0, 4.0));
         assert_eq!(wall.classify_edge(e, f, w, 3.0), EdgeObservation::UnkTrav);
+    }
+
+    fn judging(window_rad: f64, on_edge_radius_m: f64) -> Judging {
+        Judging { window_rad, on_edge_radius_m, min_crossing_range_m: 0.0 }
+    }
+
+    #[test]
+    fn a_crossing_at_the_robots_own_clearance_is_unknown() {
+        // The robot 0.6 m from a wall to its north (range 0.6 there), open elsewhere to 10 m.
+        let n = 360;
+        let mut range = vec![10.0; n];
+        let mut obstacle = vec![true; n];
+        for (b, (r, o)) in range.iter_mut().zip(obstacle.iter_mut()).enumerate() {
+            // Bins run clockwise from +x: north is bin 270.
+            if (225..=315).contains(&b) {
+                *r = 0.6;
+                *o = true;
+            }
+        }
+        let s = StarRegion::from_scan(&scan(Pose2::new(0.0, 0.0, 0.0), range, obstacle), 30.0).unwrap();
+        let north = [Point2::new(0.0, 0.0), Point2::new(0.0, 5.0)];
+        assert_eq!(s.classify_polyline(&north, &judging(0.3, 0.0)), EdgeObservation::NotTrav, "the paper's rule");
+        let near = Judging { window_rad: 0.3, on_edge_radius_m: 0.0, min_crossing_range_m: 1.0 };
+        assert_eq!(s.classify_polyline(&north, &near), EdgeObservation::UnkTrav);
+        // A crossing farther out still counts.
+        let east = [Point2::new(0.0, 0.0), Point2::new(20.0, 0.0)];
+        assert_eq!(s.classify_polyline(&east, &near), EdgeObservation::NotTrav);
+    }
+
+    #[test]
+    fn a_routed_edge_is_judged_along_all_its_pieces() {
+        let w = 0.3;
+        let wall = StarRegion::from_scan(&circle(360, 10.0, true), 30.0).unwrap();
+        let p = |x: f64, y: f64| Point2::new(x, y);
+        // Inside all along, around a corner.
+        assert_eq!(
+            wall.classify_polyline(&[p(-5.0, 0.0), p(0.0, 5.0), p(5.0, 0.0)], &judging(w, 0.0)),
+            EdgeObservation::Trav
+        );
+        // The second piece leaves through the wall: one crossing.
+        assert_eq!(
+            wall.classify_polyline(&[p(0.0, 0.0), p(5.0, 0.0), p(5.0, 20.0)], &judging(w, 0.0)),
+            EdgeObservation::NotTrav
+        );
+        // Out through the wall and back in: two crossings, although each piece's straight
+        // chord from end to end would say otherwise.
+        let out_and_back = [p(0.0, 0.0), p(20.0, 0.0), p(20.0, 1.0), p(0.0, 1.0)];
+        assert_eq!(wall.classify_polyline(&out_and_back, &judging(w, 0.0)), EdgeObservation::UnkTrav);
+        assert_eq!(wall.classify(p(0.0, 0.0), p(0.0, 1.0), w), EdgeObservation::Trav);
+        // The robot on the routed edge, 0.5 m from its corner piece: blocked towards the far end.
+        let l_shape = [p(-15.0, 0.5), p(0.0, 0.5), p(0.0, 15.0)];
+        assert_eq!(wall.classify_polyline(&l_shape, &judging(w, 3.0)), EdgeObservation::NotTrav);
+        assert_eq!(wall.classify_polyline(&l_shape, &judging(w, 0.0)), EdgeObservation::UnkTrav, "two crossings");
+        assert_eq!(polyline_point_distance(&l_shape, p(1.0, 5.0)), 1.0);
+        assert!(polyline_point_distance(&[], p(0.0, 0.0)).is_infinite());
     }
 
     #[test]

@@ -520,3 +520,59 @@ fn plan_avoiding_skips_the_given_edges_and_keeps_them() {
     let none = [(direct.nodes[0], direct.nodes[0])];
     assert_eq!(p.plan_avoiding(RING_START, RING_GOAL, &none).unwrap().nodes, direct.nodes);
 }
+
+/// 40 m × 25 m: road below y = 10 m, a sidewalk 0.15 m up behind a curb above it, one ramp up
+/// the curb at x ∈ [20, 23) m rising over y ∈ [10, 13) m, buildings above y = 20 m.
+fn curb_and_ramp_map() -> AerialMap {
+    let mut m = blank(80, 50, class::ROAD, color::ROAD);
+    paint(&mut m, 0..80, 20..40, class::SIDEWALK, color::SIDEWALK);
+    paint(&mut m, 0..80, 40..50, class::BUILDING, color::BUILDING);
+    for row in 20..50u32 {
+        for col in 0..80u32 {
+            let i = m.spec.index(Cell::new(col, row));
+            m.elevation[i] = if row >= 40 {
+                10.0
+            } else if (40..46).contains(&col) && row < 26 {
+                // Cell centres 0.25 m into the ramp rise 0.15 m over its 3 m.
+                0.15 * ((row - 20) as f32 * 0.5 + 0.25) / 3.0
+            } else {
+                0.15
+            };
+        }
+    }
+    m
+}
+
+/// Where a path's pieces cross the curb line y = 10 m.
+fn curb_crossings(path: &GlobalPath) -> Vec<f64> {
+    path.waypoints
+        .windows(2)
+        .filter(|w| (w[0].y < 10.0) != (w[1].y < 10.0))
+        .map(|w| w[0].x + (w[1].x - w[0].x) * (10.0 - w[0].y) / (w[1].y - w[0].y))
+        .collect()
+}
+
+#[test]
+fn a_path_to_the_sidewalk_goes_up_the_ramp_the_aerial_elevation_shows() {
+    let map = curb_and_ramp_map();
+    let mut p = planner(GlobalPlannerParams::default(), &map);
+    assert!(p.graph_stats().routed_edges >= 1, "{:?}", p.graph_stats());
+    let path = p.plan(Point2::new(10.0, 5.0), Point2::new(10.0, 16.0)).unwrap();
+    let crossings = curb_crossings(&path);
+    assert_eq!(crossings.len(), 1, "{:?}", path.waypoints);
+    // Up the middle of the ramp (x ∈ [20, 23)), clear of the curb on either side.
+    assert!((20.75..22.25).contains(&crossings[0]), "up the ramp, not the curb: {:?}", path.waypoints);
+    // Every node of the path is at its recorded waypoint.
+    let positions: Vec<Point2> = p.nodes().map(|(_, q, _)| q).collect();
+    for (k, &w) in path.node_waypoints.iter().enumerate() {
+        assert!(positions.contains(&path.waypoints[w]), "node {k} at waypoint {w}");
+    }
+
+    // With the routing off the graph only has straight edges, which cross the curb.
+    let mut straight = GlobalPlannerParams::default();
+    straight.graph.max_step_m = None;
+    let mut q = planner(straight, &map);
+    assert_eq!(q.graph_stats().routed_edges, 0);
+    let path = q.plan(Point2::new(10.0, 5.0), Point2::new(10.0, 16.0)).unwrap();
+    assert!(curb_crossings(&path).iter().all(|x| !(20.0..23.0).contains(x)), "{:?}", path.waypoints);
+}

@@ -1,0 +1,415 @@
+//! Routing an edge around elevation steps: where the straight line between two nodes crosses a
+//! step a UGV cannot drive over (a curb, a parked vehicle's side, a pole), the edge follows a
+//! step-free route through the two nodes' regions instead, when there is one (a curb ramp).
+//!
+//! The paper connects nodes whose regions touch with straight edges and lets experience prune
+//! the ones that cannot be driven. Between a road region and a sidewalk region that touch along
+//! a whole curb, the straight edge crosses the curb almost always, and a ramp that the aerial
+//! map shows (its elevation rises gently where the curb is a step) would never be on any edge.
+//! Following the ramp keeps the graph's topology (one edge per touching pair) and its costs
+//! (sampled along the route), and experience still judges the route as it judges any edge.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use spomp_core::{AerialMap, Cell, Point2};
+
+use crate::coverage::{NO_NODE, bresenham};
+
+/// Whether the step between two cells' elevations can be driven: unknown elevations are no
+/// evidence of a step.
+fn step_ok(a: f32, b: f32, max_step_m: f32) -> bool {
+    !(a.is_finite() && b.is_finite()) || (a - b).abs() <= max_step_m
+}
+
+/// Visits the cells under the straight line between the centres of cells `p` and `q`, in order,
+/// sampled a quarter cell apart (a cell may be visited several times in a row).
+fn walk_cells(p: (i32, i32), q: (i32, i32), mut visit: impl FnMut((i32, i32))) {
+    let (dx, dy) = ((q.0 - p.0) as f64, (q.1 - p.1) as f64);
+    let steps = (4.0 * dx.abs().max(dy.abs())).ceil().max(1.0) as i32;
+    for k in 0..=steps {
+        let t = k as f64 / steps as f64;
+        let (x, y) = (p.0 as f64 + dx * t, p.1 as f64 + dy * t);
+        visit(((x + 0.5).floor() as i32, (y + 0.5).floor() as i32));
+    }
+}
+
+/// Scratch buffers for routing, reused across edges.
+#[derive(Debug, Default)]
+pub(crate) struct EdgeRouter {
+    /// Distance in cells (Chebyshev) from each map cell to the nearest cell beside a step,
+    /// capped at [`CLEARANCE_CELLS`] (see [`EdgeRouter::prepare`]).
+    clearance: Vec<u8>,
+    /// Each covered cell's component of step-free 4-connected covered ground ([`NO_NODE`]
+    /// for uncovered cells): two cells in different components have no route between them.
+    component: Vec<u32>,
+    stack: Vec<u32>,
+    cost: Vec<u32>,
+    parent: Vec<u32>,
+    heap: BinaryHeap<Reverse<(u32, u32)>>,
+    cells: Vec<(i32, i32)>,
+}
+
+/// Octile move costs in tenths of a cell.
+const ORTHOGONAL: u32 = 10;
+const DIAGONAL: u32 = 14;
+const UNSEEN: u32 = u32::MAX;
+/// Cells (0.5 m each) a route keeps from a step when it can: about the reach of a UGV's
+/// reachability scan on flat ground, so a route crosses this band straight on (a ramp is met
+/// head-on) and runs up a ramp's middle.
+const CLEARANCE_CELLS: u8 = 6;
+/// Extra cost per cell of missing clearance, in the units of [`ORTHOGONAL`].
+const CLEARANCE_PENALTY: u32 = 15;
+/// Inside the band near a step, a route keeps a vertex every this many chain cells.
+const TIGHT_VERTEX_CELLS: usize = 2;
+
+impl EdgeRouter {
+    /// Whether the digital line from `a` to `b` passes between two cells (consecutive on the
+    /// line) whose elevations differ by more than `max_step_m`.
+    pub fn crosses_step(map: &AerialMap, a: Cell, b: Cell, max_step_m: f32) -> bool {
+        let w = map.spec.width as usize;
+        let mut prev: Option<f32> = None;
+        let mut crosses = false;
+        bresenham((a.col as i32, a.row as i32), (b.col as i32, b.row as i32), |c, r| {
+            let e = map.elevation[r as usize * w + c as usize];
+            if let Some(p) = prev
+                && !step_ok(p, e, max_step_m)
+            {
+                crosses = true;
+            }
+            prev = Some(e);
+        });
+        crosses
+    }
+
+    /// Computes the clearance and the step-free components of the covered ground for the map
+    /// and coverage `owner` as they are now; [`EdgeRouter::route`] relies on them.
+    pub fn prepare(&mut self, map: &AerialMap, owner: &[u32], max_step_m: f32) {
+        let (w, h) = (map.spec.width as usize, map.spec.height as usize);
+        let n = w * h;
+        let elev = &map.elevation;
+        // Clearance: cells beside a rise of more than half the step limit are 0 (terrain
+        // analysis flags such a rise when near, although the robot could climb it), then a
+        // Chebyshev distance by two chamfer passes.
+        let noticeable = 0.5 * max_step_m;
+        self.clearance.clear();
+        self.clearance.resize(n, CLEARANCE_CELLS);
+        for r in 0..h {
+            for c in 0..w {
+                let i = r * w + c;
+                let right = c + 1 < w && !step_ok(elev[i], elev[i + 1], noticeable);
+                let up = r + 1 < h && !step_ok(elev[i], elev[i + w], noticeable);
+                if right {
+                    self.clearance[i] = 0;
+                    self.clearance[i + 1] = 0;
+                }
+                if up {
+                    self.clearance[i] = 0;
+                    self.clearance[i + w] = 0;
+                }
+            }
+        }
+        let (wi, hi) = (w as i64, h as i64);
+        for pass in 0..2 {
+            let back: i64 = if pass == 0 { -1 } else { 1 };
+            for k in 0..n {
+                let i = if pass == 0 { k } else { n - 1 - k };
+                let (c, r) = ((i % w) as i64, (i / w) as i64);
+                let mut best = self.clearance[i];
+                for (dc, dr) in [(back, 0), (back, back), (0, back), (-back, back)] {
+                    let (nc, nr) = (c + dc, r + dr);
+                    if nc >= 0 && nr >= 0 && nc < wi && nr < hi {
+                        best = best.min(self.clearance[(nr * wi + nc) as usize].saturating_add(1));
+                    }
+                }
+                self.clearance[i] = best;
+            }
+        }
+        // Components by flood fill over 4-neighbours (a diagonal move needs both cells beside
+        // it, so 8-connected routes join 4-connected cells only).
+        self.component.clear();
+        self.component.resize(n, NO_NODE);
+        let mut next = 0u32;
+        for seed in 0..n {
+            if owner[seed] == NO_NODE || self.component[seed] != NO_NODE {
+                continue;
+            }
+            self.component[seed] = next;
+            self.stack.clear();
+            self.stack.push(seed as u32);
+            while let Some(i) = self.stack.pop() {
+                let i = i as usize;
+                let (c, r) = (i % w, i / w);
+                let neighbours = [
+                    (c + 1 < w).then(|| i + 1),
+                    (c > 0).then(|| i - 1),
+                    (r + 1 < h).then(|| i + w),
+                    (r > 0).then(|| i - w),
+                ];
+                for j in neighbours.into_iter().flatten() {
+                    if owner[j] != NO_NODE && self.component[j] == NO_NODE && step_ok(elev[i], elev[j], max_step_m) {
+                        self.component[j] = next;
+                        self.stack.push(j as u32);
+                    }
+                }
+            }
+            next += 1;
+        }
+    }
+
+    /// A step-free route from node cell `a` to node cell `b` over covered cells (`owner[i] !=
+    /// NO_NODE`: ground the graph covers, so not a building), searched within `reach` cells of
+    /// the two, keeping clear of steps where it can: the interior vertices of the route after
+    /// string pulling (each straight piece stays on covered cells, crosses no step and keeps as
+    /// far from steps as the cells it replaces), or `None` when the two cells are not joined
+    /// that way. The route may pass through other nodes' regions: a ramp is often covered by a
+    /// third node, or split between two.
+    pub fn route(
+        &mut self,
+        map: &AerialMap,
+        owner: &[u32],
+        a: Cell,
+        b: Cell,
+        reach: i32,
+        max_step_m: f32,
+    ) -> Option<Vec<Point2>> {
+        let (w, h) = (map.spec.width as i32, map.spec.height as i32);
+        let c0 = (a.col.min(b.col) as i32 - reach).max(0);
+        let r0 = (a.row.min(b.row) as i32 - reach).max(0);
+        let c1 = (a.col.max(b.col) as i32 + reach).min(w - 1);
+        let r1 = (a.row.max(b.row) as i32 + reach).min(h - 1);
+        let (bw, bh) = ((c1 - c0 + 1) as usize, (r1 - r0 + 1) as usize);
+        self.cost.clear();
+        self.cost.resize(bw * bh, UNSEEN);
+        self.parent.clear();
+        self.parent.resize(bw * bh, u32::MAX);
+        self.heap.clear();
+        let global = |c: i32, r: i32| r as usize * w as usize + c as usize;
+        let local = |c: i32, r: i32| (r - r0) as usize * bw + (c - c0) as usize;
+        let owned =
+            |c: i32, r: i32| (c0..=c1).contains(&c) && (r0..=r1).contains(&r) && { owner[global(c, r)] != NO_NODE };
+        let elev = |c: i32, r: i32| map.elevation[global(c, r)];
+        let can_step = |(c, r): (i32, i32), (d, s): (i32, i32)| step_ok(elev(c, r), elev(d, s), max_step_m);
+        let (ac, ar, bc, br) = (a.col as i32, a.row as i32, b.col as i32, b.row as i32);
+        if !owned(ac, ar) || !owned(bc, br) {
+            return None;
+        }
+        let component_of = |c: i32, r: i32| self.component.get(global(c, r)).copied().unwrap_or(NO_NODE);
+        if component_of(ac, ar) == NO_NODE || component_of(ac, ar) != component_of(bc, br) {
+            return None;
+        }
+        let clearance = &self.clearance;
+        let penalty = |c: i32, r: i32| (CLEARANCE_CELLS - clearance[global(c, r)]) as u32 * CLEARANCE_PENALTY;
+        let heuristic = |c: i32, r: i32| {
+            let (dx, dy) = ((c - bc).unsigned_abs(), (r - br).unsigned_abs());
+            ORTHOGONAL * dx.max(dy) + (DIAGONAL - ORTHOGONAL) * dx.min(dy)
+        };
+        self.cost[local(ac, ar)] = 0;
+        self.heap.push(Reverse((heuristic(ac, ar), local(ac, ar) as u32)));
+        let goal = local(bc, br) as u32;
+        let mut found = false;
+        while let Some(Reverse((_, i))) = self.heap.pop() {
+            if i == goal {
+                found = true;
+                break;
+            }
+            let (c, r) = ((i as usize % bw) as i32 + c0, (i as usize / bw) as i32 + r0);
+            let g = self.cost[i as usize];
+            for (dc, dr) in [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)] {
+                let (nc, nr) = (c + dc, r + dr);
+                if !owned(nc, nr) || !can_step((c, r), (nc, nr)) {
+                    continue;
+                }
+                let step = if dc != 0 && dr != 0 {
+                    // No cutting a corner: both cells beside the diagonal must be drivable too.
+                    let side_a = (c + dc, r);
+                    let side_b = (c, r + dr);
+                    let clear = |s: (i32, i32)| owned(s.0, s.1) && can_step((c, r), s) && can_step(s, (nc, nr));
+                    if !(clear(side_a) && clear(side_b)) {
+                        continue;
+                    }
+                    DIAGONAL
+                } else {
+                    ORTHOGONAL
+                };
+                let j = local(nc, nr);
+                let ng = g + step + penalty(nc, nr);
+                if ng < self.cost[j] {
+                    self.cost[j] = ng;
+                    self.parent[j] = i;
+                    self.heap.push(Reverse((ng + heuristic(nc, nr), j as u32)));
+                }
+            }
+        }
+        if !found {
+            return None;
+        }
+        // The cell chain from a to b.
+        self.cells.clear();
+        let mut i = goal;
+        loop {
+            self.cells.push(((i as usize % bw) as i32 + c0, (i as usize / bw) as i32 + r0));
+            if i as usize == local(ac, ar) {
+                break;
+            }
+            i = self.parent[i as usize];
+        }
+        self.cells.reverse();
+        // String pulling: from each anchor, the farthest cell of the chain a clear straight line
+        // reaches.
+        // A straight piece is clear when every cell it passes over (a corner passed
+        // diagonally counts both cells beside it) is owned, no step lies along it, and it keeps
+        // at least `keep` cells from any step.
+        let clear_line = |p: (i32, i32), q: (i32, i32), keep: u8| {
+            let mut prev = p;
+            let mut ok = true;
+            walk_cells(p, q, |cell| {
+                if !ok || cell == prev {
+                    return;
+                }
+                let diagonal = cell.0 != prev.0 && cell.1 != prev.1;
+                let sides_clear = !diagonal || {
+                    let (s1, s2) = ((cell.0, prev.1), (prev.0, cell.1));
+                    [s1, s2].iter().all(|&s| owned(s.0, s.1) && can_step(prev, s) && can_step(s, cell))
+                };
+                ok = owned(cell.0, cell.1)
+                    && clearance[global(cell.0, cell.1)] >= keep
+                    && can_step(prev, cell)
+                    && sides_clear;
+                prev = cell;
+            });
+            ok
+        };
+        let mut vertices = Vec::new();
+        let mut anchor = 0;
+        let last = self.cells.len() - 1;
+        // On open ground (full clearance) a pulled piece reaches at most the next cell of the
+        // band near a step, and keeps as far from steps as the cells of the chain it replaces.
+        // Inside the band the route follows the chain, which the clearance cost makes cross the
+        // band straight on: a robot meets a ramp head-on, and its scans along the way look up
+        // the ramp rather than at the corner of the curb beside it.
+        let chain_keep: Vec<u8> = self.cells.iter().map(|&(c, r)| clearance[global(c, r)]).collect();
+        let tight = |i: usize| chain_keep[i] < CLEARANCE_CELLS;
+        while anchor < last {
+            let next = if tight(anchor) {
+                let mut j = anchor + 1;
+                while j < last && j - anchor < TIGHT_VERTEX_CELLS && tight(j) {
+                    j += 1;
+                }
+                j
+            } else {
+                // Forward, up to the first cell no clear line reaches (cheap, and a chain of an
+                // A* over a grid is straight-ish).
+                let limit = (anchor + 1..=last).find(|&k| tight(k)).unwrap_or(last);
+                let mut next = anchor + 1;
+                let mut keep = chain_keep[anchor].min(chain_keep[next]);
+                for (j, &cell_keep) in chain_keep.iter().enumerate().take(limit + 1).skip(anchor + 2) {
+                    keep = keep.min(cell_keep);
+                    if !clear_line(self.cells[anchor], self.cells[j], keep) {
+                        break;
+                    }
+                    next = j;
+                }
+                next
+            };
+            if next < last {
+                let (c, r) = self.cells[next];
+                vertices.push(map.spec.center(Cell::new(c as u32, r as u32)));
+            }
+            anchor = next;
+        }
+        Some(vertices)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use spomp_core::GridSpec;
+
+    /// A 20 × 20 cell map: a 0.15 m step along row 10 (rows ≥ 10 raised) except a ramp over
+    /// columns 14..17 rising across rows 10..13.
+    fn curb_map() -> AerialMap {
+        let spec = GridSpec::new(Point2::new(0.0, 0.0), 0.5, 20, 20);
+        let mut map = AerialMap::unknown(spec);
+        for row in 0..20u32 {
+            for col in 0..20u32 {
+                let i = spec.index(Cell::new(col, row));
+                map.class[i] = 0;
+                map.elevation[i] = if row < 10 {
+                    0.0
+                } else if (14..17).contains(&col) && row < 13 {
+                    0.15 * (row - 9) as f32 / 4.0
+                } else {
+                    0.15
+                };
+            }
+        }
+        map
+    }
+
+    #[test]
+    fn a_straight_line_over_the_curb_crosses_a_step_one_over_the_ramp_does_not() {
+        let map = curb_map();
+        assert!(EdgeRouter::crosses_step(&map, Cell::new(5, 5), Cell::new(5, 15), 0.1));
+        assert!(!EdgeRouter::crosses_step(&map, Cell::new(15, 5), Cell::new(15, 15), 0.1));
+        assert!(!EdgeRouter::crosses_step(&map, Cell::new(5, 5), Cell::new(5, 15), 0.2), "a higher limit");
+    }
+
+    #[test]
+    fn the_route_goes_up_the_ramp_and_every_piece_is_step_free() {
+        let map = curb_map();
+        // Node 1 owns the low side, node 2 the raised side (ramp included).
+        let owner: Vec<u32> = (0..400).map(|i| if i / 20 < 10 { 1 } else { 2 }).collect();
+        let (a, b) = (Cell::new(4, 4), Cell::new(4, 16));
+        let mut router = EdgeRouter::default();
+        router.prepare(&map, &owner, 0.1);
+        let vias = router.route(&map, &owner, a, b, 30, 0.1).expect("a route up the ramp");
+        assert!(!vias.is_empty());
+        let mut points = vec![map.spec.center(a)];
+        points.extend(&vias);
+        points.push(map.spec.center(b));
+        for w in points.windows(2) {
+            let (p, q) = (map.spec.cell_at(w[0]).unwrap(), map.spec.cell_at(w[1]).unwrap());
+            assert!(!EdgeRouter::crosses_step(&map, p, q, 0.1), "piece {:?} → {:?} crosses the curb", w[0], w[1]);
+        }
+        // It crosses row 10 on the ramp's columns.
+        let on_ramp = points.windows(2).any(|w| {
+            let (p, q) = (w[0], w[1]);
+            (p.y < 5.0) != (q.y < 5.0) && {
+                let t = (5.0 - p.y) / (q.y - p.y);
+                let x = p.x + (q.x - p.x) * t;
+                (7.0..8.5).contains(&x)
+            }
+        });
+        assert!(on_ramp, "{points:?}");
+    }
+
+    #[test]
+    fn no_ramp_no_route_and_unknown_elevation_is_no_step() {
+        let mut map = curb_map();
+        let owner: Vec<u32> = (0..400).map(|i| if i / 20 < 10 { 1 } else { 2 }).collect();
+        for row in 10..13u32 {
+            for col in 14..17u32 {
+                map.elevation[map.spec.index(Cell::new(col, row))] = 0.15;
+            }
+        }
+        let mut router = EdgeRouter::default();
+        router.prepare(&map, &owner, 0.1);
+        assert_eq!(router.route(&map, &owner, Cell::new(4, 4), Cell::new(4, 16), 30, 0.1), None);
+        // Cells the UAV has not measured: no evidence of a step.
+        for col in 0..20u32 {
+            map.elevation[map.spec.index(Cell::new(col, 10))] = f32::NAN;
+        }
+        assert!(!EdgeRouter::crosses_step(&map, Cell::new(5, 5), Cell::new(5, 15), 0.1));
+        // Ground the graph does not cover (a building) is not used.
+        let mut walled: Vec<u32> = (0..400).map(|i| if i / 20 < 10 { 1 } else { 2 }).collect();
+        for (i, o) in walled.iter_mut().enumerate() {
+            if i / 20 == 11 {
+                *o = NO_NODE;
+            }
+        }
+        router.prepare(&map, &walled, 0.1);
+        assert_eq!(router.route(&map, &walled, Cell::new(4, 4), Cell::new(4, 16), 30, 0.1), None);
+    }
+}
