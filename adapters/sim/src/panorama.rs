@@ -322,6 +322,9 @@ pub struct PanoramaSensor {
     /// The last render and what it saw: the world is static, so the same pose, base height
     /// and obstacles in range give the same images, which are shared instead of re-rendered.
     last: Option<LastRender>,
+    /// The images of the render before the last one: once every frame that shared them is
+    /// gone, the next render draws into them instead of allocating.
+    spare: Option<(Arc<DepthPanorama>, Arc<SemanticPanorama>)>,
 }
 
 #[derive(Clone, Debug)]
@@ -345,6 +348,7 @@ impl PanoramaSensor {
             next_due: None,
             seq: 0,
             last: None,
+            spare: None,
         })
     }
 
@@ -390,13 +394,22 @@ impl PanoramaSensor {
             }
             _ => {
                 let g = self.renderer.geometry();
-                let mut depth = DepthPanorama::empty(g);
-                let mut semantic = SemanticPanorama { geometry: g, class: vec![UNKNOWN_CLASS; g.len()] };
+                // `render_from` clears and sizes the buffers it is given: recycled or fresh, the
+                // images are the same.
+                let recycled =
+                    self.spare.take().and_then(|(d, s)| Arc::try_unwrap(d).ok().zip(Arc::try_unwrap(s).ok()));
+                let (mut depth, mut semantic) = recycled.unwrap_or_else(|| {
+                    (
+                        DepthPanorama { geometry: g, range_m: Vec::new() },
+                        SemanticPanorama { geometry: g, class: Vec::new() },
+                    )
+                });
                 self.renderer.render_from(world, true_pose, base_m, &mut depth, &mut semantic);
                 if !seen.is_empty() {
                     self.renderer.overlay_obstacles(true_pose, base_m, &seen, &mut depth, &mut semantic);
                 }
                 let (depth, semantic) = (Arc::new(depth), Arc::new(semantic));
+                self.spare = self.last.take().map(|l| (l.depth, l.semantic));
                 self.last = Some(LastRender {
                     pose: true_pose,
                     base_m,
@@ -617,6 +630,31 @@ mod tests {
         assert_eq!(s.poll(Time::ZERO, &world, pose, 0.0, pose).map(|f| f.seq), Some(0));
         assert!(s.poll(Time::from_millis(999), &world, pose, 0.0, pose).is_none());
         assert_eq!(s.poll(Time::from_millis(1000), &world, pose, 0.0, pose).map(|f| f.seq), Some(1));
+    }
+
+    #[test]
+    fn recycled_buffers_give_the_images_of_a_fresh_render() {
+        let mut world = flat_world();
+        for row in 100..140 {
+            world.set_cell(spomp_core::Cell::new(130, row), 2, [70, 70, 70], 6.0);
+        }
+        let p = SensorParams { rows: 32, cols: 128, ..SensorParams::default() };
+        let mut s = PanoramaSensor::new(&p).unwrap();
+        let mut held = None;
+        for k in 0..6i64 {
+            let pose = Pose2::new(0.7 * k as f64, 0.3 * k as f64, 0.4 * k as f64);
+            let frame = s.poll(Time::from_millis(1000 * k), &world, pose, 0.0, pose).unwrap();
+            let mut fresh = PanoramaSensor::new(&p).unwrap();
+            let expected = fresh.poll(Time::ZERO, &world, pose, 0.0, pose).unwrap();
+            assert_eq!(frame.depth.range_m, expected.depth.range_m, "frame {k}");
+            assert_eq!(frame.semantic.class, expected.semantic.class, "frame {k}");
+            // Hold every other frame for a while, as a consumer might: its images are not reused.
+            if k % 2 == 0 {
+                held = Some(frame);
+            } else if let Some(old) = held.take() {
+                assert!(!Arc::ptr_eq(&old.depth, &frame.depth));
+            }
+        }
     }
 
     #[test]

@@ -27,7 +27,7 @@ use spomp_core::{
     Time, Twist2,
 };
 use spomp_mapping::{CompressedMap, GoalDetectionParams, GoalDetector, MappingError, Orthomap};
-use spomp_teamstate::{RecordKey, TeamState, TeamStateError, TeamStateParams};
+use spomp_teamstate::{TeamState, TeamStateError, TeamStateParams};
 
 pub use localization::{Localization, LocalizationSetup, UpdateSchedule};
 pub use navigation::{NavParams, NavStack};
@@ -260,14 +260,11 @@ impl RobotRuntime {
     pub fn ingest_team_maps(&mut self, spec: GridSpec) -> Result<usize, MappingError> {
         let fresh: Vec<(RobotId, u64, std::sync::Arc<Vec<u8>>)> = self
             .team
-            .records()
-            .filter_map(|r| match &r.key {
-                RecordKey::Map(robot) => {
-                    let v = self.team.latest_map(robot)?;
-                    let newer = self.applied_maps.get(robot).is_none_or(|&seen| v.version > seen);
-                    newer.then(|| (robot.clone(), v.version, v.blob.clone()))
-                }
-                _ => None,
+            .map_writers()
+            .filter_map(|robot| {
+                let v = self.team.latest_map(robot)?;
+                let newer = self.applied_maps.get(robot).is_none_or(|&seen| v.version > seen);
+                newer.then(|| (robot.clone(), v.version, v.blob.clone()))
             })
             .collect();
         let mut changed = 0;

@@ -107,7 +107,7 @@ pub(crate) struct MatchField {
 
 /// A fast fingerprint of the class layer, so that two maps with the same version number but
 /// different contents are told apart.
-fn fingerprint(classes: &[ClassId]) -> u64 {
+pub(crate) fn fingerprint(classes: &[ClassId]) -> u64 {
     const K: u64 = 0x9E37_79B9_7F4A_7C15;
     // Four independent lanes so the multiplies overlap: this runs on every update.
     let mut lanes = [K ^ classes.len() as u64, K.rotate_left(16), K.rotate_left(32), K.rotate_left(48)];
@@ -164,13 +164,250 @@ fn squared_distances(mask: Vec<u8>, spec: &GridSpec) -> Option<Vec<f64>> {
     Some(euclidean_squared_distance_transform(&image).into_raw())
 }
 
+/// How a cell's distances to its class and to unknown ground become a cost level.
+struct CostRule {
+    res: f64,
+    max_cost: f64,
+    level_per_m: f64,
+    unknown_cost_factor: f64,
+    /// The smallest squared cell distance whose cost reaches `max_cost`, with the largest whole
+    /// cell radius below it, when it is small enough for the bounded transform.
+    bound: Option<DistanceBound>,
+}
+
+/// Squared distances of `limit` cells² or more all cost `max_cost`; `radius` is the largest
+/// whole distance (cells) below the limit.
+#[derive(Clone, Copy)]
+struct DistanceBound {
+    limit: u16,
+    radius: usize,
+}
+
+/// Largest radius, cells, that the bounded distance transform handles (beyond it, or when the
+/// squared limit passes 254, the planes are built with the whole-map transform).
+const MAX_BOUNDED_RADIUS: usize = 16;
+
+impl CostRule {
+    fn new(res: f64, params: &LocalizationParams) -> Self {
+        let max_cost = params.max_match_distance_m;
+        let reaches_cap = |d2: u64| (d2 as f64).sqrt() * res >= max_cost;
+        let cells = max_cost / res;
+        let bound = if cells.is_finite() && cells < MAX_BOUNDED_RADIUS as f64 {
+            // Both steps are monotonic in d², so the first d² that reaches the cap is the limit.
+            let mut limit = ((cells * cells).floor() as u64).saturating_sub(2);
+            while !reaches_cap(limit) {
+                limit += 1;
+            }
+            while limit > 0 && reaches_cap(limit - 1) {
+                limit -= 1;
+            }
+            let mut radius = 0usize;
+            while ((radius + 1) * (radius + 1)) < limit as usize {
+                radius += 1;
+            }
+            // Clamped distances and the unknown marker must fit in a byte.
+            u16::try_from(limit).ok().filter(|&l| l < 255).map(|limit| DistanceBound { limit, radius })
+        } else {
+            None
+        };
+        CostRule {
+            res,
+            max_cost,
+            level_per_m: MAX_KNOWN_LEVEL as f64 / max_cost,
+            unknown_cost_factor: params.unknown_cost_factor,
+            bound,
+        }
+    }
+
+    /// Cost of a cell `d2` cells² from its class (∞: no cell of the class), metres.
+    #[inline]
+    fn to_class(&self, d2: f64) -> f64 {
+        (d2.sqrt() * self.res).min(self.max_cost)
+    }
+
+    /// Level of a known cell `d2_class` cells² from its class and `d2_unknown` from unknown
+    /// ground (∞: none).
+    #[inline]
+    fn level(&self, d2_class: f64, d2_unknown: f64, unknown_cost: f64) -> u8 {
+        let via_unknown = d2_unknown.sqrt() * self.res + unknown_cost;
+        let cost = self.to_class(d2_class).min(via_unknown);
+        (cost * self.level_per_m).round().clamp(0.0, MAX_KNOWN_LEVEL as f64) as u8
+    }
+}
+
+/// The planes with the whole-map distance transform (exact distances everywhere).
+fn full_planes(map: &AerialMap, slots: &ClassSlots, costs: &CostRule) -> (Vec<u8>, Vec<f32>) {
+    let spec = map.spec;
+    let n = spec.len();
+    let unknown_mask: Vec<u8> = map.class.iter().map(|&c| u8::from(c == UNKNOWN_CLASS)).collect();
+    let unknown_d2 = squared_distances(unknown_mask, &spec);
+    let known_cells = map.class.iter().filter(|&&c| c != UNKNOWN_CLASS).count();
+
+    let mut planes = vec![0u8; slots.len() * n];
+    let mut unknown_cost_m = Vec::with_capacity(slots.len());
+    for (slot, plane) in planes.chunks_exact_mut(n.max(1)).enumerate().take(slots.len()) {
+        let class = slots.class_of_slot[slot];
+        let mask: Vec<u8> = map.class.iter().map(|&c| u8::from(c == class)).collect();
+        let class_d2 = squared_distances(mask, &spec);
+        let d2_at = |d: &Option<Vec<f64>>, i: usize| d.as_ref().map_or(f64::INFINITY, |d| d[i]);
+        // The cost of a random guess: the class's mean cost over the known map.
+        let mean_known_cost = if known_cells == 0 {
+            costs.max_cost
+        } else {
+            (0..n).filter(|&i| map.class[i] != UNKNOWN_CLASS).map(|i| costs.to_class(d2_at(&class_d2, i))).sum::<f64>()
+                / known_cells as f64
+        };
+        let unknown_cost = costs.unknown_cost_factor * mean_known_cost;
+        unknown_cost_m.push(unknown_cost as f32);
+        for (i, level) in plane.iter_mut().enumerate() {
+            *level = if map.class[i] == UNKNOWN_CLASS {
+                UNKNOWN_COST_LEVEL
+            } else {
+                costs.level(d2_at(&class_d2, i), d2_at(&unknown_d2, i), unknown_cost)
+            };
+        }
+    }
+    (planes, unknown_cost_m)
+}
+
+/// The planes with distances computed only up to the cost cap: a squared distance at or past
+/// the bound costs `max_cost` whatever its value (and so does a path through unknown ground
+/// that long, as the unknown cost is not negative), so every level equals the whole-map
+/// transform's. Levels come from a table over (class distance, unknown distance), filled
+/// with the same arithmetic as [`full_planes`].
+fn bounded_planes(map: &AerialMap, slots: &ClassSlots, costs: &CostRule, bound: DistanceBound) -> (Vec<u8>, Vec<f32>) {
+    let spec = map.spec;
+    let n = spec.len();
+    let (width, height) = (spec.width as usize, spec.height as usize);
+    let limit = bound.limit as usize;
+    let mut scratch = BoundedEdt::new(width, height, bound);
+    let mut unknown_d2 = vec![0u16; n];
+    scratch.run(&map.class, |c| c == UNKNOWN_CLASS, &mut unknown_d2);
+    let known_cells = map.class.iter().filter(|&&c| c != UNKNOWN_CLASS).count();
+    // Past the limit: the class costs the cap, unknown ground is of no help.
+    let d2_value = |d2: usize| if d2 >= limit { f64::INFINITY } else { d2 as f64 };
+    // Per cell an index: its class distance clamped to the limit, or `unknown_index` for an
+    // unknown cell.
+    let unknown_index = limit + 1;
+    let unknown_d2: Vec<u8> = unknown_d2.iter().map(|&d| d.min(limit as u16) as u8).collect();
+    // Cost per index; an unknown cell adds −0, which leaves any sum as it is, so the sum over
+    // all cells in order is the sum over the known cells in order without a branch.
+    let mut to_class = [0.0f64; 256];
+    for (d2, cost) in to_class.iter_mut().enumerate().take(unknown_index) {
+        *cost = costs.to_class(d2_value(d2));
+    }
+    to_class[unknown_index] = -0.0;
+    // `Sum` for floats is a fold of `+` from the sum of nothing.
+    let empty_sum: f64 = std::iter::empty::<f64>().sum();
+
+    let mut class_d2 = vec![0u16; n];
+    let mut index = vec![0u8; n];
+    let stride = limit + 1;
+    let mut table = vec![UNKNOWN_COST_LEVEL; (unknown_index + 1) * stride];
+    let mut planes = vec![0u8; slots.len() * n];
+    let mut unknown_cost_m = Vec::with_capacity(slots.len());
+    for (slot, plane) in planes.chunks_exact_mut(n.max(1)).enumerate().take(slots.len()) {
+        let class = slots.class_of_slot[slot];
+        scratch.run(&map.class, |c| c == class, &mut class_d2);
+        let (limit_u16, unknown_u8) = (limit as u16, unknown_index as u8);
+        for ((k, &c), &d) in index.iter_mut().zip(&map.class).zip(&class_d2) {
+            let clamped = d.min(limit_u16) as u8;
+            *k = if c == UNKNOWN_CLASS { unknown_u8 } else { clamped };
+        }
+        let mean_known_cost = if known_cells == 0 {
+            costs.max_cost
+        } else {
+            index.iter().fold(empty_sum, |sum, &k| sum + to_class[k as usize]) / known_cells as f64
+        };
+        let unknown_cost = costs.unknown_cost_factor * mean_known_cost;
+        unknown_cost_m.push(unknown_cost as f32);
+        // Rows 0..=limit: known cells by class distance; the last row stays unknown.
+        for (dc, row) in table.chunks_exact_mut(stride).enumerate().take(unknown_index) {
+            for (du, level) in row.iter_mut().enumerate() {
+                *level = costs.level(d2_value(dc), d2_value(du), unknown_cost);
+            }
+        }
+        for ((level, &k), &du) in plane.iter_mut().zip(&index).zip(&unknown_d2) {
+            *level = table.get(k as usize * stride + du as usize).copied().unwrap_or(UNKNOWN_COST_LEVEL);
+        }
+    }
+    (planes, unknown_cost_m)
+}
+
+/// Squared Euclidean distance transform that is exact below a bound: a pass down the columns
+/// (distance along the column to the nearest set cell, capped past the radius), then per row a
+/// window of ±radius columns. Both passes run over whole rows of contiguous cells.
+struct BoundedEdt {
+    width: usize,
+    height: usize,
+    bound: DistanceBound,
+    /// Per cell, squared distance along its column to the nearest set cell, capped.
+    column_d2: Vec<i16>,
+}
+
+impl BoundedEdt {
+    fn new(width: usize, height: usize, bound: DistanceBound) -> Self {
+        BoundedEdt { width, height, bound, column_d2: vec![0; width * height] }
+    }
+
+    /// Fills `out` with each cell's squared distance (cells²) to the nearest cell whose class
+    /// passes `is_set`: exact when below `bound.limit`, else some value ≥ the limit.
+    fn run(&mut self, classes: &[ClassId], is_set: impl Fn(ClassId) -> bool, out: &mut [u16]) {
+        let (w, h) = (self.width, self.height);
+        let r = self.bound.radius;
+        if w == 0 || h == 0 || classes.len() != w * h || out.len() != w * h || self.column_d2.len() != w * h {
+            return;
+        }
+        // Any distance past the radius: its square reaches the limit.
+        let far = (r + 1) as i16;
+        let far_d2 = far * far;
+        // Down the columns: distance to the nearest set cell above (capped at `far`)...
+        let mut previous = vec![far; w];
+        for (row_classes, row_d) in classes.chunks_exact(w).zip(self.column_d2.chunks_exact_mut(w)) {
+            for ((&c, d), p) in row_classes.iter().zip(row_d.iter_mut()).zip(previous.iter_mut()) {
+                *p = if is_set(c) { 0 } else { (*p + 1).min(far) };
+                *d = *p;
+            }
+        }
+        // ... then up, taking the nearer of the two and squaring it.
+        previous.fill(far);
+        for row_d in self.column_d2.chunks_exact_mut(w).rev() {
+            for (d, p) in row_d.iter_mut().zip(previous.iter_mut()) {
+                *p = if *d == 0 { 0 } else { (*p + 1).min(far) };
+                let nearest = (*p).min(*d);
+                *d = if nearest >= far { far_d2 } else { nearest * nearest };
+            }
+        }
+        // Along the rows: the best column within ±radius.
+        let mut acc = vec![0i16; w];
+        for (row_d2, row_out) in self.column_d2.chunks_exact(w).zip(out.chunks_exact_mut(w)) {
+            acc.copy_from_slice(row_d2);
+            for dx in 1..=r.min(w - 1) {
+                let step = (dx * dx) as i16;
+                for (a, &s) in acc[dx..].iter_mut().zip(&row_d2[..w - dx]) {
+                    *a = (*a).min(s + step);
+                }
+                for (a, &s) in acc[..w - dx].iter_mut().zip(&row_d2[dx..]) {
+                    *a = (*a).min(s + step);
+                }
+            }
+            for (o, &a) in row_out.iter_mut().zip(&acc) {
+                *o = a as u16;
+            }
+        }
+    }
+}
+
 impl MatchField {
     /// Whether these planes were built from this map and table.
+    #[cfg(test)]
     pub fn matches(&self, map: &AerialMap, table: &ClassTable) -> bool {
-        self.spec == map.spec
-            && self.version == map.version
-            && self.table == *table
-            && self.fingerprint == fingerprint(&map.class)
+        self.matches_fingerprint(map, table, fingerprint(&map.class))
+    }
+
+    /// [`Self::matches`] with the map's [`fingerprint`] already computed.
+    pub fn matches_fingerprint(&self, map: &AerialMap, table: &ClassTable, fingerprint: u64) -> bool {
+        self.spec == map.spec && self.version == map.version && self.table == *table && self.fingerprint == fingerprint
     }
 
     /// Whether these planes have the placement of this map and were built with this table:
@@ -180,45 +417,26 @@ impl MatchField {
     }
 
     /// Builds the planes of a map.
+    #[cfg(test)]
     pub fn build(map: &AerialMap, table: &ClassTable, params: &LocalizationParams) -> Result<Self, LocalizationError> {
+        Self::build_with_fingerprint(map, table, params, fingerprint(&map.class))
+    }
+
+    /// Builds the planes of a map whose [`fingerprint`] is already computed.
+    pub fn build_with_fingerprint(
+        map: &AerialMap,
+        table: &ClassTable,
+        params: &LocalizationParams,
+        fingerprint: u64,
+    ) -> Result<Self, LocalizationError> {
         check_map(map)?;
         let slots = ClassSlots::resolve(params, table)?;
         let spec = map.spec;
-        let n = spec.len();
-        let res = spec.resolution_m;
-        let max_cost = params.max_match_distance_m;
-        let level_per_m = MAX_KNOWN_LEVEL as f64 / max_cost;
-
-        let unknown_mask: Vec<u8> = map.class.iter().map(|&c| u8::from(c == UNKNOWN_CLASS)).collect();
-        let unknown_d2 = squared_distances(unknown_mask, &spec);
-        let known_cells = map.class.iter().filter(|&&c| c != UNKNOWN_CLASS).count();
-
-        let mut planes = vec![0u8; slots.len() * n];
-        let mut unknown_cost_m = Vec::with_capacity(slots.len());
-        for (slot, plane) in planes.chunks_exact_mut(n.max(1)).enumerate().take(slots.len()) {
-            let class = slots.class_of_slot[slot];
-            let mask: Vec<u8> = map.class.iter().map(|&c| u8::from(c == class)).collect();
-            let class_d2 = squared_distances(mask, &spec);
-            let to_class = |i: usize| class_d2.as_ref().map_or(f64::INFINITY, |d| d[i].sqrt() * res).min(max_cost);
-            // The cost of a random guess: the class's mean cost over the known map.
-            let mean_known_cost = if known_cells == 0 {
-                max_cost
-            } else {
-                (0..n).filter(|&i| map.class[i] != UNKNOWN_CLASS).map(to_class).sum::<f64>() / known_cells as f64
-            };
-            let unknown_cost = params.unknown_cost_factor * mean_known_cost;
-            unknown_cost_m.push(unknown_cost as f32);
-            for (i, level) in plane.iter_mut().enumerate() {
-                if map.class[i] == UNKNOWN_CLASS {
-                    *level = UNKNOWN_COST_LEVEL;
-                    continue;
-                }
-                let via_unknown = unknown_d2.as_ref().map_or(f64::INFINITY, |d| d[i].sqrt() * res + unknown_cost);
-                let cost = to_class(i).min(via_unknown);
-                *level = (cost * level_per_m).round().clamp(0.0, MAX_KNOWN_LEVEL as f64) as u8;
-            }
-        }
-
+        let costs = CostRule::new(spec.resolution_m, params);
+        let (planes, unknown_cost_m) = match costs.bound {
+            Some(bound) => bounded_planes(map, &slots, &costs, bound),
+            None => full_planes(map, &slots, &costs),
+        };
         let ground_cells: Vec<u32> = map
             .class
             .iter()
@@ -237,13 +455,13 @@ impl MatchField {
         Ok(MatchField {
             spec,
             version: map.version,
-            fingerprint: fingerprint(&map.class),
+            fingerprint,
             table: table.clone(),
             slots,
             planes,
             ground_cells,
             cells_of_slot,
-            metres_per_level: (max_cost / MAX_KNOWN_LEVEL as f64) as f32,
+            metres_per_level: (params.max_match_distance_m / MAX_KNOWN_LEVEL as f64) as f32,
             unknown_cost_m,
         })
     }
@@ -318,6 +536,52 @@ mod tests {
         assert!(field.cost_m(road, 0, 0).abs() <= tol);
         assert_eq!(field.cells_of_slot[road], vec![0]);
         assert_eq!(field.cells_of_slot[field.slots.slot_of_class[3] as usize].len(), 9);
+    }
+
+    /// The bounded transform gives the planes and random-guess costs of the whole-map one, bit
+    /// for bit, on random maps with unknown patches, at several caps and resolutions.
+    #[test]
+    fn bounded_planes_equal_the_whole_map_transform() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let table = table();
+        for case in 0..24 {
+            let (w, h) = (rng.random_range(1..70u32), rng.random_range(1..50u32));
+            let res = [0.5, 0.25, 0.3, 1.0, 0.1][case % 5];
+            let spec = GridSpec::new(Point2::new(0.0, 0.0), res, w, h);
+            let mut map = AerialMap::unknown(spec);
+            let sparse = case % 3 == 0;
+            for c in map.class.iter_mut() {
+                *c = if rng.random_bool(0.15) {
+                    UNKNOWN_CLASS
+                } else if sparse {
+                    if rng.random_bool(0.02) { rng.random_range(0..8) } else { 3 }
+                } else {
+                    rng.random_range(0..8)
+                };
+            }
+            // Blobs of unknown, as the aerial map has.
+            for _ in 0..3 {
+                let (cx, cy) = (rng.random_range(0..w), rng.random_range(0..h));
+                for row in cy.saturating_sub(6)..(cy + 6).min(h) {
+                    for col in cx.saturating_sub(6)..(cx + 6).min(w) {
+                        map.class[spec.index(spomp_core::Cell::new(col, row))] = UNKNOWN_CLASS;
+                    }
+                }
+            }
+            let params = LocalizationParams {
+                max_match_distance_m: [4.0, 2.0, 3.3, 0.7, 1.2][case % 5],
+                unknown_cost_factor: [1.0, 0.0, 0.4, 2.5][case % 4],
+                ..Default::default()
+            };
+            let slots = ClassSlots::resolve(&params, &table).unwrap();
+            let costs = CostRule::new(res, &params);
+            let bound = costs.bound.expect("small caps use the bounded transform");
+            let bounded = bounded_planes(&map, &slots, &costs, bound);
+            let full = full_planes(&map, &slots, &costs);
+            assert_eq!(bounded.1, full.1, "case {case}: random-guess costs");
+            assert!(bounded.0 == full.0, "case {case}: planes differ");
+        }
     }
 
     #[test]

@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use spomp_core::{AerialMap, ClassTable, PanoramaFrame, Pose2, PoseEstimate, Time, normalize_angle};
 
 use crate::error::LocalizationError;
-use crate::field::{MatchField, UNKNOWN_COST_LEVEL, check_map};
+use crate::field::{MatchField, UNKNOWN_COST_LEVEL, check_map, fingerprint};
 use crate::motion::OdometryMotion;
 use crate::observation::LocalObservation;
 use crate::params::{LocalizationParams, PosePrior};
@@ -259,12 +259,13 @@ impl CrossViewLocalizer {
     /// `map_rebuild_interval_s`.
     pub fn prepare_map(&mut self, map: &AerialMap, classes: &ClassTable) -> Result<(), LocalizationError> {
         check_map(map)?;
-        if self.field.as_ref().is_some_and(|f| f.matches(map, classes)) {
+        let fingerprint = fingerprint(&map.class);
+        if self.field.as_ref().is_some_and(|f| f.matches_fingerprint(map, classes, fingerprint)) {
             return Ok(());
         }
         self.field = None;
         self.field_built_at = None;
-        self.field = Some(MatchField::build(map, classes, &self.params)?);
+        self.field = Some(MatchField::build_with_fingerprint(map, classes, &self.params, fingerprint)?);
         self.field_generation += 1;
         Ok(())
     }
@@ -279,10 +280,12 @@ impl CrossViewLocalizer {
                 return Ok(());
             }
         }
-        if self.field.as_ref().is_some_and(|f| f.matches(map, classes)) {
+        // `prepare_map` keeps planes that match the map and rebuilds the others.
+        let generation = self.field_generation;
+        self.prepare_map(map, classes)?;
+        if self.field_generation == generation {
             return Ok(());
         }
-        self.prepare_map(map, classes)?;
         self.field_built_at = Some(now);
         Ok(())
     }

@@ -19,6 +19,14 @@ use crate::params::LocalizationParams;
 const MAX_LOCAL_GRID_SIDE: usize = 4096;
 /// Ground cells within this distance of the robot tell which class it stands on.
 const UNDER_ROBOT_RADIUS_M: f64 = 2.0;
+/// Pixels tested at once for a return when a row is read whole.
+const SKIP_BLOCK: usize = 16;
+
+/// Whether a range is a return: NaN, infinite, zero (no return) and negative ranges are not.
+#[inline]
+fn has_return(range: f32) -> bool {
+    (range > 0.0) & (range < f32::MAX)
+}
 
 /// One observed cell: its centre in the robot frame, in map cells.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -212,24 +220,24 @@ impl LocalObservation {
             } else {
                 1
             };
-            for (((&range, &label), &c_az), &s_az) in row_ranges
-                .iter()
-                .step_by(stride)
-                .zip(row_labels.iter().step_by(stride))
-                .zip(trig.col_cos.iter().step_by(stride))
-                .zip(trig.col_sin.iter().step_by(stride))
-            {
+            let (mask, per_slot) = (&mut self.mask, &mut self.per_slot);
+            let mut take = |col: usize| {
+                let (Some(&range), Some(&label), Some(&c_az), Some(&s_az)) =
+                    (row_ranges.get(col), row_labels.get(col), trig.col_cos.get(col), trig.col_sin.get(col))
+                else {
+                    return;
+                };
                 // NaN, infinite, zero (no return) and negative ranges all fail this test.
-                if !(range > 0.0 && range < f32::MAX) {
-                    continue;
+                if !has_return(range) {
+                    return;
                 }
                 let slot = slots.slot_of_class[label as usize];
                 if slot == NO_SLOT {
-                    continue;
+                    return;
                 }
                 let r = range * c_el;
                 if r < min_r || r > max_r {
-                    continue;
+                    return;
                 }
                 let z = h + range * s_el;
                 let keep = if slots.is_ground.get(slot as usize).copied().unwrap_or(false) {
@@ -238,24 +246,37 @@ impl LocalObservation {
                     z >= -band && z <= top
                 };
                 if !keep {
-                    continue;
+                    return;
                 }
                 let u = (r * c_az) * inv_res + half_f;
                 let v = (r * s_az) * inv_res + half_f;
                 if !(u >= 0.0 && v >= 0.0 && u < side_f && v < side_f) {
-                    continue;
+                    return;
                 }
                 let (iu, iv) = (u as usize, v as usize);
-                let Some(bits) = self.mask.get_mut(iv * side + iu) else {
-                    continue;
+                let Some(bits) = mask.get_mut(iv * side + iu) else {
+                    return;
                 };
                 let bit = 1u32 << slot;
                 if *bits & bit == 0 {
                     *bits |= bit;
-                    if let Some(list) = self.per_slot.get_mut(slot as usize) {
+                    if let Some(list) = per_slot.get_mut(slot as usize) {
                         list.push(ObservedCell { x: iu as f32 - half_f + 0.5, y: iv as f32 - half_f + 0.5 });
                     }
                 }
+            };
+            let cols = row_ranges.len();
+            if stride == 1 {
+                // Rows read whole are mostly sky: skip blocks without a return in one test.
+                let mut start = 0;
+                for block in row_ranges.chunks(SKIP_BLOCK) {
+                    if block.iter().fold(false, |any, &range| any | has_return(range)) {
+                        (start..start + block.len()).for_each(&mut take);
+                    }
+                    start += block.len();
+                }
+            } else {
+                (0..cols).step_by(stride).for_each(&mut take);
             }
         }
 

@@ -57,6 +57,41 @@ impl RunSums {
     }
 }
 
+/// The three sums of a run packed in one `u64` (levels in the low 24 bits, then 20 bits each
+/// of unknown and agreeing cells), so that a cell costs one table lookup and one add. Runs of
+/// at most [`MAX_PACKED_RUN`] cells cannot carry from one field into the next.
+struct PackedLevels {
+    /// Per level, its increment of the packed sums.
+    increment: [u64; 256],
+}
+
+const PACKED_LEVEL_BITS: u32 = 24;
+const PACKED_COUNT_BITS: u32 = 20;
+/// 65536 × 255 < 2^24 and 65536 < 2^20.
+const MAX_PACKED_RUN: usize = 1 << 16;
+
+impl PackedLevels {
+    fn new(agree_level: u8) -> Self {
+        let mut increment = [0u64; 256];
+        for (level, inc) in increment.iter_mut().enumerate() {
+            let unknown = u64::from(level == UNKNOWN_COST_LEVEL as usize);
+            let agree = u64::from(level <= agree_level as usize);
+            *inc = level as u64 | unknown << PACKED_LEVEL_BITS | agree << (PACKED_LEVEL_BITS + PACKED_COUNT_BITS);
+        }
+        PackedLevels { increment }
+    }
+
+    #[inline]
+    fn unpack(packed: u64) -> RunSums {
+        let count_mask = (1u64 << PACKED_COUNT_BITS) - 1;
+        RunSums {
+            levels: (packed & ((1u64 << PACKED_LEVEL_BITS) - 1)) as u32,
+            unknown: ((packed >> PACKED_LEVEL_BITS) & count_mask) as u32,
+            agree: ((packed >> (PACKED_LEVEL_BITS + PACKED_COUNT_BITS)) & count_mask) as u32,
+        }
+    }
+}
+
 impl Scorer {
     /// Scores every pose; `out[i]` belongs to `poses[i]`.
     pub fn score_all(
@@ -86,26 +121,29 @@ impl Scorer {
         let spec = &field.spec;
         let inv_res = 1.0 / spec.resolution_m;
         let (width, height) = (spec.width as i64, spec.height as i64);
+        let packed = PackedLevels::new(agree_level);
         let mut start = 0;
         while start < self.keyed.len() {
             let bin = self.keyed[start].0;
             let end = start + self.keyed[start..].iter().take_while(|k| k.0 == bin).count();
             let (s, c) = (bin as f64 * bin_width).sin_cos();
+            // One plain pass per output so that the rotation runs on whole vectors.
             self.offsets.clear();
-            self.linear.clear();
-            let (mut min_c, mut max_c, mut min_r, mut max_r) = (i32::MAX, i32::MIN, i32::MAX, i32::MIN);
-            for cell in &obs.cells {
+            self.offsets.resize(obs.cells.len(), (0, 0));
+            for (offset, cell) in self.offsets.iter_mut().zip(&obs.cells) {
                 let (x, y) = (cell.x as f64, cell.y as f64);
                 // The pose sits at its cell's centre (0.5, 0.5) within the cell.
-                let dc = floor_small(0.5 + c * x - s * y);
-                let dr = floor_small(0.5 + s * x + c * y);
+                *offset = (floor_small(0.5 + c * x - s * y), floor_small(0.5 + s * x + c * y));
+            }
+            let (mut min_c, mut max_c, mut min_r, mut max_r) = (i32::MAX, i32::MIN, i32::MAX, i32::MIN);
+            for &(dc, dr) in &self.offsets {
                 min_c = min_c.min(dc);
                 max_c = max_c.max(dc);
                 min_r = min_r.min(dr);
                 max_r = max_r.max(dr);
-                self.offsets.push((dc, dr));
-                self.linear.push(dr as i64 * width + dc as i64);
             }
+            self.linear.clear();
+            self.linear.extend(self.offsets.iter().map(|&(dc, dr)| dr as i64 * width + dc as i64));
             for &(_, index) in &self.keyed[start..end] {
                 let Some(pose) = poses.get(index as usize) else {
                     continue;
@@ -120,7 +158,7 @@ impl Scorer {
                         && row + min_r as i64 >= 0
                         && row + (max_r as i64) < height;
                     if inside {
-                        self.score_inside(field, obs, row * width + col, agree_level)
+                        self.score_inside(field, obs, row * width + col, agree_level, &packed)
                     } else {
                         self.score_at_edge(field, obs, col, row, agree_level)
                     }
@@ -136,15 +174,30 @@ impl Scorer {
     }
 
     /// All observed cells land on the map: one add and one gather per cell.
-    fn score_inside(&self, field: &MatchField, obs: &LocalObservation, base: i64, agree_level: u8) -> PoseScore {
+    fn score_inside(
+        &self,
+        field: &MatchField,
+        obs: &LocalObservation,
+        base: i64,
+        agree_level: u8,
+        packed: &PackedLevels,
+    ) -> PoseScore {
         let mut score = PoseScore::default();
         for seg in &obs.segments {
             let plane = field.plane(seg.slot);
-            let mut sums = RunSums::default();
-            for &offset in self.linear.get(seg.start..seg.end).unwrap_or(&[]) {
-                let level = plane.get((base + offset) as usize).copied().unwrap_or(UNKNOWN_COST_LEVEL);
-                sums.add(level, agree_level);
-            }
+            let offsets = self.linear.get(seg.start..seg.end).unwrap_or(&[]);
+            let level_at = |offset: i64| plane.get((base + offset) as usize).copied().unwrap_or(UNKNOWN_COST_LEVEL);
+            let sums = if offsets.len() <= MAX_PACKED_RUN {
+                PackedLevels::unpack(
+                    offsets.iter().fold(0u64, |sum, &offset| sum + packed.increment[level_at(offset) as usize]),
+                )
+            } else {
+                let mut sums = RunSums::default();
+                for &offset in offsets {
+                    sums.add(level_at(offset), agree_level);
+                }
+                sums
+            };
             accumulate(&mut score, field, seg.slot, seg.end - seg.start, sums);
         }
         score
@@ -181,11 +234,12 @@ impl Scorer {
 }
 
 /// `floor` for |v| < 2^20 without a libm call (x86-64 without SSE4.1 has no rounding
-/// instruction): shift to positive, truncate, shift back. The local grid is far smaller.
+/// instruction): shift to positive, truncate, shift back. The local grid is far smaller. The
+/// shifted value is below 2^21, so truncating to `i32` (a packed instruction) is exact.
 #[inline]
 fn floor_small(v: f64) -> i32 {
     const SHIFT: f64 = (1 << 20) as f64;
-    ((v + SHIFT) as i64 - (1 << 20)) as i32
+    (v + SHIFT) as i32 - (1 << 20)
 }
 
 /// The score of a pose all of whose cells land on unknown.

@@ -17,11 +17,12 @@
 //!    in the same pass, are dropped.
 
 use image::{GrayImage, Luma};
-use imageproc::distance_transform::{Norm, euclidean_squared_distance_transform};
+use imageproc::distance_transform::Norm;
 use imageproc::morphology::{dilate, erode, open_mut};
 use imageproc::region_labelling::{Connectivity, connected_components};
 use spomp_core::{AerialMap, Cell, ClassId, ClassTable, Point2, UNKNOWN_CLASS};
 
+use crate::edt::SquaredEdt;
 use crate::error::MappingError;
 use crate::params::GoalDetectionParams;
 
@@ -82,6 +83,8 @@ pub struct GoalDetector {
     obstacle_lut: [bool; 256],
     /// Scratch: component statistics.
     components: Vec<Component>,
+    /// Scratch: the distance transform's buffers.
+    edt: SquaredEdt,
 }
 
 impl GoalDetector {
@@ -102,7 +105,14 @@ impl GoalDetector {
             *flag = rank[i] >= impassable || i == target as usize || i == UNKNOWN_CLASS as usize;
         }
         let placement_order = classes.easiest_first().into_iter().filter(|&c| !obstacle_lut[c as usize]).collect();
-        Ok(GoalDetector { params, target, placement_order, obstacle_lut, components: Vec::new() })
+        Ok(GoalDetector {
+            params,
+            target,
+            placement_order,
+            obstacle_lut,
+            components: Vec::new(),
+            edt: SquaredEdt::default(),
+        })
     }
 
     /// The parameters.
@@ -187,10 +197,7 @@ impl GoalDetector {
         // Clearance: distance from every cell to the nearest obstacle.
         let obstacles: Vec<u8> =
             map.class.iter().map(|&c| if self.obstacle_lut[c as usize] { 255 } else { 0 }).collect();
-        let Some(obstacles) = GrayImage::from_raw(w, h, obstacles) else {
-            return Err(MappingError::InconsistentMap("grid too large".into()));
-        };
-        let clearance_sq = euclidean_squared_distance_transform(&obstacles);
+        let clearance_sq = self.edt.transform(&obstacles, w as usize, h as usize);
 
         let region_px = self.params.placement_region_m / res;
         let margin = region_px.ceil() as i64 + 1;
@@ -218,14 +225,15 @@ impl GoalDetector {
                 let member = labels.get_pixel(x + c0, y + r0)[0] == label && closed.get_pixel(x + c0, y + r0)[0] != 0;
                 Luma([if member { 255 } else { 0 }])
             });
-            let to_cluster_sq = euclidean_squared_distance_transform(&crop);
+            let to_cluster_sq = self.edt.transform(crop.as_raw(), cw as usize, ch as usize);
             let centroid = (comp.sum_c / comp.cells as f64, comp.sum_r / comp.cells as f64);
 
             // Best cell per class: (clearance², −distance² to centroid, cell) maximised.
             let mut best: Vec<Option<(f64, f64, Cell)>> = vec![None; self.placement_order.len()];
             for y in 0..ch {
                 for x in 0..cw {
-                    if to_cluster_sq.get_pixel(x, y)[0] > region_px * region_px {
+                    let to_cluster = to_cluster_sq.get(y as usize * cw as usize + x as usize).copied();
+                    if to_cluster.is_none_or(|d| d > region_px * region_px) {
                         continue;
                     }
                     let (c, r) = (x + c0, y + r0);
@@ -234,7 +242,7 @@ impl GoalDetector {
                     let Some(slot) = self.placement_order.iter().position(|&p| p == class) else {
                         continue;
                     };
-                    let clear = clearance_sq.get_pixel(c, r)[0];
+                    let clear = clearance_sq.get(i).copied().unwrap_or(0.0);
                     let d_centroid = (c as f64 - centroid.0).powi(2) + (r as f64 - centroid.1).powi(2);
                     let better = match best[slot] {
                         None => true,

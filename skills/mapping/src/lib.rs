@@ -8,6 +8,7 @@
 //!   Coordination, DESIGN.md §5 "Mapping").
 
 mod detect;
+mod edt;
 mod error;
 mod orthomap;
 mod params;

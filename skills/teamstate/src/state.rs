@@ -90,6 +90,10 @@ pub struct TeamState {
     change_seq: u64,
     /// The latest time given to [`TeamState::advance_clock`] (claim leases are judged by it).
     now: Time,
+    /// What the last look for own claims to renew found with nothing to renew: `change_seq`
+    /// then, and the stamp of the oldest own active claim. While no record has changed and
+    /// that claim is not yet half a lease old, none is, and the look is skipped.
+    own_claims_checked: Option<(u64, Option<Time>)>,
 }
 
 impl TeamState {
@@ -112,6 +116,7 @@ impl TeamState {
             change_of: HashMap::new(),
             now: Time::ZERO,
             change_seq: 0,
+            own_claims_checked: None,
         })
     }
 
@@ -174,18 +179,29 @@ impl TeamState {
         }
         self.now = now;
         let half = self.params.claim_lease_s / 2.0;
-        let stale_own: Vec<(GoalId, u32)> = self
-            .records
-            .values()
-            .filter_map(|r| match (&r.key, &r.body) {
-                (RecordKey::Claim { goal, claimant }, RecordBody::Claim(c))
-                    if c.active && claimant == &self.self_id && now.secs_since(c.stamp) > half =>
-                {
-                    Some((goal.clone(), c.priority))
-                }
-                _ => None,
-            })
-            .collect();
+        // Age is monotonic in the stamp: if the oldest own claim is not stale, none is.
+        let nothing_stale = |oldest: Option<Time>| oldest.is_none_or(|stamp| now.secs_since(stamp) <= half);
+        let stale_own: Vec<(GoalId, u32)> = match self.own_claims_checked {
+            Some((seq, oldest)) if seq == self.change_seq && nothing_stale(oldest) => Vec::new(),
+            _ => {
+                let mut oldest: Option<Time> = None;
+                let stale: Vec<(GoalId, u32)> = self
+                    .records
+                    .values()
+                    .filter_map(|r| match (&r.key, &r.body) {
+                        (RecordKey::Claim { goal, claimant }, RecordBody::Claim(c))
+                            if c.active && claimant == &self.self_id =>
+                        {
+                            oldest = Some(oldest.map_or(c.stamp, |o| o.min(c.stamp)));
+                            (now.secs_since(c.stamp) > half).then(|| (goal.clone(), c.priority))
+                        }
+                        _ => None,
+                    })
+                    .collect();
+                self.own_claims_checked = stale.is_empty().then_some((self.change_seq, oldest));
+                stale
+            }
+        };
         for (goal, priority) in stale_own {
             let dot = self.tick();
             let key = RecordKey::Claim { goal, claimant: self.self_id.clone() };
@@ -545,6 +561,15 @@ impl TeamState {
         }
     }
 
+    /// The robots whose map records are held, in key order (the order of [`Self::records`]),
+    /// without walking the other records.
+    pub fn map_writers(&self) -> impl Iterator<Item = &RobotId> + '_ {
+        self.records.range(RecordKey::Map(RobotId::new(""))..).map_while(|(key, _)| match key {
+            RecordKey::Map(robot) => Some(robot),
+            _ => None,
+        })
+    }
+
     /// The newest map version held, over all origins (highest version, ties by origin).
     pub fn newest_map(&self) -> Option<(&RobotId, &MapVersion)> {
         self.records
@@ -787,5 +812,67 @@ impl TeamState {
     /// offered again on the next sync.
     pub fn reset_peer(&mut self, peer: &RobotId) {
         self.peers.remove(peer);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Skipping the look for claims to renew while nothing changed gives the records of a
+    /// database that looks every time: renewals at the same steps, with the same stamps.
+    #[test]
+    fn renewal_skipping_matches_looking_every_step() {
+        let mut fast = TeamState::new(RobotId::new("ugv1"), 1, TeamStateParams::default()).unwrap();
+        let at = |s: f64| Time::from_millis((s * 1000.0) as i64);
+        let mut goals = Vec::new();
+        for k in 0..3 {
+            let outcome = fast.identify_goal(Point2::new(100.0 * k as f64, 0.0), GoalOrigin::Detected, at(0.0));
+            goals.push(outcome.unwrap().id().clone());
+        }
+        let mut slow = fast.clone();
+        let lease = fast.params.claim_lease_s;
+        let mut renewals = 0;
+        for step in 1..(lease * 30.0) as i64 {
+            let now = at(step as f64 * 0.1);
+            // Claims taken (and given up) along the way, at different times.
+            if step == 40 || step == 170 {
+                let g = &goals[(step as usize / 100) % goals.len()];
+                fast.claim(g, now).unwrap();
+                slow.claim(g, now).unwrap();
+            }
+            if step == 300 {
+                fast.release(&goals[0], now).unwrap();
+                slow.release(&goals[0], now).unwrap();
+            }
+            let before = fast.change_seq;
+            fast.advance_clock(now);
+            slow.own_claims_checked = None;
+            slow.advance_clock(now);
+            renewals += usize::from(fast.change_seq != before);
+            assert!(fast.same_records(&slow), "step {step}");
+        }
+        assert!(renewals >= 4, "{renewals} renewals");
+    }
+
+    #[test]
+    fn map_writers_are_the_map_records_in_order() {
+        let mut team = TeamState::new(RobotId::new("ugv1"), 1, TeamStateParams::default()).unwrap();
+        for (k, robot) in ["uav1", "base", "ugv1", "a"].iter().enumerate() {
+            let key = RecordKey::Map(RobotId::new(robot));
+            let body =
+                RecordBody::Map(MapVersion { version: k as u64 + 1, stamp: Time::ZERO, blob: Arc::new(vec![k as u8]) });
+            team.put(key, k as u64 + 1, body);
+            team.identify_goal(Point2::new(50.0 * k as f64, 0.0), GoalOrigin::Detected, Time::ZERO).unwrap();
+        }
+        let expected: Vec<&RobotId> = team
+            .records()
+            .filter_map(|r| match &r.key {
+                RecordKey::Map(robot) => Some(robot),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(team.map_writers().collect::<Vec<_>>(), expected);
+        assert_eq!(expected.len(), 4);
     }
 }
