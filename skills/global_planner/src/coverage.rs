@@ -6,7 +6,7 @@
 //! that node. The distance transform is updated locally after each node: a covered region can
 //! only shrink distances within the current maximum distance of it.
 
-use crate::edt::{FAR, SquaredEdt};
+use spomp_raster::{FAR, SquaredEdt};
 
 /// Bucket of a squared distance (cells²): quarter-cell steps of the distance.
 fn bucket_of(dist_sq: f32) -> usize {
@@ -147,7 +147,7 @@ impl Coverage {
         for row in y0..=y1 {
             self.window.extend((x0..=x1).map(|col| if in_region(row * w + col, owner) { FAR } else { 0.0 }));
         }
-        self.edt.transform(&mut self.window, ww, wh);
+        self.edt.in_place(&mut self.window, ww, wh);
         // Only region cells are ever read from `dist`; the others keep stale values.
         self.dist.resize(n, 0.0);
         for b in &mut self.buckets {
@@ -252,7 +252,7 @@ impl Coverage {
             let (x, y) = (c as usize % w, c as usize / w);
             self.window[(y - y0) * ww + (x - x0)] = 0.0;
         }
-        self.edt.transform(&mut self.window, ww, wh);
+        self.edt.in_place(&mut self.window, ww, wh);
         for wy in 0..wh {
             let row = (y0 + wy) * w;
             for wx in 0..ww {

@@ -4,7 +4,7 @@
 
 use spomp_core::{AerialMap, ClassTable, UNKNOWN_CLASS};
 
-use crate::edt::{FAR, SquaredEdt};
+use spomp_raster::{FAR, SquaredEdt};
 
 /// Where classes changed since the last rebuild.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -106,7 +106,7 @@ impl Features {
                 self.scratch.extend(line.iter().map(|&c| if c == class { 0.0 } else { FAR }));
             }
             if self.scratch.contains(&0.0) {
-                edt.transform(&mut self.scratch, ww, wh);
+                edt.in_place(&mut self.scratch, ww, wh);
             }
             for row in write[1]..=write[3] {
                 for col in write[0]..=write[2] {

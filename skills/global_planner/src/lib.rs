@@ -16,7 +16,6 @@
 //! The crate is a pure library: time and randomness come in as arguments.
 
 mod coverage;
-mod edt;
 mod error;
 mod experience;
 mod features;

@@ -11,7 +11,6 @@ use serde::Serialize;
 use spomp_core::{AerialMap, Cell, ClassId, ClassTable, Point2, ReachabilityScan, Time, UNKNOWN_CLASS};
 
 use crate::coverage::{Coverage, CoverageInput, NO_NODE};
-use crate::edt::SquaredEdt;
 use crate::error::{PlanError, ScanError, SetupError};
 use crate::experience::{EdgeExperience, EdgeState, Transition, Votes};
 use crate::features::{ClassChange, Features};
@@ -19,6 +18,7 @@ use crate::mlp::{Mlp, TrainSettings};
 use crate::params::GlobalPlannerParams;
 use crate::routing::EdgeRouter;
 use crate::star::{EdgeObservation, Judging, StarRegion, polyline_point_distance};
+use spomp_raster::SquaredEdt;
 
 /// Stable id of a graph node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]

@@ -1,4 +1,7 @@
-//! Terrain analysis (stages 1–6) on a 256 × 1024 street-like synthetic panorama.
+//! Terrain analysis (stages 1–6) on a 256 × 1024 street-like synthetic panorama, and on a
+//! panorama the simulator rendered in a parking lot of its default city
+//! (`benches/data/sim-parking-lot.png`, written by
+//! `spomp world generate --seed 1 --out W && spomp world pano W --at 237,141,-1.5708 --out …`).
 
 use std::hint::black_box;
 
@@ -14,6 +17,21 @@ fn street_panorama() -> spomp_core::DepthPanorama {
     let mut pano = Scene::street(0.4).render(PanoramaGeometry::default_lidar());
     add_noise(&mut pano, 0.01, 0.02, &mut ChaCha8Rng::seed_from_u64(7));
     pano
+}
+
+/// Metres per count of the stored panorama (the `spomp world pano` default).
+const SIM_RANGE_SCALE_M: f64 = 1.0 / 512.0;
+
+fn simulator_panorama() -> spomp_core::DepthPanorama {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/benches/data/sim-parking-lot.png");
+    let image = image::open(path).expect("benches/data/sim-parking-lot.png").into_luma16();
+    // Rows and columns from the image; the 90° vertical field of view the simulator renders.
+    let geometry = PanoramaGeometry {
+        rows: image.height() as usize,
+        cols: image.width() as usize,
+        ..PanoramaGeometry::default_lidar()
+    };
+    spomp_core::DepthPanorama::from_counts(geometry, image.as_raw(), SIM_RANGE_SCALE_M).expect("panorama size")
 }
 
 fn bench<M: Measurement + 'static>(c: &mut Criterion<M>) {
@@ -34,6 +52,14 @@ fn bench<M: Measurement + 'static>(c: &mut Criterion<M>) {
     c.bench_function("terrain/stages_1_to_6", |b| {
         b.iter(|| {
             let out = analyzer.analyze(black_box(&depth)).expect("analyze");
+            black_box(out.reach_range_m()[0]);
+        })
+    });
+    let simulated = simulator_panorama();
+    let mut sim_analyzer = TerrainAnalyzer::new(simulated.geometry, params.clone()).expect("analyzer");
+    c.bench_function("terrain/stages_1_to_6_simulator_panorama", |b| {
+        b.iter(|| {
+            let out = sim_analyzer.analyze(black_box(&simulated)).expect("analyze");
             black_box(out.reach_range_m()[0]);
         })
     });

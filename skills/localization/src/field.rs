@@ -10,9 +10,8 @@
 //! particle alike. Costs are stored as u8 levels so that one plane of an
 //! 800 × 600 map is 480 kB and the per-particle loop stays in cache.
 
-use image::GrayImage;
-use imageproc::distance_transform::euclidean_squared_distance_transform;
 use spomp_core::{AerialMap, ClassId, ClassTable, GridSpec, UNKNOWN_CLASS};
+use spomp_raster::SquaredEdt;
 
 use crate::error::LocalizationError;
 use crate::params::LocalizationParams;
@@ -158,10 +157,7 @@ fn squared_distances(mask: Vec<u8>, spec: &GridSpec) -> Option<Vec<f64>> {
     if !mask.iter().any(|&m| m != 0) {
         return None;
     }
-    // Row order does not matter for a distance transform, so the grid's south-up rows can be
-    // handed over as an image's top-down rows unchanged.
-    let image = GrayImage::from_raw(spec.width, spec.height, mask)?;
-    Some(euclidean_squared_distance_transform(&image).into_raw())
+    Some(SquaredEdt::default().of_mask(&mask, spec.width as usize, spec.height as usize))
 }
 
 /// How a cell's distances to its class and to unknown ground become a cost level.

@@ -15,7 +15,7 @@ fn bench(c: &mut Criterion) {
     eprintln!("800×600 city map: {} goals, {} too small", found.goals.len(), found.too_small);
     c.bench_function("detect goals 800x600", |b| b.iter(|| detector.detect(&map, &[]).unwrap()));
 
-    // Cost of the imageproc stages on the same map, to see where detection time goes.
+    // Cost of the image stages on the same map, to see where detection time goes.
     {
         use image::{GrayImage, Luma};
         use imageproc::distance_transform::{Norm, euclidean_squared_distance_transform};
@@ -24,7 +24,12 @@ fn bench(c: &mut Criterion) {
         let mask =
             GrayImage::from_fn(800, 600, |x, y| Luma([if map.class[(y * 800 + x) as usize] == 4 { 255 } else { 0 }]));
         c.bench_function("stage: dilate L2 r=15", |b| b.iter(|| dilate(&mask, Norm::L2, 15)));
-        c.bench_function("stage: euclidean EDT", |b| b.iter(|| euclidean_squared_distance_transform(&mask)));
+        c.bench_function("stage: euclidean EDT (imageproc)", |b| {
+            b.iter(|| euclidean_squared_distance_transform(&mask))
+        });
+        // The transform detection uses: same values, reused buffers.
+        let mut edt = spomp_raster::SquaredEdt::default();
+        c.bench_function("stage: euclidean EDT (spomp-raster)", |b| b.iter(|| edt.of_mask(mask.as_raw(), 800, 600)));
         c.bench_function("stage: connected components", |b| {
             b.iter(|| connected_components(&mask, Connectivity::Eight, Luma([0u8])))
         });

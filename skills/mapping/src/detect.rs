@@ -21,8 +21,8 @@ use imageproc::distance_transform::Norm;
 use imageproc::morphology::{dilate, erode, open_mut};
 use imageproc::region_labelling::{Connectivity, connected_components};
 use spomp_core::{AerialMap, Cell, ClassId, ClassTable, Point2, UNKNOWN_CLASS};
+use spomp_raster::SquaredEdt;
 
-use crate::edt::SquaredEdt;
 use crate::error::MappingError;
 use crate::params::GoalDetectionParams;
 
@@ -197,7 +197,7 @@ impl GoalDetector {
         // Clearance: distance from every cell to the nearest obstacle.
         let obstacles: Vec<u8> =
             map.class.iter().map(|&c| if self.obstacle_lut[c as usize] { 255 } else { 0 }).collect();
-        let clearance_sq = self.edt.transform(&obstacles, w as usize, h as usize);
+        let clearance_sq = self.edt.of_mask(&obstacles, w as usize, h as usize);
 
         let region_px = self.params.placement_region_m / res;
         let margin = region_px.ceil() as i64 + 1;
@@ -225,7 +225,7 @@ impl GoalDetector {
                 let member = labels.get_pixel(x + c0, y + r0)[0] == label && closed.get_pixel(x + c0, y + r0)[0] != 0;
                 Luma([if member { 255 } else { 0 }])
             });
-            let to_cluster_sq = self.edt.transform(crop.as_raw(), cw as usize, ch as usize);
+            let to_cluster_sq = self.edt.of_mask(crop.as_raw(), cw as usize, ch as usize);
             let centroid = (comp.sum_c / comp.cells as f64, comp.sum_r / comp.cells as f64);
 
             // Best cell per class: (clearance², −distance² to centroid, cell) maximised.

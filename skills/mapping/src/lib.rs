@@ -8,7 +8,6 @@
 //!   Coordination, DESIGN.md §5 "Mapping").
 
 mod detect;
-mod edt;
 mod error;
 mod orthomap;
 mod params;
