@@ -1,7 +1,8 @@
 //! The UAV's aerial-planner nodes in closed loop: a UAV whose pose this test integrates toward
 //! `rt.flight` (straight line, capped speed, hover when None), as the simulator does.
 //! - `follow_waypoints` flies in order, resumes where it left off when a state machine leaves
-//!   and re-enters the state, keeps `progress`, reads QGroundControl plans (the shipped
+//!   and re-enters the state, keeps `progress` (and with `resume_from` flies back to the point of
+//!   interruption so a survey leaves no gap), reads QGroundControl plans (the shipped
 //!   `missions/explore.plan`, against hand-computed metres), refuses malformed plans with clear
 //!   errors, and routes transfers around no-fly polygons;
 //! - `seek_robot` rotates round-robin over the robots its team state knows and flies to the end
@@ -203,6 +204,91 @@ fn waypoints_are_flown_in_order_and_resumed_after_the_state_is_left() {
     // 150 m at 5 m/s plus two 5 s pauses: about 40 s.
     let total_s = n as f64 * DT_S;
     assert!((39.0..42.0).contains(&total_s), "{total_s}");
+}
+
+/// A survey (100 m, 30 m and 100 m legs) interrupted after every 20 s of flight by an 8 s errand
+/// towards a far point (another state: 40 m away from the survey), as the shipped mission's
+/// explorer is interrupted to seek UGVs. `{resume}` is the `resume_from` binding (or nothing).
+fn survey_with_errands(resume: &str) -> String {
+    format!(
+        r#"
+mission: survey-with-errands
+team:
+  - {{ id: uav1, kind: uav, role: explorer, start: {{ x_m: 0, y_m: 0 }} }}
+roles:
+  explorer:
+    blackboard: {{ next_waypoint: 0, errand_step: 0 }}
+    tree:
+      state_machine:
+        initial: survey
+        states:
+          survey:
+            run:
+              follow_waypoints:
+                waypoints: [{{ x: 0, y: 0 }}, {{ x: 100, y: 0 }}, {{ x: 100, y: 30 }}, {{ x: 0, y: 30 }}]
+                speed_mps: 5
+                progress: "{{next_waypoint}}"{resume}
+            transitions:
+              - {{ on: timer, after_s: 20, to: errand }}
+              - {{ on: success, to: done }}
+          errand:
+            run:
+              follow_waypoints: {{ waypoints: [{{ x: 50, y: -300 }}], speed_mps: 5, progress: "{{errand_step}}" }}
+            transitions: [{{ on: timer, after_s: 8, to: survey }}]
+          done: {{ terminal: success }}
+time_limit_s: 400
+"#
+    )
+}
+
+/// The longest stretch of the survey legs farther than `tol_m` from every point of `track`.
+fn longest_gap(legs: &[(Point2, Point2)], track: &[Point2], tol_m: f64) -> f64 {
+    let mut longest: f64 = 0.0;
+    for &(a, b) in legs {
+        let samples = (a.distance(b) / 0.5).ceil() as usize;
+        let mut gap = 0.0;
+        for k in 0..=samples {
+            let p = a + (b - a) * (k as f64 / samples as f64);
+            if track.iter().any(|t| t.distance(p) <= tol_m) {
+                gap = 0.0;
+            } else {
+                gap += a.distance(b) / samples as f64;
+                longest = longest.max(gap);
+            }
+        }
+    }
+    longest
+}
+
+#[test]
+fn a_resumed_survey_flies_back_to_where_it_was_interrupted_and_leaves_no_gap() {
+    let legs = [
+        (Point2::new(0.0, 0.0), Point2::new(100.0, 0.0)),
+        (Point2::new(100.0, 0.0), Point2::new(100.0, 30.0)),
+        (Point2::new(100.0, 30.0), Point2::new(0.0, 30.0)),
+    ];
+    let fly = |resume: &str| {
+        let ex = build(&temp_dir("survey-errands"), &survey_with_errands(resume), "explorer", "uav1", Pose2::default());
+        let mut uav = Uav::new(ex, Point2::new(0.0, 0.0));
+        let status = uav.run(4000);
+        assert_eq!(status, Status::Success, "{:?}", uav.reports());
+        assert_eq!(uav.int("next_waypoint"), Some(4));
+        uav
+    };
+    // Without `resume_from` each errand cuts a corner of the survey: the UAV returns to the
+    // waypoint it was heading to, and the stretch between is never flown.
+    let plain = fly("");
+    // (Corners are cut by up to the 2 m arrival radius, so "flown over" means within 3 m.)
+    assert!(longest_gap(&legs, &plain.track, 3.0) > 20.0, "{}", longest_gap(&legs, &plain.track, 3.0));
+    // With it, every metre of every leg is flown over.
+    let resumed = fly("\n                resume_from: \"{survey_resume}\"");
+    assert!(longest_gap(&legs, &resumed.track, 3.0) < 1.0, "{}", longest_gap(&legs, &resumed.track, 3.0));
+    let Some(BbValue::Point(last)) = resumed.ex.blackboard().get_by_name("survey_resume") else {
+        panic!("resume_from was never written");
+    };
+    // Written while flying the last leg; the flight back costs time but no coverage.
+    assert!((last.y - 30.0).abs() < 2.5, "{last:?}");
+    assert!(resumed.track.len() > plain.track.len());
 }
 
 #[test]

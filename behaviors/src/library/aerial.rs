@@ -27,14 +27,14 @@ const DEFAULT_NO_FLY_MARGIN_M: f64 = 5.0;
 /// Registers the UAV nodes.
 pub fn register_aerial(r: &mut NodeRegistry) {
     use Category::Action;
-    use PortType::{Bool, Float, Int, Params, Points, Robot, String as Str};
+    use PortType::{Bool, Float, Int, Params, Point, Points, Robot, String as Str};
     use RobotKind::Uav;
 
     r.register(
         NodeTypeSpec::leaf(
             "follow_waypoints",
             Action,
-            "Flies the waypoint list — `waypoints`, or the NAV_WAYPOINT items of a QGroundControl `plan_file` (read when the mission is built; its planned home position is the map origin, x east, y north, metres; exclusion geofences become no-fly zones) — at `altitude_m` and `speed_mps`, starting at index `progress` and advancing it on arrival within `arrive_radius_m` of each waypoint, so a state machine that leaves and re-enters the state resumes where it left off. Transfers route around `no_fly` polygons (shortest path over their corners, kept `margin_m` clear); a waypoint inside a zone, or with no route to it, is reported and skipped. Succeeds when the list is exhausted. Give exactly one of `waypoints` and `plan_file`.",
+            "Flies the waypoint list — `waypoints`, or the NAV_WAYPOINT items of a QGroundControl `plan_file` (read when the mission is built; its planned home position is the map origin, x east, y north, metres; exclusion geofences become no-fly zones) — at `altitude_m` and `speed_mps`, starting at index `progress` and advancing it on arrival within `arrive_radius_m` of each waypoint, so a state machine that leaves and re-enters the state resumes where it left off. With `resume_from` connected it resumes at the very point it was interrupted: it flies back there first and then on along the interrupted leg, so a survey leaves no gap. Transfers route around `no_fly` polygons (shortest path over their corners, kept `margin_m` clear); a waypoint inside a zone, or with no route to it, is reported and skipped. Succeeds when the list is exhausted. Give exactly one of `waypoints` and `plan_file`.",
             vec![
                 PortSpec::optional("waypoints", Points, "Waypoints (map frame), flown in order."),
                 PortSpec::optional("plan_file", Str, "QGroundControl .plan file, relative to the mission file; its altitudes are ignored in favour of `altitude_m`."),
@@ -43,6 +43,10 @@ pub fn register_aerial(r: &mut NodeRegistry) {
                 PortSpec::input("arrive_radius_m", Float, "A waypoint (or route corner) counts as reached within this distance, metres.").with_default(json!(2.0)),
                 PortSpec::optional("no_fly", Params, "No-fly polygons: `{zones: [[{x, y}, …], …], margin_m: 5}` (map frame, metres)."),
                 PortSpec::in_out("progress", Int, "Index of the next waypoint; share one entry between states so exploring resumes where it left off."),
+                PortSpec {
+                    optional: true,
+                    ..PortSpec::in_out("resume_from", Point, "Where the flight toward waypoint `progress` was last interrupted (written while flying the leg); share one entry between states, like `progress`, so a re-entered survey completes the interrupted leg.")
+                },
             ],
             build_follow,
         )
@@ -325,12 +329,18 @@ struct FollowWaypoints {
     speed: Binding,
     radius: Binding,
     progress: Binding,
+    resume_from: Binding,
     no_fly: Arc<NoFly>,
     /// Index of the waypoint flown to (mirrors `progress`).
     index: usize,
     /// Remaining points of the transfer to waypoint `route_to`.
     route: VecDeque<Point2>,
     route_to: Option<usize>,
+    /// Where to rejoin the interrupted leg, read from `resume_from` on (re)start.
+    rejoin: Option<Point2>,
+    /// How many of `route`'s points lie on the leg itself (after the flight back to the point
+    /// of interruption): only positions flown there are written to `resume_from`.
+    leg_points: usize,
 }
 
 fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior>, String> {
@@ -384,10 +394,13 @@ fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior>, String> {
         speed: p.get("speed_mps"),
         radius: p.get("arrive_radius_m"),
         progress: p.get("progress"),
+        resume_from: p.get("resume_from"),
         no_fly: Arc::new(no_fly),
         index: 0,
         route: VecDeque::new(),
         route_to: None,
+        rejoin: None,
+        leg_points: 0,
     }))
 }
 
@@ -417,6 +430,7 @@ impl Behavior for FollowWaypoints {
                 Some(i) => self.index = usize::try_from(i).unwrap_or(usize::MAX),
                 None => {} // not written yet: continue from this node's own count
             }
+            self.rejoin = self.resume_from.get::<Point2>(ctx.blackboard).filter(|p| p.x.is_finite() && p.y.is_finite());
         }
         let no_fly = self.no_fly.clone();
         let mut reports = Vec::new();
@@ -430,12 +444,29 @@ impl Behavior for FollowWaypoints {
                     self.index += 1;
                     continue;
                 }
+                // Back to where the leg was interrupted first, when that point is known, clear
+                // of the zones and reachable; else straight on to the waypoint.
+                let rejoin = self.rejoin.take().filter(|r| no_fly.zone_containing(*r).is_none());
                 match here {
                     // No pose yet: head for the waypoint; route once the pose is known.
-                    None => self.route = VecDeque::from([goal]),
+                    None => {
+                        self.route = VecDeque::from([goal]);
+                        self.leg_points = 1;
+                    }
                     Some(h) => match no_fly.route(h, goal) {
-                        Some(r) => {
-                            self.route = r;
+                        Some(direct) => {
+                            let via = rejoin.and_then(|r| Some((no_fly.route(h, r)?, no_fly.route(r, goal)?)));
+                            (self.route, self.leg_points) = match via {
+                                Some((mut back, leg)) => {
+                                    let leg_points = leg.len();
+                                    back.extend(leg);
+                                    (back, leg_points)
+                                }
+                                None => {
+                                    let leg_points = direct.len();
+                                    (direct, leg_points)
+                                }
+                            };
                             self.route_to = Some(self.index);
                         }
                         None => {
@@ -457,6 +488,11 @@ impl Behavior for FollowWaypoints {
             match self.route.front() {
                 Some(&target) => {
                     rt.flight = Some(FlightCommand { target, altitude_m, speed_mps });
+                    if let Some(h) = here
+                        && self.route.len() <= self.leg_points
+                    {
+                        self.resume_from.set(ctx.blackboard, BbValue::Point(h));
+                    }
                     break Status::Running;
                 }
                 None => {
