@@ -404,6 +404,24 @@ fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior>, String> {
     }))
 }
 
+impl FollowWaypoints {
+    /// The route from `here` to `goal` and how many of its points lie on the leg itself: back to
+    /// where the leg was interrupted first, when that point is known, clear of the zones and
+    /// reachable; else straight on to the waypoint. `None`: no route to the waypoint.
+    fn plan_leg(&mut self, no_fly: &NoFly, here: Point2, goal: Point2) -> Option<(VecDeque<Point2>, usize)> {
+        let rejoin = self.rejoin.take().filter(|r| no_fly.zone_containing(*r).is_none());
+        if let Some((mut back, leg)) = rejoin.and_then(|r| Some((no_fly.route(here, r)?, no_fly.route(r, goal)?))) {
+            let on_leg = leg.len();
+            back.extend(leg);
+            return Some((back, on_leg));
+        }
+        no_fly.route(here, goal).map(|leg| {
+            let on_leg = leg.len();
+            (leg, on_leg)
+        })
+    }
+}
+
 impl Behavior for FollowWaypoints {
     fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
         let waypoints = match &self.source {
@@ -444,29 +462,16 @@ impl Behavior for FollowWaypoints {
                     self.index += 1;
                     continue;
                 }
-                // Back to where the leg was interrupted first, when that point is known, clear
-                // of the zones and reachable; else straight on to the waypoint.
-                let rejoin = self.rejoin.take().filter(|r| no_fly.zone_containing(*r).is_none());
                 match here {
                     // No pose yet: head for the waypoint; route once the pose is known.
                     None => {
                         self.route = VecDeque::from([goal]);
                         self.leg_points = 1;
                     }
-                    Some(h) => match no_fly.route(h, goal) {
-                        Some(direct) => {
-                            let via = rejoin.and_then(|r| Some((no_fly.route(h, r)?, no_fly.route(r, goal)?)));
-                            (self.route, self.leg_points) = match via {
-                                Some((mut back, leg)) => {
-                                    let leg_points = leg.len();
-                                    back.extend(leg);
-                                    (back, leg_points)
-                                }
-                                None => {
-                                    let leg_points = direct.len();
-                                    (direct, leg_points)
-                                }
-                            };
+                    Some(h) => match self.plan_leg(&no_fly, h, goal) {
+                        Some((route, leg_points)) => {
+                            self.route = route;
+                            self.leg_points = leg_points;
                             self.route_to = Some(self.index);
                         }
                         None => {

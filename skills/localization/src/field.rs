@@ -153,11 +153,11 @@ pub(crate) fn check_map(map: &AerialMap) -> Result<(), LocalizationError> {
 
 /// Squared Euclidean distance, in cells², from every cell to the nearest cell with a non-zero
 /// mask value; `None` when the mask has no such cell.
-fn squared_distances(mask: Vec<u8>, spec: &GridSpec) -> Option<Vec<f64>> {
+fn squared_distances(edt: &mut SquaredEdt, mask: &[u8], spec: &GridSpec) -> Option<Vec<f64>> {
     if !mask.iter().any(|&m| m != 0) {
         return None;
     }
-    Some(SquaredEdt::default().of_mask(&mask, spec.width as usize, spec.height as usize))
+    Some(edt.of_mask(mask, spec.width as usize, spec.height as usize))
 }
 
 /// How a cell's distances to its class and to unknown ground become a cost level.
@@ -235,16 +235,17 @@ impl CostRule {
 fn full_planes(map: &AerialMap, slots: &ClassSlots, costs: &CostRule) -> (Vec<u8>, Vec<f32>) {
     let spec = map.spec;
     let n = spec.len();
-    let unknown_mask: Vec<u8> = map.class.iter().map(|&c| u8::from(c == UNKNOWN_CLASS)).collect();
-    let unknown_d2 = squared_distances(unknown_mask, &spec);
+    let mut edt = SquaredEdt::default();
+    let mut mask: Vec<u8> = map.class.iter().map(|&c| u8::from(c == UNKNOWN_CLASS)).collect();
+    let unknown_d2 = squared_distances(&mut edt, &mask, &spec);
     let known_cells = map.class.iter().filter(|&&c| c != UNKNOWN_CLASS).count();
 
     let mut planes = vec![0u8; slots.len() * n];
     let mut unknown_cost_m = Vec::with_capacity(slots.len());
     for (slot, plane) in planes.chunks_exact_mut(n.max(1)).enumerate().take(slots.len()) {
         let class = slots.class_of_slot[slot];
-        let mask: Vec<u8> = map.class.iter().map(|&c| u8::from(c == class)).collect();
-        let class_d2 = squared_distances(mask, &spec);
+        mask.iter_mut().zip(&map.class).for_each(|(m, &c)| *m = u8::from(c == class));
+        let class_d2 = squared_distances(&mut edt, &mask, &spec);
         let d2_at = |d: &Option<Vec<f64>>, i: usize| d.as_ref().map_or(f64::INFINITY, |d| d[i]);
         // The cost of a random guess: the class's mean cost over the known map.
         let mean_known_cost = if known_cells == 0 {
