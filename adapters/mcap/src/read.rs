@@ -84,12 +84,14 @@ const MAX_EXPANSION: u64 = 4096;
 /// reader allocates buffers of that size: a corrupt length field must be an error, not an
 /// out-of-memory abort.
 fn check_chunk_sizes(bytes: &[u8]) -> Result<(), ReadError> {
-    const MAGIC_LEN: usize = 8;
     if bytes.len() < MAGIC_LEN {
         return Ok(()); // the reader reports the missing magic
     }
     check_records(&bytes[MAGIC_LEN..], true)
 }
+
+/// Length of the magic that opens an MCAP file.
+const MAGIC_LEN: usize = 8;
 
 fn corrupt(what: String) -> ReadError {
     ReadError::Corrupt(what)
@@ -102,12 +104,18 @@ fn check_records(mut data: &[u8], top_level: bool) -> Result<(), ReadError> {
     while data.len() >= 9 {
         let opcode = data[0];
         let len = read_u64(data, 1).unwrap_or(u64::MAX);
+        // A record that claims more than is left is corrupt even at top level: the reader
+        // streams a chunk from its header's sizes without looking at the record length, so a
+        // chunk behind an overrunning length would otherwise go unchecked.
         let Some(body) = usize::try_from(len).ok().and_then(|l| data.get(9..9usize.checked_add(l)?)) else {
-            if top_level {
-                return Ok(()); // a truncated file: the reader reports it in its own words
-            }
+            let (place, container) = if top_level {
+                (format!("file offset {}", offset + MAGIC_LEN), "the file")
+            } else {
+                (format!("chunk offset {offset}"), "the chunk")
+            };
+            let left = data.len() - 9;
             return Err(corrupt(format!(
-                "record at chunk offset {offset} declares {len} bytes, more than the chunk holds"
+                "record at {place} declares {len} bytes, more than {container} holds ({left} left)"
             )));
         };
         if top_level && opcode == CHUNK_OPCODE {

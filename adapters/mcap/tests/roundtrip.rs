@@ -118,18 +118,50 @@ fn huge_record_length_inside_a_chunk_is_an_error_not_an_abort() {
     rec.finish().unwrap();
     let mut bytes = buf.into_inner();
     assert!(McapLog::from_bytes(bytes.clone()).messages().is_ok());
-    // First top-level record after the 8-byte magic is the header; find the chunk (opcode 6).
-    let mut pos = 8;
-    while bytes[pos] != 0x06 {
-        let len = u64::from_le_bytes(bytes[pos + 1..pos + 9].try_into().unwrap()) as usize;
-        pos += 9 + len;
-    }
-    let body = pos + 9;
+    let body = first_chunk(&bytes) + 9;
     let name_len = u32::from_le_bytes(bytes[body + 28..body + 32].try_into().unwrap()) as usize;
     let first_inner = body + 40 + name_len;
     bytes[first_inner + 1..first_inner + 9].copy_from_slice(&(1u64 << 57).to_le_bytes());
     let err = McapLog::from_bytes(bytes).messages().unwrap_err();
     assert!(err.to_string().contains("declares"), "{err}");
+}
+
+/// Regression (CI, proptest `corrupted_logs_never_panic`): two flipped bytes — one making a
+/// zstd chunk's record length run past the end of the file, one inside its compressed records —
+/// aborted the process. The size check stopped at the overrunning length, while the `mcap` reader
+/// streams a chunk from its header and decompressed a record claiming ~2⁵⁷ bytes.
+#[test]
+fn a_compressed_chunk_behind_an_overrunning_length_is_still_checked() {
+    let mut bytes = sample_log();
+    let chunk = first_chunk(&bytes);
+    let body = chunk + 9;
+    let name_len = u32::from_le_bytes(bytes[body + 28..body + 32].try_into().unwrap()) as usize;
+    assert_eq!(&bytes[body + 32..body + 32 + name_len], b"zstd");
+    let size_at = body + 32 + name_len;
+    let compressed_len = u64::from_le_bytes(bytes[size_at..size_at + 8].try_into().unwrap()) as usize;
+    let records_at = size_at + 8;
+    let uncompressed = u64::from_le_bytes(bytes[body + 16..body + 24].try_into().unwrap()) as usize;
+    let mut plain = zstd::bulk::decompress(&bytes[records_at..records_at + compressed_len], uncompressed).unwrap();
+    plain[1..9].copy_from_slice(&(1u64 << 57).to_le_bytes()); // the first inner record's length
+    let recompressed = zstd::bulk::compress(&plain, 3).unwrap();
+
+    let mut corrupt = bytes[..size_at].to_vec();
+    corrupt.extend_from_slice(&(recompressed.len() as u64).to_le_bytes());
+    corrupt.extend_from_slice(&recompressed);
+    corrupt.extend_from_slice(&bytes.split_off(records_at + compressed_len));
+    corrupt[chunk + 1..chunk + 9].copy_from_slice(&(u64::MAX / 2).to_le_bytes());
+    let err = McapLog::from_bytes(corrupt).messages().unwrap_err();
+    assert!(err.to_string().contains("more than the file holds"), "{err}");
+}
+
+/// Offset of the first top-level chunk record (opcode 6) after the magic.
+fn first_chunk(bytes: &[u8]) -> usize {
+    let mut pos = 8;
+    while bytes[pos] != 0x06 {
+        let len = u64::from_le_bytes(bytes[pos + 1..pos + 9].try_into().unwrap()) as usize;
+        pos += 9 + len;
+    }
+    pos
 }
 
 #[test]
