@@ -63,7 +63,8 @@ fn save(img: &RgbImage, path: &Path) -> Result<()> {
 /// licence): a fresh machine may have no system fonts at all.
 static PLOT_FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSansMono.ttf");
 
-fn ensure_font() -> Result<()> {
+/// Registers the bundled font as plotters' "sans-serif" (once).
+pub fn ensure_font() -> Result<()> {
     static REGISTERED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     let ok =
         *REGISTERED.get_or_init(|| plotters::style::register_font("sans-serif", FontStyle::Normal, PLOT_FONT).is_ok());

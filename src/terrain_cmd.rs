@@ -147,7 +147,10 @@ pub fn terrain(a: &TerrainArgs) -> Result<ExitCode> {
         100.0 * traversable_pixels as f64 / g.len().max(1) as f64
     );
     if let Some(dir) = &a.out {
-        out!("wrote {}/{{filled_depth,gradient,obstacles,distance,traversable,reachability}}.png", dir.display());
+        out!(
+            "wrote {}/{{filled_depth,gradient,obstacles,distance,traversable,reachability,stages}}.png",
+            dir.display()
+        );
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -224,8 +227,73 @@ fn write_stage_images(dir: &Path, out: &TerrainOutput, range_scale_m: f64, param
     }
     save_rgb(&dir.join("obstacles.png"), &obstacles)?;
     save_rgb(&dir.join("traversable.png"), &traversable)?;
-    save_rgb(&dir.join("reachability.png"), &reachability_image(out))?;
-    Ok(())
+    let reachability = reachability_image(out);
+    save_rgb(&dir.join("reachability.png"), &reachability)?;
+
+    let gray_rgb = |values: Vec<u8>| -> Result<RgbImage> {
+        let gray = GrayImage::from_raw(cols as u32, rows as u32, values).context("stage buffer size")?;
+        Ok(DynamicImage::ImageLuma8(gray).to_rgb8())
+    };
+    // Near returns bright, far ones dark, none black: legible at a glance, unlike raw counts.
+    const DEPTH_FULL_SCALE_M: f32 = 30.0;
+    let depth = gray_rgb(
+        ranges
+            .iter()
+            .map(|&r| {
+                let nearness = (1.0 - r / DEPTH_FULL_SCALE_M).clamp(0.0, 1.0);
+                if r.is_finite() && r > 0.0 { 40 + (nearness * 215.0).round() as u8 } else { 0 }
+            })
+            .collect(),
+    )?;
+    let gradient = gray_rgb(out.gradient().iter().map(|v| unit_to_u8(v / grad_full_scale)).collect())?;
+    let distance = gray_rgb(out.distance_m().iter().map(|d| unit_to_u8(d / d_max)).collect())?;
+    let panels = [
+        (format!("1 filled depth (bright = near, {DEPTH_FULL_SCALE_M:.0} m and beyond dark)"), &depth),
+        (format!("3 gradient |∇| (white = {grad_full_scale:.2}, twice the slope threshold)"), &gradient),
+        ("4 obstacles (red), returns (grey), no return (black)".to_string(), &obstacles),
+        (format!("5 distance to obstacle D (white = D_max {d_max:.1} m)"), &distance),
+        (
+            format!("5 traversable: D ≥ {:.2} m (green), near obstacles (orange), obstacles (red)", params.inflation_m),
+            &traversable,
+        ),
+    ];
+    write_stage_sheet(&dir.join("stages.png"), &panels, &reachability)
+}
+
+/// One picture of the stages for documentation: the panorama-shaped stages stacked on the left,
+/// each under its caption, the top-down reachability polygon on the right.
+fn write_stage_sheet(path: &Path, panels: &[(String, &RgbImage)], reachability: &RgbImage) -> Result<()> {
+    use plotters::prelude::*;
+    const CAPTION_PX: u32 = 26;
+    const GAP_PX: u32 = 16;
+    let panel_w = panels.iter().map(|(_, img)| img.width()).max().unwrap_or(0);
+    let left_h: u32 = panels.iter().map(|(_, img)| CAPTION_PX + img.height()).sum();
+    let width = panel_w + GAP_PX + reachability.width();
+    let height = left_h.max(CAPTION_PX + reachability.height());
+    let mut sheet = RgbImage::from_pixel(width, height, Rgb([40, 40, 40]));
+    let mut captions = Vec::new();
+    let mut y = 0;
+    for (caption, img) in panels {
+        captions.push((caption.clone(), 0, y));
+        image::imageops::replace(&mut sheet, *img, 0, i64::from(y + CAPTION_PX));
+        y += CAPTION_PX + img.height();
+    }
+    let right_x = panel_w + GAP_PX;
+    captions.push(("6 reachability S(φ), top-down, +x right (red: obstacle)".to_string(), right_x, 0));
+    image::imageops::replace(&mut sheet, reachability, i64::from(right_x), i64::from(CAPTION_PX));
+
+    crate::sim_plots::ensure_font()?;
+    let (w, h) = sheet.dimensions();
+    {
+        let root = BitMapBackend::with_buffer(&mut sheet, (w, h)).into_drawing_area();
+        let style = ("sans-serif", 16).into_font().color(&RGBColor(235, 235, 235));
+        for (caption, x, y) in &captions {
+            root.draw_text(caption, &style, (*x as i32 + 6, *y as i32 + 5))
+                .map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))?;
+        }
+        root.present().map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))?;
+    }
+    save_rgb(path, &sheet)
 }
 
 /// Top-down picture of the reachability polygon, robot at the centre, +x to the right, +y up:
@@ -259,7 +327,7 @@ fn reachability_image(out: &TerrainOutput) -> RgbImage {
         let py = centre - *r as f64 * az.sin() / m_per_px;
         if px >= 0.0 && py >= 0.0 && px < SIZE as f64 && py < SIZE as f64 {
             let colour = if *obstacle { Rgb([230, 40, 40]) } else { Rgb([240, 220, 60]) };
-            img.put_pixel(px as u32, py as u32, colour);
+            imageproc::drawing::draw_filled_circle_mut(&mut img, (px as i32, py as i32), 1, colour);
         }
     }
     imageproc::drawing::draw_filled_circle_mut(&mut img, (centre as i32, centre as i32), 3, Rgb([80, 140, 255]));

@@ -125,9 +125,16 @@ fn world_show_pano_terrain_pipeline() {
     assert!(nearest_obstacle_end < 3.0, "{nearest_obstacle_end}");
     let trav = t["traversable_pixels"].as_u64().unwrap();
     assert!(trav > 0 && trav < 256 * 1024);
-    for name in ["filled_depth", "gradient", "obstacles", "distance", "traversable", "reachability"] {
+    for name in ["filled_depth", "gradient", "obstacles", "distance", "traversable", "reachability", "stages"] {
         assert!(stages.join(format!("{name}.png")).exists(), "{name}.png");
     }
+    // The sheet: five 1024 × 256 panels under 26-pixel captions, a 16-pixel gap, the 601-pixel
+    // reachability picture; the third panel is the obstacle image, pixel for pixel.
+    let sheet = image::open(stages.join("stages.png")).unwrap().to_rgb8();
+    assert_eq!(sheet.dimensions(), (1024 + 16 + 601, 5 * (26 + 256)));
+    let obstacles = image::open(stages.join("obstacles.png")).unwrap().to_rgb8();
+    let panel = image::imageops::crop_imm(&sheet, 0, 2 * (26 + 256) + 26, 1024, 256).to_image();
+    assert!(panel == obstacles, "the obstacle panel of the sheet differs from obstacles.png");
 
     // A parameter file: a steeper threshold than the curb's slope sees no curb.
     let params = tmp.path().join("terrain.yaml");
