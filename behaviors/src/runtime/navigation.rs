@@ -30,6 +30,10 @@ const BACKTRACK_MIN_M: f64 = 6.0;
 /// Graph nodes along the trail tried as the start of a backtracking plan.
 const MAX_BACKTRACK_ATTEMPTS: usize = 12;
 
+/// Graph nodes nearest a goal in unmapped territory tried as the end of the graph part of the
+/// path ([`NavStack::plan`]).
+const MAX_UNMAPPED_GOAL_ATTEMPTS: usize = 8;
+
 /// Navigation parameters of a UGV.
 #[derive(Clone, Debug, Default)]
 pub struct NavParams {
@@ -207,13 +211,43 @@ impl NavStack {
     /// it were all seen blocked, say inside a parking lot whose straight edges cross parked
     /// vehicles), the robot backtracks: the path starts with its own trail back to the newest
     /// trail point from which the graph has one ([`GlobalPath::lead_in`] counts those points).
+    ///
+    /// When the goal lies where this robot's map has no data yet (a goal another robot found in
+    /// a map version that has not reached this one over the radio), the path runs over the
+    /// graph to the node nearest the goal that it can reach and then straight on to the goal,
+    /// a last stretch the local planner drives alone; a replan after the map arrives finds the
+    /// whole way on the graph.
     pub fn plan(&mut self, from: Point2, to: Point2) -> Result<GlobalPath, PlanError> {
+        match self.plan_on_graph(from, to) {
+            Err(unmapped @ PlanError::Unmapped { which: "goal", .. }) => {
+                self.plan_into_unmapped(from, to).ok_or(unmapped)
+            }
+            other => other,
+        }
+    }
+
+    /// [`NavStack::plan`] without the unmapped-goal fallback.
+    fn plan_on_graph(&mut self, from: Point2, to: Point2) -> Result<GlobalPath, PlanError> {
         let avoid: &[(NodeId, NodeId)] =
             if self.params.global.experience.graph_updates { &self.blocked_edges } else { &[] };
         match self.global.plan_avoiding(from, to, avoid) {
             Err(PlanError::NoPath) => self.plan_backtracking(from, to),
             other => other,
         }
+    }
+
+    /// A path to the reachable graph node nearest `to` (of the [`MAX_UNMAPPED_GOAL_ATTEMPTS`]
+    /// nearest), extended straight to `to`.
+    fn plan_into_unmapped(&mut self, from: Point2, to: Point2) -> Option<GlobalPath> {
+        let mut nearest: Vec<(f64, Point2)> = self.global.nodes().map(|(_, p, _)| (p.distance(to), p)).collect();
+        nearest.sort_by(|a, b| a.0.total_cmp(&b.0));
+        nearest.truncate(MAX_UNMAPPED_GOAL_ATTEMPTS);
+        nearest.into_iter().find_map(|(tail_m, node)| {
+            let mut path = self.plan_on_graph(from, node).ok()?;
+            path.waypoints.push(to);
+            path.length_m += tail_m;
+            Some(path)
+        })
     }
 
     /// A path that backs out along the robot's trail to the newest trail point (at least
@@ -276,5 +310,75 @@ impl NavStack {
             self.trail.pop_front();
         }
         self.trail.push_back(p);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+    use spomp_core::{AerialMap, Cell, GridSpec, UNKNOWN_CLASS};
+    use spomp_global_planner::synthetic::{class, color};
+
+    /// A 100 × 50 m map (0.5 m cells) of which only `road` (columns × rows of cells) is
+    /// mapped, as road; the rest is unknown.
+    fn partly_mapped(roads: &[(std::ops::Range<u32>, std::ops::Range<u32>)]) -> AerialMap {
+        let mut map = AerialMap::unknown(GridSpec::new(Point2::new(0.0, 0.0), 0.5, 200, 100));
+        for (cols, rows) in roads {
+            for row in rows.clone() {
+                for col in cols.clone() {
+                    let i = map.spec.index(Cell::new(col, row));
+                    (map.class[i], map.rgb[i], map.elevation[i]) = (class::ROAD, color::ROAD, 0.0);
+                }
+            }
+        }
+        map.version = 1;
+        map
+    }
+
+    fn stack(map: &AerialMap) -> NavStack {
+        let mut nav = NavStack::new(NavParams::default(), &ClassTable::default_table()).unwrap();
+        nav.global.update_map(map).unwrap();
+        nav
+    }
+
+    #[test]
+    fn a_goal_in_unmapped_territory_is_approached_over_the_graph_then_straight_on() {
+        // A road along the south edge, x 0–100 m, y 0–8 m; the goal 30 m north of its east half.
+        let map = partly_mapped(&[(0..200, 0..16)]);
+        assert_eq!(map.class[map.spec.index(Cell::new(140, 76))], UNKNOWN_CLASS);
+        let mut nav = stack(&map);
+        let (start, goal) = (Point2::new(4.0, 4.0), Point2::new(70.0, 38.0));
+        assert!(matches!(nav.global.plan(start, goal), Err(PlanError::Unmapped { .. })));
+        let path = nav.plan(start, goal).unwrap();
+        let (last, before) = (path.waypoints[path.waypoints.len() - 1], path.waypoints[path.waypoints.len() - 2]);
+        assert_eq!(last, goal);
+        // The graph part ends on the road, below the goal.
+        assert!(before.y <= 8.0 && (before.x - goal.x).abs() < 10.0, "graph part ends at {before:?}");
+        let length: f64 = path.waypoints.windows(2).map(|w| w[0].distance(w[1])).sum();
+        assert!((path.length_m - length).abs() < 1e-6, "{} against {length}", path.length_m);
+        // Nodes index the graph part only.
+        assert!(path.node_waypoints.iter().all(|&k| k + 1 < path.waypoints.len()));
+    }
+
+    #[test]
+    fn an_unmapped_goal_with_no_reachable_node_near_it_is_still_an_error() {
+        // The robot's patch of road in the south-west corner, 10 × 8 m; a large mapped lot in the
+        // east half that no edge joins to it. The goal lies between them, nearer the lot, whose
+        // nodes are all nearer than the robot's.
+        let map = partly_mapped(&[(0..20, 0..16), (100..200, 0..100)]);
+        let mut nav = stack(&map);
+        let (start, goal) = (Point2::new(4.0, 4.0), Point2::new(42.0, 25.0));
+        let patch_m = nav
+            .global
+            .nodes()
+            .filter(|(_, p, _)| p.x < 10.0)
+            .map(|(_, p, _)| p.distance(goal))
+            .fold(f64::MAX, f64::min);
+        let lot_nearer = nav.global.nodes().filter(|(_, p, _)| p.x >= 50.0 && p.distance(goal) < patch_m).count();
+        assert!(lot_nearer >= MAX_UNMAPPED_GOAL_ATTEMPTS, "{lot_nearer} lot nodes nearer than {patch_m} m");
+        let err = nav.plan(start, goal).unwrap_err();
+        assert!(matches!(err, PlanError::Unmapped { which: "goal", .. }), "{err:?}");
     }
 }

@@ -83,6 +83,17 @@ pub enum PlanError {
         /// North, metres.
         y: f64,
     },
+    /// The point lies in territory this planner's map has no data for yet (a goal found in a
+    /// map version that has not reached this robot), and no graph node is near it.
+    #[error("{which} point ({x:.1}, {y:.1}) is in territory this robot's map does not cover yet")]
+    Unmapped {
+        /// `start` or `goal`.
+        which: &'static str,
+        /// East, metres.
+        x: f64,
+        /// North, metres.
+        y: f64,
+    },
     /// The graph has no path between the two points.
     #[error("no path between start and goal")]
     NoPath,

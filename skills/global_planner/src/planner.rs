@@ -850,7 +850,8 @@ impl GlobalPlanner {
     }
 
     /// The node whose region covers the cell under `p`, or the nearest covered cell's within
-    /// the attach radius.
+    /// the attach radius; without one, [`PlanError::Unmapped`] when the map has no data at `p`,
+    /// else [`PlanError::NotOnGraph`].
     fn attach(&self, p: Point2, which: &'static str) -> Result<NodeIndex<u32>, PlanError> {
         let map = self.map.as_ref().ok_or(PlanError::NoMap)?;
         if !(p.x.is_finite() && p.y.is_finite()) {
@@ -878,7 +879,14 @@ impl GlobalPlanner {
                 }
             }
         }
-        best.map(|(_, o)| NodeIndex::new(o as usize)).ok_or(PlanError::NotOnGraph { which, x: p.x, y: p.y })
+        let (x, y) = (p.x, p.y);
+        best.map(|(_, o)| NodeIndex::new(o as usize)).ok_or_else(|| {
+            if map.class.get(map.spec.index(cell)) == Some(&UNKNOWN_CLASS) {
+                PlanError::Unmapped { which, x, y }
+            } else {
+                PlanError::NotOnGraph { which, x, y }
+            }
+        })
     }
 
     /// The vertices of edge `e` from its source node to its target node (into `out`); false

@@ -137,6 +137,26 @@ fn road_network_is_connected_and_a_building_block_is_not_crossed() {
 }
 
 #[test]
+fn a_goal_in_unmapped_territory_is_reported_as_such() {
+    // A road along the south edge; the rest of the map not yet seen, but for one mapped
+    // building far from the road.
+    let mut map = blank(200, 100, class::BUILDING, color::BUILDING);
+    map.class.fill(UNKNOWN_CLASS);
+    paint(&mut map, 0..200, 0..16, class::ROAD, color::ROAD);
+    paint(&mut map, 150..170, 70..90, class::BUILDING, color::BUILDING);
+    let mut p = planner(GlobalPlannerParams::default(), &map);
+    let start = Point2::new(4.0, 4.0);
+    assert!(p.plan(start, Point2::new(90.0, 4.0)).is_ok());
+    // Unknown ground next to the road attaches to the road's nodes within the attach radius.
+    assert!(p.plan(start, Point2::new(90.0, 9.0)).is_ok());
+    let far = p.plan(start, Point2::new(50.0, 40.0)).unwrap_err();
+    assert!(matches!(far, PlanError::Unmapped { which: "goal", .. }), "{far:?}");
+    assert!(far.to_string().contains("does not cover yet"), "{far}");
+    let wall = p.plan(start, Point2::new(80.0, 40.0)).unwrap_err();
+    assert!(matches!(wall, PlanError::NotOnGraph { which: "goal", .. }), "{wall:?}");
+}
+
+#[test]
 fn own_observations_of_a_roadblock_remove_the_edge_and_the_path_reroutes() {
     let map = ring_map();
     let mut p = planner(GlobalPlannerParams::default(), &map);
