@@ -3,7 +3,8 @@
 //! skid-steer model driven by the node's commands.
 //!
 //! Shows: `navigate_to` drives down a road past a parked vehicle cluster without touching it;
-//! `navigate_local` in front of a roadblock fails as stuck instead of pushing into it;
+//! `navigate_local` in front of a roadblock fails as stuck instead of pushing into it, and takes
+//! a target in the robot frame;
 //! `navigate_to` discovers a roadblock on the shortest route (through its scans removing the
 //! edge, or, where the scans cannot judge the edge, through being stuck on it), replans around
 //! the block and arrives; `navigate_to` crosses generated cities (200 m × 150 m, and the full
@@ -117,6 +118,24 @@ fn navigate_local_stops_at_a_roadblock_and_fails_as_stuck() {
     assert!(run.t.as_secs_f64() < 17.0 + 15.0 + 8.0, "{}", run.summary());
     assert!(run.reports.iter().any(|r| r.contains("no safe progress")), "{:?}", run.reports);
     assert_eq!(run.rt.command, Some(Twist2::ZERO));
+}
+
+#[test]
+fn navigate_local_takes_a_target_in_the_robot_frame() {
+    // Facing west (−x) at the east end of the street: 15 m ahead and 2 m to the left is, in
+    // the map frame, 15 m further west and 2 m further south.
+    let start = Pose2::new(60.0, -1.5, std::f64::consts::PI);
+    let tree = "navigate_local: { target: { x: 15, y: 2 }, frame: robot }";
+    let mut run = one_node("robot-frame", street(), start, tree, false);
+    let status = run.run(60.0);
+    println!("robot frame: {status:?}, {}", run.summary());
+    assert_eq!(status, Status::Success, "{}", run.summary());
+    let goal = Point2::new(45.0, -3.5);
+    assert!(run.position().distance(goal) <= 1.0 + 0.2, "{}", run.summary());
+    assert_eq!(run.ugv.collisions(), 0, "{}", run.summary());
+    // Arriving at all shows the target was fixed on the ground at the start: re-read relative
+    // to the moving robot it would stay 15 m ahead. 15 m at up to 1.5 m/s:
+    assert!(run.t.as_secs_f64() < 30.0, "{}", run.summary());
 }
 
 /// Drives `navigate_to` from (14, 4) to (46, 4) on the ring road with a roadblock (labelled

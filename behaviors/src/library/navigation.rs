@@ -96,9 +96,10 @@ pub fn register_navigation(r: &mut NodeRegistry) {
         NodeTypeSpec::leaf(
             "navigate_local",
             Action,
-            "Drives to `target` using only panoramas and odometry: on each panorama a local goal in the known-safe region closest to the target (with the consistency term), at every tick a DWA command toward it. Success within `tolerance_m`; Failure when the distance to the target did not shrink by 1 m for `stuck_timeout_s` (a blocked road, an empty safe region, no panoramas); halting stops the robot.",
+            "Drives to `target` using only panoramas and odometry: on each panorama a local goal in the known-safe region closest to the target (with the consistency term), at every tick a DWA command toward it. The target is in the map frame, or with `frame: robot` relative to the robot's pose estimate when the node starts (x ahead, y to the left; fixed on the ground from then on, so \"10 m ahead\" stays where it was when the robot turns). Success within `tolerance_m`; Failure when the distance to the target did not shrink by 1 m for `stuck_timeout_s` (a blocked road, an empty safe region, no panoramas); halting stops the robot.",
             vec![
-                PortSpec::input("target", Point, "Where to go (map frame)."),
+                PortSpec::input("target", Point, "Where to go, in `frame`."),
+                PortSpec::input("frame", Str, "Frame of `target`: `map`, or `robot` (the robot's pose when the node starts).").with_default(json!("map")),
                 PortSpec::input("tolerance_m", Float, "Arrival radius, metres.").with_default(json!(1.0)),
                 PortSpec::input("stuck_timeout_s", Float, "Give up after this long without progress, seconds.").with_default(json!(30.0)),
                 PortSpec::optional("local_planner", Params, "Overrides of `local_goal` and `dwa` (spomp-local-planner) over the robot's parameters, for this node; `terrain` is the robot's."),
@@ -1111,21 +1112,54 @@ impl Behavior for ReturnHome {
     }
 }
 
+/// The frame of `navigate_local`'s target.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum TargetFrame {
+    Map,
+    /// Relative to the robot's pose when the node starts.
+    Robot,
+}
+
+impl TargetFrame {
+    fn parse(name: &str) -> Result<Self, String> {
+        match name {
+            "map" => Ok(TargetFrame::Map),
+            "robot" => Ok(TargetFrame::Robot),
+            other => Err(format!("`frame` must be `map` or `robot`, not `{other}`")),
+        }
+    }
+}
+
 struct NavigateLocal {
     target: Binding,
+    frame: Binding,
     tolerance: Binding,
     stuck_timeout: Binding,
     driver: Driver,
+    /// A robot-frame target in the map frame, fixed at the first pose of this run.
+    anchored: Option<Point2>,
 }
 
 impl NavigateLocal {
     fn new(p: &PortBindings) -> Result<Self, String> {
+        // A literal frame is checked when the mission is loaded; a blackboard one when ticked.
+        if let Some(BbValue::Str(name)) = p.literal("frame") {
+            TargetFrame::parse(name)?;
+        }
         Ok(NavigateLocal {
             target: p.get("target"),
+            frame: p.get("frame"),
             tolerance: p.get("tolerance_m"),
             stuck_timeout: p.get("stuck_timeout_s"),
             driver: Driver::new(Overrides::from_ports(p, false)?),
+            anchored: None,
         })
+    }
+
+    /// The frame on the `frame` port (`map` when unset), or a report.
+    fn frame(&self, ctx: &mut TickContext<'_>, node: &str) -> Option<TargetFrame> {
+        let Some(name) = self.frame.get::<std::sync::Arc<str>>(ctx.blackboard) else { return Some(TargetFrame::Map) };
+        TargetFrame::parse(&name).map_err(|e| ctx.blackboard.report(format!("{node}: {e}"))).ok()
     }
 }
 
@@ -1134,6 +1168,7 @@ impl Behavior for NavigateLocal {
         const NODE: &str = "navigate_local";
         let now = ctx.now;
         let Some(target) = target_of(&self.target, ctx, NODE) else { return Status::Failure };
+        let Some(frame) = self.frame(ctx, NODE) else { return Status::Failure };
         let (Some(tolerance_m), Some(stuck_timeout_s)) = (
             number(&self.tolerance, ctx, NODE, "tolerance_m", 1.0),
             number(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", 30.0),
@@ -1141,13 +1176,23 @@ impl Behavior for NavigateLocal {
             return Status::Failure;
         };
         let Some((rt, bb)) = split(ctx, NODE) else { return Status::Failure };
-        if prev != Status::Running
-            && let Err(e) = self.driver.start(rt, now)
-        {
-            rt.command = Some(Twist2::ZERO);
-            bb.report(format!("{NODE}: {e}"));
-            return Status::Failure;
+        if prev != Status::Running {
+            self.anchored = None;
+            if let Err(e) = self.driver.start(rt, now) {
+                rt.command = Some(Twist2::ZERO);
+                bb.report(format!("{NODE}: {e}"));
+                return Status::Failure;
+            }
         }
+        // Without a pose estimate yet the target is not used below (the robot waits).
+        let target = match frame {
+            TargetFrame::Map => target,
+            TargetFrame::Robot => match (self.anchored, rt.pose) {
+                (Some(anchored), _) => anchored,
+                (None, Some(pose)) => *self.anchored.insert(pose.pose.transform_point(target)),
+                (None, None) => target,
+            },
+        };
         let remaining = rt.pose.map_or(f64::INFINITY, |p| p.pose.position().distance(target));
         if remaining <= tolerance_m {
             rt.command = Some(Twist2::ZERO);
