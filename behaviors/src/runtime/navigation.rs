@@ -321,7 +321,7 @@ mod tests {
     use spomp_core::{AerialMap, Cell, GridSpec, UNKNOWN_CLASS};
     use spomp_global_planner::synthetic::{class, color};
 
-    /// A 100 × 50 m map (0.5 m cells) of which only `road` (columns × rows of cells) is
+    /// A 100 × 50 m map (0.5 m cells) of which only `roads` (columns × rows of cells) are
     /// mapped, as road; the rest is unknown.
     fn partly_mapped(roads: &[(std::ops::Range<u32>, std::ops::Range<u32>)]) -> AerialMap {
         let mut map = AerialMap::unknown(GridSpec::new(Point2::new(0.0, 0.0), 0.5, 200, 100));

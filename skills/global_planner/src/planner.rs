@@ -881,11 +881,7 @@ impl GlobalPlanner {
         }
         let (x, y) = (p.x, p.y);
         best.map(|(_, o)| NodeIndex::new(o as usize)).ok_or_else(|| {
-            if map.class.get(map.spec.index(cell)) == Some(&UNKNOWN_CLASS) {
-                PlanError::Unmapped { which, x, y }
-            } else {
-                PlanError::NotOnGraph { which, x, y }
-            }
+            if map.is_known(cell) { PlanError::NotOnGraph { which, x, y } } else { PlanError::Unmapped { which, x, y } }
         })
     }
 

@@ -53,8 +53,13 @@ fn report(name: &str, unit: &str, scale: f64, repeats: usize, inner: usize, mut 
     times.sort_by(f64::total_cmp);
     let at = |q: f64| times[((times.len() - 1) as f64 * q) as usize];
     // A closed pipe (`| head`) ends the output quietly instead of panicking.
-    let line = format!("{name:<40} min {:>7.3}  p10 {:>7.3}  median {:>7.3} {unit}", at(0.0), at(0.1), at(0.5));
-    let _ = writeln!(std::io::stdout().lock(), "{line}");
+    let _ = writeln!(
+        std::io::stdout().lock(),
+        "{name:<40} min {:>7.3}  p10 {:>7.3}  median {:>7.3} {unit}",
+        at(0.0),
+        at(0.1),
+        at(0.5)
+    );
 }
 
 fn main() -> Result<(), String> {
