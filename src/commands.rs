@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use spomp_behaviors::builtin_registry;
 use spomp_behaviors::mission::json_schema::mission_schema;
 use spomp_behaviors::mission::{LoadedMission, Rendered, load_mission};
 use spomp_behaviors::registry::PortDirection;
@@ -38,7 +37,7 @@ pub fn print_diagnostics(loaded: &LoadedMission) {
 
 /// `spomp validate` (with `dry_run`, valid missions also run once in the simulator).
 pub fn validate(files: &[PathBuf], json: bool, dry_run: bool) -> Result<ExitCode> {
-    let registry = builtin_registry();
+    let registry = spomp_robot::registry();
     let mut all = Vec::new();
     let mut dry_runs = Vec::new();
     let mut failed_runs = 0;
@@ -89,14 +88,14 @@ pub fn validate(files: &[PathBuf], json: bool, dry_run: bool) -> Result<ExitCode
 
 /// `spomp schema`.
 pub fn schema() -> Result<ExitCode> {
-    let schema = mission_schema(&builtin_registry());
+    let schema = mission_schema(&spomp_robot::registry());
     println!("{}", serde_json::to_string_pretty(&schema).context("serialising the schema")?);
     Ok(ExitCode::SUCCESS)
 }
 
 /// `spomp nodes`.
 pub fn nodes(json: bool, markdown: bool, only: Option<&str>) -> Result<ExitCode> {
-    let registry = builtin_registry();
+    let registry = spomp_robot::registry();
     if markdown {
         print!("{}", registry.reference_markdown());
         return Ok(ExitCode::SUCCESS);
@@ -119,8 +118,7 @@ pub fn nodes(json: bool, markdown: bool, only: Option<&str>) -> Result<ExitCode>
         } else {
             s.robot_kinds.iter().map(|k| k.as_str()).collect::<Vec<_>>().join(", ")
         };
-        let status = if s.implemented { "" } else { "  (declared; not implemented in this build)" };
-        out.push_str(&format!("{}  [{:?}, {kinds}]{status}\n", s.name, s.category));
+        out.push_str(&format!("{}  [{:?}, {kinds}]\n", s.name, s.category));
         out.push_str(&format!("    {}\n", s.description));
         for p in &s.ports {
             let dir = match p.direction {

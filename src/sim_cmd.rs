@@ -11,7 +11,6 @@ use anyhow::{Context, Result, bail};
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
-use spomp_behaviors::builtin_registry;
 use spomp_behaviors::mission::{LoadedMission, load_mission};
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
@@ -87,7 +86,7 @@ pub struct CombinedSummary {
 
 /// `spomp sim`.
 pub fn sim(args: &SimArgs) -> Result<ExitCode> {
-    let registry = builtin_registry();
+    let registry = spomp_robot::registry();
     let loaded = load_mission(&args.mission, &registry);
     if !loaded.is_valid() {
         crate::commands::print_diagnostics(&loaded);
@@ -190,7 +189,7 @@ fn run_trial(
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
     let options = SimOptions { seed, time_limit_s: args.time_limit_s, faults: faults.clone(), ..SimOptions::default() };
-    let sim = Simulation::new(loaded, &builtin_registry(), Arc::new(world), options)
+    let sim = Simulation::new(loaded, &spomp_robot::registry(), Arc::new(world), options)
         .with_context(|| format!("setting up `{}` (seed {seed})", mission.mission))?;
     let mcap_path = trial_dir.join("run.mcap");
     let recorder = if args.no_mcap {
@@ -492,8 +491,12 @@ pub fn dry_run(loaded: &LoadedMission, json: bool) -> Result<(bool, serde_json::
     let seed = mission.sim.as_ref().and_then(|s| s.seed).unwrap_or(1);
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
-    let sim =
-        Simulation::new(loaded, &builtin_registry(), Arc::new(world), SimOptions { seed, ..SimOptions::default() })?;
+    let sim = Simulation::new(
+        loaded,
+        &spomp_robot::registry(),
+        Arc::new(world),
+        SimOptions { seed, ..SimOptions::default() },
+    )?;
     let result = sim.run(&mut spomp_sim::run::NoObserver);
     let s = &result.summary;
     let ok = s.outcome.succeeded();

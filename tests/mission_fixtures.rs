@@ -6,7 +6,6 @@
 
 use std::path::{Path, PathBuf};
 
-use spomp_behaviors::builtin_registry;
 use spomp_behaviors::mission::load_mission;
 
 fn fixtures(prefix: &str) -> Vec<PathBuf> {
@@ -50,7 +49,7 @@ fn expectations(text: &str) -> Vec<Expect> {
 
 #[test]
 fn valid_fixtures_and_shipped_missions_validate() {
-    let registry = builtin_registry();
+    let registry = spomp_robot::registry();
     let mut files = fixtures("valid-");
     let missions = Path::new(env!("CARGO_MANIFEST_DIR")).join("missions");
     for e in std::fs::read_dir(missions).unwrap() {
@@ -69,7 +68,7 @@ fn valid_fixtures_and_shipped_missions_validate() {
 
 #[test]
 fn invalid_fixtures_report_the_right_place_and_field() {
-    let registry = builtin_registry();
+    let registry = spomp_robot::registry();
     let files = fixtures("invalid-");
     assert!(files.len() >= 25, "at least 25 invalid fixtures, found {}", files.len());
     for f in files {
@@ -106,7 +105,7 @@ fn invalid_fixtures_report_the_right_place_and_field() {
 
 #[test]
 fn several_errors_are_reported_in_one_run() {
-    let registry = builtin_registry();
+    let registry = spomp_robot::registry();
     let f = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/missions/invalid-several-errors.yaml");
     let loaded = load_mission(&f, &registry);
     assert_eq!(loaded.diagnostics.len(), 3, "{:#?}", loaded.diagnostics);

@@ -7,8 +7,8 @@ use std::io::Write;
 
 use criterion::measurement::Measurement;
 use criterion::{Criterion, Throughput};
-use spomp_behaviors::mission::{BuildOptions, load_mission};
-use spomp_behaviors::{RobotExecutor, builtin_registry};
+use spomp_behaviors::mission::{BuildOptions, build_executor, load_mission};
+use spomp_behaviors::{TreeExecutor, engine_registry};
 use spomp_core::{Pose2, RobotId, Time};
 
 /// A mission whose one role is a `parallel` over `groups` reactive sequences, each of `leaves`
@@ -28,19 +28,19 @@ fn mission(groups: usize, leaves: usize) -> String {
     s
 }
 
-fn executor(groups: usize, leaves: usize) -> (RobotExecutor, usize) {
+fn executor(groups: usize, leaves: usize) -> (TreeExecutor, usize) {
     let dir = std::env::temp_dir().join(format!("spomp-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let path = dir.join("bench.yaml");
     std::fs::File::create(&path)
         .and_then(|mut f| f.write_all(mission(groups, leaves).as_bytes()))
         .expect("write mission");
-    let registry = builtin_registry();
+    let registry = engine_registry::<()>();
     let loaded = load_mission(&path, &registry);
     assert!(loaded.diagnostics.is_empty(), "{:#?}", loaded.diagnostics);
     let role = &loaded.roles["r"];
-    let ex = RobotExecutor::new(role, &registry, &RobotId::new("r"), Pose2::default(), BuildOptions::default())
-        .expect("build");
+    let ex =
+        build_executor(role, &registry, &RobotId::new("r"), Pose2::default(), BuildOptions::default()).expect("build");
     let n = ex.root().count();
     (ex, n)
 }

@@ -7,6 +7,47 @@ use spomp_core::Time;
 use crate::node::{Behavior, Slot, TickContext};
 use crate::status::Status;
 
+/// The decorator types.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DecoratorType {
+    /// `timeout`.
+    Timeout,
+    /// `retry`.
+    Retry,
+    /// `repeat`.
+    Repeat,
+    /// `inverter`.
+    Inverter,
+    /// `force_success`.
+    ForceSuccess,
+    /// `force_failure`.
+    ForceFailure,
+    /// `run_once`.
+    RunOnce,
+    /// `delay`.
+    Delay,
+    /// `rate_limit`.
+    RateLimit,
+}
+
+impl DecoratorType {
+    /// By mission name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Some(match name {
+            "timeout" => DecoratorType::Timeout,
+            "retry" => DecoratorType::Retry,
+            "repeat" => DecoratorType::Repeat,
+            "inverter" => DecoratorType::Inverter,
+            "force_success" => DecoratorType::ForceSuccess,
+            "force_failure" => DecoratorType::ForceFailure,
+            "run_once" => DecoratorType::RunOnce,
+            "delay" => DecoratorType::Delay,
+            "rate_limit" => DecoratorType::RateLimit,
+            _ => return None,
+        })
+    }
+}
+
 /// What a result-mapping decorator does to its child's outcome.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ResultMap {
@@ -19,25 +60,25 @@ pub enum ResultMap {
 }
 
 /// `inverter`, `force_success`, `force_failure`: Running passes through.
-pub struct MapResult {
-    child: Vec<Slot>,
+pub struct MapResult<E = ()> {
+    child: Vec<Slot<E>>,
     map: ResultMap,
 }
 
-impl MapResult {
+impl<E: 'static> MapResult<E> {
     /// A result-mapping decorator.
-    pub fn new(child: Slot, map: ResultMap) -> Self {
+    pub fn new(child: Slot<E>, map: ResultMap) -> Self {
         MapResult { child: vec![child], map }
     }
 }
 
-fn one(child: &mut [Slot]) -> &mut Slot {
+fn one<E>(child: &mut [Slot<E>]) -> &mut Slot<E> {
     // Decorators are built with exactly one child (the loader checks it).
     &mut child[0]
 }
 
 /// Ticks the child and, when it finished, resets it so the next run starts fresh.
-fn tick_once(child: &mut [Slot], ctx: &mut TickContext<'_>) -> Status {
+fn tick_once<E: 'static>(child: &mut [Slot<E>], ctx: &mut TickContext<'_, E>) -> Status {
     let c = one(child);
     let s = c.tick(ctx);
     if s.is_done() {
@@ -46,8 +87,8 @@ fn tick_once(child: &mut [Slot], ctx: &mut TickContext<'_>) -> Status {
     s
 }
 
-impl Behavior for MapResult {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E: 'static> Behavior<E> for MapResult<E> {
+    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         let s = tick_once(&mut self.child, ctx);
         match (self.map, s) {
             (_, Status::Running | Status::Idle) => s,
@@ -57,30 +98,30 @@ impl Behavior for MapResult {
             (ResultMap::ForceFailure, _) => Status::Failure,
         }
     }
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
+    fn halt(&mut self, ctx: &mut TickContext<'_, E>) {
         one(&mut self.child).halt(ctx);
     }
-    fn children(&self) -> &[Slot] {
+    fn children(&self) -> &[Slot<E>] {
         &self.child
     }
 }
 
 /// Fails (halting the child) if the child has not finished within the duration.
-pub struct Timeout {
-    child: Vec<Slot>,
+pub struct Timeout<E = ()> {
+    child: Vec<Slot<E>>,
     duration: Duration,
     deadline: Time,
 }
 
-impl Timeout {
+impl<E: 'static> Timeout<E> {
     /// A timeout.
-    pub fn new(child: Slot, duration: Duration) -> Self {
+    pub fn new(child: Slot<E>, duration: Duration) -> Self {
         Timeout { child: vec![child], duration, deadline: Time::ZERO }
     }
 }
 
-impl Behavior for Timeout {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E: 'static> Behavior<E> for Timeout<E> {
+    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if prev != Status::Running {
             self.deadline = ctx.now + self.duration;
         }
@@ -90,30 +131,30 @@ impl Behavior for Timeout {
         }
         tick_once(&mut self.child, ctx)
     }
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
+    fn halt(&mut self, ctx: &mut TickContext<'_, E>) {
         one(&mut self.child).halt(ctx);
     }
-    fn children(&self) -> &[Slot] {
+    fn children(&self) -> &[Slot<E>] {
         &self.child
     }
 }
 
 /// Re-runs a failing child, up to `max_attempts` attempts in all.
-pub struct Retry {
-    child: Vec<Slot>,
+pub struct Retry<E = ()> {
+    child: Vec<Slot<E>>,
     max_attempts: u32,
     attempts: u32,
 }
 
-impl Retry {
+impl<E: 'static> Retry<E> {
     /// A retry decorator.
-    pub fn new(child: Slot, max_attempts: u32) -> Self {
+    pub fn new(child: Slot<E>, max_attempts: u32) -> Self {
         Retry { child: vec![child], max_attempts: max_attempts.max(1), attempts: 0 }
     }
 }
 
-impl Behavior for Retry {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E: 'static> Behavior<E> for Retry<E> {
+    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if prev != Status::Running {
             self.attempts = 0;
         }
@@ -139,32 +180,32 @@ impl Behavior for Retry {
             }
         }
     }
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
+    fn halt(&mut self, ctx: &mut TickContext<'_, E>) {
         one(&mut self.child).halt(ctx);
         self.attempts = 0;
     }
-    fn children(&self) -> &[Slot] {
+    fn children(&self) -> &[Slot<E>] {
         &self.child
     }
 }
 
 /// Re-runs a succeeding child `times` times (or forever); fails as soon as the child fails.
 /// Each repetition starts on a new tick, so an instant child cannot spin a tick forever.
-pub struct Repeat {
-    child: Vec<Slot>,
+pub struct Repeat<E = ()> {
+    child: Vec<Slot<E>>,
     times: Option<u32>,
     done: u32,
 }
 
-impl Repeat {
+impl<E: 'static> Repeat<E> {
     /// A repeat decorator; `None` repeats forever.
-    pub fn new(child: Slot, times: Option<u32>) -> Self {
+    pub fn new(child: Slot<E>, times: Option<u32>) -> Self {
         Repeat { child: vec![child], times, done: 0 }
     }
 }
 
-impl Behavior for Repeat {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E: 'static> Behavior<E> for Repeat<E> {
+    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if prev != Status::Running {
             self.done = 0;
         }
@@ -189,30 +230,30 @@ impl Behavior for Repeat {
             other => other,
         }
     }
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
+    fn halt(&mut self, ctx: &mut TickContext<'_, E>) {
         one(&mut self.child).halt(ctx);
         self.done = 0;
     }
-    fn children(&self) -> &[Slot] {
+    fn children(&self) -> &[Slot<E>] {
         &self.child
     }
 }
 
 /// Runs the child to completion once; afterwards returns that outcome without ticking it.
-pub struct RunOnce {
-    child: Vec<Slot>,
+pub struct RunOnce<E = ()> {
+    child: Vec<Slot<E>>,
     outcome: Option<Status>,
 }
 
-impl RunOnce {
+impl<E: 'static> RunOnce<E> {
     /// A run-once decorator.
-    pub fn new(child: Slot) -> Self {
+    pub fn new(child: Slot<E>) -> Self {
         RunOnce { child: vec![child], outcome: None }
     }
 }
 
-impl Behavior for RunOnce {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E: 'static> Behavior<E> for RunOnce<E> {
+    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if let Some(s) = self.outcome {
             return s;
         }
@@ -222,30 +263,30 @@ impl Behavior for RunOnce {
         }
         s
     }
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
+    fn halt(&mut self, ctx: &mut TickContext<'_, E>) {
         one(&mut self.child).halt(ctx);
     }
-    fn children(&self) -> &[Slot] {
+    fn children(&self) -> &[Slot<E>] {
         &self.child
     }
 }
 
 /// Waits for the delay, then runs the child.
-pub struct Delay {
-    child: Vec<Slot>,
+pub struct Delay<E = ()> {
+    child: Vec<Slot<E>>,
     delay: Duration,
     start_at: Time,
 }
 
-impl Delay {
+impl<E: 'static> Delay<E> {
     /// A delay decorator.
-    pub fn new(child: Slot, delay: Duration) -> Self {
+    pub fn new(child: Slot<E>, delay: Duration) -> Self {
         Delay { child: vec![child], delay, start_at: Time::ZERO }
     }
 }
 
-impl Behavior for Delay {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E: 'static> Behavior<E> for Delay<E> {
+    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if prev != Status::Running {
             self.start_at = ctx.now + self.delay;
         }
@@ -254,32 +295,32 @@ impl Behavior for Delay {
         }
         tick_once(&mut self.child, ctx)
     }
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
+    fn halt(&mut self, ctx: &mut TickContext<'_, E>) {
         one(&mut self.child).halt(ctx);
     }
-    fn children(&self) -> &[Slot] {
+    fn children(&self) -> &[Slot<E>] {
         &self.child
     }
 }
 
 /// Ticks the child at most once per period; in between it reports Running (the child keeps
 /// its state). Use it to throttle expensive checks inside a faster tree.
-pub struct RateLimit {
-    child: Vec<Slot>,
+pub struct RateLimit<E = ()> {
+    child: Vec<Slot<E>>,
     period: Duration,
     next_at: Option<Time>,
 }
 
-impl RateLimit {
+impl<E: 'static> RateLimit<E> {
     /// A rate limiter at `hz` ticks per second.
-    pub fn new(child: Slot, hz: f64) -> Self {
+    pub fn new(child: Slot<E>, hz: f64) -> Self {
         let period = Duration::from_secs_f64(1.0 / hz.max(1e-6));
         RateLimit { child: vec![child], period, next_at: None }
     }
 }
 
-impl Behavior for RateLimit {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E: 'static> Behavior<E> for RateLimit<E> {
+    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if let Some(t) = self.next_at
             && ctx.now < t
         {
@@ -288,10 +329,10 @@ impl Behavior for RateLimit {
         self.next_at = Some(ctx.now + self.period);
         tick_once(&mut self.child, ctx)
     }
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
+    fn halt(&mut self, ctx: &mut TickContext<'_, E>) {
         one(&mut self.child).halt(ctx);
     }
-    fn children(&self) -> &[Slot] {
+    fn children(&self) -> &[Slot<E>] {
         &self.child
     }
 }

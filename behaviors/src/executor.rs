@@ -1,50 +1,29 @@
-//! One robot's behaviour tree, ticked against its clock.
+//! A tree and its blackboard, ticked against a clock: the engine's executor. It knows nothing
+//! of missions; the mission language builds one from a compiled role
+//! (`mission::build_executor`).
 
-use std::any::Any;
+use spomp_core::Time;
 
-use spomp_core::{Point2, Pose2, RobotId, Time};
-
-use crate::blackboard::{BbValue, Blackboard};
-use crate::mission::{BuildError, BuildOptions, CompiledRole, build_tree};
+use crate::blackboard::Blackboard;
 use crate::node::{Slot, TickContext, TreeObserver};
-use crate::registry::NodeRegistry;
 use crate::status::Status;
 
-/// A robot's tree and blackboard.
-pub struct RobotExecutor {
-    root: Slot,
+/// A tree acting on an environment `E` (a robot runtime), with its blackboard.
+pub struct TreeExecutor<E = ()> {
+    root: Slot<E>,
     blackboard: Blackboard,
     ticks: u64,
     last_status: Status,
 }
 
-impl RobotExecutor {
-    /// Builds a robot's tree from its compiled role and fills the provided blackboard entries.
-    pub fn new(
-        role: &CompiledRole,
-        registry: &NodeRegistry,
-        robot: &RobotId,
-        start: Pose2,
-        opts: BuildOptions,
-    ) -> Result<Self, BuildError> {
-        let mut blackboard = Blackboard::new();
-        let root = build_tree(&role.tree, registry, &mut blackboard, opts)?;
-        blackboard.set_by_name("robot_id", BbValue::Robot(robot.clone()));
-        blackboard.set_by_name("start_pose", BbValue::Pose(start));
-        blackboard.set_by_name("home", BbValue::Point(Point2::new(start.x, start.y)));
-        for (name, value) in &role.initial {
-            blackboard.set_by_name(name, value.clone());
-        }
-        Ok(RobotExecutor { root, blackboard, ticks: 0, last_status: Status::Idle })
-    }
-
-    /// An executor over an already built tree (tests, benchmarks).
-    pub fn from_root(root: Slot, blackboard: Blackboard) -> Self {
-        RobotExecutor { root, blackboard, ticks: 0, last_status: Status::Idle }
+impl<E> TreeExecutor<E> {
+    /// An executor over a built tree and the blackboard its ports were bound to.
+    pub fn from_root(root: Slot<E>, blackboard: Blackboard) -> Self {
+        TreeExecutor { root, blackboard, ticks: 0, last_status: Status::Idle }
     }
 
     /// Ticks the root once at `now`.
-    pub fn tick(&mut self, now: Time, env: &mut dyn Any, mut observer: Option<&mut dyn TreeObserver>) -> Status {
+    pub fn tick(&mut self, now: Time, env: &mut E, mut observer: Option<&mut dyn TreeObserver>) -> Status {
         self.ticks += 1;
         let s = {
             let mut ctx = TickContext {
@@ -61,8 +40,9 @@ impl RobotExecutor {
         s
     }
 
-    /// Halts the whole tree (mission end, robot killed).
-    pub fn halt(&mut self, now: Time, env: &mut dyn Any, mut observer: Option<&mut dyn TreeObserver>) {
+    /// Halts the whole tree (mission end, robot killed); afterwards [`TreeExecutor::status`]
+    /// is `Idle`, like the root.
+    pub fn halt(&mut self, now: Time, env: &mut E, mut observer: Option<&mut dyn TreeObserver>) {
         let mut ctx = TickContext {
             now,
             tick: self.ticks,
@@ -71,9 +51,10 @@ impl RobotExecutor {
             observer: shorten(&mut observer),
         };
         self.root.halt(&mut ctx);
+        self.last_status = self.root.status();
     }
 
-    /// Root status after the last tick.
+    /// The root's status: after the last tick, or `Idle` after a halt.
     pub fn status(&self) -> Status {
         self.last_status
     }
@@ -89,7 +70,7 @@ impl RobotExecutor {
     }
 
     /// The root node.
-    pub fn root(&self) -> &Slot {
+    pub fn root(&self) -> &Slot<E> {
         &self.root
     }
 

@@ -1,12 +1,17 @@
-//! The behaviour engine of spomp, its node library, and the mission language.
+//! The behaviour engine of spomp and the mission language. Robots, and the domain nodes that
+//! act on them, are one layer up (`spomp-robot`).
 //!
 //! - [`node`], [`control`], [`decorators`], [`state_machine`]: the engine. Nodes report
 //!   [`Status`]; control nodes own their children's [`Slot`]s; halting is explicit and recursive.
+//!   Trees are generic over the environment `E` their leaves act on (a robot runtime), so a
+//!   leaf gets it typed in its [`TickContext`].
 //! - [`blackboard`]: the typed per-robot blackboard, keys interned at build time.
 //! - [`registry`] and [`library`]: node types registered by name with their ports declared once;
-//!   the manifest feeds `spomp nodes`, the docs and the JSON schema.
-//! - [`mission`]: YAML missions, staged validation, compilation into trees.
-//! - [`executor`]: one robot's tree, ticked against a clock.
+//!   the manifest feeds `spomp nodes`, the docs and the JSON schema. [`library`] holds the
+//!   engine's own types (structural and generic leaves).
+//! - [`mission`]: YAML missions, staged validation, compilation into trees; it builds engine
+//!   trees, the engine knows nothing of YAML.
+//! - [`executor`]: a tree and its blackboard, ticked against a clock.
 //! - [`job`]: long work started by a node and polled on later ticks.
 //! - [`trace`]: observers that print or record transitions.
 
@@ -19,15 +24,13 @@ pub mod library;
 pub mod mission;
 pub mod node;
 pub mod registry;
-pub mod runtime;
 pub mod state_machine;
 pub mod status;
 pub mod trace;
 
 pub use blackboard::{BbValue, Binding, Blackboard, PortType};
-pub use executor::RobotExecutor;
-pub use library::builtin_registry;
+pub use executor::TreeExecutor;
+pub use library::engine_registry;
 pub use node::{Behavior, NodeInfo, Slot, TickContext, TreeObserver};
-pub use registry::{Category, NodeRegistry, NodeTypeSpec, PortSpec};
-pub use runtime::RobotRuntime;
+pub use registry::{Category, LeafType, NodeCatalog, NodeRegistry, NodeTypeSpec, PortSpec};
 pub use status::Status;

@@ -1,6 +1,5 @@
 //! The node interface, the tick context and the slot that wraps every node in a tree.
 
-use std::any::Any;
 use std::sync::Arc;
 
 use spomp_core::Time;
@@ -9,21 +8,21 @@ use crate::blackboard::Blackboard;
 use crate::status::Status;
 
 /// What a node sees during a tick.
-pub struct TickContext<'a> {
+pub struct TickContext<'a, E = ()> {
     /// The robot's current time (simulated or wall), from its `Clock`.
     pub now: Time,
     /// Root ticks so far.
     pub tick: u64,
     /// The robot's blackboard.
     pub blackboard: &'a mut Blackboard,
-    /// The robot runtime (platform, skills, team state): domain nodes downcast it to the type
-    /// they need and fail loudly if it is not there.
-    pub env: &'a mut dyn Any,
+    /// The environment the tree acts on, typed: for a robot's tree the robot runtime
+    /// (`spomp-robot`), for engine tests anything (`()` by default).
+    pub env: &'a mut E,
     /// Who hears about status transitions.
     pub observer: Option<&'a mut dyn TreeObserver>,
 }
 
-impl TickContext<'_> {
+impl<E> TickContext<'_, E> {
     #[inline]
     fn notify(&mut self, node: &NodeInfo, from: Status, to: Status) {
         if let Some(obs) = self.observer.as_deref_mut() {
@@ -65,34 +64,34 @@ pub struct NodeInfo {
 }
 
 /// The behaviour of a node. Control nodes own their children's [`Slot`]s.
-pub trait Behavior: Send {
+pub trait Behavior<E = ()>: Send {
     /// Runs one step. `prev` is the node's status before this tick: anything but `Running`
     /// means the node is (re)starting.
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status;
+    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_, E>) -> Status;
 
     /// Called when the node is halted while `Running`: cancel work, stop motion, halt
     /// children. The slot has already checked that the node was running.
-    fn halt(&mut self, _ctx: &mut TickContext<'_>) {}
+    fn halt(&mut self, _ctx: &mut TickContext<'_, E>) {}
 
     /// Resets any memory after the node finished (children reset by their parents).
     fn reset(&mut self) {}
 
     /// Children, for traversal (tree printing, counting).
-    fn children(&self) -> &[Slot] {
+    fn children(&self) -> &[Slot<E>] {
         &[]
     }
 }
 
 /// A node in a tree: its identity, its status and its behaviour.
-pub struct Slot {
+pub struct Slot<E = ()> {
     info: NodeInfo,
     status: Status,
-    behavior: Box<dyn Behavior>,
+    behavior: Box<dyn Behavior<E>>,
 }
 
-impl Slot {
+impl<E> Slot<E> {
     /// Wraps a behaviour.
-    pub fn new(info: NodeInfo, behavior: Box<dyn Behavior>) -> Self {
+    pub fn new(info: NodeInfo, behavior: Box<dyn Behavior<E>>) -> Self {
         Slot { info, status: Status::Idle, behavior }
     }
 
@@ -108,13 +107,13 @@ impl Slot {
     }
 
     /// The behaviour, for inspection.
-    pub fn behavior(&self) -> &dyn Behavior {
+    pub fn behavior(&self) -> &dyn Behavior<E> {
         &*self.behavior
     }
 
     /// Ticks the node and records the transition.
     #[inline]
-    pub fn tick(&mut self, ctx: &mut TickContext<'_>) -> Status {
+    pub fn tick(&mut self, ctx: &mut TickContext<'_, E>) -> Status {
         let prev = self.status;
         let next = self.behavior.tick(prev, ctx);
         if next != prev {
@@ -125,7 +124,7 @@ impl Slot {
     }
 
     /// Halts the node if it is running (recursively, through its behaviour) and sets it idle.
-    pub fn halt(&mut self, ctx: &mut TickContext<'_>) {
+    pub fn halt(&mut self, ctx: &mut TickContext<'_, E>) {
         if self.status == Status::Running {
             self.behavior.halt(ctx);
         }
@@ -133,7 +132,7 @@ impl Slot {
     }
 
     /// Returns a finished node to idle so it can run again (no halt: it is not running).
-    pub fn reset(&mut self, ctx: &mut TickContext<'_>) {
+    pub fn reset(&mut self, ctx: &mut TickContext<'_, E>) {
         if self.status == Status::Running {
             self.halt(ctx);
             return;
@@ -142,7 +141,7 @@ impl Slot {
         self.set_idle(ctx);
     }
 
-    fn set_idle(&mut self, ctx: &mut TickContext<'_>) {
+    fn set_idle(&mut self, ctx: &mut TickContext<'_, E>) {
         if self.status != Status::Idle {
             let prev = self.status;
             self.status = Status::Idle;
@@ -152,11 +151,11 @@ impl Slot {
 
     /// Number of nodes in this subtree.
     pub fn count(&self) -> usize {
-        1 + self.behavior.children().iter().map(Slot::count).sum::<usize>()
+        1 + self.behavior.children().iter().map(Slot::<E>::count).sum::<usize>()
     }
 
     /// Visits the subtree depth-first with the depth of each node.
-    pub fn visit(&self, depth: usize, f: &mut dyn FnMut(&Slot, usize)) {
+    pub fn visit(&self, depth: usize, f: &mut dyn FnMut(&Slot<E>, usize)) {
         f(self, depth);
         for c in self.behavior.children() {
             c.visit(depth + 1, f);
@@ -165,14 +164,14 @@ impl Slot {
 }
 
 /// Halts every child of a control node.
-pub fn halt_all(children: &mut [Slot], ctx: &mut TickContext<'_>) {
+pub fn halt_all<E>(children: &mut [Slot<E>], ctx: &mut TickContext<'_, E>) {
     for c in children {
         c.halt(ctx);
     }
 }
 
 /// Resets every child of a control node (halting any still running).
-pub fn reset_all(children: &mut [Slot], ctx: &mut TickContext<'_>) {
+pub fn reset_all<E>(children: &mut [Slot<E>], ctx: &mut TickContext<'_, E>) {
     for c in children {
         c.reset(ctx);
     }

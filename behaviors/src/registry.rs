@@ -2,6 +2,7 @@
 //! and the JSON schema are generated from.
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use serde::Serialize;
 use spomp_core::RobotKind;
@@ -123,11 +124,13 @@ impl PortBindings {
     }
 }
 
-/// Builds a leaf's behaviour from its bound ports. Errors name what is wrong with the
-/// parameters.
-pub type LeafFactory = fn(&PortBindings) -> Result<Box<dyn Behavior>, String>;
+/// Builds a leaf's behaviour from its bound ports; errors name what is wrong with the
+/// parameters. A closure, so a node type can carry configuration or handles to the
+/// services it calls.
+pub type LeafFactory<E> = Arc<dyn Fn(&PortBindings) -> Result<Box<dyn Behavior<E>>, String> + Send + Sync>;
 
-/// A registered node type.
+/// A registered node type: what the mission language and the docs know of it. Leaves also
+/// have a factory, kept beside the spec in the [`NodeRegistry`].
 #[derive(Clone, Serialize)]
 pub struct NodeTypeSpec {
     /// Name used as the key in missions.
@@ -143,10 +146,6 @@ pub struct NodeTypeSpec {
     /// Skills it calls (`local_planner`, `global_planner`, `mapping`, `teamstate`,
     /// `localization`).
     pub skills: Vec<&'static str>,
-    /// Whether this build can run it; ticking an unimplemented node fails loudly.
-    pub implemented: bool,
-    #[serde(skip)]
-    pub(crate) factory: Option<LeafFactory>,
 }
 
 impl std::fmt::Debug for NodeTypeSpec {
@@ -156,29 +155,24 @@ impl std::fmt::Debug for NodeTypeSpec {
 }
 
 impl NodeTypeSpec {
-    /// A leaf type (action or condition) with its factory.
-    pub fn leaf(
+    /// A leaf type (action or condition) with its factory; register it with
+    /// [`NodeRegistry::register`].
+    pub fn leaf<E, F>(
         name: &'static str,
         category: Category,
         description: &'static str,
         ports: Vec<PortSpec>,
-        factory: LeafFactory,
-    ) -> Self {
-        NodeTypeSpec { factory: Some(factory), ..Self::structural(name, category, description, ports) }
+        factory: F,
+    ) -> LeafType<E>
+    where
+        F: Fn(&PortBindings) -> Result<Box<dyn Behavior<E>>, String> + Send + Sync + 'static,
+    {
+        LeafType { spec: Self::structural(name, category, description, ports), factory: Arc::new(factory) }
     }
 
     /// A built-in structural type (control, decorator, state machine, subtree).
     pub fn structural(name: &'static str, category: Category, description: &'static str, ports: Vec<PortSpec>) -> Self {
-        NodeTypeSpec {
-            name,
-            category,
-            description,
-            ports,
-            robot_kinds: Vec::new(),
-            skills: Vec::new(),
-            implemented: true,
-            factory: None,
-        }
+        NodeTypeSpec { name, category, description, ports, robot_kinds: Vec::new(), skills: Vec::new() }
     }
 
     /// Restricts the robot kinds.
@@ -193,41 +187,179 @@ impl NodeTypeSpec {
         self
     }
 
-    /// Marks it as not implemented in this build.
-    pub fn unimplemented(mut self) -> Self {
-        self.implemented = false;
-        self
-    }
-
     /// A port by name.
     pub fn port(&self, name: &str) -> Option<&PortSpec> {
         self.ports.iter().find(|p| p.name == name)
     }
+}
 
-    /// The factory (leaves only).
-    pub fn factory(&self) -> Option<LeafFactory> {
-        self.factory
+/// A leaf node type ready to register: its spec and its factory.
+pub struct LeafType<E> {
+    /// What the mission language and the docs know of it.
+    pub spec: NodeTypeSpec,
+    factory: LeafFactory<E>,
+}
+
+impl<E> LeafType<E> {
+    /// Restricts the robot kinds.
+    pub fn for_kinds(mut self, kinds: &[RobotKind]) -> Self {
+        self.spec = self.spec.for_kinds(kinds);
+        self
+    }
+
+    /// Declares the skills it calls.
+    pub fn using_skills(mut self, skills: &[&'static str]) -> Self {
+        self.spec = self.spec.using_skills(skills);
+        self
     }
 }
 
-/// All node types known to a build, by name.
-#[derive(Clone, Default, Debug)]
-pub struct NodeRegistry {
-    types: BTreeMap<&'static str, NodeTypeSpec>,
+/// What can be registered: a structural spec (built by the mission language itself) or a leaf
+/// type with its factory.
+pub enum Registration<E> {
+    /// Control, decorator, state machine or subtree.
+    Structural(NodeTypeSpec),
+    /// An action or condition.
+    Leaf(LeafType<E>),
 }
 
-impl NodeRegistry {
+impl<E> From<NodeTypeSpec> for Registration<E> {
+    fn from(spec: NodeTypeSpec) -> Self {
+        Registration::Structural(spec)
+    }
+}
+
+impl<E> From<LeafType<E>> for Registration<E> {
+    fn from(leaf: LeafType<E>) -> Self {
+        Registration::Leaf(leaf)
+    }
+}
+
+/// The node types of a build as the mission language sees them: specs only, whatever the
+/// robot type the trees will run on.
+#[derive(Clone, Default)]
+pub struct NodeCatalog {
+    types: BTreeMap<&'static str, NodeTypeSpec>,
+    robot_checks: Option<Arc<dyn RobotChecks>>,
+}
+
+impl std::fmt::Debug for NodeCatalog {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("NodeCatalog").field("types", &self.types.keys()).finish()
+    }
+}
+
+/// A problem the robot layer found in a mission, at a field path of the mission file
+/// (`["team", "2", "navigation", "terrain", "inflation_m"]`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RobotProblem {
+    /// Field path in the mission file (mapping keys and list indices).
+    pub path: Vec<String>,
+    /// What is wrong, in the skill's words.
+    pub message: String,
+}
+
+/// What the mission language leaves to the layer that turns a mission into robots
+/// (`spomp-robot`): the robots' `navigation:` settings, whose types, defaults and rules are
+/// the skills', and the checks of every parameter the skills validate. Registered beside the
+/// node types, so the language stays below the robot layer.
+pub trait RobotChecks: Send + Sync {
+    /// The JSON Schema of a `navigation:` section (with its own `$defs`).
+    fn navigation_schema(&self) -> serde_json::Value;
+    /// Checks every robot of a typed mission as the robot layer will set it up.
+    fn check(&self, mission: &crate::mission::MissionFile) -> Vec<RobotProblem>;
+}
+
+/// All node types known to a build, by name, with the factories that build leaves for trees
+/// acting on `E` (the robot runtime; `()` for engine-only trees). Derefs to its
+/// [`NodeCatalog`], which is all the mission language needs.
+pub struct NodeRegistry<E> {
+    catalog: NodeCatalog,
+    factories: BTreeMap<&'static str, LeafFactory<E>>,
+}
+
+impl<E> Clone for NodeRegistry<E> {
+    fn clone(&self) -> Self {
+        NodeRegistry { catalog: self.catalog.clone(), factories: self.factories.clone() }
+    }
+}
+
+impl<E> Default for NodeRegistry<E> {
+    fn default() -> Self {
+        NodeRegistry { catalog: NodeCatalog::default(), factories: BTreeMap::new() }
+    }
+}
+
+impl<E> std::fmt::Debug for NodeRegistry<E> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("NodeRegistry").field("types", &self.catalog.types.keys()).finish()
+    }
+}
+
+impl<E> std::ops::Deref for NodeRegistry<E> {
+    type Target = NodeCatalog;
+    fn deref(&self) -> &NodeCatalog {
+        &self.catalog
+    }
+}
+
+/// A second registration under a name already taken.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("node type `{0}` is registered twice")]
+pub struct DuplicateNodeType(pub &'static str);
+
+impl<E> NodeRegistry<E> {
     /// An empty registry.
     pub fn empty() -> Self {
         Self::default()
     }
 
-    /// Registers a type; a later registration of the same name replaces the earlier one (so an
-    /// adapter can supply the real implementation of a declared node).
-    pub fn register(&mut self, spec: NodeTypeSpec) {
-        self.types.insert(spec.name, spec);
+    /// Registers a node type. A name registered twice is a programming error of the build that
+    /// registers it, reported rather than silently replacing the first.
+    pub fn try_register(&mut self, r: impl Into<Registration<E>>) -> Result<(), DuplicateNodeType> {
+        let (spec, factory) = match r.into() {
+            Registration::Structural(spec) => (spec, None),
+            Registration::Leaf(LeafType { spec, factory }) => (spec, Some(factory)),
+        };
+        if self.catalog.types.contains_key(spec.name) {
+            return Err(DuplicateNodeType(spec.name));
+        }
+        if let Some(f) = factory {
+            self.factories.insert(spec.name, f);
+        }
+        self.catalog.types.insert(spec.name, spec);
+        Ok(())
     }
 
+    /// Registers a node type of the built-in libraries.
+    ///
+    /// # Panics
+    /// When the name is taken: the built-in libraries register distinct names, which a test
+    /// checks; a lab's own types go through [`NodeRegistry::try_register`].
+    #[allow(clippy::panic)]
+    pub fn register(&mut self, r: impl Into<Registration<E>>) {
+        if let Err(e) = self.try_register(r) {
+            panic!("{e}");
+        }
+    }
+
+    /// The factory of a leaf type.
+    pub fn factory(&self, name: &str) -> Option<&LeafFactory<E>> {
+        self.factories.get(name)
+    }
+
+    /// The specs, for the mission language.
+    pub fn catalog(&self) -> &NodeCatalog {
+        &self.catalog
+    }
+
+    /// Sets the robot layer's checks of robot settings (see [`RobotChecks`]).
+    pub fn set_robot_checks(&mut self, checks: Arc<dyn RobotChecks>) {
+        self.catalog.robot_checks = Some(checks);
+    }
+}
+
+impl NodeCatalog {
     /// A type by name.
     pub fn get(&self, name: &str) -> Option<&NodeTypeSpec> {
         self.types.get(name)
@@ -241,6 +373,11 @@ impl NodeRegistry {
     /// All names.
     pub fn names(&self) -> Vec<&'static str> {
         self.types.keys().copied().collect()
+    }
+
+    /// The robot layer's checks, when a robot layer is registered.
+    pub fn robot_checks(&self) -> Option<&dyn RobotChecks> {
+        self.robot_checks.as_deref()
     }
 
     /// The manifest: every node type with its ports, as JSON.
@@ -273,9 +410,6 @@ impl NodeRegistry {
                 out.push_str(&format!("\nRobots: {kinds}."));
                 if !spec.skills.is_empty() {
                     out.push_str(&format!(" Skills: {}.", spec.skills.join(", ")));
-                }
-                if !spec.implemented {
-                    out.push_str(" *Declared; not implemented in this build.*");
                 }
                 out.push('\n');
                 if spec.ports.is_empty() {

@@ -50,21 +50,21 @@ pub struct State {
 }
 
 /// The state-machine behaviour.
-pub struct StateMachine {
+pub struct StateMachine<E = ()> {
     states: Vec<State>,
     initial: usize,
     current: usize,
     entered_at: Time,
-    children: Vec<Slot>,
+    children: Vec<Slot<E>>,
 }
 
-impl StateMachine {
+impl<E: 'static> StateMachine<E> {
     /// A state machine starting in `initial`; states refer to `children` by index.
-    pub fn new(states: Vec<State>, children: Vec<Slot>, initial: usize) -> Self {
+    pub fn new(states: Vec<State>, children: Vec<Slot<E>>, initial: usize) -> Self {
         StateMachine { states, initial, current: initial, entered_at: Time::ZERO, children }
     }
 
-    fn run_slot(&mut self, state: usize) -> Option<&mut Slot> {
+    fn run_slot(&mut self, state: usize) -> Option<&mut Slot<E>> {
         let i = self.states.get(state)?.run?;
         self.children.get_mut(i)
     }
@@ -74,7 +74,7 @@ impl StateMachine {
         self.states.get(self.current).map_or("", |s| s.name.as_str())
     }
 
-    fn enter(&mut self, target: usize, ctx: &mut TickContext<'_>) {
+    fn enter(&mut self, target: usize, ctx: &mut TickContext<'_, E>) {
         if let Some(run) = self.run_slot(self.current) {
             run.halt(ctx);
         }
@@ -86,7 +86,7 @@ impl StateMachine {
     }
 
     /// A timer or event transition of the current state that fires now.
-    fn fired(&self, ctx: &mut TickContext<'_>) -> Option<usize> {
+    fn fired(&self, ctx: &mut TickContext<'_, E>) -> Option<usize> {
         let state = self.states.get(self.current)?;
         let elapsed = ctx.now.since(self.entered_at);
         for t in &state.transitions {
@@ -100,8 +100,8 @@ impl StateMachine {
     }
 }
 
-impl Behavior for StateMachine {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E: 'static> Behavior<E> for StateMachine<E> {
+    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if prev != Status::Running {
             self.current = self.initial;
             self.entered_at = ctx.now;
@@ -140,7 +140,7 @@ impl Behavior for StateMachine {
         Status::Running
     }
 
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
+    fn halt(&mut self, ctx: &mut TickContext<'_, E>) {
         if let Some(run) = self.run_slot(self.current) {
             run.halt(ctx);
         }
@@ -151,7 +151,7 @@ impl Behavior for StateMachine {
         self.current = self.initial;
     }
 
-    fn children(&self) -> &[Slot] {
+    fn children(&self) -> &[Slot<E>] {
         &self.children
     }
 }

@@ -13,7 +13,7 @@ use spomp_behaviors::job::{Job, JobPoll, JobRunner};
 use spomp_behaviors::node::{Behavior, NodeInfo, Slot, TickContext};
 use spomp_behaviors::state_machine::{State, StateMachine, Transition, Trigger};
 use spomp_behaviors::trace::Recorder;
-use spomp_behaviors::{RobotExecutor, Status};
+use spomp_behaviors::{Status, TreeExecutor};
 use spomp_core::Time;
 
 /// What a scripted leaf saw.
@@ -58,8 +58,8 @@ fn slot(name: &str, b: Box<dyn Behavior>) -> Slot {
 }
 
 /// Ticks `root` at 10 Hz from t = 0 and returns the statuses.
-fn run(root: Slot, ticks: usize) -> (Vec<Status>, RobotExecutor) {
-    let mut ex = RobotExecutor::from_root(root, Blackboard::new());
+fn run(root: Slot, ticks: usize) -> (Vec<Status>, TreeExecutor) {
+    let mut ex = TreeExecutor::from_root(root, Blackboard::new());
     let mut out = Vec::new();
     for i in 0..ticks {
         out.push(ex.tick(Time::from_millis(100 * i as i64), &mut (), None));
@@ -270,7 +270,7 @@ fn state_machine_transitions_on_outcome_and_events() {
         ("b", Some(b), vec![(Trigger::Event("go".into()), 2)], None),
         ("end", None, vec![], Some(F)),
     ]);
-    let mut ex = RobotExecutor::from_root(root, Blackboard::new());
+    let mut ex = TreeExecutor::from_root(root, Blackboard::new());
     assert_eq!(ex.tick(Time::ZERO, &mut (), None), R, "a failed → b");
     assert_eq!(ex.tick(Time::from_millis(100), &mut (), None), R);
     ex.blackboard_mut().raise_event("go");
@@ -291,7 +291,7 @@ fn halting_is_recursive_and_observed() {
     let (a, la) = leaf("a", &[R]);
     let inner = slot("inner", Box::new(Ordered::sequence(vec![a])));
     let root = slot("outer", Box::new(Ordered::sequence(vec![inner])));
-    let mut ex = RobotExecutor::from_root(root, Blackboard::new());
+    let mut ex = TreeExecutor::from_root(root, Blackboard::new());
     let mut rec = Recorder::default();
     ex.tick(Time::ZERO, &mut (), Some(&mut rec));
     ex.halt(Time::from_millis(100), &mut (), Some(&mut rec));
@@ -352,7 +352,7 @@ fn jobs_are_polled_and_cancelled_on_halt() {
     // Threaded: the tick does not block; halting cancels the work.
     let flag = Arc::new(Mutex::new(false));
     let node = slot("job", Box::new(JobNode { job: None, cancelled: flag.clone(), runner: JobRunner::Threaded }));
-    let mut ex = RobotExecutor::from_root(node, Blackboard::new());
+    let mut ex = TreeExecutor::from_root(node, Blackboard::new());
     assert_eq!(ex.tick(Time::ZERO, &mut (), None), R, "the first tick returns while the job works");
     ex.halt(Time::from_millis(100), &mut (), None);
     let deadline = std::time::Instant::now() + Duration::from_secs(10);
@@ -364,7 +364,7 @@ fn jobs_are_polled_and_cancelled_on_halt() {
     // Threaded, left alone: finishes and succeeds on a later poll.
     let flag = Arc::new(Mutex::new(false));
     let node = slot("job", Box::new(JobNode { job: None, cancelled: flag, runner: JobRunner::Threaded }));
-    let mut ex = RobotExecutor::from_root(node, Blackboard::new());
+    let mut ex = TreeExecutor::from_root(node, Blackboard::new());
     let mut last = R;
     for i in 0..2000 {
         last = ex.tick(Time::from_millis(i), &mut (), None);

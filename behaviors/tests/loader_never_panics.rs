@@ -6,7 +6,7 @@
 use std::io::Write;
 
 use proptest::prelude::*;
-use spomp_behaviors::builtin_registry;
+use spomp_behaviors::engine_registry;
 use spomp_behaviors::mission::load_mission;
 
 fn load_text(text: &[u8]) -> usize {
@@ -15,7 +15,7 @@ fn load_text(text: &[u8]) -> usize {
     let name = std::thread::current().name().unwrap_or("t").replace("::", "-");
     let path = dir.join(format!("m-{name}.yaml"));
     std::fs::File::create(&path).unwrap().write_all(text).unwrap();
-    load_mission(&path, &builtin_registry()).diagnostics.len()
+    load_mission(&path, &engine_registry::<()>()).diagnostics.len()
 }
 
 /// YAML-ish values whose keys are drawn from the mission language, so the loader goes deep.

@@ -1,6 +1,6 @@
 //! Shared types of spomp.
 //!
-//! Everything here is plain data plus the small traits through which behaviours see a robot.
+//! Everything here is plain data.
 //! No algorithms, no I/O, no threads: skills, behaviours and adapters all agree on these types,
 //! and nothing in this crate depends on another spomp crate.
 
@@ -11,7 +11,6 @@ pub mod grid;
 pub mod ids;
 pub mod motion;
 pub mod panorama;
-pub mod platform;
 pub mod ros;
 pub mod scan;
 pub mod time;
@@ -23,6 +22,5 @@ pub use grid::{Cell, Grid, GridSpec};
 pub use ids::{GoalId, RobotId, RobotKind};
 pub use motion::{FlightCommand, Odometry, PoseEstimate, Twist2};
 pub use panorama::{DepthPanorama, PanoramaFrame, PanoramaGeometry, SemanticPanorama};
-pub use platform::{MotionSink, OdometrySource, PanoramaSource, Platform, PoseSource, TeamLink};
 pub use scan::ReachabilityScan;
-pub use time::{Clock, ManualClock, Time, WallClock};
+pub use time::Time;

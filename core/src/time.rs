@@ -1,10 +1,10 @@
-//! Time as data. Skills and nodes never read the system clock: they are handed a [`Time`]
-//! (from a [`Clock`]) so that simulated runs are repeatable and logs can be replayed.
+//! Time as data. Skills and nodes never read the system clock: adapters hand them a [`Time`]
+//! (the simulator's lockstep clock, a robot's wall clock) so that simulated runs are repeatable
+//! and logs can be replayed.
 
-use std::cell::Cell;
 use std::fmt;
 use std::ops::{Add, Sub};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
@@ -73,73 +73,18 @@ impl fmt::Display for Time {
     }
 }
 
-/// A source of the current time.
-pub trait Clock {
-    /// The current time.
-    fn now(&self) -> Time;
-}
-
-/// A clock that only moves when told to: the simulator's lockstep clock, and the clock of tests.
-#[derive(Debug, Default)]
-pub struct ManualClock {
-    now: Cell<Time>,
-}
-
-impl ManualClock {
-    /// A clock at `start`.
-    pub fn new(start: Time) -> Self {
-        ManualClock { now: Cell::new(start) }
-    }
-
-    /// Sets the time.
-    pub fn set(&self, t: Time) {
-        self.now.set(t);
-    }
-
-    /// Moves the time forward by `d`.
-    pub fn advance(&self, d: Duration) {
-        self.now.set(self.now.get() + d);
-    }
-}
-
-impl Clock for ManualClock {
-    fn now(&self) -> Time {
-        self.now.get()
-    }
-}
-
-/// The wall clock, counted from the moment it was created. Only adapters for real robots use it.
-#[derive(Debug, Clone, Copy)]
-pub struct WallClock {
-    start: Instant,
-}
-
-impl WallClock {
-    /// A wall clock whose epoch is now.
-    pub fn start_now() -> Self {
-        WallClock { start: Instant::now() }
-    }
-}
-
-impl Clock for WallClock {
-    fn now(&self) -> Time {
-        let elapsed = self.start.elapsed().as_nanos().min(i64::MAX as u128) as i64;
-        Time::from_nanos(elapsed)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn lockstep_steps_are_exact() {
-        let clock = ManualClock::new(Time::ZERO);
+        let mut now = Time::ZERO;
         for _ in 0..10_000 {
-            clock.advance(Duration::from_millis(100));
+            now = now + Duration::from_millis(100);
         }
-        assert_eq!(clock.now(), Time::from_millis(1_000_000));
-        assert_eq!(clock.now().as_secs_f64(), 1000.0);
+        assert_eq!(now, Time::from_millis(1_000_000));
+        assert_eq!(now.as_secs_f64(), 1000.0);
     }
 
     #[test]

@@ -59,7 +59,7 @@ fn ugv(c: &mut Criterion) {
 /// 10 simulated seconds per iteration. The run goes on from iteration to iteration.
 fn team(c: &mut Criterion) {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/missions/team-1uav-5ugv.yaml");
-    let registry = spomp_behaviors::builtin_registry();
+    let registry = spomp_robot::registry();
     let loaded = spomp_behaviors::mission::load_mission(&path, &registry);
     assert!(loaded.is_valid(), "{:?}", loaded.diagnostics);
     let mission = loaded.mission.as_ref().expect("mission");

@@ -16,9 +16,10 @@ mod common;
 
 use common::{DriverSetup, DrivingRobot, fill, ring};
 
-use spomp_behaviors::{RobotRuntime, Status};
+use spomp_behaviors::Status;
 use spomp_core::{Cell, Point2, Pose2, Twist2, normalize_angle};
 use spomp_global_planner::{GlobalPlannerParams, SharingMode};
+use spomp_robot::RobotRuntime;
 use spomp_sim::World;
 use spomp_teamstate::{TeamStateParams, TierSet};
 
@@ -74,7 +75,7 @@ impl DrivingRobot {
         let mut other_road = false;
         while self.t.as_secs_f64() < max_s {
             let s = self.step();
-            other_road |= self.rt.planned_path.as_ref().is_some_and(|p| p.iter().any(|q| q.y > above_y));
+            other_road |= self.rt.planned_path().is_some_and(|p| p.iter().any(|q| q.y > above_y));
             if s != Status::Running {
                 return (s, other_road);
             }
@@ -107,7 +108,7 @@ fn goal() -> Point2 {
 
 fn first_plan_takes_the_bottom_street(robot: &mut DrivingRobot) {
     robot.step();
-    let first = robot.rt.planned_path.clone().unwrap();
+    let first = robot.rt.planned_path().unwrap().to_vec();
     assert!(first.iter().all(|p| p.y < 10.0), "the first plan takes the bottom street: {first:?}");
 }
 
@@ -122,7 +123,7 @@ fn own_scans_remove_a_blocked_edge_and_the_robot_takes_the_other_road() {
     assert!(robot.position().distance(goal()) <= 2.2, "{}", robot.summary());
     assert!(other_road, "it replanned over the top street: {}", robot.summary());
     assert!(robot.removed_edges() >= 1, "its scans removed the blocked edge: {}", robot.summary());
-    let nav = robot.rt.nav.as_deref().unwrap();
+    let nav = robot.rt.nav().unwrap();
     assert!(nav.blocked_edges.is_empty(), "the scans found the block, not the stuck fallback: {}", robot.summary());
     assert_eq!(robot.ugv.collisions(), 0, "{}", robot.summary());
 }
@@ -147,13 +148,13 @@ fn with_graph_updates_off_the_robot_never_gets_past_the_block() {
 
 /// Copies every record of `from`'s team state into `to`'s, as a radio link in range would.
 fn sync(from: &mut RobotRuntime, to: &mut RobotRuntime) {
-    let (a, b) = (from.id.clone(), to.id.clone());
+    let (a, b) = (from.id().clone(), to.id().clone());
     for _ in 0..1000 {
-        let forward = from.team.make_sync(&b, TierSet::ALL, 1 << 20);
-        let back = forward.as_ref().map(|m| to.team.apply(&a, m).unwrap());
-        let reply = to.team.make_sync(&a, TierSet::ALL, 1 << 20);
+        let forward = from.team_mut().make_sync(&b, TierSet::ALL, 1 << 20);
+        let back = forward.as_ref().map(|m| to.team_mut().apply(&a, m).unwrap());
+        let reply = to.team_mut().make_sync(&a, TierSet::ALL, 1 << 20);
         if let Some(m) = &reply {
-            from.team.apply(&b, m).unwrap();
+            from.team_mut().apply(&b, m).unwrap();
         }
         if back.is_none() && reply.is_none() {
             break;
@@ -182,13 +183,13 @@ fn two_robots(block_x: f64, mode: SharingMode) -> ((f64, f64), (f64, f64)) {
     let mut second =
         robot("ugv2", 2, ring_with_block(block_x), start, &navigate_to_goal(), GlobalPlannerParams::default());
     sync(&mut first.rt, &mut second.rt);
-    let shared = first.rt.team.scan_count();
+    let shared = first.rt.team().scan_count();
     assert!(shared > 10, "UGV 1 shared its scans: {shared}");
-    assert_eq!(second.rt.team.scan_count(), shared, "UGV 2 holds all of them");
+    assert_eq!(second.rt.team().scan_count(), shared, "UGV 2 holds all of them");
     // The first tick folds the scans into UGV 2's planner (never removing an edge) and plans.
     second.step();
     assert_eq!(second.removed_edges(), 0, "other robots' scans never remove an edge");
-    let plan = second.rt.planned_path.clone().unwrap();
+    let plan = second.rt.planned_path().unwrap().to_vec();
     if mode == SharingMode::All {
         assert!(plan.iter().any(|p| p.y > 18.0), "UGV 2 plans over the top street at once: {plan:?}");
     }
@@ -340,7 +341,7 @@ fn after_driving_up_ramps_the_model_rates_unseen_ramps_above_plain_curbs() {
         robot.advance(Twist2::ZERO);
     }
     assert_eq!(robot.ugv.collisions(), 0, "{}", robot.summary());
-    let stats = robot.rt.nav.as_deref().unwrap().global.graph_stats();
+    let stats = robot.rt.nav().unwrap().global.graph_stats();
     assert!(stats.training_rounds >= 3, "{stats:?}");
     assert!(robot.ugv.base_elevation_m() < 0.05, "back on the road");
 
@@ -363,7 +364,7 @@ fn after_driving_up_ramps_the_model_rates_unseen_ramps_above_plain_curbs() {
         })
         .collect();
     assert!(ramp_cells.len() > 100 && curb_cells.len() > 500, "{} {}", ramp_cells.len(), curb_cells.len());
-    let planner = &mut robot.rt.nav.as_deref_mut().unwrap().global;
+    let planner = &mut robot.rt.nav_mut().unwrap().global;
     let mut mean = |cells: &[usize]| {
         cells.iter().map(|&i| planner.traversability_at(point(i)).unwrap()).sum::<f64>() / cells.len() as f64
     };

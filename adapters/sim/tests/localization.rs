@@ -21,9 +21,9 @@ use common::{load, simulation, write_mission};
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use spomp_behaviors::runtime::{Localization, LocalizationSetup, UpdateSchedule};
 use spomp_core::{Point2, Pose2, Time, Twist2};
 use spomp_localization::LocalizationParams;
+use spomp_robot::runtime::{Localization, LocalizationSetup, UpdateSchedule};
 use spomp_sim::run::{NoObserver, SimOptions, Simulation};
 use spomp_sim::{
     CityParams, Faults, OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams, generate_city,
@@ -34,7 +34,7 @@ const WORLD: &str = "{ generate: { size_m: [200, 150], vehicle_clusters: 4, road
 
 /// Position error of a robot's own estimate against the simulator's truth.
 fn error_of(sim: &Simulation, id: &str) -> Option<f64> {
-    let estimate = sim.runtime(id)?.pose?;
+    let estimate = sim.runtime(id)?.pose()?;
     Some(estimate.pose.position().distance(sim.true_pose(id)?.position()))
 }
 
@@ -47,7 +47,7 @@ fn median(values: &[f64]) -> f64 {
 fn trace(sim: &Simulation, id: &str) {
     if std::env::var("LOC_TRACE").is_ok() && sim.now().nanos % 1_000_000_000 == 0 {
         let rt = sim.runtime(id).unwrap();
-        if let Localization::CrossView(cv) = &rt.localization {
+        if let Localization::CrossView(cv) = &rt.localization() {
             let e = cv.filter().estimate();
             let spread = e.covariance[0].max(e.covariance[4]).sqrt();
             println!("  {:?} spread {spread:.2} m {:?}", e.pose, cv.filter().last_report());
@@ -57,8 +57,8 @@ fn trace(sim: &Simulation, id: &str) {
             sim.now().as_secs_f64(),
             sim.true_pose(id).map(|p| (p.x as i32, p.y as i32)),
             error_of(sim, id),
-            rt.localization.updates(),
-            rt.map.as_ref().map(|m| m.version())
+            rt.localization().updates(),
+            rt.map().map(|m| m.version())
         );
     }
 }
@@ -78,6 +78,7 @@ team:
     localization: {{ mode: cross_view, prior_sigma_m: 2, prior_sigma_deg: 5 }}
 roles:
   patroller:
+    navigation: {{ profile: simulation }}
     tree:
       repeat:
         times: {laps}
@@ -117,13 +118,13 @@ sim: {{ world: {WORLD}, prior_map: true }}
         "patrol: {travelled:.0} m in {:.0} s, {} updates, error median {med:.2} m, max {max:.2} m \
          (at panoramas: median {:.2} m, max {:.2} m, {} samples)",
         sim.now().as_secs_f64(),
-        rt.localization.updates(),
+        rt.localization().updates(),
         median(&series.iter().map(|&(_, e)| e).collect::<Vec<_>>()),
         series.iter().map(|&(_, e)| e).fold(0.0, f64::max),
         series.len()
     );
     assert!(travelled > 200.0 * laps as f64, "the route was driven: {travelled:.0} m");
-    assert!(rt.localization.updates() > 100, "the filter ran: {} updates", rt.localization.updates());
+    assert!(rt.localization().updates() > 100, "the filter ran: {} updates", rt.localization().updates());
     assert!(med < 2.0, "median error {med:.2} m");
     assert!(max < 5.0, "max error {max:.2} m");
 }
@@ -146,6 +147,7 @@ team:
 roles:
   hover: {{ tree: {{ wait: {{ duration_s: 1000 }} }} }}
   driver:
+    navigation: {{ profile: simulation }}
     tree:
       sequence:
         - navigate_to: {{ target: {{ x: 68, y: 5 }}, time_limit_s: 150 }}
@@ -169,9 +171,9 @@ sim: {{ world: {WORLD} }}
         let rt = sim.runtime("ugv1").unwrap();
         let error = error_of(&sim, "ugv1").unwrap();
         trace(&sim, "ugv1");
-        match (rt.map.is_some(), map_at) {
+        match (rt.map().is_some(), map_at) {
             (false, _) => {
-                assert_eq!(rt.localization.updates(), 0, "no map, no measurement update");
+                assert_eq!(rt.localization().updates(), 0, "no map, no measurement update");
                 before_map.push(error);
             }
             (true, None) => map_at = Some(sim.now()),
@@ -191,11 +193,11 @@ sim: {{ world: {WORLD} }}
          {settled_max:.2} m",
         map_at.as_secs_f64(),
         before_map.iter().copied().fold(0.0, f64::max),
-        rt.localization.updates()
+        rt.localization().updates()
     );
     assert!(map_at.as_secs_f64() > 40.0, "the map came late, not at the start");
     assert!(before_map.iter().all(|&e| e < 8.0), "odometry alone keeps the error bounded");
-    assert!(rt.localization.updates() > 10, "the filter used the map");
+    assert!(rt.localization().updates() > 10, "the filter used the map");
     assert!(settled.len() > 100, "enough time after the map");
     // The robot sees the map's edge first: the part of its view over unmapped ground must not
     // pull the estimate into the mapped area (it used to, by 8.6 m for 20 s, before the common
@@ -397,7 +399,7 @@ team:
     start: {{ x_m: 12, y_m: 73, yaw_deg: 0 }}
     localization: {{ mode: cross_view, prior_sigma_m: 2, prior_sigma_deg: 5 }}
 roles:
-  driver: {{ tree: {{ navigate_to: {{ target: {{ x: 185, y: 75 }}, time_limit_s: 300 }} }} }}
+  driver: {{ navigation: {{ profile: simulation }}, tree: {{ navigate_to: {{ target: {{ x: 185, y: 75 }}, time_limit_s: 300 }} }} }}
 complete_when: all_trees_done
 time_limit_s: 200
 sim: {{ world: {WORLD}, prior_map: true }}

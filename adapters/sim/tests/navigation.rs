@@ -96,8 +96,8 @@ fn navigate_to_drives_down_a_street_past_parked_vehicles_without_touching_them()
     // 52 m at up to 1.5 m/s, with the weaving: well within a minute.
     assert!(run.t.as_secs_f64() < 60.0, "{}", run.summary());
     // Halted/finished: the path is cleared and the robot told to stop.
-    assert!(run.rt.planned_path.is_none());
-    assert_eq!(run.rt.command, Some(Twist2::ZERO));
+    assert!(run.rt.planned_path().is_none());
+    assert_eq!(run.rt.command(), Some(Twist2::ZERO));
 }
 
 #[test]
@@ -117,7 +117,7 @@ fn navigate_local_stops_at_a_roadblock_and_fails_as_stuck() {
     // 25 m to drive at ≤ 1.5 m/s, then 15 s without progress (plus the 1 m progress margin).
     assert!(run.t.as_secs_f64() < 17.0 + 15.0 + 8.0, "{}", run.summary());
     assert!(run.reports.iter().any(|r| r.contains("no safe progress")), "{:?}", run.reports);
-    assert_eq!(run.rt.command, Some(Twist2::ZERO));
+    assert_eq!(run.rt.command(), Some(Twist2::ZERO));
 }
 
 #[test]
@@ -151,9 +151,9 @@ fn detour(name: &str, block_x: f64, global: GlobalPlannerParams) -> (DrivingRobo
     let mut status = Status::Running;
     while run.t.as_secs_f64() < 240.0 && status == Status::Running {
         status = run.step();
-        if let Some(path) = &run.rt.planned_path {
+        if let Some(path) = run.rt.planned_path() {
             if first_path.is_none() {
-                first_path = Some(path.clone());
+                first_path = Some(path.to_vec());
             }
             replanned_over_the_top |= path.iter().any(|p| p.y > 18.0);
         }
@@ -172,7 +172,7 @@ fn navigate_to_replans_when_its_scans_remove_a_blocked_edge() {
     assert!(first.iter().all(|p| p.y < 10.0), "the first plan takes the bottom street: {first:?}");
     assert_eq!(status, Status::Success, "{}", run.summary());
     assert!(over_the_top, "it replanned over the top street");
-    let nav = run.rt.nav.as_deref().unwrap();
+    let nav = run.rt.nav().unwrap();
     assert!(nav.global.graph_stats().removed_edges >= 1, "{}", run.summary());
     assert!(nav.blocked_edges.is_empty(), "the scans found it, not the stuck fallback: {}", run.summary());
     assert_eq!(run.ugv.collisions(), 0, "{}", run.summary());
@@ -191,7 +191,7 @@ fn navigate_to_gets_around_a_roadblock_its_scans_cannot_judge() {
     assert!(first.iter().all(|p| p.y < 10.0), "the first plan takes the bottom street: {first:?}");
     assert_eq!(status, Status::Success, "{}", run.summary());
     assert!(over_the_top, "it replanned over the top street");
-    assert_eq!(run.rt.nav.as_deref().unwrap().blocked_edges.len(), 1, "{}", run.summary());
+    assert_eq!(run.rt.nav().unwrap().blocked_edges.len(), 1, "{}", run.summary());
     assert_eq!(run.ugv.collisions(), 0, "{}", run.summary());
     assert!(run.ugv.distance_m() > 70.0, "it drove around: {}", run.summary());
 }
@@ -265,20 +265,20 @@ fn halting_navigate_to_stops_the_robot_and_clears_its_path() {
     let mut status = Status::Running;
     while status == Status::Running && run.t.as_secs_f64() < 10.0 {
         status = run.step();
-        saw_path |= run.rt.planned_path.is_some();
+        saw_path |= run.rt.planned_path().is_some();
         if status == Status::Running {
-            assert!(run.rt.command.is_some_and(|c| c.v >= 0.0), "the node commands the robot while running");
+            assert!(run.rt.command().is_some_and(|c| c.v >= 0.0), "the node commands the robot while running");
         }
     }
     assert_eq!(status, Status::Failure, "the timeout halted it");
     assert!(saw_path);
-    assert_eq!(run.rt.command, Some(Twist2::ZERO), "halted: stop");
-    assert!(run.rt.planned_path.is_none(), "halted: no path");
+    assert_eq!(run.rt.command(), Some(Twist2::ZERO), "halted: stop");
+    assert!(run.rt.planned_path().is_none(), "halted: no path");
     assert!(run.position().x > 8.0, "it was driving: {}", run.summary());
     // The robot comes to rest under the (absent) commands of the next ticks.
     for _ in 0..20 {
         run.rt.begin_tick();
-        run.ugv.step(&run.world, run.rt.command.unwrap_or(Twist2::ZERO), 0.1);
+        run.ugv.step(&run.world, run.rt.command().unwrap_or(Twist2::ZERO), 0.1);
     }
     assert_eq!(run.ugv.twist().v, 0.0);
 }

@@ -55,9 +55,9 @@ fn radio_ranges_decide_what_flows() {
         assert_eq!(sim.linked("base", "uav1"), tier, "at {distance} m");
         let base = sim.runtime("base").unwrap();
         let uav = RobotId::new("uav1");
-        assert_eq!(base.team.robot_pose(&uav).is_some(), pose_flows, "pose at {distance} m");
-        assert_eq!(base.team.latest_map(&uav).is_some(), map_flows, "map at {distance} m");
-        assert!(sim.runtime("uav1").unwrap().team.latest_map(&uav).is_some(), "the UAV published its map");
+        assert_eq!(base.team().robot_pose(&uav).is_some(), pose_flows, "pose at {distance} m");
+        assert_eq!(base.team().latest_map(&uav).is_some(), map_flows, "map at {distance} m");
+        assert!(sim.runtime("uav1").unwrap().team().latest_map(&uav).is_some(), "the UAV published its map");
     }
 }
 
@@ -81,8 +81,8 @@ sim:
     let mut sim = simulation(&loaded, SimOptions::default());
     run_for(&mut sim, 10.0);
     let base = sim.runtime("base").unwrap();
-    let (_, alive_stamp) = base.team.robot_pose(&RobotId::new("uav1")).unwrap();
-    let (_, dead_stamp) = base.team.robot_pose(&RobotId::new("uav2")).unwrap();
+    let (_, alive_stamp) = base.team().robot_pose(&RobotId::new("uav1")).unwrap();
+    let (_, dead_stamp) = base.team().robot_pose(&RobotId::new("uav2")).unwrap();
     assert!(alive_stamp.as_secs_f64() > 9.0, "the live UAV keeps sharing: {alive_stamp:?}");
     assert!(dead_stamp.as_secs_f64() <= 3.0, "nothing new from the dead UAV after 3 s: {dead_stamp:?}");
     assert_eq!(sim.linked("base", "uav2"), None);

@@ -12,7 +12,7 @@ use crate::registry::{Category, NodeRegistry, NodeTypeSpec, PortSpec};
 use crate::status::Status;
 
 /// Registers the generic leaves.
-pub fn register_generic(r: &mut NodeRegistry) {
+pub fn register_generic<E>(r: &mut NodeRegistry<E>) {
     use Category::{Action, Condition};
     use PortType::{Bool, Float, String as Str};
     r.register(NodeTypeSpec::leaf("succeed", Action, "Succeeds at once.", vec![], |_| {
@@ -68,8 +68,8 @@ pub fn register_generic(r: &mut NodeRegistry) {
 
 struct Fixed(Status);
 
-impl Behavior for Fixed {
-    fn tick(&mut self, _prev: Status, _ctx: &mut TickContext<'_>) -> Status {
+impl<E> Behavior<E> for Fixed {
+    fn tick(&mut self, _prev: Status, _ctx: &mut TickContext<'_, E>) -> Status {
         self.0
     }
 }
@@ -79,8 +79,8 @@ struct Wait {
     until: Time,
 }
 
-impl Behavior for Wait {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E> Behavior<E> for Wait {
+    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if prev != Status::Running {
             let Some(secs) = self.duration.get::<f64>(ctx.blackboard).filter(|s| *s >= 0.0) else {
                 ctx.blackboard.report("wait: duration_s is not a non-negative number");
@@ -97,8 +97,8 @@ struct SetFlag {
     value: Binding,
 }
 
-impl Behavior for SetFlag {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E> Behavior<E> for SetFlag {
+    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         let v = self.value.get::<bool>(ctx.blackboard).unwrap_or(true);
         if self.flag.set(ctx.blackboard, BbValue::Bool(v)) { Status::Success } else { Status::Failure }
     }
@@ -108,8 +108,8 @@ struct CheckFlag {
     flag: Binding,
 }
 
-impl Behavior for CheckFlag {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E> Behavior<E> for CheckFlag {
+    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if self.flag.get::<bool>(ctx.blackboard) == Some(true) { Status::Success } else { Status::Failure }
     }
 }
@@ -118,8 +118,8 @@ struct RaiseEvent {
     event: Binding,
 }
 
-impl Behavior for RaiseEvent {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E> Behavior<E> for RaiseEvent {
+    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         match self.event.get::<Arc<str>>(ctx.blackboard) {
             Some(e) => {
                 ctx.blackboard.raise_event(&e);
@@ -134,8 +134,8 @@ struct WaitForEvent {
     event: Binding,
 }
 
-impl Behavior for WaitForEvent {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E> Behavior<E> for WaitForEvent {
+    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         match self.event.get::<Arc<str>>(ctx.blackboard) {
             Some(e) if ctx.blackboard.take_event(&e) => Status::Success,
             Some(_) => Status::Running,
@@ -148,8 +148,8 @@ struct TimeAtLeast {
     time: Binding,
 }
 
-impl Behavior for TimeAtLeast {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl<E> Behavior<E> for TimeAtLeast {
+    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         match self.time.get::<f64>(ctx.blackboard) {
             Some(t) if ctx.now.as_secs_f64() >= t => Status::Success,
             _ => Status::Failure,

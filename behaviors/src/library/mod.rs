@@ -1,30 +1,22 @@
-//! The node library: built-in structural nodes, generic leaves and the domain nodes of the
-//! paper's missions, all registered by name with their ports.
+//! The engine's own node types: the structural ones (control nodes, decorators, the state
+//! machine, subtree references) and generic leaves (waits, flags, events, the mission clock)
+//! that work on any robot. Domain nodes (navigation, UAV time-sharing, goal coordination) live
+//! in `spomp-robot`, which adds them to a registry built here.
 
-mod aerial;
-mod coordination;
 mod generic;
-mod navigation;
-mod qgc_plan;
 mod structural;
 
-pub use aerial::register_aerial;
-pub use coordination::register_coordination;
 pub use generic::register_generic;
-pub use navigation::register_navigation;
-pub use structural::{ControlType, DecoratorType, register_structural};
+pub use structural::register_structural;
 
 use crate::registry::NodeRegistry;
 
-/// Every node type of this build: structural, generic leaves, and the domain nodes of the
-/// paper's missions (navigation, UAV time-sharing, goal coordination).
-pub fn builtin_registry() -> NodeRegistry {
+/// A registry with the engine's node types (structural and generic leaves), for trees acting
+/// on any environment `E`.
+pub fn engine_registry<E>() -> NodeRegistry<E> {
     let mut r = NodeRegistry::empty();
     register_structural(&mut r);
     register_generic(&mut r);
-    register_navigation(&mut r);
-    register_aerial(&mut r);
-    register_coordination(&mut r);
     r
 }
 
@@ -34,7 +26,7 @@ mod tests {
 
     #[test]
     fn every_node_is_documented_with_its_ports() {
-        let r = builtin_registry();
+        let r = engine_registry::<()>();
         let md = r.reference_markdown();
         for spec in r.iter() {
             assert!(!spec.description.is_empty(), "{} has no description", spec.name);

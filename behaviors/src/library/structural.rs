@@ -5,78 +5,8 @@ use serde_json::json;
 use crate::blackboard::PortType;
 use crate::registry::{Category, NodeRegistry, NodeTypeSpec, PortSpec};
 
-/// The control node types.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ControlType {
-    /// `sequence`.
-    Sequence,
-    /// `fallback`.
-    Fallback,
-    /// `reactive_sequence`.
-    ReactiveSequence,
-    /// `reactive_fallback`.
-    ReactiveFallback,
-    /// `parallel`.
-    Parallel,
-}
-
-impl ControlType {
-    /// By mission name.
-    pub fn from_name(name: &str) -> Option<Self> {
-        Some(match name {
-            "sequence" => ControlType::Sequence,
-            "fallback" => ControlType::Fallback,
-            "reactive_sequence" => ControlType::ReactiveSequence,
-            "reactive_fallback" => ControlType::ReactiveFallback,
-            "parallel" => ControlType::Parallel,
-            _ => return None,
-        })
-    }
-}
-
-/// The decorator types.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum DecoratorType {
-    /// `timeout`.
-    Timeout,
-    /// `retry`.
-    Retry,
-    /// `repeat`.
-    Repeat,
-    /// `inverter`.
-    Inverter,
-    /// `force_success`.
-    ForceSuccess,
-    /// `force_failure`.
-    ForceFailure,
-    /// `run_once`.
-    RunOnce,
-    /// `delay`.
-    Delay,
-    /// `rate_limit`.
-    RateLimit,
-}
-
-impl DecoratorType {
-    /// By mission name.
-    pub fn from_name(name: &str) -> Option<Self> {
-        Some(match name {
-            "timeout" => DecoratorType::Timeout,
-            "retry" => DecoratorType::Retry,
-            "repeat" => DecoratorType::Repeat,
-            "inverter" => DecoratorType::Inverter,
-            "force_success" => DecoratorType::ForceSuccess,
-            "force_failure" => DecoratorType::ForceFailure,
-            "run_once" => DecoratorType::RunOnce,
-            "delay" => DecoratorType::Delay,
-            "rate_limit" => DecoratorType::RateLimit,
-            _ => return None,
-        })
-    }
-}
-
 /// Registers the structural node types.
-pub fn register_structural(r: &mut NodeRegistry) {
+pub fn register_structural<E>(r: &mut NodeRegistry<E>) {
     use Category::{Control, Decorator};
     use PortType::{Float, Int, String as Str};
     let s = NodeTypeSpec::structural;

@@ -4,14 +4,19 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use crate::blackboard::{BbValue, Binding, Blackboard};
+use crate::control::ControlType;
 use crate::control::{Ordered, Parallel, Reactive};
+use crate::decorators::DecoratorType;
 use crate::decorators::{Delay, MapResult, RateLimit, Repeat, ResultMap, Retry, RunOnce, Timeout};
-use crate::library::{ControlType, DecoratorType};
+use crate::executor::TreeExecutor;
 use crate::node::{Behavior, NodeInfo, Slot};
 use crate::registry::{NodeRegistry, PortBindings};
 use crate::state_machine::{State, StateMachine, Transition};
 
+use spomp_core::{Point2, Pose2, RobotId};
+
 use super::compile::{Ir, IrBinding, IrKind};
+use super::load::CompiledRole;
 
 /// Why a tree could not be built.
 #[derive(Debug, thiserror::Error)]
@@ -24,22 +29,11 @@ pub enum BuildError {
         /// What the factory said.
         message: String,
     },
-    /// A node this build cannot run.
-    #[error("{path}: node `{node}` is not implemented in this build")]
-    NotImplemented {
-        /// Node path.
-        path: String,
-        /// Node type.
-        node: String,
-    },
 }
 
 /// Options for building.
 #[derive(Debug, Clone, Default)]
 pub struct BuildOptions {
-    /// Build declared-but-unimplemented nodes as nodes that fail loudly when ticked, instead of
-    /// refusing to build.
-    pub allow_unimplemented: bool,
     /// Folder relative file paths in the mission start from (`LoadedMission::base_dir`): a
     /// literal string on a port whose name ends in `_file` (e.g. `follow_waypoints.plan_file`)
     /// is resolved against it before the node's factory sees it. `None`: the process's working
@@ -58,26 +52,26 @@ fn resolve_file_port(port: &str, value: &BbValue, opts: &BuildOptions) -> BbValu
 }
 
 /// Builds live nodes for `ir`, declaring the blackboard entries it uses.
-pub fn build_tree(
+pub fn build_tree<E: 'static>(
     ir: &Ir,
-    registry: &NodeRegistry,
+    registry: &NodeRegistry<E>,
     bb: &mut Blackboard,
     opts: BuildOptions,
-) -> Result<Slot, BuildError> {
+) -> Result<Slot<E>, BuildError> {
     let mut next_id = 0;
     build(ir, registry, bb, &opts, &mut next_id)
 }
 
-fn build(
+fn build<E: 'static>(
     ir: &Ir,
-    registry: &NodeRegistry,
+    registry: &NodeRegistry<E>,
     bb: &mut Blackboard,
     opts: &BuildOptions,
     next_id: &mut u32,
-) -> Result<Slot, BuildError> {
+) -> Result<Slot<E>, BuildError> {
     let info = NodeInfo { id: *next_id, type_name: ir.type_name.as_str().into(), path: ir.path.as_str().into() };
     *next_id += 1;
-    let behavior: Box<dyn Behavior> = match &ir.kind {
+    let behavior: Box<dyn Behavior<E>> = match &ir.kind {
         IrKind::Control { ty, children, success_threshold, failure_threshold } => {
             let kids = children.iter().map(|c| build(c, registry, bb, opts, next_id)).collect::<Result<Vec<_>, _>>()?;
             match ty {
@@ -131,9 +125,6 @@ fn build(
                 path: ir.path.clone(),
                 message: format!("unknown node type `{}`", ir.type_name),
             })?;
-            if !spec.implemented && !opts.allow_unimplemented {
-                return Err(BuildError::NotImplemented { path: ir.path.clone(), node: ir.type_name.clone() });
-            }
             let mut bindings = PortBindings::default();
             for p in ports {
                 let b = match &p.binding {
@@ -143,7 +134,7 @@ fn build(
                 };
                 bindings.insert(p.spec.name, b);
             }
-            let factory = spec.factory().ok_or_else(|| BuildError::Node {
+            let factory = registry.factory(spec.name).ok_or_else(|| BuildError::Node {
                 path: ir.path.clone(),
                 message: "node type has no factory".into(),
             })?;
@@ -151,4 +142,24 @@ fn build(
         }
     };
     Ok(Slot::new(info, behavior))
+}
+
+/// A robot's executor for its compiled role: the tree built over a fresh blackboard, with the
+/// provided entries (`robot_id`, `start_pose`, `home`) and the role's initial values set.
+pub fn build_executor<E: 'static>(
+    role: &CompiledRole,
+    registry: &NodeRegistry<E>,
+    robot: &RobotId,
+    start: Pose2,
+    opts: BuildOptions,
+) -> Result<TreeExecutor<E>, BuildError> {
+    let mut blackboard = Blackboard::new();
+    let root = build_tree(&role.tree, registry, &mut blackboard, opts)?;
+    blackboard.set_by_name("robot_id", BbValue::Robot(robot.clone()));
+    blackboard.set_by_name("start_pose", BbValue::Pose(start));
+    blackboard.set_by_name("home", BbValue::Point(Point2::new(start.x, start.y)));
+    for (name, value) in &role.initial {
+        blackboard.set_by_name(name, value.clone());
+    }
+    Ok(TreeExecutor::from_root(root, blackboard))
 }

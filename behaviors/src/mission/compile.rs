@@ -7,8 +7,9 @@ use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
 use std::time::Duration;
 
 use crate::blackboard::{BbValue, PortType};
-use crate::library::{ControlType, DecoratorType};
-use crate::registry::{Category, NodeRegistry, NodeTypeSpec, PortSpec};
+use crate::control::ControlType;
+use crate::decorators::DecoratorType;
+use crate::registry::{Category, NodeCatalog, NodeTypeSpec, PortSpec};
 use crate::state_machine::Trigger;
 use crate::status::Status;
 
@@ -120,7 +121,7 @@ pub struct SubtreeDef {
 
 /// The compiler for one mission.
 pub struct Compiler<'a> {
-    registry: &'a NodeRegistry,
+    registry: &'a NodeCatalog,
     subtrees: &'a BTreeMap<String, SubtreeDef>,
     files: &'a [std::path::PathBuf],
     diags: Vec<Diagnostic>,
@@ -142,7 +143,7 @@ const STRUCTURAL_KEYS_DECORATOR: &[&str] = &["child", "name"];
 impl<'a> Compiler<'a> {
     /// A compiler over a registry and the mission's subtrees.
     pub fn new(
-        registry: &'a NodeRegistry,
+        registry: &'a NodeCatalog,
         subtrees: &'a BTreeMap<String, SubtreeDef>,
         files: &'a [std::path::PathBuf],
     ) -> Self {

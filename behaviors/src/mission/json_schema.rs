@@ -5,7 +5,7 @@
 use serde_json::{Map, Value, json};
 
 use crate::blackboard::PortType;
-use crate::registry::{Category, NodeRegistry, NodeTypeSpec, PortDirection};
+use crate::registry::{Category, NodeCatalog, NodeTypeSpec, PortDirection};
 
 use super::schema::MissionFile;
 
@@ -100,7 +100,7 @@ fn node_body_schema(spec: &NodeTypeSpec) -> Value {
 }
 
 /// The JSON Schema of mission files for a registry.
-pub fn mission_schema(registry: &NodeRegistry) -> Value {
+pub fn mission_schema(registry: &NodeCatalog) -> Value {
     let schema = schemars::schema_for!(MissionFile);
     let mut root = serde_json::to_value(&schema).unwrap_or_else(|_| json!({}));
     let variants: Vec<Value> = registry
@@ -140,6 +140,27 @@ pub fn mission_schema(registry: &NodeRegistry) -> Value {
     if let Some(Value::Object(defs)) = root.get_mut("$defs") {
         defs.insert("TreeNode".into(), tree);
         defs.insert("State".into(), state);
+    }
+    if let Some(checks) = registry.robot_checks() {
+        let mut nav = checks.navigation_schema();
+        let nav_defs = nav.as_object_mut().and_then(|o| o.remove("$defs"));
+        if let Some(o) = nav.as_object_mut() {
+            o.remove("$schema");
+        }
+        if let Some(Value::Object(defs)) = root.get_mut("$defs") {
+            if let Some(Value::Object(extra)) = nav_defs {
+                for (k, v) in extra {
+                    defs.entry(k).or_insert(v);
+                }
+            }
+            defs.insert("Navigation".into(), nav);
+            for owner in ["RoleSpec", "RobotSpec"] {
+                if let Some(p) = defs.get_mut(owner).and_then(|d| d.pointer_mut("/properties/navigation")) {
+                    let description = p.get("description").cloned().unwrap_or(Value::Null);
+                    *p = json!({"description": description, "$ref": "#/$defs/Navigation"});
+                }
+            }
+        }
     }
     if let Value::Object(o) = &mut root {
         o.insert("title".into(), Value::String("spomp mission".into()));

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use spomp_core::{ClassTable, RobotKind};
 
 use crate::blackboard::{BbValue, PortType};
-use crate::registry::NodeRegistry;
+use crate::registry::{NodeCatalog, NodeRegistry};
 
 use super::compile::{Compiler, FileId, Ir, IrKind, SubtreeDef, check_wiring};
 use super::diagnostic::{Diagnostic, Stage};
@@ -86,7 +86,8 @@ fn de_diag(file: &Path, prefix: &str, e: &DeError, fallback: Loc) -> Diagnostic 
 }
 
 /// Loads and validates a mission file against a node registry.
-pub fn load_mission(path: &Path, registry: &NodeRegistry) -> LoadedMission {
+pub fn load_mission<E: 'static>(path: &Path, nodes: &NodeRegistry<E>) -> LoadedMission {
+    let registry = nodes.catalog();
     let mut out = LoadedMission::default();
     let file: FileId = 0;
     out.files.push(path.to_path_buf());
@@ -298,16 +299,23 @@ pub fn load_mission(path: &Path, registry: &NodeRegistry) -> LoadedMission {
     // --- team ---
     if let Some(m) = &mission {
         check_team(m, &root, path, registry, &out.roles, &mut diags);
+        // Robot settings and skill parameters, checked by the robot layer with the skills' rules.
+        if let Some(checks) = registry.robot_checks() {
+            for p in checks.check(m) {
+                let segs: Vec<&str> = p.path.iter().map(String::as_str).collect();
+                diags.push(Diagnostic::new(path, loc_at(&root, &segs), p.path.join("."), Stage::Schema, p.message));
+            }
+        }
     }
 
     // --- build: node factories check what only they can (e.g. a plan file that must parse) ---
     if diags.is_empty() {
         let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
         for role in out.roles.values() {
-            let opts = super::BuildOptions { base_dir: Some(base.clone()), allow_unimplemented: true };
+            let opts = super::BuildOptions { base_dir: Some(base.clone()) };
             let mut bb = crate::blackboard::Blackboard::new();
             if let Err(super::BuildError::Node { path: node_path, message }) =
-                super::build_tree(&role.tree, registry, &mut bb, opts)
+                super::build_tree(&role.tree, nodes, &mut bb, opts)
             {
                 let node = find_ir(&role.tree, &node_path).unwrap_or(&role.tree);
                 let file = out.files.get(node.file).cloned().unwrap_or_else(|| path.to_path_buf());
@@ -492,22 +500,10 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, diags: &mut Vec<Diagn
         );
     }
     if let Some(g) = &m.goals {
-        if g.deconfliction_radius_m < 0.0 {
-            bad(
-                &["goals", "deconfliction_radius_m"],
-                format!("expected a non-negative distance in metres, found {}", g.deconfliction_radius_m),
-            );
-        }
         if g.time_limit_per_m_s <= 0.0 {
             bad(
                 &["goals", "time_limit_per_m_s"],
                 format!("expected a positive number of seconds per metre, found {}", g.time_limit_per_m_s),
-            );
-        }
-        if !(g.claim_lease_s.is_finite() && g.claim_lease_s > 0.0) {
-            bad(
-                &["goals", "claim_lease_s"],
-                format!("expected a positive number of seconds (the claim lease), found {}", g.claim_lease_s),
             );
         }
         if let Some(d) = &g.detect {
@@ -517,15 +513,6 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, diags: &mut Vec<Diagn
                     &["goals", "detect", "class"],
                     format!("unknown class `{}`; classes are: {}", d.class, classes.names().join(", ")),
                 );
-            }
-            for (name, v) in [
-                ("merge_distance_m", d.merge_distance_m),
-                ("min_size_m", d.min_size_m),
-                ("placement_region_m", d.placement_region_m),
-            ] {
-                if v < 0.0 {
-                    bad(&["goals", "detect", name], format!("expected a non-negative distance in metres, found {v}"));
-                }
             }
         }
         if g.detect.is_none() && g.manual.is_empty() {
@@ -602,7 +589,7 @@ fn check_team(
     m: &MissionFile,
     root: &Node,
     file: &Path,
-    registry: &NodeRegistry,
+    registry: &NodeCatalog,
     roles: &BTreeMap<String, CompiledRole>,
     diags: &mut Vec<Diagnostic>,
 ) {

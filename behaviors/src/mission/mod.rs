@@ -9,7 +9,7 @@ pub mod load;
 pub mod schema;
 pub mod yaml;
 
-pub use build::{BuildError, BuildOptions, build_tree};
+pub use build::{BuildError, BuildOptions, build_executor, build_tree};
 pub use diagnostic::{Diagnostic, Rendered, Stage};
 pub use load::{CompiledRole, LoadedMission, PROVIDED_ENTRIES, load_mission, skills_of};
 pub use schema::MissionFile;

@@ -83,6 +83,10 @@ pub struct RobotSpec {
     /// ROS 2 adapter settings.
     #[serde(default)]
     pub ros2: Option<Ros2Spec>,
+    /// Navigation settings of this robot (UGVs), applied field by field over its role's. The
+    /// section's types, defaults and rules are the skills' (see `docs/missions.md`).
+    #[serde(default)]
+    pub navigation: Option<serde_json::Value>,
 }
 
 /// A start pose.
@@ -156,29 +160,23 @@ pub struct GoalsSpec {
     /// Operator-specified goals.
     #[serde(default)]
     pub manual: Vec<ManualGoal>,
-    /// Goals closer than this are the same goal, metres.
-    #[serde(default = "default_deconfliction")]
-    pub deconfliction_radius_m: f64,
+    /// Goals closer than this are the same goal, metres; unset: the team state's default
+    /// (10 m, the paper's).
+    #[serde(default)]
+    pub deconfliction_radius_m: Option<f64>,
     /// Time limit per metre of planned path, seconds (the paper's per-goal time limit).
     #[serde(default = "default_time_per_m")]
     pub time_limit_per_m_s: f64,
     /// A claim is a lease, seconds: its holder renews it while it holds the goal; a claim of
     /// another robot not renewed for this long no longer counts, so a goal held by a dead robot
-    /// (or one out of contact that long) becomes claimable again. Must be > 0.
-    #[serde(default = "default_claim_lease")]
-    pub claim_lease_s: f64,
-}
-
-fn default_deconfliction() -> f64 {
-    10.0
+    /// (or one out of contact that long) becomes claimable again. Must be > 0; unset: the team
+    /// state's default (300 s).
+    #[serde(default)]
+    pub claim_lease_s: Option<f64>,
 }
 
 fn default_time_per_m() -> f64 {
     2.0
-}
-
-fn default_claim_lease() -> f64 {
-    300.0
 }
 
 /// Goal detection settings.
@@ -188,31 +186,19 @@ pub struct DetectSpec {
     /// Class to cluster.
     #[serde(default = "default_class")]
     pub class: String,
-    /// Merge distance, metres.
-    #[serde(default = "default_merge")]
-    pub merge_distance_m: f64,
-    /// Minimum cluster size, metres.
-    #[serde(default = "default_min_size")]
-    pub min_size_m: f64,
-    /// Placement region around a cluster, metres.
-    #[serde(default = "default_region")]
-    pub placement_region_m: f64,
+    /// Clusters closer than this merge into one, metres; unset: the detector's default (15 m).
+    #[serde(default)]
+    pub merge_distance_m: Option<f64>,
+    /// Minimum cluster size, metres; unset: the detector's default (8 m).
+    #[serde(default)]
+    pub min_size_m: Option<f64>,
+    /// Placement region around a cluster, metres; unset: the detector's default (7 m).
+    #[serde(default)]
+    pub placement_region_m: Option<f64>,
 }
 
 fn default_class() -> String {
     "vehicle".into()
-}
-
-fn default_merge() -> f64 {
-    15.0
-}
-
-fn default_min_size() -> f64 {
-    8.0
-}
-
-fn default_region() -> f64 {
-    7.0
 }
 
 /// A goal given by the operator.
@@ -241,6 +227,11 @@ pub struct RoleSpec {
     /// Tick rate of the tree.
     #[serde(default = "default_tick")]
     pub tick_hz: f64,
+    /// Navigation settings of the role's robots (UGVs): `profile`, `terrain`, `local_goal`,
+    /// `control`, `global_planner`, `watchdog`; a robot's own `navigation` overrides them field
+    /// by field.
+    #[serde(default)]
+    pub navigation: Option<serde_json::Value>,
     /// The tree.
     pub tree: TreeNode,
 }

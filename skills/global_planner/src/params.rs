@@ -3,6 +3,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::error::SetupError;
+
 /// All parameters of the global planner, grouped as a mission file nests them.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
@@ -17,6 +19,51 @@ pub struct GlobalPlannerParams {
     pub sharing: SharingParams,
     /// Graph search and replanning.
     pub search: SearchParams,
+}
+
+impl GlobalPlannerParams {
+    /// Checks every field's range. Bounds keep every buffer and loop sized sensibly whatever a
+    /// mission file says; `graph.class_order` is checked against the class table when the
+    /// planner is built.
+    pub fn validate(&self) -> Result<(), SetupError> {
+        let params = self;
+        let g = &params.graph;
+        let l = &params.learning;
+        let x = &params.experience;
+        let in_range = |v: f64, lo: f64, hi: f64| v.is_finite() && v >= lo && v <= hi;
+        // Bounds keep every buffer and loop sized sensibly whatever a mission file says.
+        let checks: [(&'static str, bool, &str); 13] = [
+            ("graph.visibility_range_m", in_range(g.visibility_range_m, 0.1, 500.0), "must be in [0.1, 500] m"),
+            ("graph.edge_sample_spacing_m", in_range(g.edge_sample_spacing_m, 0.05, 100.0), "must be in [0.05, 100] m"),
+            ("graph.attach_radius_m", in_range(g.attach_radius_m, 0.0, 200.0), "must be in [0, 200] m"),
+            ("learning.hidden_units", (1..=1024).contains(&l.hidden_units), "must be in 1..=1024"),
+            ("learning.rmsprop_decay", in_range(l.rmsprop_decay, 0.0, 0.999_999), "must be in [0, 1)"),
+            ("learning.step_size", in_range(l.step_size, 1e-9, 10.0), "must be in (0, 10]"),
+            ("learning.rmsprop_epsilon", in_range(l.rmsprop_epsilon, 0.0, 1.0), "must be in [0, 1]"),
+            ("learning.l2_regularization", in_range(l.l2_regularization, 0.0, 100.0), "must be in [0, 100]"),
+            ("learning.not_trav_depth_m", in_range(l.not_trav_depth_m, 0.0, 50.0), "must be in [0, 50] m"),
+            ("learning.max_scan_range_m", in_range(l.max_scan_range_m, 0.1, 500.0), "must be in [0.1, 500] m"),
+            ("experience.on_edge_radius_m", in_range(x.on_edge_radius_m, 0.0, 50.0), "must be in [0, 50] m"),
+            ("experience.min_crossing_range_m", in_range(x.min_crossing_range_m, 0.0, 50.0), "must be in [0, 50] m"),
+            (
+                "experience.crossing_window_rad",
+                in_range(x.crossing_window_rad, 0.0, std::f64::consts::PI),
+                "must be in [0, π] rad",
+            ),
+        ];
+        if let Some((name, _, reason)) = checks.iter().find(|c| !c.1) {
+            return Err(SetupError::InvalidParameter { name, reason: (*reason).into() });
+        }
+        if let Some(step) = g.max_step_m
+            && !(step.is_finite() && step > 0.0 && step <= 100.0)
+        {
+            return Err(SetupError::InvalidParameter {
+                name: "graph.max_step_m",
+                reason: "must be in (0, 100] m, or null to keep every edge straight".into(),
+            });
+        }
+        Ok(())
+    }
 }
 
 /// Graph construction: greedy farthest-point coverage with ray-traced visibility regions.

@@ -268,41 +268,8 @@ fn pair(a: NodeIndex<u32>, b: NodeIndex<u32>) -> (u32, u32) {
 impl GlobalPlanner {
     /// A planner with no map yet.
     pub fn new(params: GlobalPlannerParams, classes: ClassTable) -> Result<Self, SetupError> {
+        params.validate()?;
         let g = &params.graph;
-        let l = &params.learning;
-        let x = &params.experience;
-        let in_range = |v: f64, lo: f64, hi: f64| v.is_finite() && v >= lo && v <= hi;
-        // Bounds keep every buffer and loop sized sensibly whatever a mission file says.
-        let checks: [(&'static str, bool, &str); 13] = [
-            ("graph.visibility_range_m", in_range(g.visibility_range_m, 0.1, 500.0), "must be in [0.1, 500] m"),
-            ("graph.edge_sample_spacing_m", in_range(g.edge_sample_spacing_m, 0.05, 100.0), "must be in [0.05, 100] m"),
-            ("graph.attach_radius_m", in_range(g.attach_radius_m, 0.0, 200.0), "must be in [0, 200] m"),
-            ("learning.hidden_units", (1..=1024).contains(&l.hidden_units), "must be in 1..=1024"),
-            ("learning.rmsprop_decay", in_range(l.rmsprop_decay, 0.0, 0.999_999), "must be in [0, 1)"),
-            ("learning.step_size", in_range(l.step_size, 1e-9, 10.0), "must be in (0, 10]"),
-            ("learning.rmsprop_epsilon", in_range(l.rmsprop_epsilon, 0.0, 1.0), "must be in [0, 1]"),
-            ("learning.l2_regularization", in_range(l.l2_regularization, 0.0, 100.0), "must be in [0, 100]"),
-            ("learning.not_trav_depth_m", in_range(l.not_trav_depth_m, 0.0, 50.0), "must be in [0, 50] m"),
-            ("learning.max_scan_range_m", in_range(l.max_scan_range_m, 0.1, 500.0), "must be in [0.1, 500] m"),
-            ("experience.on_edge_radius_m", in_range(x.on_edge_radius_m, 0.0, 50.0), "must be in [0, 50] m"),
-            ("experience.min_crossing_range_m", in_range(x.min_crossing_range_m, 0.0, 50.0), "must be in [0, 50] m"),
-            (
-                "experience.crossing_window_rad",
-                in_range(x.crossing_window_rad, 0.0, std::f64::consts::PI),
-                "must be in [0, π] rad",
-            ),
-        ];
-        if let Some((name, _, reason)) = checks.iter().find(|c| !c.1) {
-            return Err(SetupError::InvalidParameter { name, reason: (*reason).into() });
-        }
-        if let Some(step) = g.max_step_m
-            && !(step.is_finite() && step > 0.0 && step <= 100.0)
-        {
-            return Err(SetupError::InvalidParameter {
-                name: "graph.max_step_m",
-                reason: "must be in (0, 100] m, or null to keep every edge straight".into(),
-            });
-        }
         let order: Vec<ClassId> = if g.class_order.is_empty() {
             let ranks = classes.rank_lut();
             classes.easiest_first().into_iter().filter(|&c| ranks[c as usize] <= g.max_class_rank).collect()
@@ -327,7 +294,7 @@ impl GlobalPlanner {
         }
         let resolution = 0.5;
         let features = Features::new(&classes);
-        let model = Mlp::new(features.channels(), l.hidden_units);
+        let model = Mlp::new(features.channels(), params.learning.hidden_units);
         Ok(GlobalPlanner {
             coverage: Coverage::new((g.visibility_range_m / resolution).round() as i32),
             rank_of_class: classes.rank_lut(),

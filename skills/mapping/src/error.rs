@@ -4,8 +4,13 @@
 #[derive(Debug, thiserror::Error)]
 pub enum MappingError {
     /// A parameter is out of range.
-    #[error("invalid mapping parameters: {0}")]
-    InvalidParams(String),
+    #[error("invalid mapping parameter `{name}`: {reason}")]
+    InvalidParams {
+        /// Field name.
+        name: &'static str,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// The detection class is not in the class table.
     #[error("class `{name}` is not in the class table (known: {known})")]
     UnknownClass {

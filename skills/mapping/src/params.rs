@@ -56,7 +56,7 @@ impl GoalDetectionParams {
         ];
         for (name, v) in fields {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(MappingError::InvalidParams(format!("{name} must be finite and ≥ 0, got {v}")));
+                return Err(MappingError::InvalidParams { name, reason: format!("must be finite and ≥ 0, got {v}") });
             }
         }
         Ok(())

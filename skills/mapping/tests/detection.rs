@@ -130,7 +130,7 @@ fn bad_class_and_params_are_errors() {
     let p = GoalDetectionParams { class: "tank".into(), ..GoalDetectionParams::default() };
     assert!(matches!(GoalDetector::new(p, &t), Err(MappingError::UnknownClass { .. })));
     let p = GoalDetectionParams { min_size_m: -1.0, ..GoalDetectionParams::default() };
-    assert!(matches!(GoalDetector::new(p, &t), Err(MappingError::InvalidParams(_))));
+    assert!(matches!(GoalDetector::new(p, &t), Err(MappingError::InvalidParams { .. })));
     let mut m = flat(10, 10, ROAD);
     m.class.pop();
     assert!(detector().detect(&m, &[]).is_err());

@@ -6,8 +6,13 @@ use spomp_core::GoalId;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TeamStateError {
     /// A parameter is out of range.
-    #[error("invalid team-state parameters: {0}")]
-    InvalidParams(String),
+    #[error("invalid team-state parameter `{name}`: {reason}")]
+    InvalidParams {
+        /// Field name.
+        name: &'static str,
+        /// What is wrong with it.
+        reason: &'static str,
+    },
     /// The goal id is not in the database.
     #[error("unknown goal {0}")]
     UnknownGoal(GoalId),

@@ -47,21 +47,21 @@ impl Default for TeamStateParams {
 impl TeamStateParams {
     /// Checks ranges; returns the first problem found.
     pub fn validate(&self) -> Result<(), TeamStateError> {
-        let bad = |what: &str| Err(TeamStateError::InvalidParams(what.to_string()));
+        let bad = |name, reason| Err(TeamStateError::InvalidParams { name, reason });
         if !(self.deconfliction_radius_m.is_finite() && self.deconfliction_radius_m >= 0.0) {
-            return bad("deconfliction_radius_m must be finite and ≥ 0");
+            return bad("deconfliction_radius_m", "must be finite and ≥ 0");
         }
         if !(self.scan_min_spacing_m.is_finite() && self.scan_min_spacing_m >= 0.0) {
-            return bad("scan_min_spacing_m must be finite and ≥ 0");
+            return bad("scan_min_spacing_m", "must be finite and ≥ 0");
         }
         if self.max_message_bytes == 0 || self.max_scan_bins == 0 || self.max_map_blob_bytes == 0 {
-            return bad("max_message_bytes, max_scan_bins and max_map_blob_bytes must be > 0");
+            return bad("max_message_bytes", "max_message_bytes, max_scan_bins and max_map_blob_bytes must be > 0");
         }
         if !(self.claim_lease_s.is_finite() && self.claim_lease_s > 0.0) {
-            return bad("claim_lease_s must be finite and > 0");
+            return bad("claim_lease_s", "must be finite and > 0");
         }
         if !(1..=64).contains(&self.max_in_flight_messages) {
-            return bad("max_in_flight_messages must be in 1..=64");
+            return bad("max_in_flight_messages", "must be in 1..=64");
         }
         Ok(())
     }

@@ -22,18 +22,19 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use serde::Serialize;
+use spomp_behaviors::NodeRegistry;
 use spomp_behaviors::mission::schema::CompleteWhen;
-use spomp_behaviors::mission::{BuildOptions, LoadedMission, MissionFile};
+use spomp_behaviors::mission::{LoadedMission, MissionFile};
 use spomp_behaviors::trace::{Recorder, TransitionRecord};
-use spomp_behaviors::{NodeRegistry, RobotExecutor, RobotRuntime, Status};
 use spomp_core::{
     GoalId, Odometry, PanoramaFrame, PanoramaGeometry, Point2, Pose2, PoseEstimate, ReachabilityScan, RobotId,
     RobotKind, Time, Twist2,
 };
-use spomp_mapping::{CompressionParams, Orthomap, PngLevel};
+use spomp_mapping::{CompressionParams, PngLevel};
+use spomp_robot::{PoseInput, Robot, RobotRuntime, RobotSetup};
 use spomp_teamstate::{GoalOrigin, Tier, TierSet};
 
-pub use setup::{PoseMode, faults_for_mission, radio_for_mission, runtime_config, world_for_mission};
+pub use setup::{faults_for_mission, operating_area, radio_for_mission, world_for_mission};
 pub use summary::{ClusterSummary, ErrorStats, GoalSummary, Outcome, ProblemCount, RobotSummary, RunSummary};
 
 use crate::error::SimError;
@@ -194,8 +195,6 @@ enum Body {
         uav: Box<Uav>,
         camera: Box<OrthoCamera>,
         flying_to: Option<Point2>,
-        next_publish: Time,
-        published_version: u64,
     },
     Fixed {
         pose: Pose2,
@@ -205,9 +204,8 @@ enum Body {
 struct SimRobot {
     id: RobotId,
     kind: RobotKind,
-    mode: PoseMode,
-    rt: RobotRuntime,
-    ex: RobotExecutor,
+    pose_input: PoseInput,
+    robot: Robot,
     body: Body,
     tick_period_ns: i64,
     next_tick: Time,
@@ -313,7 +311,7 @@ impl Simulation {
     /// Sets up a validated mission in `world`.
     pub fn new(
         loaded: &LoadedMission,
-        registry: &NodeRegistry,
+        registry: &NodeRegistry<RobotRuntime>,
         world: Arc<World>,
         options: SimOptions,
     ) -> Result<Self, SimError> {
@@ -327,31 +325,19 @@ impl Simulation {
         }
         let faults = faults_for_mission(&mission, &options.faults);
         let radio = Radio::new(radio_for_mission(&mission), &faults)?;
+        let area = operating_area(&mission, &world);
         let mut robots = Vec::with_capacity(mission.team.len());
         for (i, spec) in mission.team.iter().enumerate() {
-            let (config, mode) = runtime_config(&mission, i, &world, options.seed)?;
-            let start = config.start;
-            let id = config.id.clone();
-            let mut rt = RobotRuntime::from_config(config)
-                .map_err(|e| SimError::invalid("team", format!("robot `{}`: {e}", spec.id)))?;
-            let role = loaded.roles.get(&spec.role).ok_or_else(|| {
-                SimError::invalid("team", format!("robot `{}`: role `{}` did not compile", spec.id, spec.role))
-            })?;
-            let build = BuildOptions { base_dir: Some(loaded.base_dir()), ..BuildOptions::default() };
-            let ex = RobotExecutor::new(role, registry, &id, start, build)
-                .map_err(|e| SimError::invalid("team", format!("robot `{}`: {e}", spec.id)))?;
-            if let Some(goals) = &mission.goals {
-                for (k, g) in goals.manual.iter().enumerate() {
-                    rt.team
-                        .add_mission_goal(k as u32, Point2::new(g.x_m, g.y_m))
-                        .map_err(|e| SimError::invalid("goals.manual", e.to_string()))?;
-                }
-            }
-            if mission.sim.as_ref().is_some_and(|s| s.prior_map) {
-                let map = Orthomap::from_map(world.map().clone())
-                    .map_err(|e| SimError::invalid("sim.prior_map", e.to_string()))?;
-                rt.map = Some(map);
-            }
+            let robot_error =
+                |e: &dyn std::fmt::Display| SimError::invalid("team", format!("robot `{}`: {e}", spec.id));
+            let mut setup =
+                RobotSetup::from_mission(&mission, &spec.id, &area, options.seed).map_err(|e| robot_error(&e))?;
+            setup.config.map_publish_period_s = options.map_publish_period_s;
+            setup.config.map_compression = options.map_compression.clone();
+            let start = setup.config.start;
+            let id = setup.config.id.clone();
+            let robot = Robot::from_setup(loaded, setup, registry).map_err(|e| robot_error(&e))?;
+            let pose_input = robot.pose_input();
             let seed = options.seed.wrapping_mul(31).wrapping_add(i as u64 * 7919 + 17);
             let body = match spec.kind {
                 RobotKind::Ugv => {
@@ -364,13 +350,13 @@ impl Simulation {
                             ),
                         )
                     })?;
-                    let truth_source = match mode {
-                        PoseMode::GroundTruth { noise_m } => Some(Box::new(NoisyPoseSource::new(
+                    let truth_source = match pose_input {
+                        PoseInput::GroundTruth { noise_m } => Some(Box::new(NoisyPoseSource::new(
                             PoseNoiseParams { position_std_m: noise_m, yaw_std_rad: noise_m * 0.02 },
                             faults.localization_noise_scale,
                             seed ^ 0x5EED,
                         ))),
-                        PoseMode::CrossView => None,
+                        PoseInput::OwnEstimate | PoseInput::External => None,
                     };
                     Body::Ugv {
                         ugv: Box::new(ugv),
@@ -385,27 +371,21 @@ impl Simulation {
                         last_scan_stamp: None,
                     }
                 }
-                RobotKind::Uav => {
-                    rt.map = Some(Orthomap::new(*world.spec()));
-                    Body::Uav {
-                        uav: Box::new(Uav::new(options.uav.clone(), start)?),
-                        camera: Box::new(OrthoCamera::new(&options.uav, &world, seed)?),
-                        flying_to: None,
-                        next_publish: Time::ZERO,
-                        published_version: 0,
-                    }
-                }
+                RobotKind::Uav => Body::Uav {
+                    uav: Box::new(Uav::new(options.uav.clone(), start)?),
+                    camera: Box::new(OrthoCamera::new(&options.uav, &world, seed)?),
+                    flying_to: None,
+                },
                 RobotKind::Basestation => Body::Fixed { pose: start },
             };
             let mut node_paths = Vec::new();
-            ex.root().visit(0, &mut |slot, _| node_paths.push(slot.info().path.to_string()));
-            let hz = if role.tick_hz.is_finite() && role.tick_hz > 0.0 { role.tick_hz } else { 10.0 };
+            robot.tree().root().visit(0, &mut |slot, _| node_paths.push(slot.info().path.to_string()));
+            let hz = robot.tick_hz();
             robots.push(SimRobot {
                 id: id.clone(),
                 kind: spec.kind,
-                mode,
-                rt,
-                ex,
+                pose_input,
+                robot,
                 body,
                 tick_period_ns: ((1e9 / hz).round() as i64).max(1),
                 next_tick: Time::ZERO,
@@ -467,9 +447,14 @@ impl Simulation {
         self.outcome
     }
 
+    /// A robot (tests and tools).
+    pub fn robot(&self, id: &str) -> Option<&Robot> {
+        self.robots.iter().find(|r| r.id.as_str() == id).map(|r| &r.robot)
+    }
+
     /// A robot's runtime (tests and tools).
     pub fn runtime(&self, id: &str) -> Option<&RobotRuntime> {
-        self.robots.iter().find(|r| r.id.as_str() == id).map(|r| &r.rt)
+        self.robot(id).map(Robot::runtime)
     }
 
     /// A robot's ground-truth pose.
@@ -543,7 +528,7 @@ impl Simulation {
                     kind: r.kind,
                     truth: r.truth(),
                     z_m: r.z_m(),
-                    estimate: r.rt.pose,
+                    estimate: r.robot.pose(),
                     command: r.command,
                 };
                 observer.on_state(&r.id, now, &snap);
@@ -565,7 +550,7 @@ impl Simulation {
             if r.alive() && r.kill_at.is_some_and(|k| now >= k) {
                 r.killed_s = Some(now.as_secs_f64());
                 r.command = Twist2::ZERO;
-                r.ex.halt(now, &mut r.rt, None);
+                r.robot.halt(now, None);
                 observer.on_event(now, &SimEvent::RobotKilled { robot: r.id.to_string() });
             }
         }
@@ -602,7 +587,7 @@ impl Simulation {
                     if !alive {
                         continue;
                     }
-                    match r.rt.flight {
+                    match r.robot.flight() {
                         Some(cmd) => {
                             if *flying_to != Some(cmd.target) {
                                 uav.go_to(cmd.target);
@@ -635,9 +620,9 @@ impl Simulation {
                     }
                     let odom = odometry.update(now, truth, ugv.twist());
                     observer.on_odometry(&r.id, &odom);
-                    r.rt.on_odometry(odom);
+                    r.robot.on_odometry(odom);
                     if let Some(src) = truth_source.as_mut() {
-                        r.rt.on_external_pose(src.estimate(now, truth));
+                        r.robot.on_external_pose(src.estimate(now, truth));
                     }
                     others_than(&self.obstacles, own, &mut self.others);
                     if let Some(frame) =
@@ -645,8 +630,8 @@ impl Simulation {
                     {
                         let frame = Arc::new(frame);
                         observer.on_panorama(&r.id, &frame);
-                        r.rt.on_panorama(frame);
-                        if let Some(est) = r.rt.pose {
+                        r.robot.on_panorama(frame);
+                        if let Some(est) = r.robot.pose() {
                             let error = est.pose.position().distance(truth.position());
                             r.localization_errors.push(error);
                             let t = now.as_secs_f64();
@@ -654,7 +639,7 @@ impl Simulation {
                                 r.localization_error_series.push((t, error));
                             }
                         }
-                        if let Some(nav) = r.rt.nav.as_deref()
+                        if let Some(nav) = r.robot.nav()
                             && let Some(scan) = nav.latest_scan.as_ref()
                             && *last_scan_stamp != Some(scan.stamp)
                         {
@@ -666,39 +651,24 @@ impl Simulation {
                         }
                     }
                 }
-                Body::Uav { uav, camera, next_publish, published_version, .. } => {
+                Body::Uav { uav, camera, .. } => {
                     if !alive {
                         continue;
                     }
                     let pose = uav.pose();
-                    r.rt.on_external_pose(PoseEstimate { stamp: now, pose, covariance: [0.0; 9], confidence: 1.0 });
+                    r.robot.on_external_pose(PoseEstimate { stamp: now, pose, covariance: [0.0; 9], confidence: 1.0 });
                     let tiles = camera.reveal(world, pose);
-                    if let Some(map) = r.rt.map.as_mut() {
-                        for tile in &tiles {
-                            if let Err(e) = map.apply_tile(tile) {
-                                r.rt.problems.push(format!("camera tile rejected: {e}"));
-                            }
-                        }
-                        // The whole map each time: the team state keeps only the newest version per
-                        // publisher, so a robot that missed one still gets everything.
-                        if now >= *next_publish && map.version() != *published_version {
-                            *next_publish = Time::from_secs_f64(now.as_secs_f64() + self.options.map_publish_period_s);
-                            match map.encode(&self.options.map_compression) {
-                                Ok(blob) => {
-                                    *published_version = map.version();
-                                    if let Err(e) = r.rt.team.add_map_version(map.version(), now, blob.to_bytes()) {
-                                        r.rt.problems.push(format!("map version rejected: {e}"));
-                                    }
-                                }
-                                Err(e) => r.rt.problems.push(format!("map encoding failed: {e}")),
-                            }
-                        }
-                    }
+                    r.robot.on_camera_tiles(&tiles, now);
                 }
                 Body::Fixed { pose } => {
                     if alive {
                         let pose = *pose;
-                        r.rt.on_external_pose(PoseEstimate { stamp: now, pose, covariance: [0.0; 9], confidence: 1.0 });
+                        r.robot.on_external_pose(PoseEstimate {
+                            stamp: now,
+                            pose,
+                            covariance: [0.0; 9],
+                            confidence: 1.0,
+                        });
                     }
                 }
             }
@@ -740,19 +710,16 @@ impl Simulation {
                 let budget = credit.get(k).copied().unwrap_or(0);
                 let from = self.robots[a].id.clone();
                 let to = self.robots[b].id.clone();
-                let Some(msg) =
-                    self.robots[a].rt.team.make_sync(&to, tiers, usize::try_from(budget).unwrap_or(usize::MAX))
+                // Over the wire: encoded, decoded and checked by the receiver.
+                let Some(bytes) =
+                    self.robots[a].robot.team_message_for(&to, tiers, usize::try_from(budget).unwrap_or(usize::MAX))
                 else {
                     continue;
                 };
-                // Over the wire: encoded, decoded and checked by the receiver.
-                let bytes = msg.encode();
                 if let Some(c) = credit.get_mut(k) {
                     *c = c.saturating_sub(bytes.len() as u64);
                 }
-                if let Err(e) = self.robots[b].rt.team.apply_bytes(&from, &bytes) {
-                    self.robots[b].rt.problems.push(format!("sync from {from} rejected: {e}"));
-                }
+                self.robots[b].robot.on_team_message(&from, &bytes);
             }
         }
         self.link_credit = credit;
@@ -770,10 +737,9 @@ impl Simulation {
             }
             if now >= r.next_tick {
                 r.next_tick = Time::from_nanos(now.nanos + r.tick_period_ns - 1);
-                r.rt.maintain(now);
-                r.rt.begin_tick();
-                r.ex.tick(now, &mut r.rt, Some(&mut recorder));
-                r.command = r.rt.command.unwrap_or(Twist2::ZERO);
+                r.robot.maintain(now);
+                r.robot.tick(now, Some(&mut recorder));
+                r.command = r.robot.command().unwrap_or(Twist2::ZERO);
                 if !recorder.records.is_empty() {
                     for rec in &recorder.records {
                         if let Some(t) = r.ticked.get_mut(rec.node_id as usize) {
@@ -783,14 +749,12 @@ impl Simulation {
                     observer.on_transitions(&r.id, &recorder.records);
                     recorder.records.clear();
                 }
-                let path_len = r.rt.planned_path.as_ref().map_or(0, Vec::len);
+                let path_len = r.robot.planned_path().map_or(0, <[Point2]>::len);
                 if path_len != r.last_path_len {
                     r.last_path_len = path_len;
-                    observer.on_path(&r.id, now, r.rt.planned_path.as_deref().unwrap_or(&[]));
+                    observer.on_path(&r.id, now, r.robot.planned_path().unwrap_or(&[]));
                 }
-                let mut reports = r.ex.blackboard_mut().take_reports();
-                reports.append(&mut r.rt.problems);
-                for message in reports {
+                for message in r.robot.take_problems() {
                     observer.on_problem(&r.id, now, &message);
                     let key = (r.id.to_string(), message);
                     if let Some(p) = self.problems.get_mut(&key) {
@@ -809,8 +773,13 @@ impl Simulation {
             // Claim bookkeeping for the "time heading to a goal" metric.
             if r.kind == RobotKind::Ugv {
                 let id = r.id.clone();
-                let held =
-                    r.rt.team.goals().iter().find(|g| g.visited.is_none() && g.is_held_by(&id)).map(|g| g.id.clone());
+                let held = r
+                    .robot
+                    .team()
+                    .goals()
+                    .iter()
+                    .find(|g| g.visited.is_none() && g.is_held_by(&id))
+                    .map(|g| g.id.clone());
                 if held != r.held {
                     if let Some(old) = &r.held {
                         observer.on_event(now, &SimEvent::GoalReleased { goal: old.to_string(), by: id.to_string() });
@@ -832,7 +801,7 @@ impl Simulation {
         let now = self.now;
         let mut own_visits = Vec::new();
         for (ri, r) in self.robots.iter().enumerate() {
-            for g in r.rt.team.goals() {
+            for g in r.robot.team().goals() {
                 for a in &g.aliases {
                     self.aliases.insert(a.clone(), g.id.clone());
                 }
@@ -989,7 +958,10 @@ impl Simulation {
         if clusters.is_empty() {
             return None;
         }
-        let match_radius_m = detect.merge_distance_m + detect.placement_region_m;
+        // The detector's own defaults for what the mission leaves unset.
+        let defaults = spomp_mapping::GoalDetectionParams::default();
+        let match_radius_m = detect.merge_distance_m.unwrap_or(defaults.merge_distance_m)
+            + detect.placement_region_m.unwrap_or(defaults.placement_region_m);
         let near =
             |c: &Point2, g: &GoalSummary| Point2::new(g.position[0], g.position[1]).distance(*c) <= match_radius_m;
         let found = clusters.iter().filter(|c| goals.iter().any(|g| near(c, g))).count();
@@ -1000,11 +972,9 @@ impl Simulation {
     fn check_end(&mut self, observer: &mut dyn SimObserver) {
         let done = match self.mission.complete_when {
             CompleteWhen::AllGoalsVisited => self.all_goals_visited(),
-            CompleteWhen::AllTreesDone => self
-                .robots
-                .iter()
-                .filter(|r| r.alive())
-                .all(|r| matches!(r.ex.status(), Status::Success | Status::Failure)),
+            CompleteWhen::AllTreesDone => {
+                self.robots.iter().filter(|r| r.alive()).all(|r| r.robot.tree().status().is_done())
+            }
             CompleteWhen::TimeLimit => false,
         };
         let outcome = if done {
@@ -1024,16 +994,20 @@ impl Simulation {
 
     fn finish(mut self, _observer: &mut dyn SimObserver, wall_s: f64) -> RunResult {
         let end_s = self.now.as_secs_f64();
+        // Each tree's status at the end of the run, before the halt that stops it.
+        let final_status: Vec<String> =
+            self.robots.iter().map(|r| format!("{:?}", r.robot.tree().status()).to_lowercase()).collect();
         for r in &mut self.robots {
             if r.alive() {
-                r.ex.halt(self.now, &mut r.rt, None);
+                r.robot.halt(self.now, None);
             }
         }
         let goals = self.merged_goals();
         let robots = self
             .robots
             .iter()
-            .map(|r| {
+            .enumerate()
+            .map(|(i, r)| {
                 let visited_goals: Vec<&GoalSummary> =
                     goals.iter().filter(|g| g.visited_by.as_deref() == Some(r.id.as_str())).collect();
                 let heading: f64 = r
@@ -1053,14 +1027,14 @@ impl Simulation {
                     heading_to_goal_fraction: if end_s > 0.0 { heading / end_s } else { 0.0 },
                     collisions,
                     localization: match r.kind {
-                        RobotKind::Ugv => r.mode.name().to_string(),
+                        RobotKind::Ugv => r.pose_input.name().to_string(),
                         RobotKind::Uav => "gps".to_string(),
                         RobotKind::Basestation => "surveyed".to_string(),
                     },
                     localization_error_m: ErrorStats::of(&r.localization_errors),
                     goals_visited: visited_goals.len() as u32,
                     killed_s: r.killed_s,
-                    tree_status: format!("{:?}", r.ex.status()).to_lowercase(),
+                    tree_status: final_status.get(i).cloned().unwrap_or_default(),
                 }
             })
             .collect();

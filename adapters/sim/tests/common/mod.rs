@@ -8,13 +8,17 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use spomp_behaviors::mission::{BuildOptions, LoadedMission, load_mission};
-use spomp_behaviors::runtime::{LocalizationSetup, NavParams, RuntimeConfig};
-use spomp_behaviors::{RobotExecutor, RobotRuntime, Status, builtin_registry};
+use spomp_behaviors::mission::{BuildOptions, LoadedMission, build_executor, load_mission};
+use spomp_behaviors::{Status, TreeExecutor};
 use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, RobotId, RobotKind, Time, Twist2};
+use spomp_robot::registry as builtin_registry;
+use spomp_robot::runtime::{NavParams, RuntimeConfig};
+use spomp_robot::{RobotRuntime, WatchdogParams};
+
+/// A UGV's tree over its runtime.
+pub type RobotExecutor = TreeExecutor<RobotRuntime>;
 use spomp_global_planner::GlobalPlannerParams;
 use spomp_local_planner::LocalPlannerParams;
-use spomp_mapping::Orthomap;
 use spomp_sim::run::{SimOptions, Simulation, world_for_mission};
 use spomp_sim::{OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams, World};
 use spomp_teamstate::TeamStateParams;
@@ -83,25 +87,19 @@ pub fn driver(world: &World, s: DriverSetup<'_>) -> (RobotRuntime, RobotExecutor
     let registry = builtin_registry();
     let loaded = load_mission(&path, &registry);
     assert!(loaded.diagnostics.is_empty(), "{mission}\n{:#?}", loaded.diagnostics);
-    let config = RuntimeConfig {
-        id: RobotId::new(s.id),
-        kind: RobotKind::Ugv,
-        priority: s.priority,
-        start: s.start,
-        classes: world.classes().clone(),
-        map_spec: Some(*world.spec()),
-        team: s.team,
-        detection: None,
-        localization: LocalizationSetup::External,
-        nav: Some(NavParams { local: LocalPlannerParams::simulation(), global: s.global }),
-        goal_time_per_m_s: 2.0,
-        seed: 7,
-    };
-    let mut rt = RobotRuntime::from_config(config).unwrap();
-    if s.with_map {
-        rt.map = Some(Orthomap::from_map(world.map().clone()).unwrap());
-    }
-    let ex = RobotExecutor::new(&loaded.roles["driver"], &registry, &rt.id, s.start, BuildOptions::default()).unwrap();
+    let mut config = RuntimeConfig::basic(RobotId::new(s.id), RobotKind::Ugv, s.priority, s.start);
+    config.classes = world.classes().clone();
+    config.map_spec = Some(*world.spec());
+    config.team = s.team;
+    config.nav = Some(NavParams {
+        local: LocalPlannerParams::simulation(),
+        global: s.global,
+        watchdog: WatchdogParams::default(),
+    });
+    config.seed = 7;
+    config.prior_map = s.with_map.then(|| world.map().clone());
+    let rt = RobotRuntime::from_config(config).unwrap();
+    let ex = build_executor(&loaded.roles["driver"], &registry, rt.id(), s.start, BuildOptions::default()).unwrap();
     (rt, ex)
 }
 
@@ -156,7 +154,7 @@ impl DrivingRobot {
         self.rt.begin_tick();
         let status = self.ex.tick(self.t, &mut self.rt, None);
         self.reports.extend(self.ex.blackboard_mut().take_reports());
-        self.advance(self.rt.command.unwrap_or(Twist2::ZERO));
+        self.advance(self.rt.command().unwrap_or(Twist2::ZERO));
         status
     }
 
@@ -177,12 +175,12 @@ impl DrivingRobot {
 
     /// Edges the robot's own scans removed from its graph.
     pub fn removed_edges(&self) -> usize {
-        self.rt.nav.as_deref().map_or(0, |n| n.global.graph_stats().removed_edges)
+        self.rt.nav().map_or(0, |n| n.global.graph_stats().removed_edges)
     }
 
     /// Where the robot is and what it went through, for assertion messages.
     pub fn summary(&self) -> String {
-        let nav = self.rt.nav.as_deref();
+        let nav = self.rt.nav();
         format!(
             "t = {:.1} s, at ({:.1}, {:.1}), driven {:.1} m, {} collisions, graph {:?}, {} edges removed by scans, {} \
              blocked by being stuck, failure {:?}, reports {:?}, problems {:?}",
@@ -196,7 +194,7 @@ impl DrivingRobot {
             nav.map_or(0, |n| n.blocked_edges.len()),
             self.ex.blackboard().get_by_name("why"),
             self.reports,
-            self.rt.problems
+            self.rt.problems()
         )
     }
 }

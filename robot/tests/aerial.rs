@@ -15,9 +15,13 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use spomp_behaviors::mission::{BuildOptions, load_mission};
+use spomp_behaviors::mission::{BuildOptions, build_executor, load_mission};
 use spomp_behaviors::registry::PortBindings;
-use spomp_behaviors::{BbValue, Binding, RobotExecutor, RobotRuntime, Status, builtin_registry};
+use spomp_behaviors::{BbValue, Binding, Status, TreeExecutor};
+use spomp_robot::RobotRuntime;
+use spomp_robot::registry as builtin_registry;
+
+type RobotExecutor = TreeExecutor<RobotRuntime>;
 use spomp_core::{Point2, Pose2, PoseEstimate, RobotId, RobotKind, Time};
 use spomp_teamstate::{TeamStateParams, TierSet};
 
@@ -40,8 +44,8 @@ fn build_from(path: &Path, role: &str, id: &str, start: Pose2) -> RobotExecutor 
     let registry = builtin_registry();
     let loaded = load_mission(path, &registry);
     assert!(loaded.diagnostics.is_empty(), "{:#?}", loaded.diagnostics);
-    let opts = BuildOptions { base_dir: Some(loaded.base_dir()), ..Default::default() };
-    RobotExecutor::new(&loaded.roles[role], &registry, &RobotId::new(id), start, opts).unwrap()
+    let opts = BuildOptions { base_dir: Some(loaded.base_dir()) };
+    build_executor(&loaded.roles[role], &registry, &RobotId::new(id), start, opts).unwrap()
 }
 
 fn runtime(id: &str, kind: RobotKind, priority: u32, start: Pose2) -> RobotRuntime {
@@ -82,7 +86,7 @@ impl Uav {
         fix(&mut self.rt, self.pos, t);
         self.rt.begin_tick();
         let s = self.ex.tick(t, &mut self.rt, None);
-        if let Some(cmd) = self.rt.flight {
+        if let Some(cmd) = self.rt.flight() {
             self.altitudes.push(cmd.altitude_m);
             if self.targets.last().is_none_or(|p| p.distance(cmd.target) > 1e-9) {
                 self.targets.push(cmd.target);
@@ -175,7 +179,7 @@ fn waypoints_are_flown_in_order_and_resumed_after_the_state_is_left() {
     let mut n = 0;
     while status == Status::Running && n < 1000 {
         status = uav.step(at(n));
-        let flying = uav.rt.flight.is_some();
+        let flying = uav.rt.flight().is_some();
         progress_log.push((n, uav.int("next_waypoint").unwrap(), flying));
         if !flying && status == Status::Running {
             paused_at.push((n, uav.pos));
@@ -315,7 +319,7 @@ fn the_shipped_plan_is_flown_in_metres_from_its_planned_home() {
     // file it could not read.
     let registry = builtin_registry();
     let loaded = load_mission(&mission, &registry);
-    let err = RobotExecutor::new(
+    let err = build_executor(
         &loaded.roles["explorer"],
         &registry,
         &RobotId::new("uav1"),
@@ -328,9 +332,8 @@ fn the_shipped_plan_is_flown_in_metres_from_its_planned_home() {
     assert!(err.contains("explore.plan") && err.contains("cannot read"), "{err}");
 }
 
-fn follow_node(ports: &[(&'static str, BbValue)]) -> Result<Box<dyn spomp_behaviors::Behavior>, String> {
+fn follow_node(ports: &[(&'static str, BbValue)]) -> Result<Box<dyn spomp_behaviors::Behavior<RobotRuntime>>, String> {
     let registry = builtin_registry();
-    let spec = registry.get("follow_waypoints").unwrap();
     let mut p = PortBindings::default();
     for (name, v) in ports {
         p.insert(name, Binding::Literal(v.clone()));
@@ -340,7 +343,7 @@ fn follow_node(ports: &[(&'static str, BbValue)]) -> Result<Box<dyn spomp_behavi
             p.insert(name, Binding::Literal(BbValue::Float(v)));
         }
     }
-    (spec.factory().unwrap())(&p)
+    (registry.factory("follow_waypoints").unwrap())(&p)
 }
 
 fn plan_port(path: &Path) -> (&'static str, BbValue) {
@@ -528,8 +531,9 @@ time_limit_s: 1000
 
 /// Everything `from` holds, copied into `to` (a one-way radio burst; acknowledgements dropped).
 fn tell(from: &mut RobotRuntime, to: &mut RobotRuntime) {
-    if let Some(m) = from.team.make_sync(&to.id, TierSet::ALL, usize::MAX) {
-        to.team.apply(&from.id, &m).unwrap();
+    let to_id = to.id().clone();
+    if let Some(m) = from.team_mut().make_sync(&to_id, TierSet::ALL, usize::MAX) {
+        to.team_mut().apply(from.id(), &m).unwrap();
     }
 }
 
@@ -553,7 +557,7 @@ fn seek_robot_rotates_round_robin_and_flies_to_the_path_end_of_a_stale_robot() {
     fix(&mut ugv1, Point2::new(100.0, 0.0), t0);
     // ugv2 was last heard at t = 0, heading to (0, 200): at t0 its pose is stale.
     fix(&mut ugv2, Point2::new(0.0, 100.0), Time::ZERO);
-    ugv2.team.set_path_end(Some(Point2::new(0.0, 200.0))).unwrap();
+    ugv2.team_mut().set_path_end(Some(Point2::new(0.0, 200.0))).unwrap();
     for r in [&mut base, &mut ugv1, &mut ugv2] {
         tell(r, &mut uav.rt);
     }
@@ -606,7 +610,7 @@ fn seek_robot_fails_when_no_robot_is_known() {
     assert_eq!(uav.step(Time::ZERO), Status::Failure);
     let reports = uav.reports();
     assert!(reports.iter().any(|r| r.contains("no robot to seek")), "{reports:?}");
-    assert!(uav.rt.flight.is_none());
+    assert!(uav.rt.flight().is_none());
 }
 
 // ------------------------------------------------------------------------ wait_for_sync
@@ -628,19 +632,19 @@ fn wait_for_sync_needs_a_full_exchange_during_the_wait_and_times_out_otherwise()
     let mut ugv = runtime("ugv1", RobotKind::Ugv, 1, Pose2::default());
     let ugv_at = Point2::new(20.0, 5.0);
     // Some team data on both sides, as in a mission.
-    ugv.team.add_mission_goal(0, Point2::new(60.0, 60.0)).unwrap();
+    ugv.team_mut().add_mission_goal(0, Point2::new(60.0, 60.0)).unwrap();
     fix(&mut ugv, ugv_at, Time::ZERO);
 
     // Nothing heard yet: hover (no command), not complete.
     assert_eq!(uav.step(at(0)), Status::Running);
-    assert!(uav.rt.flight.is_none());
+    assert!(uav.rt.flight().is_none());
     // One way only: the UAV hears ugv1 (and tracks it) but ugv1 has not confirmed anything.
     tell(&mut ugv, &mut uav.rt);
     assert_eq!(uav.step(at(1)), Status::Running);
-    assert_eq!(uav.rt.flight.map(|f| f.target), Some(ugv_at), "tracks the robot's pose");
+    assert_eq!(uav.rt.flight().map(|f| f.target), Some(ugv_at), "tracks the robot's pose");
     // A full exchange: complete.
     exchange(&mut uav.rt, &mut ugv);
-    assert!(uav.rt.team.sync_complete_with(&ugv.id));
+    assert!(uav.rt.team().sync_complete_with(&ugv.id()));
     assert_eq!(uav.step(at(2)), Status::Success);
 
     // A new wait later: the team state still reports the old sync complete, but nothing was
@@ -649,7 +653,7 @@ fn wait_for_sync_needs_a_full_exchange_during_the_wait_and_times_out_otherwise()
     let mut n = begin;
     let status = loop {
         let s = uav.step(at(n));
-        assert!(uav.rt.team.sync_complete_with(&ugv.id), "the stale completion is still reported");
+        assert!(uav.rt.team().sync_complete_with(&ugv.id()), "the stale completion is still reported");
         if s != Status::Running {
             break s;
         }
@@ -676,7 +680,7 @@ fn wait_for_sync_without_tracking_hovers() {
     tell(&mut ugv, &mut uav.rt);
     for n in 0..20 {
         assert_eq!(uav.step(at(n)), Status::Running);
-        assert!(uav.rt.flight.is_none());
+        assert!(uav.rt.flight().is_none());
     }
     assert_eq!(uav.pos, Point2::new(0.0, 0.0));
 }

@@ -40,11 +40,12 @@ use spomp_core::{Point2, Pose2, RobotKind, Time, Twist2};
 use spomp_global_planner::{GlobalPath, NodeId, SearchParams};
 use spomp_local_planner::{Dwa, LocalGoalParams, LocalPlannerParams, select_local_goal};
 
-use crate::blackboard::{BbValue, Binding, PortType};
-use crate::node::{Behavior, TickContext};
-use crate::registry::{Category, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
-use crate::runtime::{NavStack, RobotRuntime, runtime};
-use crate::status::Status;
+use super::Ctx;
+use crate::runtime::{NavStack, RobotRuntime};
+use spomp_behaviors::Status;
+use spomp_behaviors::blackboard::{BbValue, Binding, PortType};
+use spomp_behaviors::node::Behavior;
+use spomp_behaviors::registry::{Category, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
 
 /// The remaining distance must drop by this much within the stuck timeout, metres.
 pub const PROGRESS_MARGIN_M: f64 = 1.0;
@@ -66,7 +67,7 @@ const CLEARANCE_HALF_WIDTH_M: f64 = 1.0;
 const PROJECTION_WINDOW_M: f64 = 20.0;
 
 /// Registers the navigation nodes.
-pub fn register_navigation(r: &mut NodeRegistry) {
+pub fn register_navigation(r: &mut NodeRegistry<RobotRuntime>) {
     use Category::Action;
     use PortType::{Float, Params, Point, String as Str};
     use RobotKind::Ugv;
@@ -296,7 +297,7 @@ impl Driver {
 
     /// Starts a drive: builds the tuning on first use, forgets the last drive.
     fn start(&mut self, rt: &RobotRuntime, now: Time) -> Result<(), String> {
-        let Some(nav) = rt.nav.as_deref() else {
+        let Some(nav) = rt.nav() else {
             return Err("the robot has no navigation stack (not a UGV, or its runtime was set up without `nav`)".into());
         };
         if self.tuning.is_none() {
@@ -356,31 +357,32 @@ impl Driver {
     /// then DWA. Writes `rt.command` (zero without a view or a local goal).
     fn drive(&mut self, rt: &mut RobotRuntime, goal: Point2) {
         let Some(tuning) = self.tuning.as_mut() else {
-            rt.command = Some(Twist2::ZERO);
+            rt.command_velocity(Twist2::ZERO);
             return;
         };
-        let Some(view) = rt.nav.as_deref().and_then(|n| n.view.as_ref()) else {
-            rt.command = Some(Twist2::ZERO);
+        let odometry = rt.odometry();
+        let Some((view, rng)) = rt.nav_and_rng().and_then(|(n, rng)| Some((n.view.as_ref()?, rng))) else {
+            rt.command_velocity(Twist2::ZERO);
             return;
         };
         if self.view_stamp != Some(view.stamp) {
             let at = view.pose.pose;
             let target = at.inverse_transform_point(goal);
             let previous = self.local_goal.map(|g| at.inverse_transform_point(self.view_pose.transform_point(g)));
-            self.local_goal = select_local_goal(&view.region, target, previous, &tuning.goal, &mut rt.rng);
+            self.local_goal = select_local_goal(&view.region, target, previous, &tuning.goal, rng);
             self.view_stamp = Some(view.stamp);
             self.view_pose = at;
         }
         let Some(local_goal) = self.local_goal else {
-            rt.command = Some(Twist2::ZERO);
+            rt.command_velocity(Twist2::ZERO);
             return;
         };
-        let (robot, current) = match rt.odometry {
+        let (robot, current) = match odometry {
             Some(odom) => (view.odom_pose.between(odom.pose), odom.twist),
             None => (Pose2::default(), Twist2::ZERO),
         };
         let cmd = tuning.dwa.step_in_region(current, robot, local_goal, &view.region);
-        rt.command = Some(cmd);
+        rt.command_velocity(cmd);
     }
 }
 
@@ -625,7 +627,7 @@ impl Navigator {
     }
 
     fn has_graph(rt: &RobotRuntime) -> bool {
-        rt.nav.as_deref().is_some_and(NavStack::has_graph)
+        rt.nav().is_some_and(NavStack::has_graph)
     }
 
     /// Plans from `from`; `Ok(None)` when the robot has no graph yet (local-only driving).
@@ -633,7 +635,7 @@ impl Navigator {
         if !Self::has_graph(rt) {
             return Ok(None);
         }
-        let Some(nav) = rt.nav.as_deref_mut() else { return Ok(None) };
+        let Some(nav) = rt.nav_mut() else { return Ok(None) };
         nav.plan(from, to).map(Some).map_err(|e| e.to_string())
     }
 
@@ -649,25 +651,19 @@ impl Navigator {
             _ => {}
         }
         let end = route.points.last().copied();
-        rt.planned_path = Some(route.points.clone());
-        if let Err(e) = rt.team.set_path_end(end) {
-            rt.problems.push(format!("team state rejected the path end: {e}"));
-        }
+        rt.publish_path(route.points.clone(), end);
         self.route = Some(route);
         self.next_replan = now + std::time::Duration::from_secs_f64(REPLAN_PERIOD_S);
     }
 
     /// Clears the published path.
     fn clear(rt: &mut RobotRuntime) {
-        rt.planned_path = None;
-        if let Err(e) = rt.team.set_path_end(None) {
-            rt.problems.push(format!("team state rejected clearing the path end: {e}"));
-        }
+        rt.clear_path();
     }
 
     /// Ends the drive: stop, clear the path.
     fn finish(&mut self, rt: &mut RobotRuntime) {
-        rt.command = Some(Twist2::ZERO);
+        rt.command_velocity(Twist2::ZERO);
         Self::clear(rt);
         self.route = None;
     }
@@ -680,7 +676,7 @@ impl Navigator {
         self.route = None;
         self.behind = None;
         self.ahead = None;
-        let from = rt.pose.map_or(rt.start.position(), |p| p.pose.position());
+        let from = rt.pose().map_or(rt.start().position(), |p| p.pose.position());
         let path = Self::plan(rt, from, req.target).map_err(|e| (Reason::NoPath, format!("no path: {e}")))?;
         self.adopt(rt, Route::new(path, from, req.target), now, Trigger::Start, req);
         Ok(())
@@ -719,7 +715,7 @@ impl Navigator {
 
     /// A route that first backs out along the robot's trail ([`NavStack::plan_backtracking`]).
     fn backtrack_route(rt: &mut RobotRuntime, here: Point2, target: Point2) -> Option<Route> {
-        let nav = rt.nav.as_deref_mut()?;
+        let nav = rt.nav_mut()?;
         nav.note_stuck_at(here);
         let path = nav.plan_backtracking(here, target).ok()?;
         Some(Route::new(Some(path), here, target))
@@ -727,7 +723,7 @@ impl Navigator {
 
     fn node_position(rt: &RobotRuntime, node: Option<NodeId>) -> Option<Point2> {
         let node = node?;
-        rt.nav.as_deref()?.global.nodes().find(|(id, _, _)| *id == node).map(|(_, p, _)| p)
+        rt.nav()?.global.nodes().find(|(id, _, _)| *id == node).map(|(_, p, _)| p)
     }
 
     /// Replans keeping the robot's commitment: from the node it is heading to (the current
@@ -763,12 +759,12 @@ impl Navigator {
 
     /// Checks the path after new information; replans when needed.
     fn maybe_replan(&mut self, rt: &mut RobotRuntime, now: Time, here: Point2, req: &Request) -> Result<(), String> {
-        let stamp = rt.nav.as_deref().and_then(|n| n.view.as_ref()).map(|v| v.stamp);
+        let stamp = rt.nav().and_then(|n| n.view.as_ref()).map(|v| v.stamp);
         let new_view = stamp.is_some() && stamp != self.checked_view;
         self.checked_view = stamp;
         let Some(route) = &self.route else { return Ok(()) };
         let ratio = self.driver.tuning.as_ref().map_or(0.2, |t| t.replan_ratio);
-        let (trigger, current_edge_gone) = match (&route.path, rt.nav.as_deref()) {
+        let (trigger, current_edge_gone) = match (&route.path, rt.nav()) {
             (_, None) => return Ok(()),
             // Local-only so far: plan as soon as a map gives a graph.
             (None, Some(nav)) => {
@@ -819,8 +815,8 @@ impl Navigator {
     }
 
     fn tick(&mut self, rt: &mut RobotRuntime, now: Time, req: &Request) -> Step {
-        let Some(pose) = rt.pose else {
-            rt.command = Some(Twist2::ZERO);
+        let Some(pose) = rt.pose() else {
+            rt.command_velocity(Twist2::ZERO);
             if self.driver.stuck(now, None, f64::INFINITY, req.stuck_timeout_s) {
                 return Step::Failed(Reason::Stuck, "the robot has had no pose estimate".into());
             }
@@ -839,7 +835,7 @@ impl Navigator {
         let Some(route) = self.route.as_mut() else {
             return Step::Failed(Reason::NoPath, "no route".into());
         };
-        let global = rt.nav.as_deref().map(|n| &n.global);
+        let global = rt.nav().map(|n| &n.global);
         // Whether the aerial map shows a step on the lines from `a` to `b` and to the points
         // `half_width_m` either side of `b` (a wedge: what lies right beside the robot, such
         // as a wall it drives along, does not count).
@@ -862,7 +858,7 @@ impl Navigator {
         self.ahead = ahead;
         if self.driver.stuck(now, Some(here), remaining, req.stuck_timeout_s) {
             let pinned = self.driver.pinned(now, Some(here), req.stuck_timeout_s);
-            if let Some(nav) = rt.nav.as_deref_mut()
+            if let Some(nav) = rt.nav_mut()
                 && let (Some(a), Some(b)) = (self.behind, self.ahead)
             {
                 nav.block_edge(a, b);
@@ -906,18 +902,8 @@ impl Navigator {
 // ---------------------------------------------------------------------------------------------
 // Nodes
 
-/// The robot runtime and the blackboard of a tick, borrowed side by side.
-fn split<'c>(ctx: &'c mut TickContext<'_>, node: &str) -> Option<(&'c mut RobotRuntime, &'c mut crate::Blackboard)> {
-    if !ctx.env.is::<RobotRuntime>() {
-        runtime(ctx, node);
-        return None;
-    }
-    let rt = ctx.env.downcast_mut::<RobotRuntime>()?;
-    Some((rt, &mut *ctx.blackboard))
-}
-
 /// A positive finite number from a port (its declared default when unset), or a report.
-fn number(binding: &Binding, ctx: &mut TickContext<'_>, node: &str, port: &str, default: f64) -> Option<f64> {
+fn number(binding: &Binding, ctx: &mut Ctx<'_>, node: &str, port: &str, default: f64) -> Option<f64> {
     let v = match binding {
         Binding::Unset => default,
         b => match b.get::<f64>(ctx.blackboard) {
@@ -936,7 +922,7 @@ fn number(binding: &Binding, ctx: &mut TickContext<'_>, node: &str, port: &str, 
     }
 }
 
-fn target_of(binding: &Binding, ctx: &mut TickContext<'_>, node: &str) -> Option<Point2> {
+fn target_of(binding: &Binding, ctx: &mut Ctx<'_>, node: &str) -> Option<Point2> {
     match binding.get::<Point2>(ctx.blackboard) {
         Some(p) if p.x.is_finite() && p.y.is_finite() => Some(p),
         Some(p) => {
@@ -956,20 +942,24 @@ fn run_navigation(
     nav: &mut Navigator,
     prev: Status,
     rt: &mut RobotRuntime,
-    bb: &mut crate::Blackboard,
+    bb: &mut spomp_behaviors::Blackboard,
     now: Time,
     req: &Request,
     node: &str,
     failure_reason: &Binding,
 ) -> Status {
-    let fail = |nav: &mut Navigator, rt: &mut RobotRuntime, bb: &mut crate::Blackboard, reason: Reason, msg: String| {
+    let fail = |nav: &mut Navigator,
+                rt: &mut RobotRuntime,
+                bb: &mut spomp_behaviors::Blackboard,
+                reason: Reason,
+                msg: String| {
         nav.finish(rt);
         bb.report(format!("{node}: {msg}"));
         failure_reason.set(bb, BbValue::Str(reason.as_str().into()));
         Status::Failure
     };
     if prev != Status::Running {
-        if rt.pose.is_some_and(|p| p.pose.position().distance(req.target) <= req.tolerance_m) {
+        if rt.pose().is_some_and(|p| p.pose.position().distance(req.target) <= req.tolerance_m) {
             nav.finish(rt);
             return Status::Success;
         }
@@ -1013,8 +1003,8 @@ impl NavigateTo {
     }
 }
 
-impl Behavior for NavigateTo {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl Behavior<RobotRuntime> for NavigateTo {
+    fn tick(&mut self, prev: Status, ctx: &mut Ctx<'_>) -> Status {
         const NODE: &str = "navigate_to";
         let now = ctx.now;
         let Some(target) = target_of(&self.target, ctx, NODE) else { return Status::Failure };
@@ -1039,18 +1029,19 @@ impl Behavior for NavigateTo {
                 None => return Status::Failure,
             },
         };
-        let Some((rt, bb)) = split(ctx, NODE) else { return Status::Failure };
+        let (rt, bb) = (&mut *ctx.env, &mut *ctx.blackboard);
         let limit = match (fixed, per_m) {
             (Some(s), _) => Limit::Fixed(s),
             (None, Some(k)) => Limit::PerMetre(k),
-            (None, None) => Limit::PerMetre(rt.goal_time_per_m_s),
+            (None, None) => Limit::PerMetre(rt.goal_time_per_m_s()),
         };
         let req = Request { target, tolerance_m, limit, stuck_timeout_s, lookahead_m };
         run_navigation(&mut self.nav, prev, rt, bb, now, &req, NODE, &self.failure_reason)
     }
 
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
-        if let Some(rt) = ctx.env.downcast_mut::<RobotRuntime>() {
+    fn halt(&mut self, ctx: &mut Ctx<'_>) {
+        {
+            let rt = &mut *ctx.env;
             self.nav.finish(rt);
         }
     }
@@ -1076,8 +1067,8 @@ impl ReturnHome {
     }
 }
 
-impl Behavior for ReturnHome {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl Behavior<RobotRuntime> for ReturnHome {
+    fn tick(&mut self, prev: Status, ctx: &mut Ctx<'_>) -> Status {
         const NODE: &str = "return_home";
         let now = ctx.now;
         let (Some(min_distance_m), Some(tolerance_m), Some(stuck_timeout_s)) = (
@@ -1087,26 +1078,27 @@ impl Behavior for ReturnHome {
         ) else {
             return Status::Failure;
         };
-        let Some((rt, bb)) = split(ctx, NODE) else { return Status::Failure };
-        let home = rt.start.position();
+        let (rt, bb) = (&mut *ctx.env, &mut *ctx.blackboard);
+        let home = rt.start().position();
         // Without a pose estimate the robot cannot know it is home: it waits for one (and fails as
         // stuck if none comes) like any drive.
-        let here = rt.pose.map(|p| p.pose.position());
+        let here = rt.pose().map(|p| p.pose.position());
         if prev != Status::Running && here.is_some_and(|h| h.distance(home) <= min_distance_m) {
             return Status::Success;
         }
         let req = Request {
             target: home,
             tolerance_m,
-            limit: Limit::PerMetre(rt.goal_time_per_m_s),
+            limit: Limit::PerMetre(rt.goal_time_per_m_s()),
             stuck_timeout_s,
             lookahead_m: 8.0,
         };
         run_navigation(&mut self.nav, prev, rt, bb, now, &req, NODE, &self.failure_reason)
     }
 
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
-        if let Some(rt) = ctx.env.downcast_mut::<RobotRuntime>() {
+    fn halt(&mut self, ctx: &mut Ctx<'_>) {
+        {
+            let rt = &mut *ctx.env;
             self.nav.finish(rt);
         }
     }
@@ -1157,14 +1149,14 @@ impl NavigateLocal {
     }
 
     /// The frame on the `frame` port (`map` when unset), or a report.
-    fn frame(&self, ctx: &mut TickContext<'_>, node: &str) -> Option<TargetFrame> {
+    fn frame(&self, ctx: &mut Ctx<'_>, node: &str) -> Option<TargetFrame> {
         let Some(name) = self.frame.get::<std::sync::Arc<str>>(ctx.blackboard) else { return Some(TargetFrame::Map) };
         TargetFrame::parse(&name).map_err(|e| ctx.blackboard.report(format!("{node}: {e}"))).ok()
     }
 }
 
-impl Behavior for NavigateLocal {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl Behavior<RobotRuntime> for NavigateLocal {
+    fn tick(&mut self, prev: Status, ctx: &mut Ctx<'_>) -> Status {
         const NODE: &str = "navigate_local";
         let now = ctx.now;
         let Some(target) = target_of(&self.target, ctx, NODE) else { return Status::Failure };
@@ -1175,11 +1167,11 @@ impl Behavior for NavigateLocal {
         ) else {
             return Status::Failure;
         };
-        let Some((rt, bb)) = split(ctx, NODE) else { return Status::Failure };
+        let (rt, bb) = (&mut *ctx.env, &mut *ctx.blackboard);
         if prev != Status::Running {
             self.anchored = None;
             if let Err(e) = self.driver.start(rt, now) {
-                rt.command = Some(Twist2::ZERO);
+                rt.command_velocity(Twist2::ZERO);
                 bb.report(format!("{NODE}: {e}"));
                 return Status::Failure;
             }
@@ -1187,21 +1179,21 @@ impl Behavior for NavigateLocal {
         // Without a pose estimate yet the target is not used below (the robot waits).
         let target = match frame {
             TargetFrame::Map => target,
-            TargetFrame::Robot => match (self.anchored, rt.pose) {
+            TargetFrame::Robot => match (self.anchored, rt.pose()) {
                 (Some(anchored), _) => anchored,
                 (None, Some(pose)) => *self.anchored.insert(pose.pose.transform_point(target)),
                 (None, None) => target,
             },
         };
-        let remaining = rt.pose.map_or(f64::INFINITY, |p| p.pose.position().distance(target));
+        let remaining = rt.pose().map_or(f64::INFINITY, |p| p.pose.position().distance(target));
         if remaining <= tolerance_m {
-            rt.command = Some(Twist2::ZERO);
+            rt.command_velocity(Twist2::ZERO);
             return Status::Success;
         }
-        let here = rt.pose.map(|p| p.pose.position());
+        let here = rt.pose().map(|p| p.pose.position());
         if self.driver.stuck(now, here, remaining, stuck_timeout_s) {
-            rt.command = Some(Twist2::ZERO);
-            let why = if rt.pose.is_none() {
+            rt.command_velocity(Twist2::ZERO);
+            let why = if rt.pose().is_none() {
                 "the robot has no pose estimate".to_string()
             } else {
                 format!("no safe progress for {stuck_timeout_s:.0} s ({remaining:.1} m from the target)")
@@ -1209,17 +1201,18 @@ impl Behavior for NavigateLocal {
             bb.report(format!("{NODE}: {why}"));
             return Status::Failure;
         }
-        if rt.pose.is_none() {
-            rt.command = Some(Twist2::ZERO);
+        if rt.pose().is_none() {
+            rt.command_velocity(Twist2::ZERO);
             return Status::Running;
         }
         self.driver.drive(rt, target);
         Status::Running
     }
 
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
-        if let Some(rt) = ctx.env.downcast_mut::<RobotRuntime>() {
-            rt.command = Some(Twist2::ZERO);
+    fn halt(&mut self, ctx: &mut Ctx<'_>) {
+        {
+            let rt = &mut *ctx.env;
+            rt.command_velocity(Twist2::ZERO);
         }
     }
 }

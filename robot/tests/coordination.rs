@@ -7,9 +7,12 @@
 
 use std::io::Write;
 
-use spomp_behaviors::mission::{BuildOptions, load_mission};
-use spomp_behaviors::{BbValue, RobotExecutor, RobotRuntime, Status, builtin_registry};
+use spomp_behaviors::mission::{BuildOptions, build_executor, load_mission};
+use spomp_behaviors::{BbValue, Status, TreeExecutor};
 use spomp_core::{GoalId, Point2, Pose2, PoseEstimate, RobotId, RobotKind, Time};
+use spomp_robot::RobotRuntime;
+use spomp_robot::registry as builtin_registry;
+use spomp_robot::runtime::RuntimeConfig;
 use spomp_teamstate::{TeamStateParams, TierSet};
 
 /// Claim, "drive" (a wait guarded by goal_still_mine), mark visited; on failure release.
@@ -40,7 +43,7 @@ time_limit_s: 100
 
 struct Robot {
     rt: RobotRuntime,
-    ex: RobotExecutor,
+    ex: TreeExecutor<RobotRuntime>,
 }
 
 fn robots() -> (Robot, Robot) {
@@ -56,11 +59,11 @@ fn robots() -> (Robot, Robot) {
         let start = Pose2::new(x, 0.0, 0.0);
         let mut rt =
             RobotRuntime::new(RobotId::new(id), RobotKind::Ugv, priority, start, TeamStateParams::default()).unwrap();
-        rt.pose = Some(PoseEstimate { pose: start, confidence: 1.0, ..Default::default() });
+        rt.on_external_pose(PoseEstimate { pose: start, confidence: 1.0, ..Default::default() });
         // Operator goals: A near both robots, B farther away.
-        rt.team.add_mission_goal(0, Point2::new(10.0, 0.0)).unwrap();
-        rt.team.add_mission_goal(1, Point2::new(60.0, 0.0)).unwrap();
-        let ex = RobotExecutor::new(role, &registry, &rt.id, start, BuildOptions::default()).unwrap();
+        rt.team_mut().add_mission_goal(0, Point2::new(10.0, 0.0)).unwrap();
+        rt.team_mut().add_mission_goal(1, Point2::new(60.0, 0.0)).unwrap();
+        let ex = build_executor(role, &registry, rt.id(), start, BuildOptions::default()).unwrap();
         Robot { rt, ex }
     };
     (make("ugv1", 1, 0.0), make("ugv2", 2, 5.0))
@@ -73,11 +76,11 @@ fn tick(r: &mut Robot, t: Time) -> Status {
 /// A full exchange both ways, as robots in radio contact would do.
 fn exchange(a: &mut Robot, b: &mut Robot) {
     for _ in 0..3 {
-        if let Some(m) = a.rt.team.make_sync(&b.rt.id, TierSet::ALL, usize::MAX) {
-            b.rt.team.apply(&a.rt.id, &m).unwrap();
+        if let Some(m) = a.rt.team_mut().make_sync(&b.rt.id(), TierSet::ALL, usize::MAX) {
+            b.rt.team_mut().apply(&a.rt.id(), &m).unwrap();
         }
-        if let Some(m) = b.rt.team.make_sync(&a.rt.id, TierSet::ALL, usize::MAX) {
-            a.rt.team.apply(&b.rt.id, &m).unwrap();
+        if let Some(m) = b.rt.team_mut().make_sync(&a.rt.id(), TierSet::ALL, usize::MAX) {
+            a.rt.team_mut().apply(&b.rt.id(), &m).unwrap();
         }
     }
 }
@@ -90,7 +93,7 @@ fn held_goal(r: &Robot) -> Option<GoalId> {
 }
 
 fn goal_at(r: &Robot, x: f64) -> GoalId {
-    r.rt.team.goals().iter().find(|g| (g.position.x - x).abs() < 1e-9).unwrap().id.clone()
+    r.rt.team().goals().iter().find(|g| (g.position.x - x).abs() < 1e-9).unwrap().id.clone()
 }
 
 #[test]
@@ -107,8 +110,8 @@ fn concurrent_claims_resolve_by_priority_and_the_loser_moves_on() {
     // They meet: the higher-priority claim wins at both.
     exchange(&mut u1, &mut u2);
     for r in [&u1, &u2] {
-        let view = r.rt.team.goal(&a).unwrap();
-        assert!(view.is_held_by(&u1.rt.id), "{} sees {:?}", r.rt.id, view.claimant);
+        let view = r.rt.team().goal(&a).unwrap();
+        assert!(view.is_held_by(&u1.rt.id()), "{} sees {:?}", r.rt.id(), view.claimant);
     }
 
     // ugv2 notices at its next tick, releases A (not unreachable: it was preempted) and claims B.
@@ -117,8 +120,8 @@ fn concurrent_claims_resolve_by_priority_and_the_loser_moves_on() {
     tick(&mut u2, t);
     tick(&mut u2, Time::from_millis(200));
     assert_eq!(held_goal(&u2), Some(b.clone()));
-    assert!(!u2.rt.team.goal(&a).unwrap().is_unreachable_for(&u2.rt.id));
-    assert!(u2.rt.team.goal(&b).unwrap().is_held_by(&u2.rt.id));
+    assert!(!u2.rt.team().goal(&a).unwrap().is_unreachable_for(&u2.rt.id()));
+    assert!(u2.rt.team().goal(&b).unwrap().is_held_by(&u2.rt.id()));
 
     // Both arrive after their 5 s drives and mark their goals visited; the team agrees.
     for i in 3..=80 {
@@ -128,9 +131,9 @@ fn concurrent_claims_resolve_by_priority_and_the_loser_moves_on() {
     }
     exchange(&mut u1, &mut u2);
     for r in [&u1, &u2] {
-        assert_eq!(r.rt.team.goal(&a).unwrap().visited.as_ref().map(|v| v.1.clone()), Some(u1.rt.id.clone()));
-        assert_eq!(r.rt.team.goal(&b).unwrap().visited.as_ref().map(|v| v.1.clone()), Some(u2.rt.id.clone()));
-        assert!(r.rt.team.all_goals_visited());
+        assert_eq!(r.rt.team().goal(&a).unwrap().visited.as_ref().map(|v| v.1.clone()), Some(u1.rt.id().clone()));
+        assert_eq!(r.rt.team().goal(&b).unwrap().visited.as_ref().map(|v| v.1.clone()), Some(u2.rt.id().clone()));
+        assert!(r.rt.team().all_goals_visited());
     }
 }
 
@@ -141,20 +144,19 @@ fn failure_marks_unreachable_for_that_robot_only_until_cleared() {
     // ugv1 claims A, then "fails" to reach it: release with the unreachable mark.
     tick(&mut u1, Time::ZERO);
     assert_eq!(held_goal(&u1), Some(a.clone()));
-    u1.rt.team.release(&a, Time::from_millis(50)).unwrap();
-    u1.rt.team.mark_unreachable(&a, Time::from_millis(50)).unwrap();
+    u1.rt.team_mut().release(&a, Time::from_millis(50)).unwrap();
+    u1.rt.team_mut().mark_unreachable(&a, Time::from_millis(50)).unwrap();
     let claimable: Vec<GoalId> =
-        u1.rt.team.claimable_goals_for(&u1.rt.id, Point2::new(0.0, 0.0)).iter().map(|g| g.id.clone()).collect();
+        u1.rt.team().claimable_goals_for(&u1.rt.id(), Point2::new(0.0, 0.0)).iter().map(|g| g.id.clone()).collect();
     assert!(!claimable.contains(&a), "A is unreachable for ugv1");
     exchange(&mut u1, &mut u2);
     let for_u2: Vec<GoalId> =
-        u2.rt.team.claimable_goals_for(&u2.rt.id, Point2::new(5.0, 0.0)).iter().map(|g| g.id.clone()).collect();
+        u2.rt.team().claimable_goals_for(&u2.rt.id(), Point2::new(5.0, 0.0)).iter().map(|g| g.id.clone()).collect();
     assert_eq!(for_u2.first(), Some(&a), "another robot may still try A");
 
     // Nothing else left for ugv1 would make it retry: clear_unreachable through the node.
     let registry = builtin_registry();
-    let spec = registry.get("clear_unreachable").unwrap();
-    let mut node = (spec.factory().unwrap())(&Default::default()).unwrap();
+    let mut node = (registry.factory("clear_unreachable").unwrap())(&Default::default()).unwrap();
     let mut bb = spomp_behaviors::Blackboard::new();
     let mut ctx = spomp_behaviors::TickContext {
         now: Time::from_millis(60),
@@ -164,27 +166,14 @@ fn failure_marks_unreachable_for_that_robot_only_until_cleared() {
         observer: None,
     };
     assert_eq!(node.tick(Status::Idle, &mut ctx), Status::Success);
-    assert!(!u1.rt.team.goal(&a).unwrap().is_unreachable_for(&u1.rt.id));
-}
-
-#[test]
-fn coordination_nodes_without_a_runtime_fail_and_say_why() {
-    let registry = builtin_registry();
-    let spec = registry.get("has_claimable_goal").unwrap();
-    let mut node = (spec.factory().unwrap())(&Default::default()).unwrap();
-    let mut bb = spomp_behaviors::Blackboard::new();
-    let mut ctx =
-        spomp_behaviors::TickContext { now: Time::ZERO, tick: 1, blackboard: &mut bb, env: &mut (), observer: None };
-    assert_eq!(node.tick(Status::Idle, &mut ctx), Status::Failure);
-    let reports = bb.take_reports();
-    assert!(reports[0].contains("needs a robot runtime"), "{reports:?}");
+    assert!(!u1.rt.team().goal(&a).unwrap().is_unreachable_for(&u1.rt.id()));
 }
 
 mod detection {
     use super::*;
     use spomp_behaviors::{Blackboard, TickContext};
-    use spomp_core::{AerialMap, ClassTable, GridSpec};
-    use spomp_mapping::{CompressionParams, GoalDetectionParams, GoalDetector, encode_layers};
+    use spomp_core::{AerialMap, GridSpec};
+    use spomp_mapping::{CompressionParams, GoalDetectionParams, encode_layers};
 
     /// 100 m × 50 m of road with two rows of three parked cars, 50 m apart.
     fn parking_map() -> AerialMap {
@@ -213,12 +202,10 @@ mod detection {
     }
 
     fn detecting_runtime(id: &str, spec: GridSpec) -> RobotRuntime {
-        let mut rt =
-            RobotRuntime::new(RobotId::new(id), RobotKind::Ugv, 1, Pose2::default(), TeamStateParams::default())
-                .unwrap();
-        rt.detector = Some(GoalDetector::new(GoalDetectionParams::default(), &ClassTable::default_table()).unwrap());
-        rt.map_spec = Some(spec);
-        rt
+        let mut config = RuntimeConfig::basic(RobotId::new(id), RobotKind::Ugv, 1, Pose2::default());
+        config.detection = Some(GoalDetectionParams::default());
+        config.map_spec = Some(spec);
+        RobotRuntime::from_config(config).unwrap()
     }
 
     /// Ticks a fresh `detect_goals` node once and returns (status, new_goals, reports).
@@ -228,7 +215,7 @@ mod detection {
         let key = bb.declare("new", spomp_behaviors::PortType::Int);
         let mut ports = spomp_behaviors::registry::PortBindings::default();
         ports.insert("new_goals", spomp_behaviors::Binding::Entry(key));
-        let mut node = (registry.get("detect_goals").unwrap().factory().unwrap())(&ports).unwrap();
+        let mut node = (registry.factory("detect_goals").unwrap())(&ports).unwrap();
         let mut ctx = TickContext { now: t, tick: 1, blackboard: &mut bb, env: rt, observer: None };
         let status = node.tick(Status::Idle, &mut ctx);
         let n = match bb.get(key) {
@@ -247,38 +234,38 @@ mod detection {
         // No map yet: one pass, nothing found, no error.
         assert_eq!(detect(&mut a, Time::ZERO), (Status::Success, Some(0), vec![]));
 
-        a.team.add_map_version(map.version, Time::ZERO, blob).unwrap();
+        a.team_mut().add_map_version(map.version, Time::ZERO, blob).unwrap();
         let (status, n, reports) = detect(&mut a, Time::from_millis(100));
         assert_eq!((status, n), (Status::Success, Some(2)), "{reports:?}");
-        let xs: Vec<f64> = a.team.goals().iter().map(|g| g.position.x).collect();
+        let xs: Vec<f64> = a.team().goals().iter().map(|g| g.position.x).collect();
         assert!(xs.iter().any(|x| (15.0..40.0).contains(x)) && xs.iter().any(|x| (65.0..90.0).contains(x)), "{xs:?}");
         assert_eq!(detect(&mut a, Time::from_millis(200)).1, Some(0), "same map version: no second pass");
 
         // ugv2 receives the goals and the map through the team state, detects the same clusters,
         // and adds nothing.
         for _ in 0..3 {
-            if let Some(m) = a.team.make_sync(&b.id, TierSet::ALL, usize::MAX) {
-                b.team.apply(&a.id, &m).unwrap();
+            if let Some(m) = a.team_mut().make_sync(&b.id(), TierSet::ALL, usize::MAX) {
+                b.team_mut().apply(&a.id(), &m).unwrap();
             }
-            if let Some(m) = b.team.make_sync(&a.id, TierSet::ALL, usize::MAX) {
-                a.team.apply(&b.id, &m).unwrap();
+            if let Some(m) = b.team_mut().make_sync(&a.id(), TierSet::ALL, usize::MAX) {
+                a.team_mut().apply(&b.id(), &m).unwrap();
             }
         }
-        assert_eq!(b.team.goals().len(), 2);
+        assert_eq!(b.team().goals().len(), 2);
         let (status, n, reports) = detect(&mut b, Time::from_millis(300));
         assert_eq!((status, n), (Status::Success, Some(0)), "{reports:?}");
-        assert!(b.map.as_ref().is_some_and(|m| m.map().known_cells() == map.spec.len()));
-        assert_eq!(b.team.goals().len(), 2);
+        assert!(b.map().is_some_and(|m| m.map().known_cells() == map.spec.len()));
+        assert_eq!(b.team().goals().len(), 2);
     }
 
     #[test]
     fn a_corrupt_map_version_is_reported_and_changes_nothing() {
         let spec = GridSpec::new(Point2::new(0.0, 0.0), 0.5, 200, 100);
         let mut a = detecting_runtime("ugv1", spec);
-        a.team.add_map_version(1, Time::ZERO, vec![1, 2, 3, 4]).unwrap();
+        a.team_mut().add_map_version(1, Time::ZERO, vec![1, 2, 3, 4]).unwrap();
         let (status, n, reports) = detect(&mut a, Time::from_millis(100));
         assert_eq!((status, n), (Status::Success, Some(0)));
         assert!(reports.iter().any(|r| r.contains("unusable")), "{reports:?}");
-        assert!(a.team.goals().is_empty());
+        assert!(a.team().goals().is_empty());
     }
 }

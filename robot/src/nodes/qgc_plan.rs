@@ -158,7 +158,7 @@ fn home_of(home: &Value) -> Result<Origin, String> {
 }
 
 fn kind(v: &Value) -> &'static str {
-    crate::blackboard::json_kind(v)
+    spomp_behaviors::blackboard::json_kind(v)
 }
 
 /// Navigation commands flown as a waypoint at the item's position.

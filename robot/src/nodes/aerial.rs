@@ -4,7 +4,7 @@
 //! robot's last known pose or, when that is stale, the end of its last known path) and
 //! `wait_for_sync` (hover or track until a fresh full team-state sync with the robot).
 //!
-//! A flying node writes `rt.flight` every tick it runs; the runtime clears it before each tick,
+//! A flying node commands a flight target every tick it runs; the runtime clears it before each tick,
 //! so a halted node's command never outlives it (halting clears it too).
 
 use std::collections::VecDeque;
@@ -14,18 +14,19 @@ use std::sync::Arc;
 use serde_json::json;
 use spomp_core::{FlightCommand, Point2, RobotId, RobotKind, Time};
 
+use super::Ctx;
 use super::qgc_plan::load_plan;
-use crate::blackboard::{BbValue, Binding, PortType};
-use crate::node::{Behavior, TickContext};
-use crate::registry::{Category, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
-use crate::runtime::{RobotRuntime, runtime};
-use crate::status::Status;
+use crate::runtime::RobotRuntime;
+use spomp_behaviors::Status;
+use spomp_behaviors::blackboard::{BbValue, Binding, PortType};
+use spomp_behaviors::node::Behavior;
+use spomp_behaviors::registry::{Category, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
 
 /// Default clearance kept from no-fly polygons, metres.
 const DEFAULT_NO_FLY_MARGIN_M: f64 = 5.0;
 
 /// Registers the UAV nodes.
-pub fn register_aerial(r: &mut NodeRegistry) {
+pub fn register_aerial(r: &mut NodeRegistry<RobotRuntime>) {
     use Category::Action;
     use PortType::{Bool, Float, Int, Params, Point, Points, Robot, String as Str};
     use RobotKind::Uav;
@@ -107,7 +108,7 @@ fn literal_number(p: &PortBindings, port: &str, positive: bool) -> Result<(), St
 }
 
 /// Reads a number port at tick time; reports and returns None when it is missing or invalid.
-fn number(b: &Binding, ctx: &mut TickContext<'_>, node: &str, port: &str, positive: bool) -> Option<f64> {
+fn number(b: &Binding, ctx: &mut Ctx<'_>, node: &str, port: &str, positive: bool) -> Option<f64> {
     match b.get::<f64>(ctx.blackboard) {
         Some(v) if v.is_finite() && (!positive || v > 0.0) => Some(v),
         Some(v) => {
@@ -123,17 +124,15 @@ fn number(b: &Binding, ctx: &mut TickContext<'_>, node: &str, port: &str, positi
 }
 
 /// Altitude and speed of a flying node.
-fn flight_params(altitude: &Binding, speed: &Binding, ctx: &mut TickContext<'_>, node: &str) -> Option<(f64, f64)> {
+fn flight_params(altitude: &Binding, speed: &Binding, ctx: &mut Ctx<'_>, node: &str) -> Option<(f64, f64)> {
     let altitude_m = number(altitude, ctx, node, "altitude_m", false)?;
     let speed_mps = number(speed, ctx, node, "speed_mps", true)?;
     Some((altitude_m, speed_mps))
 }
 
 /// Clears the flight command on halt.
-fn stop_flying(ctx: &mut TickContext<'_>) {
-    if let Some(rt) = ctx.env.downcast_mut::<RobotRuntime>() {
-        rt.flight = None;
-    }
+fn stop_flying(ctx: &mut Ctx<'_>) {
+    ctx.env.hover();
 }
 
 // ---------------------------------------------------------------------------------- no-fly zones
@@ -343,7 +342,7 @@ struct FollowWaypoints {
     leg_points: usize,
 }
 
-fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior>, String> {
+fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, String> {
     let mut polys = Vec::new();
     let mut margin = DEFAULT_NO_FLY_MARGIN_M;
     match (p.get("no_fly"), p.literal("no_fly")) {
@@ -422,8 +421,8 @@ impl FollowWaypoints {
     }
 }
 
-impl Behavior for FollowWaypoints {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl Behavior<RobotRuntime> for FollowWaypoints {
+    fn tick(&mut self, prev: Status, ctx: &mut Ctx<'_>) -> Status {
         let waypoints = match &self.source {
             Source::Fixed(w) => w.clone(),
             Source::Port(b) => match b.get::<Arc<Vec<Point2>>>(ctx.blackboard) {
@@ -452,8 +451,8 @@ impl Behavior for FollowWaypoints {
         }
         let no_fly = self.no_fly.clone();
         let mut reports = Vec::new();
-        let Some(rt) = runtime(ctx, FOLLOW) else { return Status::Failure };
-        let here = rt.pose.map(|p| p.pose.position());
+        let rt = &mut *ctx.env;
+        let here = rt.pose().map(|p| p.pose.position());
         let status = loop {
             let Some(&goal) = waypoints.get(self.index) else { break Status::Success };
             if self.route_to != Some(self.index) {
@@ -492,7 +491,7 @@ impl Behavior for FollowWaypoints {
             }
             match self.route.front() {
                 Some(&target) => {
-                    rt.flight = Some(FlightCommand { target, altitude_m, speed_mps });
+                    rt.command_flight(FlightCommand { target, altitude_m, speed_mps });
                     if let Some(h) = here
                         && self.route.len() <= self.leg_points
                     {
@@ -513,7 +512,7 @@ impl Behavior for FollowWaypoints {
         status
     }
 
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
+    fn halt(&mut self, ctx: &mut Ctx<'_>) {
         self.route_to = None;
         stop_flying(ctx);
     }
@@ -537,7 +536,7 @@ struct SeekRobot {
     current: Option<RobotId>,
 }
 
-fn build_seek(p: &PortBindings) -> Result<Box<dyn Behavior>, String> {
+fn build_seek(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, String> {
     literal_number(p, "stale_after_s", true)?;
     literal_number(p, "arrive_radius_m", true)?;
     literal_number(p, "speed_mps", true)?;
@@ -562,7 +561,7 @@ fn parse_ids(s: &str) -> Vec<RobotId> {
 
 impl SeekRobot {
     /// The next robot round-robin after the last one, among those eligible now.
-    fn pick(&mut self, ctx: &mut TickContext<'_>) -> Option<RobotId> {
+    fn pick(&mut self, ctx: &mut Ctx<'_>) -> Option<RobotId> {
         let now = ctx.now;
         let last = self.target.get::<RobotId>(ctx.blackboard).or_else(|| self.last.clone());
         let only: Option<Vec<RobotId>> = self.candidates.get::<Arc<str>>(ctx.blackboard).map(|s| parse_ids(&s));
@@ -570,13 +569,13 @@ impl SeekRobot {
             Binding::Unset => None,
             ref b => Some(number(b, ctx, SEEK, "alive_within_s", true)?),
         };
-        let rt = runtime(ctx, SEEK)?;
-        let me = rt.id.clone();
+        let rt = &*ctx.env;
+        let me = rt.id();
         let mut eligible: Vec<RobotId> = rt
-            .team
+            .team()
             .robots()
             .into_iter()
-            .filter(|(id, s)| **id != me && (s.pose.is_some() || s.path_end.is_some()))
+            .filter(|(id, s)| *id != me && (s.pose.is_some() || s.path_end.is_some()))
             .filter(|(id, _)| only.as_ref().is_none_or(|l| l.contains(id)))
             .filter(|(_, s)| alive_within.is_none_or(|w| s.pose.is_some() && now.secs_since(s.stamp) <= w))
             .map(|(id, _)| id.clone())
@@ -590,8 +589,8 @@ impl SeekRobot {
     }
 }
 
-impl Behavior for SeekRobot {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl Behavior<RobotRuntime> for SeekRobot {
+    fn tick(&mut self, prev: Status, ctx: &mut Ctx<'_>) -> Status {
         let now = ctx.now;
         let Some((altitude_m, speed_mps)) = flight_params(&self.altitude, &self.speed, ctx, SEEK) else {
             return Status::Failure;
@@ -605,8 +604,8 @@ impl Behavior for SeekRobot {
             self.current = Some(pick);
         }
         let Some(id) = self.current.clone() else { return Status::Failure };
-        let Some(rt) = runtime(ctx, SEEK) else { return Status::Failure };
-        let aim = rt.team.robot_status(&id).and_then(|s| match (s.pose, s.path_end) {
+        let rt = &mut *ctx.env;
+        let aim = rt.team().robot_status(&id).and_then(|s| match (s.pose, s.path_end) {
             (Some(p), None) => Some(p.position()),
             (Some(p), Some(_)) if now.secs_since(s.stamp) <= stale => Some(p.position()),
             (_, end) => end,
@@ -615,14 +614,14 @@ impl Behavior for SeekRobot {
             ctx.blackboard.report(format!("{SEEK}: the team state has no position of `{id}`"));
             return Status::Failure;
         };
-        if rt.pose.is_some_and(|p| p.pose.position().distance(aim) <= radius) {
+        if rt.pose().is_some_and(|p| p.pose.position().distance(aim) <= radius) {
             return Status::Success;
         }
-        rt.flight = Some(FlightCommand { target: aim, altitude_m, speed_mps });
+        rt.command_flight(FlightCommand { target: aim, altitude_m, speed_mps });
         Status::Running
     }
 
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
+    fn halt(&mut self, ctx: &mut Ctx<'_>) {
         self.current = None;
         stop_flying(ctx);
     }
@@ -647,7 +646,7 @@ struct WaitForSync {
     saw_incomplete: bool,
 }
 
-fn build_wait(p: &PortBindings) -> Result<Box<dyn Behavior>, String> {
+fn build_wait(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, String> {
     literal_number(p, "timeout_s", true)?;
     literal_number(p, "speed_mps", true)?;
     literal_number(p, "altitude_m", false)?;
@@ -662,8 +661,8 @@ fn build_wait(p: &PortBindings) -> Result<Box<dyn Behavior>, String> {
     }))
 }
 
-impl Behavior for WaitForSync {
-    fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl Behavior<RobotRuntime> for WaitForSync {
+    fn tick(&mut self, prev: Status, ctx: &mut Ctx<'_>) -> Status {
         let now = ctx.now;
         let Some(robot) = self.robot.get::<RobotId>(ctx.blackboard) else {
             ctx.blackboard.report(format!("{WAIT}: no robot on its `robot` port"));
@@ -679,13 +678,13 @@ impl Behavior for WaitForSync {
             self.saw_incomplete = false;
         }
         let started = self.started;
-        let Some(rt) = runtime(ctx, WAIT) else { return Status::Failure };
-        if robot == rt.id {
+        let rt = &mut *ctx.env;
+        if &robot == rt.id() {
             ctx.blackboard.report(format!("{WAIT}: `{robot}` is this robot"));
             return Status::Failure;
         }
-        let complete = rt.team.sync_complete_with(&robot);
-        let pose = rt.team.robot_pose(&robot);
+        let complete = rt.team().sync_complete_with(&robot);
+        let pose = rt.team().robot_pose(&robot);
         // A completion reported before the wait began may be stale: require that it completed
         // during the wait, or that the peer's state reached us during the wait.
         let fresh = self.saw_incomplete || pose.is_some_and(|(_, stamp)| stamp >= started);
@@ -697,12 +696,12 @@ impl Behavior for WaitForSync {
             return Status::Failure;
         }
         if track && let Some((p, _)) = pose {
-            rt.flight = Some(FlightCommand { target: p.position(), altitude_m, speed_mps });
+            rt.command_flight(FlightCommand { target: p.position(), altitude_m, speed_mps });
         }
         Status::Running
     }
 
-    fn halt(&mut self, ctx: &mut TickContext<'_>) {
+    fn halt(&mut self, ctx: &mut Ctx<'_>) {
         stop_flying(ctx);
     }
 }

@@ -16,6 +16,7 @@ use spomp_mapping::Orthomap;
 use spomp_teamstate::TeamState;
 
 use super::RuntimeError;
+use crate::settings::WatchdogParams;
 
 /// Spacing of the robot's trail points, metres.
 const TRAIL_SPACING_M: f64 = 2.0;
@@ -41,6 +42,8 @@ pub struct NavParams {
     pub local: LocalPlannerParams,
     /// Global planner (graph, learning, experience, sharing, search).
     pub global: GlobalPlannerParams,
+    /// When driving nodes give up as stuck.
+    pub watchdog: WatchdogParams,
 }
 
 /// The latest terrain analysis, with where the robot was when the panorama was taken.

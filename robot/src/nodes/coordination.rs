@@ -8,19 +8,19 @@
 
 use spomp_core::{GoalId, RobotKind};
 
-use crate::blackboard::{BbValue, Binding, PortType};
-use crate::node::{Behavior, TickContext};
-use crate::registry::{Category, NodeRegistry, NodeTypeSpec, PortSpec};
-use spomp_teamstate::{GoalOrigin, IdentifyOutcome};
+use spomp_behaviors::blackboard::{BbValue, Binding, PortType};
+use spomp_behaviors::node::Behavior;
+use spomp_behaviors::registry::{Category, LeafType, NodeRegistry, NodeTypeSpec, PortSpec};
 
-use crate::runtime::runtime;
-use crate::status::Status;
+use super::Ctx;
+use crate::runtime::RobotRuntime;
+use spomp_behaviors::Status;
 
 /// Registers the coordination nodes.
-pub fn register_coordination(r: &mut NodeRegistry) {
+pub fn register_coordination(r: &mut NodeRegistry<RobotRuntime>) {
     use Category::{Action, Condition};
     use PortType::{Bool, Goal, Point};
-    let ugv = |spec: NodeTypeSpec| spec.for_kinds(&[RobotKind::Ugv]).using_skills(&["teamstate"]);
+    let ugv = |spec: LeafType<RobotRuntime>| spec.for_kinds(&[RobotKind::Ugv]).using_skills(&["teamstate"]);
     r.register(
         NodeTypeSpec::leaf(
             "detect_goals",
@@ -86,46 +86,19 @@ struct DetectGoals {
     new_goals: Binding,
 }
 
-impl Behavior for DetectGoals {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
-        let now = ctx.now;
-        let Some(rt) = runtime(ctx, "detect_goals") else { return Status::Failure };
-        let spec = rt.map.as_ref().map(|m| m.map().spec).or(rt.map_spec);
-        let mut problems = Vec::new();
-        if let Some(spec) = spec
-            && let Err(e) = rt.ingest_team_maps(spec)
-        {
-            problems.push(format!("detect_goals: a received map version is unusable: {e}"));
+impl Behavior<RobotRuntime> for DetectGoals {
+    fn tick(&mut self, _prev: Status, ctx: &mut Ctx<'_>) -> Status {
+        let pass = ctx.env.detect_goals(ctx.now);
+        for p in pass.problems {
+            ctx.blackboard.report(format!("detect_goals: {p}"));
         }
-        let mut added = 0i64;
-        if let (Some(map), Some(detector)) = (rt.map.as_ref(), rt.detector.as_mut())
-            && rt.detected_version != Some(map.version())
-        {
-            let known: Vec<spomp_core::Point2> = rt.team.goals().iter().map(|g| g.position).collect();
-            match detector.detect(map.map(), &known) {
-                Ok(found) => {
-                    for g in found.goals {
-                        match rt.team.identify_goal(g.position, GoalOrigin::Detected, now) {
-                            Ok(IdentifyOutcome::New(_)) => added += 1,
-                            Ok(IdentifyOutcome::Existing(_)) => {}
-                            Err(e) => problems.push(format!("detect_goals: {e}")),
-                        }
-                    }
-                    rt.detected_version = Some(map.version());
-                }
-                Err(e) => problems.push(format!("detect_goals: {e}")),
-            }
-        }
-        for p in problems {
-            ctx.blackboard.report(p);
-        }
-        self.new_goals.set(ctx.blackboard, BbValue::Int(added));
+        self.new_goals.set(ctx.blackboard, BbValue::Int(pass.added as i64));
         Status::Success
     }
 }
 
 /// Reads a goal port, reporting when it is unset.
-fn goal_of(binding: &Binding, ctx: &mut TickContext<'_>, node: &str) -> Option<GoalId> {
+fn goal_of(binding: &Binding, ctx: &mut Ctx<'_>, node: &str) -> Option<GoalId> {
     let g = binding.get::<GoalId>(ctx.blackboard);
     if g.is_none() {
         ctx.blackboard.report(format!("{node}: no goal on its `goal` port"));
@@ -138,21 +111,20 @@ struct ClaimGoal {
     position: Binding,
 }
 
-impl Behavior for ClaimGoal {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl Behavior<RobotRuntime> for ClaimGoal {
+    fn tick(&mut self, _prev: Status, ctx: &mut Ctx<'_>) -> Status {
         let now = ctx.now;
-        let Some(rt) = runtime(ctx, "claim_goal") else { return Status::Failure };
-        let Some(pose) = rt.pose else {
+        let rt = &mut *ctx.env;
+        let Some(pose) = rt.pose() else {
             ctx.blackboard.report("claim_goal: the robot has no pose yet");
             return Status::Failure;
         };
-        let id = rt.id.clone();
         let Some(best) =
-            rt.team.claimable_goals_for(&id, pose.pose.position()).first().map(|v| (v.id.clone(), v.position))
+            rt.team().claimable_goals_for(rt.id(), pose.pose.position()).first().map(|v| (v.id.clone(), v.position))
         else {
             return Status::Failure;
         };
-        match rt.team.claim(&best.0, now) {
+        match rt.team_mut().claim(&best.0, now) {
             Ok(outcome) => {
                 self.goal.set(ctx.blackboard, BbValue::Goal(outcome.goal));
                 self.position.set(ctx.blackboard, BbValue::Point(best.1));
@@ -170,13 +142,12 @@ struct GoalStillMine {
     goal: Binding,
 }
 
-impl Behavior for GoalStillMine {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl Behavior<RobotRuntime> for GoalStillMine {
+    fn tick(&mut self, _prev: Status, ctx: &mut Ctx<'_>) -> Status {
         let Some(goal) = goal_of(&self.goal, ctx, "goal_still_mine") else { return Status::Failure };
-        let Some(rt) = runtime(ctx, "goal_still_mine") else { return Status::Failure };
-        let id = rt.id.clone();
-        match rt.team.goal(&goal) {
-            Some(view) if view.visited.is_none() && view.is_held_by(&id) => Status::Success,
+        let rt = &*ctx.env;
+        match rt.team().goal(&goal) {
+            Some(view) if view.visited.is_none() && view.is_held_by(rt.id()) => Status::Success,
             _ => Status::Failure,
         }
     }
@@ -184,12 +155,14 @@ impl Behavior for GoalStillMine {
 
 struct HasClaimable;
 
-impl Behavior for HasClaimable {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
-        let Some(rt) = runtime(ctx, "has_claimable_goal") else { return Status::Failure };
-        let position = rt.pose.map(|p| p.pose.position()).unwrap_or_else(|| rt.start.position());
-        let id = rt.id.clone();
-        if rt.team.claimable_goals_for(&id, position).is_empty() { Status::Failure } else { Status::Success }
+impl Behavior<RobotRuntime> for HasClaimable {
+    fn tick(&mut self, _prev: Status, ctx: &mut Ctx<'_>) -> Status {
+        let rt = &*ctx.env;
+        if rt.team().claimable_goals_for(rt.id(), rt.position_or_start()).is_empty() {
+            Status::Failure
+        } else {
+            Status::Success
+        }
     }
 }
 
@@ -197,12 +170,12 @@ struct MarkVisited {
     goal: Binding,
 }
 
-impl Behavior for MarkVisited {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl Behavior<RobotRuntime> for MarkVisited {
+    fn tick(&mut self, _prev: Status, ctx: &mut Ctx<'_>) -> Status {
         let now = ctx.now;
         let Some(goal) = goal_of(&self.goal, ctx, "mark_visited") else { return Status::Failure };
-        let Some(rt) = runtime(ctx, "mark_visited") else { return Status::Failure };
-        let result = rt.team.mark_visited(&goal, now).and_then(|()| rt.team.release(&goal, now));
+        let team = ctx.env.team_mut();
+        let result = team.mark_visited(&goal, now).and_then(|()| team.release(&goal, now));
         match result {
             Ok(()) => Status::Success,
             Err(e) => {
@@ -218,18 +191,17 @@ struct ReleaseGoal {
     unreachable: Binding,
 }
 
-impl Behavior for ReleaseGoal {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
+impl Behavior<RobotRuntime> for ReleaseGoal {
+    fn tick(&mut self, _prev: Status, ctx: &mut Ctx<'_>) -> Status {
         let now = ctx.now;
         let mark = self.unreachable.get::<bool>(ctx.blackboard).unwrap_or(true);
         let Some(goal) = goal_of(&self.goal, ctx, "release_goal") else { return Status::Failure };
-        let Some(rt) = runtime(ctx, "release_goal") else { return Status::Failure };
-        let id = rt.id.clone();
+        let rt = &mut *ctx.env;
         // Preempted or visited meanwhile: the goal is not unreachable, someone else has it.
-        let still_ours = rt.team.goal(&goal).is_some_and(|v| v.visited.is_none() && v.is_held_by(&id));
-        let mut result = rt.team.release(&goal, now);
+        let still_ours = rt.team().goal(&goal).is_some_and(|v| v.visited.is_none() && v.is_held_by(rt.id()));
+        let mut result = rt.team_mut().release(&goal, now);
         if mark && still_ours && result.is_ok() {
-            result = rt.team.mark_unreachable(&goal, now);
+            result = rt.team_mut().mark_unreachable(&goal, now);
         }
         match result {
             Ok(()) => Status::Success,
@@ -243,10 +215,9 @@ impl Behavior for ReleaseGoal {
 
 struct ClearUnreachable;
 
-impl Behavior for ClearUnreachable {
-    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_>) -> Status {
-        let Some(rt) = runtime(ctx, "clear_unreachable") else { return Status::Failure };
-        rt.team.clear_unreachable();
+impl Behavior<RobotRuntime> for ClearUnreachable {
+    fn tick(&mut self, _prev: Status, ctx: &mut Ctx<'_>) -> Status {
+        ctx.env.team_mut().clear_unreachable();
         Status::Success
     }
 }

@@ -1,0 +1,83 @@
+//! The robot layer's checks of a mission (the mission language's `RobotChecks`): every robot
+//! is set up as [`crate::RobotSetup`] will set it up, and each parameter is checked by its
+//! skill's own `validate()`; problems point at the mission field the value came from.
+
+use serde_json::Value;
+use spomp_behaviors::mission::MissionFile;
+use spomp_behaviors::registry::{RobotChecks, RobotProblem};
+use spomp_core::RobotKind;
+use spomp_mapping::{GoalDetectionParams, MappingError};
+use spomp_teamstate::TeamStateError;
+
+use crate::settings::NavigationSettings;
+use crate::setup::team_params;
+
+/// [`RobotChecks`] of this robot layer.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MissionRobotChecks;
+
+fn path(segs: &[&str]) -> Vec<String> {
+    segs.iter().map(|s| s.to_string()).collect()
+}
+
+impl RobotChecks for MissionRobotChecks {
+    fn navigation_schema(&self) -> Value {
+        NavigationSettings::json_schema()
+    }
+
+    fn check(&self, mission: &MissionFile) -> Vec<RobotProblem> {
+        let mut problems = Vec::new();
+        if let Err(e) = team_params(mission).validate() {
+            let (field, message) = match e {
+                TeamStateError::InvalidParams { name, reason } => (name, reason.to_string()),
+                other => ("", other.to_string()),
+            };
+            problems.push(RobotProblem { path: path(&["goals", field]), message });
+        }
+        if let Some(d) = mission.goals.as_ref().and_then(|g| g.detect.as_ref()) {
+            let defaults = GoalDetectionParams::default();
+            let params = GoalDetectionParams {
+                class: d.class.clone(),
+                merge_distance_m: d.merge_distance_m.unwrap_or(defaults.merge_distance_m),
+                min_size_m: d.min_size_m.unwrap_or(defaults.min_size_m),
+                placement_region_m: d.placement_region_m.unwrap_or(defaults.placement_region_m),
+                ..defaults
+            };
+            if let Err(MappingError::InvalidParams { name, reason }) = params.validate() {
+                problems.push(RobotProblem { path: path(&["goals", "detect", name]), message: reason });
+            }
+        }
+        for (i, robot) in mission.team.iter().enumerate() {
+            let role_layer = mission.roles.get(&robot.role).and_then(|r| r.navigation.as_ref());
+            let robot_layer = robot.navigation.as_ref();
+            if robot.kind != RobotKind::Ugv {
+                if robot_layer.is_some() {
+                    problems.push(RobotProblem {
+                        path: vec!["team".into(), i.to_string(), "navigation".into()],
+                        message: format!("only UGVs navigate; `{}` is a {}", robot.id, robot.kind.as_str()),
+                    });
+                }
+                continue;
+            }
+            let layers: Vec<&Value> = role_layer.into_iter().chain(robot_layer).collect();
+            if let Err(e) = NavigationSettings::resolve(&layers) {
+                // The layer the value came from: the role's is layer 0 when it has one.
+                let from_robot = match e.layer {
+                    Some(l) => role_layer.is_none() || l == 1,
+                    None => robot_layer.is_some(),
+                };
+                let mut at = if from_robot {
+                    vec!["team".to_string(), i.to_string(), "navigation".to_string()]
+                } else {
+                    vec!["roles".to_string(), robot.role.clone(), "navigation".to_string()]
+                };
+                at.extend(e.path.iter().cloned());
+                let message = format!("{} (robot `{}`)", e.message, robot.id);
+                if !problems.iter().any(|p: &RobotProblem| p.path == at) {
+                    problems.push(RobotProblem { path: at, message });
+                }
+            }
+        }
+        problems
+    }
+}

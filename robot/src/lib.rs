@@ -1,0 +1,30 @@
+//! One spomp robot, the same for every adapter.
+//!
+//! - [`Robot`]: the seam. An adapter (the simulator, the ROS 2 node, log replay) owns one per
+//!   robot and drives it through a small push API: inputs ([`Robot::on_odometry`],
+//!   [`Robot::on_panorama`], [`Robot::on_external_pose`], [`Robot::on_camera_tiles`],
+//!   [`Robot::on_team_message`]), [`Robot::maintain`] and [`Robot::tick`], then outputs
+//!   ([`Robot::command`] or [`Robot::flight`], [`Robot::team_message_for`],
+//!   [`Robot::take_problems`]).
+//! - [`RobotSetup`]: the one translation from a mission, a robot id and the [`OperatingArea`]
+//!   to a robot's configuration, with its [`NavigationSettings`] from the mission's
+//!   `navigation:` sections.
+//! - [`runtime`]: the robot's state and continuous skills (localization, terrain analysis, the
+//!   global planner kept current, the team state, the map copy) — what the domain nodes act on,
+//!   typed, through methods.
+//! - [`nodes`]: the domain behaviour nodes (navigation, UAV time-sharing, goal coordination) and
+//!   [`registry`], the engine's node types plus these.
+
+pub mod checks;
+pub mod nodes;
+mod robot;
+pub mod runtime;
+pub mod settings;
+pub mod setup;
+
+pub use checks::MissionRobotChecks;
+pub use nodes::registry;
+pub use robot::{Robot, RobotError};
+pub use runtime::RobotRuntime;
+pub use settings::{NavigationProfile, NavigationSettings, SettingsError, WatchdogParams};
+pub use setup::{OperatingArea, PoseInput, RobotSetup, SetupError, robot_seed};

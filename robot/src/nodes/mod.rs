@@ -1,0 +1,52 @@
+//! The domain nodes of the paper's missions, acting on a [`RobotRuntime`]: driving
+//! (`navigate_to`, `navigate_local`, `return_home`), the UAV's time-sharing (`follow_waypoints`,
+//! `seek_robot`, `wait_for_sync`), goal coordination (`detect_goals`, `claim_goal`, …).
+
+mod aerial;
+mod coordination;
+mod navigation;
+mod qgc_plan;
+
+use std::sync::Arc;
+
+pub use aerial::register_aerial;
+pub use coordination::register_coordination;
+pub use navigation::register_navigation;
+
+use spomp_behaviors::{NodeRegistry, TickContext, engine_registry};
+
+use crate::checks::MissionRobotChecks;
+use crate::runtime::RobotRuntime;
+
+/// What a domain node sees during a tick: the robot runtime, typed, as `ctx.env`.
+pub(crate) type Ctx<'a> = TickContext<'a, RobotRuntime>;
+
+/// Every node type of a robot: the engine's (structural, generic leaves) and the domain nodes,
+/// with the robot layer's checks of robot settings. `spomp validate`, `sim`, `run`, `nodes` and
+/// `schema` all use it; a lab's own binary adds its node types to it.
+pub fn registry() -> NodeRegistry<RobotRuntime> {
+    let mut r = engine_registry();
+    register_navigation(&mut r);
+    register_aerial(&mut r);
+    register_coordination(&mut r);
+    r.set_robot_checks(Arc::new(MissionRobotChecks));
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_node_is_documented_with_its_ports() {
+        let r = registry();
+        let md = r.reference_markdown();
+        for spec in r.iter() {
+            assert!(!spec.description.is_empty(), "{} has no description", spec.name);
+            assert!(md.contains(&format!("### `{}`", spec.name)));
+            for p in &spec.ports {
+                assert!(!p.description.is_empty(), "{}.{} has no description", spec.name, p.name);
+            }
+        }
+    }
+}

@@ -1,0 +1,236 @@
+//! The seam between a robot and the world: one [`Robot`] per robot, driven the same way by
+//! every adapter.
+//!
+//! Per control period an adapter:
+//! 1. pushes what arrived: odometry, panoramas, an external pose (GPS, a surveyed position,
+//!    simulator truth where the mission asks), camera tiles (the UAV), team-state messages with
+//!    the peer they came from;
+//! 2. calls [`Robot::maintain`] and [`Robot::tick`] at the robot's tick rate;
+//! 3. pulls what the robot wants done: [`Robot::command`] (UGV velocity) or [`Robot::flight`]
+//!    (UAV target) — `None` is stop / hover, so a command never outlives the node that issued
+//!    it — the team-state message for each peer it can reach ([`Robot::team_message_for`]),
+//!    and the problems met ([`Robot::take_problems`]).
+
+use std::sync::Arc;
+
+use spomp_behaviors::mission::{BuildError, BuildOptions, LoadedMission, build_executor};
+use spomp_behaviors::{NodeRegistry, Status, TreeExecutor, TreeObserver};
+use spomp_core::{
+    FlightCommand, MapTile, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, RobotKind, Time,
+    Twist2,
+};
+use spomp_teamstate::{TeamState, TierSet};
+
+use crate::runtime::{NavStack, RobotRuntime, RuntimeError};
+use crate::setup::{OperatingArea, PoseInput, RobotSetup, SetupError};
+
+/// Why a robot could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum RobotError {
+    /// The mission did not load cleanly.
+    #[error("the mission is not valid; run `spomp validate` on it")]
+    InvalidMission,
+    /// The robot's settings.
+    #[error(transparent)]
+    Setup(#[from] SetupError),
+    /// A skill refused its parameters.
+    #[error(transparent)]
+    Runtime(#[from] RuntimeError),
+    /// Its role did not compile.
+    #[error("role `{0}` did not compile")]
+    Role(String),
+    /// Its tree could not be built.
+    #[error(transparent)]
+    Build(#[from] BuildError),
+    /// A goal of the mission was refused by the team state.
+    #[error("goals.manual: {0}")]
+    MissionGoal(String),
+}
+
+/// One robot: its runtime (state and continuous skills) and its behaviour tree.
+pub struct Robot {
+    runtime: RobotRuntime,
+    tree: TreeExecutor<RobotRuntime>,
+    pose_input: PoseInput,
+    tick_hz: f64,
+}
+
+impl Robot {
+    /// Robot `id` of a validated mission, over `area`, with `run_seed` seeding its random
+    /// stream; its tree is built from `registry` (the robot layer's [`crate::registry`], or a
+    /// lab's own with more node types).
+    pub fn from_mission(
+        loaded: &LoadedMission,
+        id: &str,
+        area: &OperatingArea,
+        run_seed: u64,
+        registry: &NodeRegistry<RobotRuntime>,
+    ) -> Result<Self, RobotError> {
+        let mission = loaded.mission.as_ref().filter(|_| loaded.is_valid()).ok_or(RobotError::InvalidMission)?;
+        let setup = RobotSetup::from_mission(mission, id, area, run_seed)?;
+        Self::from_setup(loaded, setup, registry)
+    }
+
+    /// A robot from its setup (an adapter may adjust the setup first: the simulator's map
+    /// publishing rate, say).
+    pub fn from_setup(
+        loaded: &LoadedMission,
+        setup: RobotSetup,
+        registry: &NodeRegistry<RobotRuntime>,
+    ) -> Result<Self, RobotError> {
+        let mission = loaded.mission.as_ref().filter(|_| loaded.is_valid()).ok_or(RobotError::InvalidMission)?;
+        let role = loaded.roles.get(&setup.role).ok_or_else(|| RobotError::Role(setup.role.clone()))?;
+        let start = setup.config.start;
+        let robot_id = setup.config.id.clone();
+        let mut runtime = RobotRuntime::from_config(setup.config)?;
+        if let Some(goals) = &mission.goals {
+            for (k, g) in goals.manual.iter().enumerate() {
+                runtime
+                    .team_mut()
+                    .add_mission_goal(k as u32, Point2::new(g.x_m, g.y_m))
+                    .map_err(|e| RobotError::MissionGoal(e.to_string()))?;
+            }
+        }
+        let build = BuildOptions { base_dir: Some(loaded.base_dir()) };
+        let tree = build_executor(role, registry, &robot_id, start, build)?;
+        let tick_hz = if setup.tick_hz.is_finite() && setup.tick_hz > 0.0 { setup.tick_hz } else { 10.0 };
+        Ok(Robot { runtime, tree, pose_input: setup.pose_input, tick_hz })
+    }
+
+    // --- identity -------------------------------------------------------------------------------
+
+    /// The robot's id.
+    pub fn id(&self) -> &RobotId {
+        self.runtime.id()
+    }
+
+    /// Its kind.
+    pub fn kind(&self) -> RobotKind {
+        self.runtime.kind()
+    }
+
+    /// Where its map-frame pose must come from.
+    pub fn pose_input(&self) -> PoseInput {
+        self.pose_input
+    }
+
+    /// Its tree's tick rate, per second.
+    pub fn tick_hz(&self) -> f64 {
+        self.tick_hz
+    }
+
+    // --- inputs -----------------------------------------------------------------------------------
+
+    /// New odometry (robot frame).
+    pub fn on_odometry(&mut self, odom: Odometry) {
+        self.runtime.on_odometry(odom);
+    }
+
+    /// A new depth + semantic panorama.
+    pub fn on_panorama(&mut self, frame: Arc<PanoramaFrame>) {
+        self.runtime.on_panorama(frame);
+    }
+
+    /// A map-frame pose from outside (see [`Robot::pose_input`]).
+    pub fn on_external_pose(&mut self, estimate: PoseEstimate) {
+        self.runtime.on_external_pose(estimate);
+    }
+
+    /// Aerial-map tiles from the robot's own camera (the UAV).
+    pub fn on_camera_tiles(&mut self, tiles: &[MapTile], now: Time) {
+        self.runtime.on_camera_tiles(tiles, now);
+    }
+
+    /// A team-state sync message from peer `from`, as bytes off the link. A message that does
+    /// not decode or check is rejected whole, reported, and changes nothing.
+    pub fn on_team_message(&mut self, from: &RobotId, bytes: &[u8]) {
+        if let Err(e) = self.runtime.team_mut().apply_bytes(from, bytes) {
+            self.runtime.report(format!("sync from {from} rejected: {e}"));
+        }
+    }
+
+    // --- stepping ---------------------------------------------------------------------------------
+
+    /// Background upkeep at `now` (team-state clock, global planner upkeep); once per tick.
+    pub fn maintain(&mut self, now: Time) {
+        self.runtime.maintain(now);
+    }
+
+    /// Ticks the tree once at `now`; transitions go to `observer`.
+    pub fn tick(&mut self, now: Time, observer: Option<&mut dyn TreeObserver>) -> Status {
+        self.runtime.begin_tick();
+        self.tree.tick(now, &mut self.runtime, observer)
+    }
+
+    /// Halts the tree (mission end, robot killed): running nodes stop and clean up.
+    pub fn halt(&mut self, now: Time, observer: Option<&mut dyn TreeObserver>) {
+        self.tree.halt(now, &mut self.runtime, observer);
+    }
+
+    // --- outputs ----------------------------------------------------------------------------------
+
+    /// The velocity command of the last tick (UGVs); `None`: stop.
+    pub fn command(&self) -> Option<Twist2> {
+        self.runtime.command()
+    }
+
+    /// The flight command of the last tick (UAVs); `None`: hover.
+    pub fn flight(&self) -> Option<FlightCommand> {
+        self.runtime.flight()
+    }
+
+    /// The sync message for peer `to`, limited to `tiers` and `budget_bytes`, encoded for the
+    /// link; `None` when there is nothing to send.
+    pub fn team_message_for(&mut self, to: &RobotId, tiers: TierSet, budget_bytes: usize) -> Option<Vec<u8>> {
+        self.runtime.team_mut().make_sync(to, tiers, budget_bytes).map(|m| m.encode())
+    }
+
+    /// Problems met since the last call: the nodes' reports, then the runtime's.
+    pub fn take_problems(&mut self) -> Vec<String> {
+        let mut out = self.tree.blackboard_mut().take_reports();
+        out.append(&mut self.runtime.take_problems());
+        out
+    }
+
+    // --- what observers may read --------------------------------------------------------------------
+
+    /// The latest map-frame pose estimate.
+    pub fn pose(&self) -> Option<PoseEstimate> {
+        self.runtime.pose()
+    }
+
+    /// The robot's team state.
+    pub fn team(&self) -> &TeamState {
+        self.runtime.team()
+    }
+
+    /// The path being followed, map frame.
+    pub fn planned_path(&self) -> Option<&[Point2]> {
+        self.runtime.planned_path()
+    }
+
+    /// The navigation stack (UGVs), for its latest scan and terrain analysis.
+    pub fn nav(&self) -> Option<&NavStack> {
+        self.runtime.nav()
+    }
+
+    /// The latest reachability scan (UGVs).
+    pub fn latest_scan(&self) -> Option<&Arc<ReachabilityScan>> {
+        self.runtime.nav().and_then(|n| n.latest_scan.as_ref())
+    }
+
+    /// The runtime, read-only (tests and tools).
+    pub fn runtime(&self) -> &RobotRuntime {
+        &self.runtime
+    }
+
+    /// The tree's executor (node paths, blackboard, status).
+    pub fn tree(&self) -> &TreeExecutor<RobotRuntime> {
+        &self.tree
+    }
+
+    /// The tree's executor, mutable (adapters inject blackboard entries and events).
+    pub fn tree_mut(&mut self) -> &mut TreeExecutor<RobotRuntime> {
+        &mut self.tree
+    }
+}

@@ -1,0 +1,535 @@
+//! The robot runtime: one robot's state and continuous skills, and what domain nodes see of
+//! the robot (their `TickContext::env`, typed).
+//!
+//! Adapters do not drive it directly: they drive a [`crate::Robot`], which owns the runtime and
+//! the robot's tree. The runtime's state is private; inputs, outputs and what nodes may do go
+//! through methods that say what they do.
+
+mod localization;
+mod navigation;
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use spomp_core::{
+    AerialMap, ClassTable, FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, Point2, Pose2, PoseEstimate,
+    RobotId, RobotKind, Time, Twist2,
+};
+use spomp_mapping::{CompressedMap, CompressionParams, GoalDetectionParams, GoalDetector, MappingError, Orthomap};
+use spomp_teamstate::{GoalOrigin, IdentifyOutcome, TeamState, TeamStateError, TeamStateParams};
+
+pub use localization::{Localization, LocalizationSetup, UpdateSchedule};
+pub use navigation::{NavParams, NavStack};
+
+/// How to set up one robot's runtime (from the mission and the adapter).
+#[derive(Clone, Debug)]
+pub struct RuntimeConfig {
+    /// The robot.
+    pub id: RobotId,
+    /// Its kind.
+    pub kind: RobotKind,
+    /// UGV priority (lower = higher); 0 for other kinds is fine.
+    pub priority: u32,
+    /// Start pose in the map frame (home, and the localization prior's mean).
+    pub start: Pose2,
+    /// The semantic class table.
+    pub classes: ClassTable,
+    /// Grid of the operating area (the aerial map the team builds).
+    pub map_spec: Option<GridSpec>,
+    /// Team state parameters (deconfliction radius from the mission).
+    pub team: TeamStateParams,
+    /// Goal detection (from the mission's `goals.detect`); none for robots without it.
+    pub detection: Option<GoalDetectionParams>,
+    /// Where the map-frame pose comes from.
+    pub localization: LocalizationSetup,
+    /// Navigation parameters (UGVs).
+    pub nav: Option<NavParams>,
+    /// Per-goal time limit per metre of planned path (mission `goals.time_limit_per_m_s`).
+    pub goal_time_per_m_s: f64,
+    /// Seed of this robot's random stream (skills take randomness from it).
+    pub seed: u64,
+    /// How often a mapping robot (the UAV) publishes its map as a new version, seconds.
+    pub map_publish_period_s: f64,
+    /// PNG effort of the published map layers.
+    pub map_compression: CompressionParams,
+    /// An aerial map the robot starts with (surveyed before the mission); `None`: only what the
+    /// team maps.
+    pub prior_map: Option<AerialMap>,
+}
+
+impl RuntimeConfig {
+    /// A robot with no navigation, no goal detection and an externally supplied pose, over the
+    /// default class table and no map grid (tests, basestations); set the other fields as
+    /// needed.
+    pub fn basic(id: RobotId, kind: RobotKind, priority: u32, start: Pose2) -> Self {
+        RuntimeConfig {
+            id,
+            kind,
+            priority,
+            start,
+            classes: ClassTable::default_table(),
+            map_spec: None,
+            team: TeamStateParams::default(),
+            detection: None,
+            localization: LocalizationSetup::External,
+            nav: None,
+            goal_time_per_m_s: 2.0,
+            seed: 0,
+            map_publish_period_s: 10.0,
+            map_compression: CompressionParams::default(),
+            prior_map: None,
+        }
+    }
+}
+
+/// Errors setting up a runtime.
+#[derive(Debug, thiserror::Error)]
+pub enum RuntimeError {
+    /// Team state parameters rejected.
+    #[error("team state: {0}")]
+    Team(#[from] TeamStateError),
+    /// Goal detection parameters or the prior map rejected.
+    #[error("mapping: {0}")]
+    Mapping(#[from] MappingError),
+    /// A skill rejected its parameters.
+    #[error("{skill}: {message}")]
+    Skill {
+        /// Which skill.
+        skill: &'static str,
+        /// What it said.
+        message: String,
+    },
+}
+
+/// One robot's state and skills: the environment its behaviour nodes act on.
+pub struct RobotRuntime {
+    id: RobotId,
+    kind: RobotKind,
+    /// The replicated team database.
+    team: TeamState,
+    /// Latest map-frame pose (from the localizer, GPS or simulator truth).
+    pose: Option<PoseEstimate>,
+    /// Start pose (home).
+    start: Pose2,
+    classes: ClassTable,
+    /// This robot's copy of the aerial map: grown from the map versions received in the team
+    /// state, or (on the UAV) by its own camera.
+    map: Option<Orthomap>,
+    /// Goal detection as the mission's `goals.detect` configures it (none: no detection).
+    detector: Option<GoalDetector>,
+    /// Map version the last detection pass ran on.
+    detected_version: Option<u64>,
+    /// Grid of the operating area, for the map copy received maps grow.
+    map_spec: Option<GridSpec>,
+    odometry: Option<Odometry>,
+    panorama: Option<Arc<PanoramaFrame>>,
+    /// Velocity command written by a driving node this tick (UGVs); `None`: stop.
+    command: Option<Twist2>,
+    /// Flight command written by a flying node this tick (UAVs); `None`: hover.
+    flight: Option<FlightCommand>,
+    /// The path being followed, map frame.
+    planned_path: Option<Vec<Point2>>,
+    goal_time_per_m_s: f64,
+    rng: ChaCha8Rng,
+    localization: Localization,
+    /// Terrain analysis, global planner and controller (UGVs with navigation).
+    nav: Option<Box<NavStack>>,
+    /// Problems met outside a tick (a bad map blob, a skill error), drained by the adapter.
+    problems: Vec<String>,
+    /// Newest map version applied, per publishing robot.
+    applied_maps: HashMap<RobotId, u64>,
+    /// Map publishing of a mapping robot: period, effort, next due time, last version sent.
+    map_publish_period_s: f64,
+    map_compression: CompressionParams,
+    next_map_publish: Time,
+    published_map_version: u64,
+}
+
+/// What one goal-detection pass did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct DetectionPass {
+    /// Goals new to the team state.
+    pub added: usize,
+    /// What went wrong (a bad map version, a detector error), for the node to report.
+    pub problems: Vec<String>,
+}
+
+impl RobotRuntime {
+    /// A runtime with an empty team state, no navigation and an externally supplied pose
+    /// (tests, basestations). `priority` orders UGV claims (lower = higher).
+    pub fn new(
+        id: RobotId,
+        kind: RobotKind,
+        priority: u32,
+        start: Pose2,
+        team: TeamStateParams,
+    ) -> Result<Self, TeamStateError> {
+        let team = TeamState::new(id.clone(), priority, team)?;
+        Ok(RobotRuntime {
+            id,
+            kind,
+            team,
+            pose: None,
+            start,
+            classes: ClassTable::default_table(),
+            map: None,
+            detector: None,
+            detected_version: None,
+            map_spec: None,
+            odometry: None,
+            panorama: None,
+            command: None,
+            flight: None,
+            planned_path: None,
+            goal_time_per_m_s: 2.0,
+            rng: ChaCha8Rng::seed_from_u64(0),
+            localization: Localization::External,
+            nav: None,
+            problems: Vec::new(),
+            applied_maps: HashMap::new(),
+            map_publish_period_s: 10.0,
+            map_compression: CompressionParams::default(),
+            next_map_publish: Time::ZERO,
+            published_map_version: 0,
+        })
+    }
+
+    /// A runtime set up from a mission's description of the robot.
+    pub fn from_config(config: RuntimeConfig) -> Result<Self, RuntimeError> {
+        let mut rt = RobotRuntime::new(config.id, config.kind, config.priority, config.start, config.team)?;
+        rt.classes = config.classes;
+        rt.map_spec = config.map_spec;
+        rt.goal_time_per_m_s = config.goal_time_per_m_s;
+        rt.rng = ChaCha8Rng::seed_from_u64(config.seed);
+        rt.map_publish_period_s = config.map_publish_period_s;
+        rt.map_compression = config.map_compression;
+        if let Some(det) = config.detection {
+            rt.detector = Some(GoalDetector::new(det, &rt.classes)?);
+        }
+        rt.localization = Localization::from_setup(&config.localization, config.start)?;
+        if let Some(nav) = config.nav {
+            rt.nav = Some(Box::new(NavStack::new(nav, &rt.classes)?));
+        }
+        if let Some(map) = config.prior_map {
+            rt.map = Some(Orthomap::from_map(map)?);
+        } else if rt.kind == RobotKind::Uav
+            && let Some(spec) = rt.map_spec
+        {
+            // The UAV maps: its copy grows from its own camera.
+            rt.map = Some(Orthomap::new(spec));
+        }
+        Ok(rt)
+    }
+
+    // --- identity ----------------------------------------------------------------------------
+
+    /// The robot's id.
+    pub fn id(&self) -> &RobotId {
+        &self.id
+    }
+
+    /// Its kind.
+    pub fn kind(&self) -> RobotKind {
+        self.kind
+    }
+
+    /// Its start pose (home), map frame.
+    pub fn start(&self) -> Pose2 {
+        self.start
+    }
+
+    /// The semantic class table.
+    pub fn classes(&self) -> &ClassTable {
+        &self.classes
+    }
+
+    // --- inputs (adapters, through `Robot`) -----------------------------------------------------
+
+    /// Clears this tick's outputs; called before the tree is ticked.
+    pub fn begin_tick(&mut self) {
+        self.command = None;
+        self.flight = None;
+    }
+
+    /// A pose from outside the robot's own estimation: GPS on the UAV, the basestation's
+    /// surveyed position, or (where the mission asks for it) simulator ground truth plus noise.
+    /// Ignored while a cross-view localizer owns the pose.
+    pub fn on_external_pose(&mut self, estimate: PoseEstimate) {
+        if matches!(self.localization, Localization::External) {
+            self.pose = Some(estimate);
+            self.publish_pose(estimate);
+        }
+    }
+
+    /// New odometry: the pose between panoramas is the last filtered pose composed with the
+    /// odometry since (the paper's scheme).
+    pub fn on_odometry(&mut self, odom: Odometry) {
+        self.odometry = Some(odom);
+        if let Some(estimate) = self.localization.pose_at(&odom, &mut self.rng) {
+            self.pose = Some(estimate);
+            self.publish_pose(estimate);
+        }
+    }
+
+    /// A new panorama: brings the map copy up to date, runs the localizer's measurement update,
+    /// then terrain analysis (reachability scan shared on the team state and fed to the global
+    /// planner).
+    pub fn on_panorama(&mut self, frame: Arc<PanoramaFrame>) {
+        self.panorama = Some(frame.clone());
+        if let Err(e) = self.refresh_map() {
+            self.problems.push(format!("a received map version is unusable: {e}"));
+        }
+        let map = self.map.as_ref().map(|m| (m.map(), m.version()));
+        match self.localization.on_panorama(&frame, map, &self.classes, &mut self.rng) {
+            Ok(Some(estimate)) => {
+                self.pose = Some(estimate);
+                self.publish_pose(estimate);
+            }
+            Ok(None) => {}
+            Err(e) => self.problems.push(format!("localization: {e}")),
+        }
+        if let (Some(nav), Some(pose)) = (self.nav.as_deref_mut(), self.pose) {
+            let map = self.map.as_ref();
+            match nav.on_panorama(&self.id, &frame, pose, map, &mut self.team, &mut self.rng) {
+                Ok(()) => {}
+                Err(e) => self.problems.push(format!("navigation: {e}")),
+            }
+        }
+    }
+
+    /// Tiles of the aerial map from the robot's own camera (the UAV): applied to its map, which
+    /// is published to the team as a new version every `map_publish_period_s` while it changes
+    /// (the whole map each time: the team state keeps only the newest version per publisher, so
+    /// a robot that missed one still gets everything).
+    pub fn on_camera_tiles(&mut self, tiles: &[MapTile], now: Time) {
+        let Some(map) = self.map.as_mut() else {
+            if !tiles.is_empty() {
+                self.problems.push("camera tiles arrived, but this robot keeps no aerial map".into());
+            }
+            return;
+        };
+        for tile in tiles {
+            if let Err(e) = map.apply_tile(tile) {
+                self.problems.push(format!("camera tile rejected: {e}"));
+            }
+        }
+        if now >= self.next_map_publish && map.version() != self.published_map_version {
+            self.next_map_publish = Time::from_secs_f64(now.as_secs_f64() + self.map_publish_period_s);
+            match map.encode(&self.map_compression) {
+                Ok(blob) => {
+                    self.published_map_version = map.version();
+                    if let Err(e) = self.team.add_map_version(map.version(), now, blob.to_bytes()) {
+                        self.problems.push(format!("map version rejected: {e}"));
+                    }
+                }
+                Err(e) => self.problems.push(format!("map encoding failed: {e}")),
+            }
+        }
+    }
+
+    /// Background upkeep at simulated/real time `now`: the team state's clock (own claims
+    /// renewed, other robots' expired claims dropped); the global planner takes in new map
+    /// versions and team scans and retrains on its schedule. Call once per control period.
+    pub fn maintain(&mut self, now: Time) {
+        self.team.advance_clock(now);
+        if let Some(nav) = self.nav.as_deref_mut()
+            && let Err(e) = nav.maintain(now, self.map.as_ref(), &self.team, &mut self.rng)
+        {
+            self.problems.push(format!("navigation: {e}"));
+        }
+    }
+
+    fn publish_pose(&mut self, estimate: PoseEstimate) {
+        if let Err(e) = self.team.set_pose(estimate.pose, estimate.stamp) {
+            self.problems.push(format!("team state rejected the pose: {e}"));
+        }
+    }
+
+    /// Applies map versions that arrived in the team state since the last call to this robot's
+    /// map copy (created over the operating area's grid on first use). Returns the number of
+    /// cells changed; a corrupt blob is an error and changes nothing (later versions still apply
+    /// next call).
+    pub fn refresh_map(&mut self) -> Result<usize, MappingError> {
+        let Some(spec) = self.map.as_ref().map(|m| m.map().spec).or(self.map_spec) else { return Ok(0) };
+        let fresh: Vec<(RobotId, u64, std::sync::Arc<Vec<u8>>)> = self
+            .team
+            .map_writers()
+            .filter_map(|robot| {
+                let v = self.team.latest_map(robot)?;
+                let newer = self.applied_maps.get(robot).is_none_or(|&seen| v.version > seen);
+                newer.then(|| (robot.clone(), v.version, v.blob.clone()))
+            })
+            .collect();
+        let mut changed = 0;
+        for (robot, version, blob) in fresh {
+            let compressed = CompressedMap::from_bytes(&blob)?;
+            let map = self.map.get_or_insert_with(|| Orthomap::new(spec));
+            changed += map.apply_compressed(&compressed)?;
+            self.applied_maps.insert(robot, version);
+        }
+        Ok(changed)
+    }
+
+    // --- what nodes read --------------------------------------------------------------------------
+
+    /// Latest map-frame pose estimate.
+    pub fn pose(&self) -> Option<PoseEstimate> {
+        self.pose
+    }
+
+    /// Latest map-frame position, or the start position before the first estimate.
+    pub fn position_or_start(&self) -> Point2 {
+        self.pose.map_or_else(|| self.start.position(), |p| p.pose.position())
+    }
+
+    /// Latest odometry.
+    pub fn odometry(&self) -> Option<Odometry> {
+        self.odometry
+    }
+
+    /// Latest panorama.
+    pub fn panorama(&self) -> Option<&Arc<PanoramaFrame>> {
+        self.panorama.as_ref()
+    }
+
+    /// The replicated team database.
+    pub fn team(&self) -> &TeamState {
+        &self.team
+    }
+
+    /// The team database, to claim, release and mark goals and publish what the robot knows.
+    pub fn team_mut(&mut self) -> &mut TeamState {
+        &mut self.team
+    }
+
+    /// This robot's copy of the aerial map.
+    pub fn map(&self) -> Option<&Orthomap> {
+        self.map.as_ref()
+    }
+
+    /// Where the pose comes from, and the localizer's state.
+    pub fn localization(&self) -> &Localization {
+        &self.localization
+    }
+
+    /// The navigation stack (UGVs with navigation).
+    pub fn nav(&self) -> Option<&NavStack> {
+        self.nav.as_deref()
+    }
+
+    /// The navigation stack, to plan and mark what driving taught.
+    pub fn nav_mut(&mut self) -> Option<&mut NavStack> {
+        self.nav.as_deref_mut()
+    }
+
+    /// The navigation stack with the robot's random stream (local-goal sampling needs both).
+    pub fn nav_and_rng(&mut self) -> Option<(&mut NavStack, &mut ChaCha8Rng)> {
+        Some((self.nav.as_deref_mut()?, &mut self.rng))
+    }
+
+    /// This robot's random stream (skills take randomness from it, so runs repeat).
+    pub fn rng(&mut self) -> &mut ChaCha8Rng {
+        &mut self.rng
+    }
+
+    /// The mission's per-goal time limit per metre of planned path, s/m.
+    pub fn goal_time_per_m_s(&self) -> f64 {
+        self.goal_time_per_m_s
+    }
+
+    // --- what nodes do --------------------------------------------------------------------------
+
+    /// Brings the map copy up to date with received map versions, then, if it changed since
+    /// the last pass, detects goals in it and adds the new ones to the team state.
+    pub fn detect_goals(&mut self, now: Time) -> DetectionPass {
+        let mut pass = DetectionPass::default();
+        if let Err(e) = self.refresh_map() {
+            pass.problems.push(format!("a received map version is unusable: {e}"));
+        }
+        let (Some(map), Some(detector)) = (self.map.as_ref(), self.detector.as_mut()) else { return pass };
+        if self.detected_version == Some(map.version()) {
+            return pass;
+        }
+        let known: Vec<Point2> = self.team.goals().iter().map(|g| g.position).collect();
+        match detector.detect(map.map(), &known) {
+            Ok(found) => {
+                for g in found.goals {
+                    match self.team.identify_goal(g.position, GoalOrigin::Detected, now) {
+                        Ok(IdentifyOutcome::New(_)) => pass.added += 1,
+                        Ok(IdentifyOutcome::Existing(_)) => {}
+                        Err(e) => pass.problems.push(e.to_string()),
+                    }
+                }
+                self.detected_version = Some(map.version());
+            }
+            Err(e) => pass.problems.push(e.to_string()),
+        }
+        pass
+    }
+
+    /// Commands a velocity for this tick (UGVs).
+    pub fn command_velocity(&mut self, twist: Twist2) {
+        self.command = Some(twist);
+    }
+
+    /// Commands a flight target for this tick (UAVs).
+    pub fn command_flight(&mut self, flight: FlightCommand) {
+        self.flight = Some(flight);
+    }
+
+    /// Withdraws this tick's flight command: the UAV hovers.
+    pub fn hover(&mut self) {
+        self.flight = None;
+    }
+
+    /// Publishes the path the robot follows (map frame) and its end on the team state, so a
+    /// seeking UAV can find the robot where it is heading.
+    pub fn publish_path(&mut self, points: Vec<Point2>, end: Option<Point2>) {
+        self.planned_path = Some(points);
+        if let Err(e) = self.team.set_path_end(end) {
+            self.problems.push(format!("team state rejected the path end: {e}"));
+        }
+    }
+
+    /// Withdraws the published path.
+    pub fn clear_path(&mut self) {
+        self.planned_path = None;
+        if let Err(e) = self.team.set_path_end(None) {
+            self.problems.push(format!("team state rejected clearing the path end: {e}"));
+        }
+    }
+
+    /// Records a problem for the adapter to report.
+    pub fn report(&mut self, problem: String) {
+        self.problems.push(problem);
+    }
+
+    // --- outputs (adapters, through `Robot`) ------------------------------------------------------
+
+    /// The velocity command of the last tick; `None`: stop.
+    pub fn command(&self) -> Option<Twist2> {
+        self.command
+    }
+
+    /// The flight command of the last tick; `None`: hover.
+    pub fn flight(&self) -> Option<FlightCommand> {
+        self.flight
+    }
+
+    /// The path being followed, map frame.
+    pub fn planned_path(&self) -> Option<&[Point2]> {
+        self.planned_path.as_deref()
+    }
+
+    /// The problems met and not taken yet.
+    pub fn problems(&self) -> &[String] {
+        &self.problems
+    }
+
+    /// Takes the problems met since the last call.
+    pub fn take_problems(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.problems)
+    }
+}

@@ -1,0 +1,172 @@
+//! The one translation from a mission to a robot: a loaded mission, a robot id and the
+//! operating area (class table, grid, an optional prior map — never a simulator world) become
+//! the robot's [`RuntimeConfig`]. Every adapter builds its robots through here.
+
+use spomp_behaviors::mission::MissionFile;
+use spomp_behaviors::mission::schema::LocalizationMode;
+use spomp_core::{AerialMap, ClassTable, GridSpec, Pose2, RobotId, RobotKind};
+use spomp_mapping::{CompressionParams, GoalDetectionParams, PngLevel};
+use spomp_teamstate::TeamStateParams;
+
+use crate::runtime::{LocalizationSetup, RuntimeConfig, UpdateSchedule};
+use crate::settings::{NavigationSettings, SettingsError};
+
+/// Where the robots operate: what every robot's maps are laid over.
+#[derive(Clone, Debug)]
+pub struct OperatingArea {
+    /// The semantic class table.
+    pub classes: ClassTable,
+    /// Grid of the aerial map the team builds.
+    pub grid: GridSpec,
+    /// An aerial map the robots start with (surveyed before the mission); `None`: they know only
+    /// what the team maps.
+    pub prior_map: Option<AerialMap>,
+}
+
+/// Where a robot's map-frame pose comes from, as the adapter must supply it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PoseInput {
+    /// The robot localizes itself (cross-view localizer on its panoramas and odometry); the
+    /// adapter feeds odometry and panoramas only.
+    OwnEstimate,
+    /// The adapter feeds a map-frame pose (GPS on the UAV, the basestation's surveyed position).
+    External,
+    /// Simulator ground truth with Gaussian noise of this standard deviation (metres): the
+    /// paper's simulation switch, only where the mission asks for it (`localization: { mode:
+    /// ground_truth }`).
+    GroundTruth {
+        /// Position noise, metres (1σ).
+        noise_m: f64,
+    },
+}
+
+impl PoseInput {
+    /// Name for summaries.
+    pub fn name(&self) -> &'static str {
+        match self {
+            PoseInput::OwnEstimate => "cross_view",
+            PoseInput::External => "external",
+            PoseInput::GroundTruth { .. } => "ground_truth",
+        }
+    }
+}
+
+/// A robot of a mission, ready to build.
+#[derive(Clone, Debug)]
+pub struct RobotSetup {
+    /// Its index in the mission's team.
+    pub index: usize,
+    /// The runtime configuration.
+    pub config: RuntimeConfig,
+    /// Where its pose comes from.
+    pub pose_input: PoseInput,
+    /// Its role's name.
+    pub role: String,
+    /// Tick rate of its tree, per second.
+    pub tick_hz: f64,
+}
+
+/// Why a mission's robot could not be set up.
+#[derive(Debug, thiserror::Error)]
+pub enum SetupError {
+    /// No robot with that id in the team.
+    #[error("no robot `{0}` in the mission's team")]
+    UnknownRobot(String),
+    /// A setting is invalid (the skill's own validation).
+    #[error(transparent)]
+    Settings(#[from] SettingsError),
+}
+
+/// The seed of one robot's random stream from a run's seed: distinct, reproducible streams per
+/// robot and run, whatever adapter runs them.
+pub fn robot_seed(run_seed: u64, robot_index: usize) -> u64 {
+    run_seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(robot_index as u64 + 1)
+}
+
+/// How often the mapping robot publishes its map as a new version, seconds.
+pub const MAP_PUBLISH_PERIOD_S: f64 = 10.0;
+
+impl RobotSetup {
+    /// The robot `id` of `mission` over `area`; `run_seed` seeds its random stream
+    /// ([`robot_seed`]).
+    pub fn from_mission(
+        mission: &MissionFile,
+        id: &str,
+        area: &OperatingArea,
+        run_seed: u64,
+    ) -> Result<Self, SetupError> {
+        let index = mission.team.iter().position(|r| r.id == id).ok_or_else(|| SetupError::UnknownRobot(id.into()))?;
+        let spec = &mission.team[index];
+        let start = Pose2::new(spec.start.x_m, spec.start.y_m, spec.start.yaw_deg.to_radians());
+        let goals = mission.goals.as_ref();
+        let team = team_params(mission);
+        let detection = goals.and_then(|g| g.detect.as_ref()).and_then(|d| {
+            let detects = matches!(spec.kind, RobotKind::Ugv | RobotKind::Basestation);
+            let defaults = GoalDetectionParams::default();
+            detects.then(|| GoalDetectionParams {
+                class: d.class.clone(),
+                merge_distance_m: d.merge_distance_m.unwrap_or(defaults.merge_distance_m),
+                min_size_m: d.min_size_m.unwrap_or(defaults.min_size_m),
+                placement_region_m: d.placement_region_m.unwrap_or(defaults.placement_region_m),
+                deconfliction_radius_m: team.deconfliction_radius_m,
+                ..defaults
+            })
+        });
+        let (localization, pose_input) = match (spec.kind, spec.localization.as_ref()) {
+            (RobotKind::Ugv, Some(l)) if l.mode == LocalizationMode::GroundTruth => {
+                (LocalizationSetup::External, PoseInput::GroundTruth { noise_m: l.noise_m })
+            }
+            (RobotKind::Ugv, l) => (
+                LocalizationSetup::CrossView {
+                    params: Box::default(),
+                    prior_sigma_m: l.map(|l| l.prior_sigma_m).unwrap_or(2.0),
+                    prior_sigma_rad: l.map(|l| l.prior_sigma_deg).unwrap_or(5.0).to_radians(),
+                    schedule: UpdateSchedule::default(),
+                },
+                PoseInput::OwnEstimate,
+            ),
+            _ => (LocalizationSetup::External, PoseInput::External),
+        };
+        let role = mission.roles.get(&spec.role);
+        let nav = if spec.kind == RobotKind::Ugv {
+            let layers: Vec<&serde_json::Value> =
+                role.and_then(|r| r.navigation.as_ref()).into_iter().chain(spec.navigation.as_ref()).collect();
+            Some(NavigationSettings::resolve(&layers)?.into_nav_params())
+        } else {
+            None
+        };
+        let config = RuntimeConfig {
+            id: RobotId::new(&spec.id),
+            kind: spec.kind,
+            priority: spec.priority.unwrap_or(0),
+            start,
+            classes: area.classes.clone(),
+            map_spec: Some(area.grid),
+            team,
+            detection,
+            localization,
+            nav,
+            goal_time_per_m_s: goals.map(|g| g.time_limit_per_m_s).unwrap_or(2.0),
+            seed: robot_seed(run_seed, index),
+            map_publish_period_s: MAP_PUBLISH_PERIOD_S,
+            // The whole map is re-encoded on every publish: favour speed over the last bytes.
+            map_compression: CompressionParams { level: PngLevel::Fast },
+            prior_map: area.prior_map.clone(),
+        };
+        Ok(RobotSetup { index, config, pose_input, role: spec.role.clone(), tick_hz: role.map_or(10.0, |r| r.tick_hz) })
+    }
+}
+
+/// The team-state parameters of a mission: its deconfliction radius and claim lease over the
+/// skill's defaults. Scans are shared through the global planner's sharing filter (one owner),
+/// so the team state keeps every scan it is given.
+pub fn team_params(mission: &MissionFile) -> TeamStateParams {
+    let defaults = TeamStateParams::default();
+    let goals = mission.goals.as_ref();
+    TeamStateParams {
+        deconfliction_radius_m: goals.and_then(|g| g.deconfliction_radius_m).unwrap_or(defaults.deconfliction_radius_m),
+        claim_lease_s: goals.and_then(|g| g.claim_lease_s).unwrap_or(defaults.claim_lease_s),
+        scan_min_spacing_m: 0.0,
+        ..defaults
+    }
+}
