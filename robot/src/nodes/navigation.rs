@@ -42,6 +42,7 @@ use spomp_local_planner::{Dwa, LocalGoalParams, LocalPlannerParams, select_local
 
 use super::Ctx;
 use crate::runtime::{NavStack, RobotRuntime};
+use crate::settings::WatchdogParams;
 use spomp_behaviors::Status;
 use spomp_behaviors::blackboard::{BbValue, Binding, PortType};
 use spomp_behaviors::node::Behavior;
@@ -82,7 +83,7 @@ pub fn register_navigation(r: &mut NodeRegistry<RobotRuntime>) {
                 PortSpec::input("tolerance_m", Float, "Arrival radius, metres.").with_default(json!(2.0)),
                 PortSpec::optional("time_limit_s", Float, "Fixed time limit, seconds; overrides `time_per_m_s`."),
                 PortSpec::optional("time_per_m_s", Float, "Time limit per metre of planned path, s/m; unset: the mission's `goals.time_limit_per_m_s`."),
-                PortSpec::input("stuck_timeout_s", Float, "Fail as stuck after this long without 1 m of progress along the path, seconds.").with_default(json!(30.0)),
+                PortSpec::optional("stuck_timeout_s", Float, "Fail as stuck after this long without 1 m of progress along the path, seconds; unset: the robot's `navigation.watchdog.stuck_timeout_s` (30 s unless the mission says otherwise)."),
                 PortSpec::input("lookahead_m", Float, "Distance ahead along the global path of the waypoint given to the local planner, metres.").with_default(json!(8.0)),
                 PortSpec::optional("global_planner", Params, "Only `search: { replan_cost_rise_ratio }` (the robot's graph, learning and experience are shared by all nodes and set in its navigation parameters)."),
                 PortSpec::optional("local_planner", Params, "Overrides of `local_goal` and `dwa` (spomp-local-planner) over the robot's parameters, for this node; `terrain` is the robot's."),
@@ -102,7 +103,7 @@ pub fn register_navigation(r: &mut NodeRegistry<RobotRuntime>) {
                 PortSpec::input("target", Point, "Where to go, in `frame`."),
                 PortSpec::input("frame", Str, "Frame of `target`: `map`, or `robot` (the robot's pose when the node starts).").with_default(json!("map")),
                 PortSpec::input("tolerance_m", Float, "Arrival radius, metres.").with_default(json!(1.0)),
-                PortSpec::input("stuck_timeout_s", Float, "Give up after this long without progress, seconds.").with_default(json!(30.0)),
+                PortSpec::optional("stuck_timeout_s", Float, "Give up after this long without progress, seconds; unset: the robot's `navigation.watchdog.stuck_timeout_s`."),
                 PortSpec::optional("local_planner", Params, "Overrides of `local_goal` and `dwa` (spomp-local-planner) over the robot's parameters, for this node; `terrain` is the robot's."),
             ],
             |p| Ok(Box::new(NavigateLocal::new(p)?)),
@@ -118,7 +119,7 @@ pub fn register_navigation(r: &mut NodeRegistry<RobotRuntime>) {
             vec![
                 PortSpec::input("min_distance_m", Float, "Only move if farther than this from home, metres.").with_default(json!(5.0)),
                 PortSpec::input("tolerance_m", Float, "Arrival radius, metres.").with_default(json!(2.0)),
-                PortSpec::input("stuck_timeout_s", Float, "Fail as stuck after this long without 1 m of progress, seconds.").with_default(json!(30.0)),
+                PortSpec::optional("stuck_timeout_s", Float, "Fail as stuck after this long without 1 m of progress, seconds; unset: the robot's `navigation.watchdog.stuck_timeout_s`."),
                 PortSpec::output("failure_reason", Str, "Why it failed: no_path, stuck or time_limit."),
             ],
             |p| Ok(Box::new(ReturnHome::new(p)?)),
@@ -903,6 +904,11 @@ impl Navigator {
 // Nodes
 
 /// A positive finite number from a port (its declared default when unset), or a report.
+/// The robot's own stuck timeout (`navigation.watchdog`), for nodes that do not set one.
+fn robot_stuck_timeout_s(rt: &RobotRuntime) -> f64 {
+    rt.nav().map_or_else(|| WatchdogParams::default().stuck_timeout_s, |n| n.params.watchdog.stuck_timeout_s)
+}
+
 fn number(binding: &Binding, ctx: &mut Ctx<'_>, node: &str, port: &str, default: f64) -> Option<f64> {
     let v = match binding {
         Binding::Unset => default,
@@ -1010,7 +1016,7 @@ impl Behavior<RobotRuntime> for NavigateTo {
         let Some(target) = target_of(&self.target, ctx, NODE) else { return Status::Failure };
         let (Some(tolerance_m), Some(stuck_timeout_s), Some(lookahead_m)) = (
             number(&self.tolerance, ctx, NODE, "tolerance_m", 2.0),
-            number(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", 30.0),
+            number(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", robot_stuck_timeout_s(ctx.env)),
             number(&self.lookahead, ctx, NODE, "lookahead_m", 8.0),
         ) else {
             return Status::Failure;
@@ -1074,7 +1080,7 @@ impl Behavior<RobotRuntime> for ReturnHome {
         let (Some(min_distance_m), Some(tolerance_m), Some(stuck_timeout_s)) = (
             number(&self.min_distance, ctx, NODE, "min_distance_m", 5.0),
             number(&self.tolerance, ctx, NODE, "tolerance_m", 2.0),
-            number(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", 30.0),
+            number(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", robot_stuck_timeout_s(ctx.env)),
         ) else {
             return Status::Failure;
         };
@@ -1163,7 +1169,7 @@ impl Behavior<RobotRuntime> for NavigateLocal {
         let Some(frame) = self.frame(ctx, NODE) else { return Status::Failure };
         let (Some(tolerance_m), Some(stuck_timeout_s)) = (
             number(&self.tolerance, ctx, NODE, "tolerance_m", 1.0),
-            number(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", 30.0),
+            number(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", robot_stuck_timeout_s(ctx.env)),
         ) else {
             return Status::Failure;
         };
