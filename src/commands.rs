@@ -14,9 +14,8 @@ use spomp_behaviors::registry::PortDirection;
 /// Renders a mission's diagnostics with their source lines.
 fn render_diagnostics(loaded: &LoadedMission) -> String {
     let mut human = String::new();
-    // No context lines: a report quotes the offending line only, never the rest of a file.
-    let handler =
-        miette::GraphicalReportHandler::new_themed(miette::GraphicalTheme::unicode_nocolor()).with_context_lines(0);
+    // `Rendered` hands the renderer the offending line only, never the rest of a file.
+    let handler = miette::GraphicalReportHandler::new_themed(miette::GraphicalTheme::unicode_nocolor());
     for d in &loaded.diagnostics {
         human.push_str(&format!("{d}\n"));
         let src = loaded.source_of(&d.file).unwrap_or_default().to_string();

@@ -125,6 +125,12 @@ fn a_diagnostic_quotes_at_most_the_offending_line() {
     let text = stdout_of(&out);
     assert!(text.contains("notes.txt"), "{text}");
     assert!(!text.contains("secret-two") && !text.contains("secret-three"), "{text}");
+    // An error in the middle of a mission: its line is quoted, its neighbours are not.
+    let out =
+        spomp().current_dir(root()).args(["validate", "tests/missions/invalid-unknown-port.yaml"]).output().unwrap();
+    let text = stdout_of(&out);
+    assert!(text.contains(r#"- navigate_to: { target: "{goal_position}", speed: 3 }"#), "{text}");
+    assert!(!text.contains("claim_goal") && !text.contains("mark_visited"), "{text}");
     // Out of the folder: refused before anything is read.
     let m = mission(dir.path(), "m2.yaml", "include: [/etc/passwd]\n");
     let out = spomp().arg("validate").arg(&m).output().unwrap();

@@ -104,14 +104,23 @@ impl Rendered {
     /// not printable text.
     pub fn new(mut diag: Diagnostic, source: String) -> Self {
         let name = diag.file.display().to_string();
+        // The renderer sees only the offending line: the lines before it are left empty (so its
+        // line number stays right) and the lines after it are cut.
+        let mut shown = String::new();
         diag.span = diag.span.and_then(|(offset, len)| {
             let start = source.get(..offset)?.rfind('\n').map_or(0, |p| p + 1);
             let end = source.get(offset..)?.find('\n').map_or(source.len(), |p| offset + p);
             let line = source.get(start..end)?;
             let printable = line.chars().all(|c| !c.is_control() || c == '\t' || c == '\r');
-            (end - start <= MAX_QUOTED_LINE && printable).then(|| (offset, len.min(end - offset).max(1)))
+            if end - start > MAX_QUOTED_LINE || !printable {
+                return None;
+            }
+            let line_index = source[..start].matches('\n').count();
+            shown = "\n".repeat(line_index);
+            shown.push_str(line);
+            Some((line_index + offset - start, len.min(end - offset).max(1)))
         });
-        Rendered { diag, src: miette::NamedSource::new(name, source) }
+        Rendered { diag, src: miette::NamedSource::new(name, shown) }
     }
 }
 
