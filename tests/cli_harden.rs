@@ -364,11 +364,20 @@ fn a_killed_run_leaves_a_log_that_reads_to_its_last_chunk() {
 
 #[test]
 fn sigint_finishes_the_step_and_writes_summaries_marked_interrupted() {
+    interrupted_by("-INT");
+}
+
+#[test]
+fn sigterm_finishes_the_step_and_writes_summaries_marked_interrupted() {
+    interrupted_by("-TERM");
+}
+
+fn interrupted_by(sig: &str) {
     let dir = tempfile::tempdir().unwrap();
     let out_dir = dir.path().join("out");
     let child = start_sim(&out_dir);
     wait_for_log(&out_dir.join("trial-1/run.mcap"), 100_000);
-    signal(&child, "-INT");
+    signal(&child, sig);
     let out = child.wait_with_output().unwrap();
     assert_eq!(out.status.code(), Some(130), "{}", stderr_of(&out));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

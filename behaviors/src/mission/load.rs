@@ -602,18 +602,22 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, roots: &[PathBuf], di
             let idx = i.to_string();
             use super::schema::FaultSpec;
             let negative = match f {
-                FaultSpec::Kill { at_s, .. } => *at_s < 0.0,
+                FaultSpec::Kill { at_s, .. } => limits::duration_from_secs(*at_s).is_err(),
                 FaultSpec::Blackout { from_s, to_s, region } => {
-                    *from_s < 0.0
+                    limits::duration_from_secs(*from_s).is_err()
+                        || limits::duration_from_secs(*to_s).is_err()
                         || to_s < from_s
                         || region.as_ref().is_some_and(|c| c.radius_m.is_nan() || c.radius_m < 0.0)
                 }
-                FaultSpec::OdometryNoise { scale } | FaultSpec::LocalizationNoise { scale } => *scale < 0.0,
+                FaultSpec::OdometryNoise { scale } | FaultSpec::LocalizationNoise { scale } => {
+                    !(scale.is_finite() && (0.0..=100.0).contains(scale))
+                }
             };
             if negative {
                 bad(
                     &["sim", "faults", &idx],
-                    "times must be non-negative and in order, radii and scales non-negative".into(),
+                    "times must be between 0 and 1e9 s and in order, radii non-negative, scales between 0 and 100"
+                        .into(),
                 );
             }
             if let FaultSpec::Kill { robot, .. } = f
