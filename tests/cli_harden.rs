@@ -140,6 +140,20 @@ fn a_diagnostic_quotes_at_most_the_offending_line() {
 }
 
 #[test]
+fn files_outside_the_mission_folder_need_allow_dir() {
+    let shared = tempfile::tempdir().unwrap();
+    std::fs::write(shared.path().join("lib.yaml"), "subtrees:\n  idle: { wait: { duration_s: 5 } }\n").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let include = shared.path().join("lib.yaml");
+    let m = mission(dir.path(), "m.yaml", &format!("include: [\"{}\"]\n", include.display()));
+    let out = spomp().arg("validate").arg(&m).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stdout_of(&out).contains("is outside"), "{}", stdout_of(&out));
+    let out = spomp().arg("validate").arg("--allow-dir").arg(shared.path()).arg(&m).output().unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", stdout_of(&out));
+}
+
+#[test]
 fn closed_stdout_ends_quietly() {
     for args in [&["schema"][..], &["nodes", "--json"][..], &["nodes", "--markdown"][..]] {
         let mut child =
