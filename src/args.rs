@@ -1,5 +1,6 @@
 //! Parsers for comma-separated command-line values (`X,Y`, `X,Y,YAW`, `W,H`).
 
+use spomp_behaviors::mission::limits;
 use spomp_core::{Point2, Pose2};
 
 fn numbers(text: &str, expected: usize, what: &str) -> Result<Vec<f64>, String> {
@@ -40,7 +41,7 @@ pub fn size(text: &str) -> Result<(f64, f64), String> {
 /// `ROBOT@SECONDS` (a kill fault).
 pub fn kill(text: &str) -> Result<(String, f64), String> {
     let (robot, at) = text.split_once('@').ok_or_else(|| format!("expected ROBOT@SECONDS, got `{text}`"))?;
-    let at_s = at.trim().parse::<f64>().ok().filter(|v| v.is_finite() && *v >= 0.0);
+    let at_s = at.trim().parse::<f64>().ok().filter(|v| limits::duration_from_secs(*v).is_ok());
     match (robot.trim(), at_s) {
         ("", _) => Err(format!("no robot id in `{text}`")),
         (_, None) => Err(format!("`{at}` is not a time in seconds (expected ROBOT@SECONDS)")),
@@ -48,10 +49,40 @@ pub fn kill(text: &str) -> Result<(String, f64), String> {
     }
 }
 
+/// A time limit in seconds: the rule of the mission's `time_limit_s` (positive, at most 7 days).
+pub fn time_limit(text: &str) -> Result<f64, String> {
+    let v = text.trim().parse::<f64>().map_err(|_| format!("`{text}` is not a number of seconds"))?;
+    limits::check_time_limit(v)?;
+    Ok(v)
+}
+
+/// Wall-clock seconds: positive and finite.
+pub fn wall_seconds(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("expected a positive number of seconds, got `{text}`")),
+    }
+}
+
+/// A period in seconds: 0 (never) up to the longest mission duration.
+pub fn period(text: &str) -> Result<f64, String> {
+    let v = text.trim().parse::<f64>().map_err(|_| format!("`{text}` is not a number of seconds"))?;
+    limits::duration_from_secs(v)?;
+    Ok(v)
+}
+
+/// A noise multiplier: finite, between 0 and 100.
+pub fn scale(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && (0.0..=100.0).contains(&v) => Ok(v),
+        _ => Err(format!("expected a multiplier between 0 and 100, got `{text}`")),
+    }
+}
+
 /// `FROM..TO` seconds, FROM ≤ TO.
 pub fn window(text: &str) -> Result<(f64, f64), String> {
     let (a, b) = text.split_once("..").ok_or_else(|| format!("expected FROM..TO seconds, got `{text}`"))?;
-    let parse = |v: &str| v.trim().parse::<f64>().ok().filter(|v| v.is_finite() && *v >= 0.0);
+    let parse = |v: &str| v.trim().parse::<f64>().ok().filter(|v| limits::duration_from_secs(*v).is_ok());
     match (parse(a), parse(b)) {
         (Some(a), Some(b)) if a <= b => Ok((a, b)),
         _ => Err(format!("expected FROM..TO with 0 ≤ FROM ≤ TO seconds, got `{text}`")),
@@ -81,5 +112,12 @@ mod tests {
         assert_eq!(window("10..20").unwrap(), (10.0, 20.0));
         assert!(window("20..10").is_err());
         assert!(window("x..1").is_err());
+        assert_eq!(time_limit("600").unwrap(), 600.0);
+        for bad in ["NaN", "-1", "0", "1e12", "inf", "x"] {
+            assert!(time_limit(bad).is_err(), "{bad}");
+        }
+        assert!(kill("ugv2@1e308").is_err());
+        assert!(period("0").is_ok() && period("-1").is_err() && period("NaN").is_err());
+        assert!(scale("2").is_ok() && scale("-1").is_err() && scale("inf").is_err());
     }
 }

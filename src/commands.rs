@@ -6,12 +6,14 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use spomp_behaviors::mission::json_schema::mission_schema;
-use spomp_behaviors::mission::{LoadedMission, Rendered, load_mission};
+use spomp_behaviors::mission::yaml::Loc;
+use spomp_behaviors::mission::{Diagnostic, LoadOptions, LoadedMission, Rendered, Stage, load_mission_with};
 use spomp_behaviors::registry::PortDirection;
 
 /// Renders a mission's diagnostics with their source lines.
 fn render_diagnostics(loaded: &LoadedMission) -> String {
     let mut human = String::new();
+    // `Rendered` hands the renderer the offending line only, never the rest of a file.
     let handler = miette::GraphicalReportHandler::new_themed(miette::GraphicalTheme::unicode_nocolor());
     for d in &loaded.diagnostics {
         human.push_str(&format!("{d}\n"));
@@ -36,14 +38,19 @@ pub fn print_diagnostics(loaded: &LoadedMission) {
 }
 
 /// `spomp validate` (with `dry_run`, valid missions also run once in the simulator).
-pub fn validate(files: &[PathBuf], json: bool, dry_run: bool) -> Result<ExitCode> {
+pub fn validate(
+    files: &[PathBuf],
+    json: bool,
+    dry_run: Option<crate::sim_cmd::DryRunLimits>,
+    options: &LoadOptions,
+) -> Result<ExitCode> {
     let registry = spomp_robot::registry();
     let mut all = Vec::new();
     let mut dry_runs = Vec::new();
     let mut failed_runs = 0;
     let mut human = String::new();
     for file in files {
-        let loaded = load_mission(file, &registry);
+        let loaded = load_mission_with(file, &registry, options);
         if loaded.diagnostics.is_empty() {
             if let Some(m) = &loaded.mission {
                 human.push_str(&format!(
@@ -54,17 +61,32 @@ pub fn validate(files: &[PathBuf], json: bool, dry_run: bool) -> Result<ExitCode
                     m.roles.len()
                 ));
             }
-            if dry_run {
+            if let Some(limits) = dry_run {
                 if !json {
                     let _ = write!(std::io::stdout().lock(), "{human}");
                     human.clear();
                 }
-                let (ok, value) =
-                    crate::sim_cmd::dry_run(&loaded, json).with_context(|| format!("dry run of {}", file.display()))?;
-                if !ok {
-                    failed_runs += 1;
+                match crate::sim_cmd::dry_run(&loaded, json, limits) {
+                    Ok((ok, value)) => {
+                        if !ok {
+                            failed_runs += 1;
+                        }
+                        dry_runs.push(serde_json::json!({ "file": file, "dry_run": value }));
+                    }
+                    // The mission is valid but the simulator cannot set it up (its world, a
+                    // start pose): a diagnostic of the dry-run stage, in JSON too.
+                    Err(e) => {
+                        let d = Diagnostic::new(
+                            file,
+                            Loc { line: 1, column: 1, offset: None, len: 0 },
+                            "",
+                            Stage::DryRun,
+                            format!("{e:#}"),
+                        );
+                        human.push_str(&format!("{d}\n✘ {}: the dry run could not start\n", file.display()));
+                        all.push(d);
+                    }
                 }
-                dry_runs.push(serde_json::json!({ "file": file, "dry_run": value }));
             }
         } else {
             human.push_str(&render_diagnostics(&loaded));
@@ -72,16 +94,15 @@ pub fn validate(files: &[PathBuf], json: bool, dry_run: bool) -> Result<ExitCode
         }
         all.extend(loaded.diagnostics);
     }
-    let mut stdout = std::io::stdout().lock();
     if json {
-        if dry_run {
+        if dry_run.is_some() {
             let v = serde_json::json!({ "diagnostics": all, "dry_runs": dry_runs });
-            writeln!(stdout, "{}", serde_json::to_string_pretty(&v)?)?;
+            emit(&format!("{}\n", serde_json::to_string_pretty(&v)?));
         } else {
-            writeln!(stdout, "{}", serde_json::to_string_pretty(&all)?)?;
+            emit(&format!("{}\n", serde_json::to_string_pretty(&all)?));
         }
     } else {
-        write!(stdout, "{human}")?;
+        emit(&human);
     }
     Ok(if all.is_empty() && failed_runs == 0 { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
@@ -89,7 +110,7 @@ pub fn validate(files: &[PathBuf], json: bool, dry_run: bool) -> Result<ExitCode
 /// `spomp schema`.
 pub fn schema() -> Result<ExitCode> {
     let schema = mission_schema(&spomp_robot::registry());
-    println!("{}", serde_json::to_string_pretty(&schema).context("serialising the schema")?);
+    emit(&format!("{}\n", serde_json::to_string_pretty(&schema).context("serialising the schema")?));
     Ok(ExitCode::SUCCESS)
 }
 
@@ -97,7 +118,7 @@ pub fn schema() -> Result<ExitCode> {
 pub fn nodes(json: bool, markdown: bool, only: Option<&str>) -> Result<ExitCode> {
     let registry = spomp_robot::registry();
     if markdown {
-        print!("{}", registry.reference_markdown());
+        emit(&registry.reference_markdown());
         return Ok(ExitCode::SUCCESS);
     }
     if let Some(name) = only
@@ -108,7 +129,7 @@ pub fn nodes(json: bool, markdown: bool, only: Option<&str>) -> Result<ExitCode>
     }
     let specs: Vec<_> = registry.iter().filter(|s| only.is_none_or(|n| n == s.name)).collect();
     if json {
-        println!("{}", serde_json::to_string_pretty(&specs)?);
+        emit(&format!("{}\n", serde_json::to_string_pretty(&specs)?));
         return Ok(ExitCode::SUCCESS);
     }
     let mut out = String::new();
@@ -135,6 +156,12 @@ pub fn nodes(json: bool, markdown: bool, only: Option<&str>) -> Result<ExitCode>
         }
         out.push('\n');
     }
-    print!("{out}");
+    emit(&out);
     Ok(ExitCode::SUCCESS)
+}
+
+/// Writes to stdout; a closed stdout (output piped into `head`) ends the output quietly.
+fn emit(text: &str) {
+    let mut stdout = std::io::stdout().lock();
+    let _ = stdout.write_all(text.as_bytes()).and_then(|()| stdout.flush());
 }

@@ -18,6 +18,7 @@ macro_rules! out {
 
 mod args;
 mod commands;
+mod log_cmd;
 mod plan_cmd;
 mod sim_cmd;
 mod sim_plots;
@@ -47,6 +48,17 @@ enum Command {
         /// does it end within its time limit, which nodes were ticked, the outcome.
         #[arg(long)]
         dry_run: bool,
+        /// With --dry-run: simulate at most this many seconds (default: the mission's time limit).
+        #[arg(long, value_parser = args::time_limit, requires = "dry_run", allow_hyphen_values = true)]
+        time_limit_s: Option<f64>,
+        /// With --dry-run: stop a dry run after this many wall-clock seconds (it then fails,
+        /// outcome `interrupted`).
+        #[arg(long, value_parser = args::wall_seconds, default_value_t = 300.0, requires = "dry_run")]
+        max_wall_s: f64,
+        /// A folder besides the mission's own that its includes, plan files and world may be in
+        /// (repeatable).
+        #[arg(long = "allow-dir", value_name = "DIR")]
+        allow_dirs: Vec<PathBuf>,
     },
     /// Run a mission in the built-in simulator: summary table, `summary.json`, `run.mcap` and
     /// plots per trial under the output folder.
@@ -95,6 +107,11 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Check or recover an MCAP log (e.g. one a crash or a kill cut short).
+    Log {
+        #[command(subcommand)]
+        action: LogCommand,
+    },
     /// Build the global planner's graph on a world's map and plan on it.
     Plan {
         /// World folder.
@@ -134,6 +151,30 @@ enum Command {
 enum OnOff {
     On,
     Off,
+}
+
+#[derive(Subcommand, Debug)]
+enum LogCommand {
+    /// Read a log to its end, or to its last whole chunk if it was cut short: exit 0 when
+    /// everything there reads, 1 when a record is corrupt or the file is no MCAP log.
+    Check {
+        /// The log.
+        log: PathBuf,
+        /// Print {file, closed, chunks, messages, topics, readable_bytes, lost_bytes, corrupt} as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write the readable messages of a log as a closed, indexed MCAP file.
+    Recover {
+        /// The log.
+        log: PathBuf,
+        /// The recovered log.
+        #[arg(long)]
+        out: PathBuf,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 #[derive(Subcommand, Debug)]
@@ -243,7 +284,13 @@ fn main() -> ExitCode {
         }
     };
     let result = match cli.command {
-        Command::Validate { files, json, dry_run } => commands::validate(&files, json, dry_run),
+        Command::Validate { files, json, dry_run, time_limit_s, max_wall_s, allow_dirs } => {
+            let dry_run = dry_run.then_some(sim_cmd::DryRunLimits { time_limit_s, max_wall_s });
+            let options = spomp_behaviors::mission::LoadOptions { allowed_dirs: allow_dirs };
+            commands::validate(&files, json, dry_run, &options)
+        }
+        Command::Log { action: LogCommand::Check { log, json } } => log_cmd::check(&log, json),
+        Command::Log { action: LogCommand::Recover { log, out, json } } => log_cmd::recover(&log, &out, json),
         Command::Sim(args) => sim_cmd::sim(&args),
         Command::Schema => commands::schema(),
         Command::Nodes { json, markdown, name } => commands::nodes(json, markdown, name.as_deref()),

@@ -55,7 +55,9 @@ pub struct PlanArgs {
 
 fn load_params(file: Option<&Path>) -> Result<GlobalPlannerParams> {
     let Some(file) = file else { return Ok(GlobalPlannerParams::default()) };
-    let text = std::fs::read_to_string(file).with_context(|| format!("{}: cannot read", file.display()))?;
+    // A regular file of at most 4 MiB: a FIFO or a device given as --params is refused, not read.
+    let text = spomp_behaviors::mission::limits::read_text(file, spomp_behaviors::mission::limits::MAX_SOURCE_BYTES)
+        .map_err(|e| anyhow::anyhow!("--params: {e}"))?;
     serde_saphyr::from_str(&text)
         .with_context(|| format!("{}: not a valid global planner parameter file", file.display()))
 }

@@ -1,21 +1,21 @@
 //! `spomp sim` and `spomp validate --dry-run`: run a mission in the built-in simulator, trials
 //! in parallel, each recorded to MCAP with a summary and plots.
 
-use std::fs::File;
-use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
-use spomp_behaviors::mission::{LoadedMission, load_mission};
+use spomp_behaviors::mission::{LoadOptions, LoadedMission, load_mission_with};
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
 use spomp_core::{Odometry, PanoramaFrame, PanoramaGeometry, Point2, ReachabilityScan, RobotId, RobotKind, Time};
-use spomp_mcap::{Recorder, RecorderOptions};
+use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
 use spomp_sim::run::{RobotSnapshot, RunResult, RunSummary, SimEvent, SimObserver, SimOptions, Simulation};
 use spomp_sim::{Blackout, Faults, KillFault};
 
@@ -30,19 +30,24 @@ pub struct SimArgs {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Trials, run in parallel on all cores (default: the mission's `sim.trials`, else 1).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub trials: Option<u32>,
-    /// Output folder (default `runs/<mission>/`).
+    /// Output folder (default `runs/<mission>/`). Trial folders a previous run left there are
+    /// replaced; a folder holding files `spomp sim` does not write is refused.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Run even when the outputs are estimated to need more than 20 GB of disk.
+    #[arg(long)]
+    pub force: bool,
     /// Print the combined summary as JSON.
     #[arg(long)]
     pub json: bool,
-    /// Override the mission's time limit, seconds.
-    #[arg(long)]
+    /// Override the mission's time limit, seconds (the rule of `time_limit_s`: positive, at most
+    /// 604800).
+    #[arg(long, value_parser = crate::args::time_limit, allow_hyphen_values = true)]
     pub time_limit_s: Option<f64>,
     /// Record a (downsampled) panorama per UGV every this many seconds in the MCAP (0: none).
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = crate::args::period, allow_hyphen_values = true)]
     pub pano_every_s: f64,
     /// Also save the recorded panoramas as 16-bit depth PNGs (the `spomp terrain` format).
     #[arg(long)]
@@ -56,15 +61,19 @@ pub struct SimArgs {
     /// Radio blackout for everyone: FROM..TO seconds (repeatable).
     #[arg(long, value_parser = crate::args::window)]
     pub blackout: Vec<(f64, f64)>,
-    /// Multiply the odometry noise.
-    #[arg(long)]
+    /// Multiply the odometry noise (0 to 100).
+    #[arg(long, value_parser = crate::args::scale, allow_hyphen_values = true)]
     pub odometry_noise: Option<f64>,
-    /// Multiply the ground-truth localization noise.
-    #[arg(long)]
+    /// Multiply the ground-truth localization noise (0 to 100).
+    #[arg(long, value_parser = crate::args::scale, allow_hyphen_values = true)]
     pub localization_noise: Option<f64>,
     /// Print every node transition.
     #[arg(long)]
     pub trace: bool,
+    /// A folder besides the mission's own that its includes, plan files and world may be in
+    /// (repeatable).
+    #[arg(long = "allow-dir", value_name = "DIR")]
+    pub allow_dirs: Vec<PathBuf>,
 }
 
 /// The combined summary of all trials.
@@ -74,6 +83,9 @@ pub struct CombinedSummary {
     pub mission: String,
     /// Trials run.
     pub trials: usize,
+    /// The run was stopped (Ctrl-C, SIGTERM) before every trial ended: the summaries cover what
+    /// ran, and the trials cut short end `interrupted`.
+    pub interrupted: bool,
     /// Trials whose mission completed.
     pub completed: usize,
     /// Mean fraction of world clusters visited (generated worlds), else of goals visited.
@@ -84,10 +96,29 @@ pub struct CombinedSummary {
     pub runs: Vec<RunSummary>,
 }
 
+/// Exit code of a run stopped by Ctrl-C or SIGTERM (128 + SIGINT, as shells report it).
+const EXIT_INTERRUPTED: u8 = 130;
+
+/// Disk a run may be estimated to need before it asks for `--force`, bytes.
+const DISK_LIMIT_BYTES: f64 = 20e9;
+
+/// MCAP bytes per robot per simulated second with the default recording (measured: 1.3 kB on
+/// the first 200 s of `visit-all-vehicle-clusters.yaml`, 5 robots; tripled for margin), and the
+/// plots, CSV and summary of a trial (1.1 MB measured).
+const MCAP_BYTES_PER_ROBOT_S: f64 = 4e3;
+const TRIAL_FIXED_BYTES: f64 = 2e6;
+
+/// A usage error: printed, exit 2.
+fn usage(message: String) -> Result<ExitCode> {
+    eprintln!("error: {message}");
+    Ok(ExitCode::from(2))
+}
+
 /// `spomp sim`.
 pub fn sim(args: &SimArgs) -> Result<ExitCode> {
     let registry = spomp_robot::registry();
-    let loaded = load_mission(&args.mission, &registry);
+    let options = LoadOptions { allowed_dirs: args.allow_dirs.clone() };
+    let loaded = load_mission_with(&args.mission, &registry, &options);
     if !loaded.is_valid() {
         crate::commands::print_diagnostics(&loaded);
         return Ok(ExitCode::from(1));
@@ -96,9 +127,37 @@ pub fn sim(args: &SimArgs) -> Result<ExitCode> {
     let sim_spec = mission.sim.as_ref();
     let first_seed = args.seed.or(sim_spec.and_then(|s| s.seed)).unwrap_or(1);
     let trials = args.trials.or(sim_spec.and_then(|s| s.trials)).unwrap_or(1).max(1);
+    // The same rules as the mission's own fields.
+    for (robot, _) in &args.kill {
+        if !mission.team.iter().any(|r| &r.id == robot) {
+            let ids: Vec<&str> = mission.team.iter().map(|r| r.id.as_str()).collect();
+            return usage(format!("--kill {robot}@…: no robot `{robot}` in the team; robots are: {}", ids.join(", ")));
+        }
+    }
+    if first_seed.checked_add(u64::from(trials) - 1).is_none() {
+        return usage(format!(
+            "--seed {first_seed} with {trials} trials: trial seeds (seed + k) would pass {}",
+            u64::MAX
+        ));
+    }
+    let time_limit = args.time_limit_s.unwrap_or(mission.time_limit_s);
+    let estimate = disk_estimate(trials, mission.team.len(), time_limit, !args.no_mcap);
+    if estimate > DISK_LIMIT_BYTES && !args.force {
+        return usage(format!(
+            "{trials} trials of {time_limit:.0} s with {} robots would write about {:.0} GB (limit {:.0} GB); \
+             give --force to run anyway, or fewer --trials, --no-mcap or a shorter --time-limit-s",
+            mission.team.len(),
+            estimate / 1e9,
+            DISK_LIMIT_BYTES / 1e9
+        ));
+    }
     let out_dir = args.out.clone().unwrap_or_else(|| PathBuf::from("runs").join(&mission.mission));
+    if let Err(message) = clean_previous_outputs(&out_dir) {
+        return usage(message);
+    }
     std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let faults = cli_faults(args);
+    let interrupted = stop_on_signals()?;
 
     let progress = MultiProgress::with_draw_target(if args.json || args.trace {
         ProgressDrawTarget::hidden()
@@ -113,34 +172,37 @@ pub fn sim(args: &SimArgs) -> Result<ExitCode> {
         );
         bar
     });
-    let time_limit = args.time_limit_s.unwrap_or(mission.time_limit_s);
     let seeds: Vec<u64> = (0..u64::from(trials)).map(|k| first_seed + k).collect();
-    let results: Vec<Result<RunSummary>> = seeds
+    let results: Vec<Option<Result<RunSummary>>> = seeds
         .par_iter()
         .map(|&seed| {
+            if interrupted.load(Ordering::Relaxed) {
+                return None; // not started: nothing to summarise
+            }
             let bar = progress.add(ProgressBar::new(time_limit.ceil().max(1.0) as u64));
             bar.set_style(
                 ProgressStyle::with_template("seed {prefix:>3} {bar:30} {pos}/{len} s simulated {msg}")
                     .unwrap_or_else(|_| ProgressStyle::default_bar()),
             );
             bar.set_prefix(seed.to_string());
-            let r = run_trial(&loaded, seed, args, &faults, &out_dir, &bar);
+            let r = run_trial(&loaded, seed, args, &faults, &out_dir, &bar, &interrupted);
             bar.finish_and_clear();
             progress.remove(&bar);
             if let Some(o) = &overall {
                 o.inc(1);
             }
-            r
+            Some(r)
         })
         .collect();
     if let Some(o) = overall {
         o.finish_and_clear();
     }
     let mut runs = Vec::new();
-    for r in results {
+    for r in results.into_iter().flatten() {
         runs.push(r?);
     }
-    let combined = combine(&mission.mission, runs);
+    let was_interrupted = interrupted.load(Ordering::Relaxed);
+    let combined = combine(&mission.mission, runs, was_interrupted);
     let path = out_dir.join("summary.json");
     std::fs::write(&path, serde_json::to_string_pretty(&combined)?)
         .with_context(|| format!("writing {}", path.display()))?;
@@ -153,9 +215,84 @@ pub fn sim(args: &SimArgs) -> Result<ExitCode> {
         if combined.trials > 1 {
             print_combined(&combined);
         }
+        if was_interrupted {
+            out!("interrupted: {} of {trials} trials ran (those cut short end `Interrupted`)", combined.trials);
+        }
         out!("summary: {}", path.display());
     }
-    Ok(if combined.completed == combined.trials { ExitCode::SUCCESS } else { ExitCode::from(1) })
+    Ok(if was_interrupted {
+        ExitCode::from(EXIT_INTERRUPTED)
+    } else if combined.completed == combined.trials {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+/// A flag raised by SIGINT or SIGTERM: the trials then finish their current step, close their
+/// logs and write their summaries. A second signal of the same kind ends the process at once.
+fn stop_on_signals() -> Result<Arc<AtomicBool>> {
+    let flag = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        // Registered first, so it acts on the second signal only (when the flag is already set).
+        signal_hook::flag::register_conditional_shutdown(sig, EXIT_INTERRUPTED.into(), flag.clone())
+            .context("installing the signal handlers")?;
+        signal_hook::flag::register(sig, flag.clone()).context("installing the signal handlers")?;
+    }
+    Ok(flag)
+}
+
+/// Bytes a run's outputs are expected to take.
+fn disk_estimate(trials: u32, robots: usize, time_limit_s: f64, mcap: bool) -> f64 {
+    let per_trial = TRIAL_FIXED_BYTES + if mcap { MCAP_BYTES_PER_ROBOT_S * robots as f64 * time_limit_s } else { 0.0 };
+    f64::from(trials) * per_trial
+}
+
+/// What a trial folder holds when `spomp sim` wrote it.
+const TRIAL_ENTRIES: &[&str] = &["summary.json", "run.mcap", "plots", "localization_error.csv", "panoramas"];
+
+/// Removes the trial folders a previous run left in `out_dir` (their summary would otherwise sit
+/// beside trial folders of another run); refuses when one holds something `spomp sim` does not
+/// write, naming it.
+fn clean_previous_outputs(out_dir: &Path) -> Result<(), String> {
+    let Ok(entries) = std::fs::read_dir(out_dir) else { return Ok(()) };
+    let mut stale = Vec::new();
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let Some(seed) = name.strip_prefix("trial-") else { continue };
+        let path = e.path();
+        if seed.parse::<u64>().is_err() || !path.is_dir() || path.is_symlink() {
+            return Err(format!(
+                "{} is not a trial folder spomp sim wrote; choose another --out or move it",
+                path.display()
+            ));
+        }
+        let inner = std::fs::read_dir(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        for f in inner.flatten() {
+            let n = f.file_name().to_string_lossy().into_owned();
+            if !TRIAL_ENTRIES.contains(&n.as_str()) || f.path().is_symlink() {
+                return Err(format!(
+                    "{} holds {n}, which spomp sim does not write; choose another --out or move it",
+                    path.display()
+                ));
+            }
+        }
+        stale.push(path);
+    }
+    for p in stale {
+        std::fs::remove_dir_all(&p).map_err(|e| format!("removing the previous run's {}: {e}", p.display()))?;
+    }
+    Ok(())
+}
+
+/// `dir/name` for a file or folder name the run makes up (a trial, a robot's panorama): refused
+/// unless `name` is one plain path component, so no output lands outside `dir`.
+fn output_path(dir: &Path, name: &str) -> Result<PathBuf> {
+    let mut parts = Path::new(name).components();
+    match (parts.next(), parts.next()) {
+        (Some(std::path::Component::Normal(_)), None) => Ok(dir.join(name)),
+        _ => bail!("refusing to write `{name}`: it is not a plain file name inside {}", dir.display()),
+    }
 }
 
 fn cli_faults(args: &SimArgs) -> Faults {
@@ -182,9 +319,10 @@ fn run_trial(
     faults: &Faults,
     out_dir: &Path,
     bar: &ProgressBar,
+    interrupted: &AtomicBool,
 ) -> Result<RunSummary> {
     let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
-    let trial_dir = out_dir.join(format!("trial-{seed}"));
+    let trial_dir = output_path(out_dir, &format!("trial-{seed}"))?;
     std::fs::create_dir_all(trial_dir.join("plots")).with_context(|| format!("creating {}", trial_dir.display()))?;
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
@@ -195,8 +333,10 @@ fn run_trial(
     let recorder = if args.no_mcap {
         None
     } else {
-        let file = File::create(&mcap_path).with_context(|| format!("creating {}", mcap_path.display()))?;
-        Some(Recorder::new(BufWriter::new(file), RecorderOptions::default())?)
+        Some(
+            Recorder::create(&mcap_path, RecorderOptions::default())
+                .with_context(|| format!("creating {}", mcap_path.display()))?,
+        )
     };
     let panos_dir = args.save_panos.then(|| trial_dir.join("panoramas"));
     if let Some(d) = &panos_dir {
@@ -212,7 +352,7 @@ fn run_trial(
         trace: args.trace,
         last_second: -1,
     };
-    let result = sim.run(&mut observer);
+    let result = sim.run_until(&mut observer, &mut || interrupted.load(Ordering::Relaxed));
     if let Some(e) = observer.error.take() {
         return Err(e.context(format!("recording {}", mcap_path.display())));
     }
@@ -250,7 +390,7 @@ fn localization_error_csv(result: &RunResult) -> String {
 
 /// Records a run to MCAP and drives the progress bar.
 struct RunObserver {
-    recorder: Option<Recorder<BufWriter<File>>>,
+    recorder: Option<Recorder<SafeFile>>,
     error: Option<anyhow::Error>,
     pano_every_ns: i64,
     last_pano: std::collections::HashMap<RobotId, i64>,
@@ -261,7 +401,7 @@ struct RunObserver {
 }
 
 impl RunObserver {
-    fn record(&mut self, f: impl FnOnce(&mut Recorder<BufWriter<File>>) -> Result<(), spomp_mcap::RecordError>) {
+    fn record(&mut self, f: impl FnOnce(&mut Recorder<SafeFile>) -> Result<(), spomp_mcap::RecordError>) {
         if self.error.is_some() {
             return;
         }
@@ -314,8 +454,9 @@ impl SimObserver for RunObserver {
         self.last_pano.insert(robot.clone(), frame.stamp.nanos);
         self.record(|r| r.panorama(robot.as_str(), frame.stamp, &frame.depth, Some(&frame.semantic)));
         if let Some(dir) = &self.panos_dir {
-            let path = dir.join(format!("{robot}-{:06}.png", frame.stamp.nanos / 1_000_000_000));
-            if let Err(e) = crate::world_cmd::save_depth_png(&frame.depth, DEFAULT_RANGE_SCALE_M, &path) {
+            let saved = output_path(dir, &format!("{robot}-{:06}.png", frame.stamp.nanos / 1_000_000_000))
+                .and_then(|path| crate::world_cmd::save_depth_png(&frame.depth, DEFAULT_RANGE_SCALE_M, &path));
+            if let Err(e) = saved {
                 self.error.get_or_insert(e);
             }
         }
@@ -370,7 +511,7 @@ impl SimObserver for RunObserver {
     }
 }
 
-fn combine(mission: &str, runs: Vec<RunSummary>) -> CombinedSummary {
+fn combine(mission: &str, runs: Vec<RunSummary>, interrupted: bool) -> CombinedSummary {
     let n = runs.len().max(1) as f64;
     let fraction = |r: &RunSummary| match r.clusters {
         Some(c) if c.total > 0 => c.visited as f64 / c.total as f64,
@@ -380,6 +521,7 @@ fn combine(mission: &str, runs: Vec<RunSummary>) -> CombinedSummary {
     CombinedSummary {
         mission: mission.to_string(),
         trials: runs.len(),
+        interrupted,
         completed: runs.iter().filter(|r| r.outcome.succeeded()).count(),
         mean_visited_fraction: runs.iter().map(fraction).sum::<f64>() / n,
         mean_speedup: runs.iter().map(|r| r.speedup).sum::<f64>() / n,
@@ -484,22 +626,31 @@ fn print_combined(c: &CombinedSummary) {
     );
 }
 
+/// Caps of a dry run.
+#[derive(Debug, Clone, Copy)]
+pub struct DryRunLimits {
+    /// Simulated seconds at most (the mission's time limit when `None`).
+    pub time_limit_s: Option<f64>,
+    /// Wall-clock seconds at most; past them the run stops `interrupted` (and fails).
+    pub max_wall_s: f64,
+}
+
 /// `spomp validate --dry-run` for one valid mission: runs it once in the simulator and reports
 /// whether it ends within its time limit, which nodes were ticked and the outcome.
-pub fn dry_run(loaded: &LoadedMission, json: bool) -> Result<(bool, serde_json::Value)> {
+pub fn dry_run(loaded: &LoadedMission, json: bool, limits: DryRunLimits) -> Result<(bool, serde_json::Value)> {
     let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
     let seed = mission.sim.as_ref().and_then(|s| s.seed).unwrap_or(1);
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
-    let sim = Simulation::new(
-        loaded,
-        &spomp_robot::registry(),
-        Arc::new(world),
-        SimOptions { seed, ..SimOptions::default() },
-    )?;
-    let result = sim.run(&mut spomp_sim::run::NoObserver);
+    let options = SimOptions { seed, time_limit_s: limits.time_limit_s, ..SimOptions::default() };
+    let sim = Simulation::new(loaded, &spomp_robot::registry(), Arc::new(world), options)
+        .with_context(|| format!("setting up `{}` in the simulator", mission.mission))?;
+    let start = Instant::now();
+    let result =
+        sim.run_until(&mut spomp_sim::run::NoObserver, &mut || start.elapsed().as_secs_f64() > limits.max_wall_s);
     let s = &result.summary;
     let ok = s.outcome.succeeded();
+    let stopped = s.outcome == spomp_sim::run::Outcome::Interrupted;
     if !json {
         out!(
             "  dry run (seed {seed}): {:?} at {:.0} s of {:.0} s; {}/{} nodes ticked; {}/{} goals visited",
@@ -511,6 +662,12 @@ pub fn dry_run(loaded: &LoadedMission, json: bool) -> Result<(bool, serde_json::
             s.goals_visited,
             s.goals.len()
         );
+        if stopped {
+            out!(
+                "  stopped after {} s of wall time (--max-wall-s); give a shorter --time-limit-s or a larger --max-wall-s",
+                limits.max_wall_s
+            );
+        }
         if !s.nodes_never_ticked.is_empty() {
             out!("  never ticked:");
             for n in &s.nodes_never_ticked {
@@ -522,6 +679,7 @@ pub fn dry_run(loaded: &LoadedMission, json: bool) -> Result<(bool, serde_json::
         "outcome": s.outcome,
         "terminated_within_time_limit": ok,
         "end_s": s.end_s,
+        "time_limit_s": s.time_limit_s,
         "nodes_ticked": s.nodes_exercised,
         "nodes_total": s.nodes_total,
         "never_ticked": s.nodes_never_ticked,

@@ -33,6 +33,10 @@ pub struct TerrainArgs {
 
 /// Reads a 16-bit grayscale PNG of range counts into a depth panorama.
 pub fn read_depth_png(path: &Path, range_scale_m: f64, v_fov_rad: f64) -> Result<DepthPanorama> {
+    // Only a regular file: opening a FIFO would wait for a writer for ever.
+    if !std::fs::metadata(path).with_context(|| format!("{}: cannot open", path.display()))?.is_file() {
+        bail!("{}: not a regular file (expected a 16-bit grayscale PNG)", path.display());
+    }
     let reader = ImageReader::open(path)
         .with_context(|| format!("{}: cannot open", path.display()))?
         .with_guessed_format()
@@ -50,7 +54,9 @@ fn load_params(a: &TerrainArgs) -> Result<TerrainParams> {
     let Some(file) = &a.params else {
         return Ok(if a.simulation { TerrainParams::simulation() } else { TerrainParams::default() });
     };
-    let text = std::fs::read_to_string(file).with_context(|| format!("{}: cannot read", file.display()))?;
+    // A regular file of at most 4 MiB: a FIFO or a device given as --params is refused, not read.
+    let text = spomp_behaviors::mission::limits::read_text(file, spomp_behaviors::mission::limits::MAX_SOURCE_BYTES)
+        .map_err(|e| anyhow::anyhow!("--params: {e}"))?;
     let params: TerrainParams = serde_saphyr::from_str(&text)
         .with_context(|| format!("{}: not a valid terrain parameter file", file.display()))?;
     params.validate().with_context(|| format!("{}: bad terrain parameters", file.display()))?;

@@ -644,7 +644,7 @@ fn wait_for_sync_needs_a_full_exchange_during_the_wait_and_times_out_otherwise()
     assert_eq!(uav.rt.flight().map(|f| f.target), Some(ugv_at), "tracks the robot's pose");
     // A full exchange: complete.
     exchange(&mut uav.rt, &mut ugv);
-    assert!(uav.rt.team().sync_complete_with(&ugv.id()));
+    assert!(uav.rt.team().sync_complete_with(ugv.id()));
     assert_eq!(uav.step(at(2)), Status::Success);
 
     // A new wait later: the team state still reports the old sync complete, but nothing was
@@ -653,7 +653,7 @@ fn wait_for_sync_needs_a_full_exchange_during_the_wait_and_times_out_otherwise()
     let mut n = begin;
     let status = loop {
         let s = uav.step(at(n));
-        assert!(uav.rt.team().sync_complete_with(&ugv.id()), "the stale completion is still reported");
+        assert!(uav.rt.team().sync_complete_with(ugv.id()), "the stale completion is still reported");
         if s != Status::Running {
             break s;
         }

@@ -76,11 +76,11 @@ fn tick(r: &mut Robot, t: Time) -> Status {
 /// A full exchange both ways, as robots in radio contact would do.
 fn exchange(a: &mut Robot, b: &mut Robot) {
     for _ in 0..3 {
-        if let Some(m) = a.rt.team_mut().make_sync(&b.rt.id(), TierSet::ALL, usize::MAX) {
-            b.rt.team_mut().apply(&a.rt.id(), &m).unwrap();
+        if let Some(m) = a.rt.team_mut().make_sync(b.rt.id(), TierSet::ALL, usize::MAX) {
+            b.rt.team_mut().apply(a.rt.id(), &m).unwrap();
         }
-        if let Some(m) = b.rt.team_mut().make_sync(&a.rt.id(), TierSet::ALL, usize::MAX) {
-            a.rt.team_mut().apply(&b.rt.id(), &m).unwrap();
+        if let Some(m) = b.rt.team_mut().make_sync(a.rt.id(), TierSet::ALL, usize::MAX) {
+            a.rt.team_mut().apply(b.rt.id(), &m).unwrap();
         }
     }
 }
@@ -111,7 +111,7 @@ fn concurrent_claims_resolve_by_priority_and_the_loser_moves_on() {
     exchange(&mut u1, &mut u2);
     for r in [&u1, &u2] {
         let view = r.rt.team().goal(&a).unwrap();
-        assert!(view.is_held_by(&u1.rt.id()), "{} sees {:?}", r.rt.id(), view.claimant);
+        assert!(view.is_held_by(u1.rt.id()), "{} sees {:?}", r.rt.id(), view.claimant);
     }
 
     // ugv2 notices at its next tick, releases A (not unreachable: it was preempted) and claims B.
@@ -120,8 +120,8 @@ fn concurrent_claims_resolve_by_priority_and_the_loser_moves_on() {
     tick(&mut u2, t);
     tick(&mut u2, Time::from_millis(200));
     assert_eq!(held_goal(&u2), Some(b.clone()));
-    assert!(!u2.rt.team().goal(&a).unwrap().is_unreachable_for(&u2.rt.id()));
-    assert!(u2.rt.team().goal(&b).unwrap().is_held_by(&u2.rt.id()));
+    assert!(!u2.rt.team().goal(&a).unwrap().is_unreachable_for(u2.rt.id()));
+    assert!(u2.rt.team().goal(&b).unwrap().is_held_by(u2.rt.id()));
 
     // Both arrive after their 5 s drives and mark their goals visited; the team agrees.
     for i in 3..=80 {
@@ -147,11 +147,11 @@ fn failure_marks_unreachable_for_that_robot_only_until_cleared() {
     u1.rt.team_mut().release(&a, Time::from_millis(50)).unwrap();
     u1.rt.team_mut().mark_unreachable(&a, Time::from_millis(50)).unwrap();
     let claimable: Vec<GoalId> =
-        u1.rt.team().claimable_goals_for(&u1.rt.id(), Point2::new(0.0, 0.0)).iter().map(|g| g.id.clone()).collect();
+        u1.rt.team().claimable_goals_for(u1.rt.id(), Point2::new(0.0, 0.0)).iter().map(|g| g.id.clone()).collect();
     assert!(!claimable.contains(&a), "A is unreachable for ugv1");
     exchange(&mut u1, &mut u2);
     let for_u2: Vec<GoalId> =
-        u2.rt.team().claimable_goals_for(&u2.rt.id(), Point2::new(5.0, 0.0)).iter().map(|g| g.id.clone()).collect();
+        u2.rt.team().claimable_goals_for(u2.rt.id(), Point2::new(5.0, 0.0)).iter().map(|g| g.id.clone()).collect();
     assert_eq!(for_u2.first(), Some(&a), "another robot may still try A");
 
     // Nothing else left for ugv1 would make it retry: clear_unreachable through the node.
@@ -166,7 +166,7 @@ fn failure_marks_unreachable_for_that_robot_only_until_cleared() {
         observer: None,
     };
     assert_eq!(node.tick(Status::Idle, &mut ctx), Status::Success);
-    assert!(!u1.rt.team().goal(&a).unwrap().is_unreachable_for(&u1.rt.id()));
+    assert!(!u1.rt.team().goal(&a).unwrap().is_unreachable_for(u1.rt.id()));
 }
 
 mod detection {
@@ -244,11 +244,11 @@ mod detection {
         // ugv2 receives the goals and the map through the team state, detects the same clusters,
         // and adds nothing.
         for _ in 0..3 {
-            if let Some(m) = a.team_mut().make_sync(&b.id(), TierSet::ALL, usize::MAX) {
-                b.team_mut().apply(&a.id(), &m).unwrap();
+            if let Some(m) = a.team_mut().make_sync(b.id(), TierSet::ALL, usize::MAX) {
+                b.team_mut().apply(a.id(), &m).unwrap();
             }
-            if let Some(m) = b.team_mut().make_sync(&a.id(), TierSet::ALL, usize::MAX) {
-                a.team_mut().apply(&b.id(), &m).unwrap();
+            if let Some(m) = b.team_mut().make_sync(a.id(), TierSet::ALL, usize::MAX) {
+                a.team_mut().apply(b.id(), &m).unwrap();
             }
         }
         assert_eq!(b.team().goals().len(), 2);

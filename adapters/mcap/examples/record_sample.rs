@@ -2,9 +2,6 @@
 //! given as the first argument; CI reads it with the Python `mcap` reader to check the file and
 //! its ROS 2 schemas are standard.
 
-use std::fs::File;
-use std::io::BufWriter;
-
 use spomp_behaviors::Status;
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::{DepthPanorama, PanoramaGeometry, Pose2, ReachabilityScan, RobotId, SemanticPanorama, Time, Twist2};
@@ -12,7 +9,7 @@ use spomp_mcap::{Recorder, RecorderOptions};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let path = std::env::args().nth(1).ok_or("usage: record_sample OUT.mcap")?;
-    let mut rec = Recorder::new(BufWriter::new(File::create(&path)?), RecorderOptions::default())?;
+    let mut rec = Recorder::create(std::path::Path::new(&path), RecorderOptions::default())?;
     for i in 0..10 {
         let t = Time::from_millis(100 * i);
         rec.pose("ugv1", t, Pose2::new(i as f64 * 0.1, 0.0, 0.0), 0.0)?;

@@ -13,6 +13,8 @@
 
 mod read;
 mod record;
+mod safe;
 
-pub use read::{LogMessage, McapLog, ReadError, decode_cdr};
+pub use read::{LogCheck, LogMessage, McapLog, ReadError, check_log, decode_cdr, recover_log};
 pub use record::{RecordError, Recorder, RecorderOptions, encode_cdr};
+pub use safe::SafeFile;

@@ -76,6 +76,119 @@ impl McapLog {
     }
 }
 
+/// What [`check_log`] found in a log file.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct LogCheck {
+    /// The file was closed properly: a summary section and footer follow the data.
+    pub closed: bool,
+    /// Chunks read, every one whole and decompressing to well-formed records.
+    pub chunks: usize,
+    /// Messages readable, by topic.
+    pub topics: std::collections::BTreeMap<String, u64>,
+    /// Bytes from the start of the file to the end of the last whole record of the data.
+    pub readable_bytes: u64,
+    /// Bytes after them that are not part of a whole record (what a crash cut short), or, when
+    /// `bad_record` is set, everything from the bad record on.
+    pub lost_bytes: u64,
+    /// The first record that is whole but corrupt (offset and why), if any: the data after it is
+    /// not read.
+    pub bad_record: Option<(u64, String)>,
+}
+
+impl LogCheck {
+    /// Messages readable.
+    pub fn messages(&self) -> u64 {
+        self.topics.values().sum()
+    }
+}
+
+const OP_CHUNK: u8 = 0x06;
+const OP_DATA_END: u8 = 0x0F;
+const OP_FOOTER: u8 = 0x02;
+
+/// Checks a log file as a crash may have left it: every record of the data section is read up
+/// to the last whole one, every chunk decompressed and its records checked, and the messages
+/// counted by topic. An error only when the file is not an MCAP log at all.
+pub fn check_log(bytes: &[u8]) -> Result<LogCheck, ReadError> {
+    let (check, data_end) = scan_data(bytes)?;
+    let mut check = check;
+    for m in mcap::MessageStream::new(&readable_prefix(bytes, data_end))? {
+        match m {
+            Ok(m) => *check.topics.entry(m.channel.topic.clone()).or_default() += 1,
+            Err(e) => {
+                check.bad_record.get_or_insert((data_end as u64, format!("message stream: {e}")));
+                break;
+            }
+        }
+    }
+    Ok(check)
+}
+
+/// Rewrites the readable part of a log (see [`check_log`]) as a complete, indexed MCAP file.
+pub fn recover_log<W: std::io::Write + std::io::Seek>(bytes: &[u8], out: W) -> Result<LogCheck, ReadError> {
+    let (mut check, data_end) = scan_data(bytes)?;
+    let mut writer = mcap::WriteOptions::new().profile("ros2").library("spomp log recover").create(out)?;
+    for m in mcap::MessageStream::new(&readable_prefix(bytes, data_end))? {
+        let Ok(m) = m else { break };
+        *check.topics.entry(m.channel.topic.clone()).or_default() += 1;
+        writer.write(&m)?;
+    }
+    writer.finish()?;
+    Ok(check)
+}
+
+/// The data section up to `data_end`, closed with a provisional end so that a linear reader
+/// reads it to the end.
+fn readable_prefix(bytes: &[u8], data_end: usize) -> Vec<u8> {
+    let mut v = Vec::with_capacity(data_end + crate::safe::PROVISIONAL_END_LEN);
+    v.extend_from_slice(&bytes[..data_end]);
+    v.extend_from_slice(&crate::safe::provisional_end());
+    v
+}
+
+/// Walks the data section; returns what it found and where the readable data ends.
+fn scan_data(bytes: &[u8]) -> Result<(LogCheck, usize), ReadError> {
+    if bytes.get(..MAGIC_LEN) != Some(&crate::safe::MAGIC[..]) {
+        return Err(corrupt("the file does not start with the MCAP magic".into()));
+    }
+    let mut check = LogCheck::default();
+    let mut at = MAGIC_LEN;
+    loop {
+        let rest = &bytes[at..];
+        let Some(len) = read_u64(rest, 1) else { break };
+        let Some(body) = usize::try_from(len).ok().and_then(|l| rest.get(9..9usize.checked_add(l)?)) else {
+            break; // a record the file does not hold whole: where a crash cut the log
+        };
+        match rest[0] {
+            OP_CHUNK => {
+                if let Err(e) = check_chunk(body) {
+                    check.bad_record = Some((at as u64, e.to_string()));
+                    break;
+                }
+                check.chunks += 1;
+            }
+            OP_DATA_END => {
+                let after = &rest[9 + body.len()..];
+                // A footer that points at a summary, then the magic: a file closed properly.
+                check.closed = after.len() >= 9 + 20 + MAGIC_LEN
+                    && after[after.len() - MAGIC_LEN..] == crate::safe::MAGIC[..]
+                    && after[after.len() - MAGIC_LEN - 29] == OP_FOOTER
+                    && read_u64(after, after.len() - MAGIC_LEN - 20).is_some_and(|s| s != 0);
+                break;
+            }
+            OP_FOOTER => break,
+            _ => {}
+        }
+        at += 9 + body.len();
+    }
+    check.readable_bytes = at as u64;
+    check.lost_bytes = (bytes.len() - at) as u64;
+    if check.closed || bytes[at..].first() == Some(&OP_DATA_END) {
+        check.lost_bytes = 0;
+    }
+    Ok((check, at))
+}
+
 /// Largest decompressed chunk accepted, and the largest expansion over the compressed size.
 const MAX_CHUNK_BYTES: u64 = 512 << 20;
 const MAX_EXPANSION: u64 = 4096;

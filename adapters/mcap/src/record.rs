@@ -3,12 +3,17 @@
 use std::collections::BTreeMap;
 use std::collections::HashMap;
 use std::io::{Seek, Write};
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
 
 use byteorder::LittleEndian;
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::{DEFAULT_RANGE_SCALE_M, range_to_count};
 use spomp_core::ros::{self, RosMessage};
 use spomp_core::{DepthPanorama, Pose2, ReachabilityScan, SemanticPanorama, Time, Twist2};
+
+use crate::safe::{FLUSH_CHUNK, FLUSH_IGNORE, FLUSH_LAST, SafeFile};
 
 /// CDR encapsulation header for little-endian plain CDR, as ROS 2 writes it.
 pub(crate) const CDR_LE_HEADER: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
@@ -30,6 +35,9 @@ pub enum RecordError {
     /// JSON encoding failed.
     #[error("json: {0}")]
     Json(#[from] serde_json::Error),
+    /// The log file could not be created or written.
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
 }
 
 /// Encodes a ROS 2 message as ROS 2 puts it on the wire: encapsulation header + CDR body.
@@ -49,11 +57,16 @@ pub struct RecorderOptions {
     pub panorama_downsample: usize,
     /// Compress chunks with zstd.
     pub compress: bool,
+    /// A chunk is closed (and, for [`Recorder::create`], written to disk) once its messages
+    /// reach this many bytes…
+    pub chunk_bytes: u64,
+    /// …or span this long in log time, seconds: a crash loses at most this much of the log.
+    pub chunk_duration_s: f64,
 }
 
 impl Default for RecorderOptions {
     fn default() -> Self {
-        RecorderOptions { panorama_downsample: 4, compress: true }
+        RecorderOptions { panorama_downsample: 4, compress: true, chunk_bytes: 1 << 20, chunk_duration_s: 10.0 }
     }
 }
 
@@ -65,14 +78,65 @@ pub struct Recorder<W: Write + Seek> {
     sequence: u32,
     options: RecorderOptions,
     messages: u64,
+    /// Message bytes in the open chunk.
+    chunk_bytes: u64,
+    /// Log time of the open chunk's first message.
+    chunk_start: Option<u64>,
+    /// What a flush of the sink means (see [`SafeFile`]).
+    flush_mode: Arc<AtomicU8>,
+}
+
+impl Recorder<SafeFile> {
+    /// A recorder writing a crash-safe log file at `path` (created or truncated): chunks are
+    /// written whole, each followed by a provisional end, so the file is a complete MCAP file
+    /// up to its last chunk at any moment (see [`SafeFile`]).
+    pub fn create(path: &Path, options: RecorderOptions) -> Result<Self, RecordError> {
+        let mode = Arc::new(AtomicU8::new(FLUSH_IGNORE));
+        let file = SafeFile::create(path, mode.clone())?;
+        let mut rec = Recorder::with_mode(file, options, mode)?;
+        rec.end_chunk()?; // the header and a provisional end: a valid, empty log
+        Ok(rec)
+    }
 }
 
 impl<W: Write + Seek> Recorder<W> {
     /// A recorder writing to `w`.
     pub fn new(w: W, options: RecorderOptions) -> Result<Self, RecordError> {
+        Recorder::with_mode(w, options, Arc::new(AtomicU8::new(FLUSH_IGNORE)))
+    }
+
+    fn with_mode(w: W, options: RecorderOptions, flush_mode: Arc<AtomicU8>) -> Result<Self, RecordError> {
         let compression = if options.compress { Some(mcap::Compression::Zstd) } else { None };
-        let writer = mcap::WriteOptions::new().profile("ros2").library("spomp").compression(compression).create(w)?;
-        Ok(Recorder { writer, schemas: HashMap::new(), channels: HashMap::new(), sequence: 0, options, messages: 0 })
+        // Chunks are built in memory and written whole (no seeking back to patch a header), and
+        // closed by `log` on size or duration.
+        let writer = mcap::WriteOptions::new()
+            .profile("ros2")
+            .library("spomp")
+            .compression(compression)
+            .chunk_size(None)
+            .disable_seeking(true)
+            .create(w)?;
+        Ok(Recorder {
+            writer,
+            schemas: HashMap::new(),
+            channels: HashMap::new(),
+            sequence: 0,
+            options,
+            messages: 0,
+            chunk_bytes: 0,
+            chunk_start: None,
+            flush_mode,
+        })
+    }
+
+    /// Closes the open chunk and writes it out (to disk, for [`Recorder::create`]).
+    pub fn end_chunk(&mut self) -> Result<(), RecordError> {
+        self.flush_mode.store(FLUSH_CHUNK, Ordering::Relaxed);
+        let result = self.writer.flush();
+        self.flush_mode.store(FLUSH_IGNORE, Ordering::Relaxed);
+        self.chunk_bytes = 0;
+        self.chunk_start = None;
+        Ok(result?)
     }
 
     /// Messages written so far.
@@ -108,6 +172,12 @@ impl<W: Write + Seek> Recorder<W> {
             &data,
         )?;
         self.messages += 1;
+        self.chunk_bytes += data.len() as u64;
+        let start = *self.chunk_start.get_or_insert(t);
+        let span_s = t.saturating_sub(start) as f64 * 1e-9;
+        if self.chunk_bytes >= self.options.chunk_bytes || span_s >= self.options.chunk_duration_s {
+            self.end_chunk()?;
+        }
         Ok(())
     }
 
@@ -282,6 +352,8 @@ impl<W: Write + Seek> Recorder<W> {
     /// Writes the summary and index; the file is complete after this.
     pub fn finish(mut self) -> Result<(), RecordError> {
         self.writer.finish()?;
+        self.flush_mode.store(FLUSH_LAST, Ordering::Relaxed);
+        self.writer.into_inner().flush()?;
         Ok(())
     }
 }

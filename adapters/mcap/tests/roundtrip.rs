@@ -113,7 +113,11 @@ proptest! {
 #[test]
 fn huge_record_length_inside_a_chunk_is_an_error_not_an_abort() {
     let mut buf = Cursor::new(Vec::new());
-    let mut rec = Recorder::new(&mut buf, RecorderOptions { panorama_downsample: 4, compress: false }).unwrap();
+    let mut rec = Recorder::new(
+        &mut buf,
+        RecorderOptions { panorama_downsample: 4, compress: false, ..RecorderOptions::default() },
+    )
+    .unwrap();
     rec.pose("ugv1", Time::ZERO, Pose2::default(), 0.0).unwrap();
     rec.finish().unwrap();
     let mut bytes = buf.into_inner();

@@ -60,7 +60,11 @@ fn ugv(c: &mut Criterion) {
 fn team(c: &mut Criterion) {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/missions/team-1uav-5ugv.yaml");
     let registry = spomp_robot::registry();
-    let loaded = spomp_behaviors::mission::load_mission(&path, &registry);
+    // The bench mission includes the shipped subtree and plan (as with `--allow-dir missions`).
+    let options = spomp_behaviors::mission::LoadOptions {
+        allowed_dirs: vec![std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../missions")],
+    };
+    let loaded = spomp_behaviors::mission::load_mission_with(&path, &registry, &options);
     assert!(loaded.is_valid(), "{:?}", loaded.diagnostics);
     let mission = loaded.mission.as_ref().expect("mission");
     let options = SimOptions { seed: 1, time_limit_s: Some(1e6), ..SimOptions::default() };

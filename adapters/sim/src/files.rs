@@ -10,6 +10,8 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use spomp_core::{AerialMap, ClassTable, GridSpec, Point2};
 
+use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, SourceError, number, read_text, resolve_inside};
+
 use crate::error::SimError;
 use crate::world::{World, WorldMeta};
 
@@ -124,6 +126,96 @@ impl DerivedElevationParams {
     }
 }
 
+/// The most cells a world may have (a 4000 × 4000 grid); each simulated robot keeps maps of the
+/// same size.
+pub const MAX_WORLD_CELLS: u64 = 16_000_000;
+
+/// Cell sizes a world may have, metres.
+pub const RESOLUTION_RANGE_M: (f64, f64) = (0.01, 100.0);
+
+/// The farthest a world's origin or a point of its metadata may lie from the map frame's
+/// origin, metres (1000 km).
+pub const MAX_COORDINATE_M: f64 = 1e6;
+
+/// Checks the numbers of a world description before anything is allocated from them: finite,
+/// in range, the map-frame points of the metadata inside the coordinate limit.
+fn check_description(desc: &WorldFile) -> Result<(), String> {
+    let (lo, hi) = RESOLUTION_RANGE_M;
+    if !(desc.resolution_m.is_finite() && (lo..=hi).contains(&desc.resolution_m)) {
+        return Err(format!(
+            "resolution_m must be between {lo} and {hi} metres per cell, got {}",
+            number(desc.resolution_m)
+        ));
+    }
+    let coordinate = |what: &str, v: f64| -> Result<(), String> {
+        if v.is_finite() && v.abs() <= MAX_COORDINATE_M {
+            Ok(())
+        } else {
+            Err(format!("{what} must be a finite coordinate within ±{} m, got {}", number(MAX_COORDINATE_M), number(v)))
+        }
+    };
+    coordinate("origin.x", desc.origin.x)?;
+    coordinate("origin.y", desc.origin.y)?;
+    if let (Some(w), Some(h)) = (desc.width, desc.height) {
+        check_cells(w, h, desc.resolution_m)?;
+    }
+    if let Some(e) = &desc.layers.elevation
+        && !(e.scale_m.is_finite()
+            && e.scale_m > 0.0
+            && e.scale_m <= 1.0
+            && e.offset_m.is_finite()
+            && e.offset_m.abs() <= 1e4)
+    {
+        return Err(format!(
+            "layers.elevation needs 0 < scale_m ≤ 1 metre per count and |offset_m| ≤ 10000 m, got scale_m {} and offset_m {}",
+            number(e.scale_m),
+            number(e.offset_m)
+        ));
+    }
+    for (i, p) in desc.meta.vehicle_clusters.iter().enumerate() {
+        coordinate(&format!("meta.vehicle_clusters[{i}].x"), p.x)?;
+        coordinate(&format!("meta.vehicle_clusters[{i}].y"), p.y)?;
+    }
+    for (i, p) in desc.meta.roadblocks.iter().enumerate() {
+        coordinate(&format!("meta.roadblocks[{i}].x"), p.x)?;
+        coordinate(&format!("meta.roadblocks[{i}].y"), p.y)?;
+    }
+    for (i, p) in desc.meta.start_poses.iter().enumerate() {
+        coordinate(&format!("meta.start_poses[{i}].x"), p.x)?;
+        coordinate(&format!("meta.start_poses[{i}].y"), p.y)?;
+        if !p.yaw.is_finite() {
+            return Err(format!("meta.start_poses[{i}].yaw must be finite, got {}", p.yaw));
+        }
+    }
+    Ok(())
+}
+
+/// Checks the size of a grid: at most [`MAX_WORLD_CELLS`] cells, and an extent within the
+/// coordinate limit.
+fn check_cells(width: u32, height: u32, resolution_m: f64) -> Result<(), String> {
+    let cells = u64::from(width) * u64::from(height);
+    if cells == 0 {
+        return Err(format!("the world is {width} × {height} cells; it needs at least one"));
+    }
+    if cells > MAX_WORLD_CELLS {
+        return Err(format!("the world is {width} × {height} = {cells} cells; at most {MAX_WORLD_CELLS} are allowed"));
+    }
+    let extent = f64::from(width.max(height)) * resolution_m;
+    if extent > MAX_COORDINATE_M {
+        return Err(format!("the world is {extent} m across; at most {MAX_COORDINATE_M} m are allowed"));
+    }
+    Ok(())
+}
+
+fn source_err(path: &Path) -> impl FnOnce(SourceError) -> SimError + '_ {
+    move |e| match e {
+        SourceError::Io { message, kind, .. } => {
+            SimError::Io { path: path.to_path_buf(), source: std::io::Error::new(kind, message) }
+        }
+        other => SimError::BadYaml { path: path.to_path_buf(), message: other.to_string() },
+    }
+}
+
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> SimError + '_ {
     move |source| SimError::Io { path: path.to_path_buf(), source }
 }
@@ -143,7 +235,7 @@ fn checked_table(table: ClassTable, path: &Path) -> Result<ClassTable, SimError>
 }
 
 fn open_layer(dir: &Path, file: &str, layer: &'static str) -> Result<(PathBuf, image::DynamicImage), SimError> {
-    let path = dir.join(file);
+    let path = resolve_inside(&[dir.to_path_buf()], dir, file).map_err(source_err(&dir.join(WORLD_FILE)))?;
     if !path.is_file() {
         return Err(SimError::MissingLayer { layer, path });
     }
@@ -176,33 +268,26 @@ impl World {
     pub fn load_with(dir: impl AsRef<Path>, heights: &DerivedElevationParams) -> Result<World, SimError> {
         let dir = dir.as_ref();
         let yaml_path = dir.join(WORLD_FILE);
-        let text = std::fs::read_to_string(&yaml_path).map_err(io_err(&yaml_path))?;
+        let text = read_text(&yaml_path, MAX_SOURCE_BYTES).map_err(source_err(&yaml_path))?;
         let desc: WorldFile = serde_saphyr::from_str(&text)
             .map_err(|e| SimError::BadYaml { path: yaml_path.clone(), message: e.to_string() })?;
-        if !(desc.resolution_m.is_finite() && desc.resolution_m > 0.0) {
-            return Err(SimError::BadYaml {
-                path: yaml_path,
-                message: format!("resolution_m must be positive, got {}", desc.resolution_m),
-            });
-        }
+        check_description(&desc).map_err(|message| SimError::BadYaml { path: yaml_path.clone(), message })?;
         let classes = match &desc.class_table {
             None => ClassTable::default_table(),
             Some(ClassTableSource::Inline(t)) => checked_table(t.clone(), &yaml_path)?,
             Some(ClassTableSource::Path(p)) => {
-                let path = dir.join(p);
-                let text = std::fs::read_to_string(&path).map_err(io_err(&path))?;
+                let path = resolve_inside(&[dir.to_path_buf()], dir, p).map_err(source_err(&yaml_path))?;
+                let text = read_text(&path, MAX_SOURCE_BYTES).map_err(source_err(&path))?;
                 ClassTable::from_yaml(&text)?
             }
         };
 
         let (class_path, class_img) = open_layer(dir, &desc.layers.class, "class")?;
+        let (width, height) = (desc.width.unwrap_or(class_img.width()), desc.height.unwrap_or(class_img.height()));
+        check_cells(width, height, desc.resolution_m)
+            .map_err(|message| SimError::BadYaml { path: yaml_path.clone(), message })?;
         let class_img = class_img.to_rgb8();
-        let spec = GridSpec::new(
-            desc.origin,
-            desc.resolution_m,
-            desc.width.unwrap_or(class_img.width()),
-            desc.height.unwrap_or(class_img.height()),
-        );
+        let spec = GridSpec::new(desc.origin, desc.resolution_m, width, height);
         check_size("class", &class_path, &spec, class_img.width(), class_img.height())?;
         let (w, h) = (spec.width as usize, spec.height as usize);
         let mut map = AerialMap::unknown(spec);

@@ -241,7 +241,7 @@ fn navigate_to_crosses_a_generated_city() {
 /// 300 m away (about 3 s in the dev profile).
 #[test]
 fn navigate_to_crosses_a_full_city_with_roadblocks() {
-    cross_city("full city", &CityParams::default(), 1, 300.0, 900.0);
+    cross_city("full-city", &CityParams::default(), 1, 300.0, 900.0);
 }
 
 #[test]

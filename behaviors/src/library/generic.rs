@@ -1,7 +1,6 @@
 //! Generic leaves: waiting, flags, events, mission time.
 
 use std::sync::Arc;
-use std::time::Duration;
 
 use serde_json::json;
 use spomp_core::Time;
@@ -82,11 +81,15 @@ struct Wait {
 impl<E> Behavior<E> for Wait {
     fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if prev != Status::Running {
-            let Some(secs) = self.duration.get::<f64>(ctx.blackboard).filter(|s| *s >= 0.0) else {
-                ctx.blackboard.report("wait: duration_s is not a non-negative number");
-                return Status::Failure;
+            let secs = self.duration.get::<f64>(ctx.blackboard).unwrap_or(f64::NAN);
+            let duration = match crate::mission::limits::duration_from_secs(secs) {
+                Ok(d) => d,
+                Err(e) => {
+                    ctx.blackboard.report(format!("wait: duration_s: {e}"));
+                    return Status::Failure;
+                }
             };
-            self.until = ctx.now + Duration::from_secs_f64(secs);
+            self.until = ctx.now + duration;
         }
         if ctx.now >= self.until { Status::Success } else { Status::Running }
     }

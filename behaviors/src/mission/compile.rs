@@ -404,7 +404,14 @@ impl<'a> Compiler<'a> {
             DecoratorType::Timeout | DecoratorType::Delay => {
                 let name = if ty == DecoratorType::Timeout { "duration_s" } else { "delay_s" };
                 match required(self, name) {
-                    Some(BbValue::Float(s)) => duration = Duration::from_secs_f64(s),
+                    Some(BbValue::Float(s)) => match super::limits::duration_from_secs(s) {
+                        Ok(d) => duration = d,
+                        Err(e) => {
+                            let loc = body.get(name).map_or(key.loc, |v| v.loc);
+                            self.err(file, loc, &path, Stage::Schema, format!("`{name}`: {e}"));
+                            ok = false;
+                        }
+                    },
                     _ => ok = false,
                 }
             }
@@ -688,17 +695,13 @@ impl<'a> Compiler<'a> {
             Some("failure") => Trigger::Failure,
             Some("timer") => match t.get("after_s") {
                 Some(v) => match v.as_f64() {
-                    Some(s) if s >= 0.0 && s.is_finite() => Trigger::Timer(Duration::from_secs_f64(s)),
-                    Some(s) => {
-                        self.err(
-                            file,
-                            v.loc,
-                            path,
-                            Stage::Schema,
-                            format!("`after_s` must be a non-negative number of seconds, found {s}"),
-                        );
-                        return None;
-                    }
+                    Some(s) => match super::limits::duration_from_secs(s) {
+                        Ok(d) => Trigger::Timer(d),
+                        Err(e) => {
+                            self.err(file, v.loc, path, Stage::Schema, format!("`after_s`: {e}"));
+                            return None;
+                        }
+                    },
                     None => {
                         self.err(
                             file,

@@ -95,11 +95,32 @@ pub struct Rendered {
     src: miette::NamedSource<String>,
 }
 
+/// The longest source line a report quotes, bytes; a longer line is not quoted.
+const MAX_QUOTED_LINE: usize = 300;
+
 impl Rendered {
-    /// Pairs a diagnostic with the text of its file.
-    pub fn new(diag: Diagnostic, source: String) -> Self {
+    /// Pairs a diagnostic with the text of its file. The report quotes at most the line the
+    /// problem is on (never the rest of the file), and nothing when that line is very long or
+    /// not printable text.
+    pub fn new(mut diag: Diagnostic, source: String) -> Self {
         let name = diag.file.display().to_string();
-        Rendered { diag, src: miette::NamedSource::new(name, source) }
+        // The renderer sees only the offending line: the lines before it are left empty (so its
+        // line number stays right) and the lines after it are cut.
+        let mut shown = String::new();
+        diag.span = diag.span.and_then(|(offset, len)| {
+            let start = source.get(..offset)?.rfind('\n').map_or(0, |p| p + 1);
+            let end = source.get(offset..)?.find('\n').map_or(source.len(), |p| offset + p);
+            let line = source.get(start..end)?;
+            let printable = line.chars().all(|c| !c.is_control() || c == '\t' || c == '\r');
+            if end - start > MAX_QUOTED_LINE || !printable {
+                return None;
+            }
+            let line_index = source[..start].matches('\n').count();
+            shown = "\n".repeat(line_index);
+            shown.push_str(line);
+            Some((line_index + offset - start, len.min(end - offset).max(1)))
+        });
+        Rendered { diag, src: miette::NamedSource::new(name, shown) }
     }
 }
 

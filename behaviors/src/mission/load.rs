@@ -13,6 +13,7 @@ use crate::registry::{NodeCatalog, NodeRegistry};
 
 use super::compile::{Compiler, FileId, Ir, IrKind, SubtreeDef, check_wiring};
 use super::diagnostic::{Diagnostic, Stage};
+use super::limits;
 use super::schema::{IncludeFile, MissionFile, RobotSpec};
 use super::yaml::{DeError, Loc, Node, parse};
 
@@ -85,23 +86,36 @@ fn de_diag(file: &Path, prefix: &str, e: &DeError, fallback: Loc) -> Diagnostic 
     Diagnostic::new(file, e.loc.unwrap_or(fallback), path, Stage::Schema, e.message.clone())
 }
 
+/// How to load a mission.
+#[derive(Debug, Clone, Default)]
+pub struct LoadOptions {
+    /// Folders besides the mission's own that its includes, plan files and world folder may be
+    /// in (the command line's `--allow-dir`). Without them, every file a mission names must be
+    /// inside the mission's folder.
+    pub allowed_dirs: Vec<PathBuf>,
+}
+
 /// Loads and validates a mission file against a node registry.
 pub fn load_mission<E: 'static>(path: &Path, nodes: &NodeRegistry<E>) -> LoadedMission {
+    load_mission_with(path, nodes, &LoadOptions::default())
+}
+
+/// Loads and validates a mission file against a node registry, with options.
+pub fn load_mission_with<E: 'static>(path: &Path, nodes: &NodeRegistry<E>, options: &LoadOptions) -> LoadedMission {
     let registry = nodes.catalog();
     let mut out = LoadedMission::default();
+    let roots: Vec<PathBuf> = std::iter::once(path.parent().map(Path::to_path_buf).unwrap_or_default())
+        .chain(options.allowed_dirs.iter().cloned())
+        .collect();
     let file: FileId = 0;
     out.files.push(path.to_path_buf());
-    let text = match std::fs::read_to_string(path) {
+    let text = match limits::read_text(path, limits::MAX_SOURCE_BYTES) {
         Ok(t) => t,
         Err(e) => {
             out.sources.push(String::new());
-            out.diagnostics.push(Diagnostic::new(
-                path,
-                Loc::default(),
-                "",
-                Stage::Parse,
-                format!("cannot read the mission: {e}"),
-            ));
+            let (line, column) = e.position().unwrap_or((1, 1));
+            let loc = Loc { line, column, offset: None, len: 0 };
+            out.diagnostics.push(Diagnostic::new(path, loc, "", Stage::Parse, format!("cannot read the mission: {e}")));
             return out;
         }
     };
@@ -221,7 +235,7 @@ pub fn load_mission<E: 'static>(path: &Path, nodes: &NodeRegistry<E>) -> LoadedM
         None
     };
     if let Some(m) = &mission {
-        check_ranges(m, &root, path, &mut diags);
+        check_ranges(m, &root, path, &roots, &mut diags);
     }
 
     // --- includes and subtrees ---
@@ -229,7 +243,7 @@ pub fn load_mission<E: 'static>(path: &Path, nodes: &NodeRegistry<E>) -> LoadedM
     collect_subtrees(&root, file, &mut subtrees, &out.files, &mut diags);
     let mut stack = vec![canonical(path)];
     if let Some(inc) = root.get("include") {
-        load_includes(inc, path, &mut out, &mut stack, &mut subtrees, &mut diags);
+        load_includes(inc, path, &roots, &mut out, &mut stack, &mut subtrees, &mut diags);
     }
 
     // --- wiring: compile every role ---
@@ -294,6 +308,11 @@ pub fn load_mission<E: 'static>(path: &Path, nodes: &NodeRegistry<E>) -> LoadedM
             let _ = compiler.compile(&def.node, def.file, name);
             diags.append(&mut compiler.into_diagnostics());
         }
+    }
+
+    // --- limits on literal durations and files in the trees ---
+    for role in out.roles.values() {
+        limits::check_tree_literals(&role.tree, &out.files, &roots, &mut diags);
     }
 
     // --- team ---
@@ -377,6 +396,7 @@ fn collect_subtrees(
 fn load_includes(
     list: &Node,
     including: &Path,
+    roots: &[PathBuf],
     out: &mut LoadedMission,
     stack: &mut Vec<PathBuf>,
     subtrees: &mut BTreeMap<String, SubtreeDef>,
@@ -386,7 +406,13 @@ fn load_includes(
     let base = including.parent().map(Path::to_path_buf).unwrap_or_default();
     for item in items {
         let Some(rel) = item.as_str() else { continue };
-        let target = base.join(rel);
+        let target = match limits::resolve_inside(roots, &base, rel) {
+            Ok(t) => t,
+            Err(e) => {
+                diags.push(Diagnostic::new(including, item.loc, "include", Stage::Parse, e.to_string()));
+                continue;
+            }
+        };
         let canon = canonical(&target);
         if stack.contains(&canon) {
             let chain: Vec<String> = stack
@@ -406,7 +432,7 @@ fn load_includes(
         if out.files.iter().any(|f| canonical(f) == canon) {
             continue; // already included through another path
         }
-        let text = match std::fs::read_to_string(&target) {
+        let text = match limits::read_text(&target, limits::MAX_SOURCE_BYTES) {
             Ok(t) => t,
             Err(e) => {
                 diags.push(Diagnostic::new(
@@ -414,7 +440,7 @@ fn load_includes(
                     item.loc,
                     "include",
                     Stage::Parse,
-                    format!("cannot read included file `{}`: {e}", target.display()),
+                    format!("cannot read included file: {e}"),
                 ));
                 continue;
             }
@@ -429,6 +455,13 @@ fn load_includes(
                 continue;
             }
         };
+        if node.as_map().is_none() {
+            // Say what was expected without quoting the file: it may not be a mission file at all.
+            let found = node.value.kind();
+            let message = format!("an included file is a mapping with `subtrees:` (and `include:`); found {found}");
+            diags.push(Diagnostic::new(&target, node.loc, "", Stage::Schema, message));
+            continue;
+        }
         if let Err(e) = node.deserialize::<IncludeFile>() {
             diags.push(de_diag(&target, "", &e, node.loc));
             continue;
@@ -436,7 +469,7 @@ fn load_includes(
         collect_subtrees(&node, file, subtrees, &out.files, diags);
         if let Some(inc) = node.get("include") {
             stack.push(canon);
-            load_includes(inc, &target, out, stack, subtrees, diags);
+            load_includes(inc, &target, roots, out, stack, subtrees, diags);
             stack.pop();
         }
     }
@@ -462,15 +495,15 @@ fn loc_at(root: &Node, path: &[&str]) -> Loc {
     loc
 }
 
-fn check_ranges(m: &MissionFile, root: &Node, file: &Path, diags: &mut Vec<Diagnostic>) {
+fn check_ranges(m: &MissionFile, root: &Node, file: &Path, roots: &[PathBuf], diags: &mut Vec<Diagnostic>) {
     let mut bad = |path: &[&str], msg: String| {
         diags.push(Diagnostic::new(file, loc_at(root, path), path.join("."), Stage::Schema, msg));
     };
-    if !(m.time_limit_s > 0.0 && m.time_limit_s.is_finite()) {
-        bad(&["time_limit_s"], format!("expected a positive number of seconds, found {}", m.time_limit_s));
+    if let Err(e) = limits::check_time_limit(m.time_limit_s) {
+        bad(&["time_limit_s"], e);
     }
-    if m.mission.trim().is_empty() {
-        bad(&["mission"], "the mission needs a name".into());
+    if let Err(e) = limits::check_identifier("the mission name", &m.mission) {
+        bad(&["mission"], e);
     }
     if m.comms.position_range_m < 0.0 {
         bad(
@@ -536,6 +569,11 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, diags: &mut Vec<Diagn
         }
     }
     if let Some(sim) = &m.sim {
+        if let Some(super::schema::WorldSpec::Dir(dir)) = &sim.world
+            && let Err(e) = limits::resolve_inside(roots, &roots[0], dir)
+        {
+            bad(&["sim", "world"], format!("the world folder {e}"));
+        }
         if let Some(super::schema::WorldSpec::Generate(g)) = &sim.world
             && g.size_m.iter().any(|s| !(*s >= 50.0 && *s <= 5000.0))
         {
@@ -551,18 +589,22 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, diags: &mut Vec<Diagn
             let idx = i.to_string();
             use super::schema::FaultSpec;
             let negative = match f {
-                FaultSpec::Kill { at_s, .. } => *at_s < 0.0,
+                FaultSpec::Kill { at_s, .. } => limits::duration_from_secs(*at_s).is_err(),
                 FaultSpec::Blackout { from_s, to_s, region } => {
-                    *from_s < 0.0
+                    limits::duration_from_secs(*from_s).is_err()
+                        || limits::duration_from_secs(*to_s).is_err()
                         || to_s < from_s
                         || region.as_ref().is_some_and(|c| c.radius_m.is_nan() || c.radius_m < 0.0)
                 }
-                FaultSpec::OdometryNoise { scale } | FaultSpec::LocalizationNoise { scale } => *scale < 0.0,
+                FaultSpec::OdometryNoise { scale } | FaultSpec::LocalizationNoise { scale } => {
+                    !(scale.is_finite() && (0.0..=100.0).contains(scale))
+                }
             };
             if negative {
                 bad(
                     &["sim", "faults", &idx],
-                    "times must be non-negative and in order, radii and scales non-negative".into(),
+                    "times must be between 0 and 1e9 s and in order, radii non-negative, scales between 0 and 100"
+                        .into(),
                 );
             }
             if let FaultSpec::Kill { robot, .. } = f
@@ -613,12 +655,18 @@ fn check_team(
     if m.team.is_empty() {
         team_diag(vec!["team".into()], "the team has no robots".into());
     }
+    if m.team.len() > limits::MAX_ROBOTS {
+        team_diag(
+            vec!["team".into()],
+            format!("the team has {} robots; at most {} are allowed", m.team.len(), limits::MAX_ROBOTS),
+        );
+    }
     let mut ids: HashMap<&str, usize> = HashMap::new();
     let mut priorities: HashMap<u32, &str> = HashMap::new();
     for (i, r) in m.team.iter().enumerate() {
         let idx = i.to_string();
-        if r.id.trim().is_empty() {
-            team_diag(vec!["team".into(), idx.clone(), "id".into()], "a robot needs a non-empty id".into());
+        if let Err(e) = limits::check_identifier("a robot id", &r.id) {
+            team_diag(vec!["team".into(), idx.clone(), "id".into()], e);
         }
         if let Some(first) = ids.insert(&r.id, i) {
             team_diag(

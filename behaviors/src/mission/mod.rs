@@ -5,11 +5,14 @@ pub mod build;
 pub mod compile;
 pub mod diagnostic;
 pub mod json_schema;
+pub mod limits;
 pub mod load;
 pub mod schema;
 pub mod yaml;
 
 pub use build::{BuildError, BuildOptions, build_executor, build_tree};
 pub use diagnostic::{Diagnostic, Rendered, Stage};
-pub use load::{CompiledRole, LoadedMission, PROVIDED_ENTRIES, load_mission, skills_of};
+pub use load::{
+    CompiledRole, LoadOptions, LoadedMission, PROVIDED_ENTRIES, load_mission, load_mission_with, skills_of,
+};
 pub use schema::MissionFile;

@@ -192,10 +192,38 @@ fn saphyr_message(e: &serde_saphyr::Error) -> String {
     let first = text.lines().next().unwrap_or_default();
     let first = first.strip_prefix("error: ").unwrap_or(first);
     // "line L column C: message"
-    match first.split_once(": ") {
-        Some((head, rest)) if head.starts_with("line ") => rest.to_string(),
-        _ => first.to_string(),
+    let message = match first.split_once(": ") {
+        Some((head, rest)) if head.starts_with("line ") => rest,
+        _ => first,
+    };
+    user_message(message)
+}
+
+/// The parser's message in the mission author's terms: what to change in the file, not which
+/// option of the parser to set.
+fn user_message(message: &str) -> String {
+    if let Some(rest) = message.strip_prefix("duplicate mapping key") {
+        let key = rest.split(", set DuplicateKeyPolicy").next().unwrap_or_default().trim_start_matches(": ");
+        let key = if key.starts_with(", set") || key.is_empty() { String::new() } else { format!(" `{key}`") };
+        return format!("duplicate key{key}: a key may appear once in a mapping; remove or rename one of them");
     }
+    if let Some(breach) = message.strip_prefix("budget breached: ") {
+        // `Depth { depth: 65 }`: the limit's name, then the count that passed it.
+        let name = breach.split([' ', '{']).next().unwrap_or_default();
+        let count: String = breach.chars().filter(char::is_ascii_digit).collect();
+        let what = match name {
+            "Depth" => "nests too deeply",
+            "Events" | "Nodes" => "has too many values",
+            "Aliases" => "uses aliases (`*name`) too often",
+            "Anchors" => "has too many anchors (`&name`)",
+            "Documents" => "has too many documents (`---`)",
+            "InclusionDepth" => "nests includes too deeply",
+            _ => "is too large or too complex",
+        };
+        let at = if count.is_empty() { String::new() } else { format!(" ({count} reached)") };
+        return format!("the YAML {what} for a mission file{at}; simplify it");
+    }
+    message.to_string()
 }
 
 /// The shape serde-saphyr fills in; converted to [`Node`] right after.

@@ -496,9 +496,20 @@ impl Simulation {
     }
 
     /// Runs to the end and summarises.
-    pub fn run(mut self, observer: &mut dyn SimObserver) -> RunResult {
+    pub fn run(self, observer: &mut dyn SimObserver) -> RunResult {
+        self.run_until(observer, &mut || false)
+    }
+
+    /// Runs to the end, or until `stop` (asked before each step) says to stop; a stopped run
+    /// ends [`Outcome::Interrupted`] after the step in progress and is summarised all the same.
+    pub fn run_until(mut self, observer: &mut dyn SimObserver, stop: &mut dyn FnMut() -> bool) -> RunResult {
         let wall = Instant::now();
         while self.outcome.is_none() {
+            if stop() {
+                self.outcome = Some(Outcome::Interrupted);
+                observer.on_event(self.now, &SimEvent::MissionEnded { outcome: Outcome::Interrupted });
+                break;
+            }
             self.step(observer);
         }
         self.finish(observer, wall.elapsed().as_secs_f64())
@@ -975,7 +986,8 @@ impl Simulation {
             CompleteWhen::AllTreesDone => {
                 self.robots.iter().filter(|r| r.alive()).all(|r| r.robot.tree().status().is_done())
             }
-            CompleteWhen::TimeLimit => false,
+            // Such a mission runs for its whole time limit: reaching it is its completion.
+            CompleteWhen::TimeLimit => self.now >= self.time_limit,
         };
         let outcome = if done {
             Some(Outcome::Complete)

@@ -12,6 +12,9 @@ pub enum Outcome {
     TimeLimit,
     /// Every robot died.
     AllDead,
+    /// The run was stopped before it ended (Ctrl-C, SIGTERM, a dry run's wall-time cap): the
+    /// summary covers what ran.
+    Interrupted,
 }
 
 impl Outcome {

@@ -8,7 +8,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use spomp_behaviors::mission::{BuildOptions, LoadedMission, build_executor, load_mission};
+use spomp_behaviors::mission::{BuildOptions, LoadOptions, LoadedMission, build_executor, load_mission_with};
 use spomp_behaviors::{Status, TreeExecutor};
 use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, RobotId, RobotKind, Time, Twist2};
 use spomp_robot::registry as builtin_registry;
@@ -32,9 +32,11 @@ pub fn write_mission(name: &str, text: &str) -> PathBuf {
     path
 }
 
-/// Loads a mission that must be valid.
+/// Loads a mission that must be valid; besides its own folder, it may include from the
+/// shipped `missions/` folder (as with `--allow-dir missions`).
 pub fn load(path: &Path) -> LoadedMission {
-    let loaded = load_mission(path, &builtin_registry());
+    let options = LoadOptions { allowed_dirs: vec![Path::new(env!("CARGO_MANIFEST_DIR")).join("../../missions")] };
+    let loaded = load_mission_with(path, &builtin_registry(), &options);
     assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
     loaded
 }
@@ -85,7 +87,7 @@ pub fn driver(world: &World, s: DriverSetup<'_>) -> (RobotRuntime, RobotExecutor
     let path = dir.join("mission.yaml");
     std::fs::File::create(&path).unwrap().write_all(mission.as_bytes()).unwrap();
     let registry = builtin_registry();
-    let loaded = load_mission(&path, &registry);
+    let loaded = load_mission_with(&path, &registry, &LoadOptions::default());
     assert!(loaded.diagnostics.is_empty(), "{mission}\n{:#?}", loaded.diagnostics);
     let mut config = RuntimeConfig::basic(RobotId::new(s.id), RobotKind::Ugv, s.priority, s.start);
     config.classes = world.classes().clone();
