@@ -1,11 +1,14 @@
 #!/usr/bin/env python3
 """Checks the layering rules of DESIGN.md §2 on the workspace's dependency graph.
 
-Layers, bottom to top: core < skills < behaviors < adapters < the CLI (root package).
+Layers, bottom to top: core < skills < behaviors (engine + mission language) < robot < adapters
+< the CLI (root package).
 - core depends on no spomp crate;
-- a skill depends only on core and other skills (never behaviours or adapters);
-- behaviours depend on core and skills, never on adapters;
-- an adapter depends on core, skills and behaviours, never on another adapter;
+- a skill depends only on core and other skills (never behaviours, the robot or adapters);
+- behaviours (the engine and the mission language) depend on core only: they know no skill,
+  no robot and no adapter;
+- the robot (runtime, domain nodes, mission → robot) depends on core, skills and behaviours;
+- an adapter depends on core, skills, behaviours and the robot, never on another adapter;
 - only the root `spomp` package wires adapters together;
 - tools (benchmark support) depend on no spomp crate and are used as dev-dependencies only.
 Every spomp crate must live in a known layer directory. Exit 1 on any violation.
@@ -24,6 +27,10 @@ def layer_of(manifest_dir: str, root: str) -> str:
         return "core"
     if rel == "behaviors":
         return "behaviors"
+    if rel == "robot":
+        return "robot"
+    if rel == "examples" or rel.startswith("examples" + os.sep):
+        return "example"
     if rel.startswith("skills" + os.sep):
         return "skill"
     if rel.startswith("adapters" + os.sep):
@@ -39,10 +46,12 @@ ALLOWED = {
     "tool": set(),
     "core": set(),
     "skill": {"core", "skill"},
-    "behaviors": {"core", "skill"},
-    "adapter": {"core", "skill", "behaviors"},
-    "cli": {"core", "skill", "behaviors", "adapter"},
-    "tests": {"core", "skill", "behaviors", "adapter", "cli"},
+    "behaviors": {"core"},
+    "robot": {"core", "skill", "behaviors"},
+    "adapter": {"core", "skill", "behaviors", "robot"},
+    "cli": {"core", "skill", "behaviors", "robot", "adapter"},
+    "example": {"core", "skill", "behaviors", "robot", "adapter", "cli"},
+    "tests": {"core", "skill", "behaviors", "robot", "adapter", "cli"},
 }
 
 

@@ -127,3 +127,50 @@ sim: { world: { generate: { size_m: [120, 100], vehicle_clusters: 1, roadblocks:
         run["never_ticked"].as_array().unwrap().iter().map(|s| s.as_str().unwrap().to_string()).collect();
     assert_eq!(never, vec!["ugv1: r/fallback[1]/fail".to_string()]);
 }
+
+/// The paper's ablation switches and a robot's own terrain threshold, set in the mission
+/// (`navigation:` per role, overridden per robot), are the settings the robots run with.
+#[test]
+fn navigation_settings_in_the_mission_are_in_force_per_robot() {
+    let dir = tempfile::tempdir().unwrap();
+    let mission = dir.path().join("ablation.yaml");
+    std::fs::write(
+        &mission,
+        r#"
+mission: ablation
+team:
+  - { id: ugv1, kind: ugv, role: r, priority: 1, start: { x_m: 12, y_m: 2.5 }, localization: { mode: ground_truth } }
+  - id: ugv2
+    kind: ugv
+    role: r
+    priority: 2
+    start: { x_m: 12, y_m: 6 }
+    localization: { mode: ground_truth }
+    navigation:
+      terrain: { inflation_m: 0.9 }
+      global_planner: { learning: off, graph_updates: off }
+roles:
+  r:
+    navigation: { profile: simulation, watchdog: { stuck_timeout_s: 45 } }
+    tree:
+      navigate_to: { target: { x: 60, y: 4 } }
+complete_when: all_trees_done
+time_limit_s: 10
+sim: { world: { generate: { size_m: [120, 100], vehicle_clusters: 1, roadblocks: 0 } } }
+"#,
+    )
+    .unwrap();
+    let out_dir = dir.path().join("out");
+    let out = spomp().args(["sim", "--json", "--no-mcap", "--out"]).arg(&out_dir).arg(&mission).output().unwrap();
+    assert!(out.status.code().is_some_and(|c| c <= 1), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let robots = v["runs"][0]["robots"].as_array().unwrap();
+    let nav = |id: &str| robots.iter().find(|r| r["id"] == id).unwrap()["navigation"].clone();
+    let (u1, u2) = (nav("ugv1"), nav("ugv2"));
+    assert_eq!((u1["learning"].as_bool(), u1["graph_updates"].as_bool()), (Some(true), Some(true)), "{u1}");
+    assert_eq!(u1["inflation_m"], 0.75, "the simulation profile: {u1}");
+    assert_eq!(u1["stuck_timeout_s"], 45.0, "the role's watchdog: {u1}");
+    assert_eq!((u2["learning"].as_bool(), u2["graph_updates"].as_bool()), (Some(false), Some(false)), "{u2}");
+    assert_eq!(u2["inflation_m"], 0.9, "the robot's own override: {u2}");
+    assert_eq!(u2["slope_threshold"], 0.25, "the rest from its role's profile: {u2}");
+}

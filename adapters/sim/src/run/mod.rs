@@ -35,7 +35,9 @@ use spomp_robot::{PoseInput, Robot, RobotRuntime, RobotSetup};
 use spomp_teamstate::{GoalOrigin, Tier, TierSet};
 
 pub use setup::{faults_for_mission, operating_area, radio_for_mission, world_for_mission};
-pub use summary::{ClusterSummary, ErrorStats, GoalSummary, Outcome, ProblemCount, RobotSummary, RunSummary};
+pub use summary::{
+    ClusterSummary, ErrorStats, GoalSummary, NavigationInForce, Outcome, ProblemCount, RobotSummary, RunSummary,
+};
 
 use crate::error::SimError;
 use crate::panorama::{PanoramaSensor, SensorParams};
@@ -1047,6 +1049,23 @@ impl Simulation {
                     goals_visited: visited_goals.len() as u32,
                     killed_s: r.killed_s,
                     tree_status: final_status.get(i).cloned().unwrap_or_default(),
+                    navigation: r.robot.nav().map(|n| {
+                        let p = &n.params;
+                        NavigationInForce {
+                            learning: p.global.learning.enabled,
+                            graph_updates: p.global.experience.graph_updates,
+                            sharing: match p.global.sharing.mode {
+                                spomp_global_planner::SharingMode::None => "none",
+                                spomp_global_planner::SharingMode::Downsampled => "downsampled",
+                                spomp_global_planner::SharingMode::All => "all",
+                            }
+                            .to_string(),
+                            slope_threshold: p.local.terrain.slope_threshold,
+                            inflation_m: p.local.terrain.inflation_m,
+                            max_speed_mps: p.local.dwa.max_speed_mps,
+                            stuck_timeout_s: p.watchdog.stuck_timeout_s,
+                        }
+                    }),
                 }
             })
             .collect();

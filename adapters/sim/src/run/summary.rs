@@ -100,6 +100,29 @@ pub struct RobotSummary {
     pub killed_s: Option<f64>,
     /// Root status of its tree at the end.
     pub tree_status: String,
+    /// The navigation settings in force (UGVs): the profile's values with the mission's
+    /// `navigation:` layers over them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub navigation: Option<NavigationInForce>,
+}
+
+/// The navigation settings a UGV ran with, the ones the paper's ablations switch.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NavigationInForce {
+    /// Learned traversability on (MLP) or off (class ranks).
+    pub learning: bool,
+    /// Edge updates from reachability scans on or off.
+    pub graph_updates: bool,
+    /// Terrain-scan sharing: none, downsampled or all.
+    pub sharing: String,
+    /// Terrain slope threshold.
+    pub slope_threshold: f64,
+    /// Terrain inflation, metres.
+    pub inflation_m: f64,
+    /// DWA speed limit, m/s.
+    pub max_speed_mps: f64,
+    /// Driving nodes' default stuck timeout, seconds.
+    pub stuck_timeout_s: f64,
 }
 
 /// Ground-truth clusters of the world against the goals the team found.
