@@ -1,12 +1,14 @@
 //! The particle filter over (x, y, yaw) in the aerial map frame.
 
+use std::sync::Arc;
+
 use rand::Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 use spomp_core::{AerialMap, ClassTable, PanoramaFrame, Pose2, PoseEstimate, Time, normalize_angle};
 
 use crate::error::LocalizationError;
-use crate::field::{MatchField, UNKNOWN_COST_LEVEL, check_map, fingerprint};
+use crate::field::{MatchField, UNKNOWN_COST_LEVEL, check_map, fingerprint, shared_field};
 use crate::motion::OdometryMotion;
 use crate::observation::LocalObservation;
 use crate::params::{LocalizationParams, PosePrior};
@@ -90,7 +92,9 @@ pub struct CrossViewLocalizer {
     candidate_scores: Vec<PoseScore>,
     candidate_order: Vec<usize>,
     order: Vec<usize>,
-    field: Option<MatchField>,
+    /// Cost planes of the current map, shared with every localizer in the process that holds
+    /// the same map with the same parameters.
+    field: Option<Arc<MatchField>>,
     /// Frame time at which `field` was built by an update (None: built outside an update).
     field_built_at: Option<Time>,
     /// Incremented whenever `field` is rebuilt.
@@ -258,7 +262,10 @@ impl CrossViewLocalizer {
     }
 
     /// Builds (or reuses) the per-class cost planes of a map: rebuilt whenever the map's
-    /// placement, version or contents, or the class table, differ from the last build. Call it
+    /// placement, version or contents, or the class table, differ from the last build. Planes
+    /// another localizer in the process already holds for the same map, table and parameters
+    /// are shared (by `Arc`), not built again: robots with the same prior map hold one set.
+    /// Call it
     /// ahead of time to keep the cost out of an update, or to force a new map in at once;
     /// [`Self::update`] itself rebuilds for a new version of the same map at most every
     /// `map_rebuild_interval_s`.
@@ -270,7 +277,7 @@ impl CrossViewLocalizer {
         }
         self.field = None;
         self.field_built_at = None;
-        self.field = Some(MatchField::build_with_fingerprint(map, classes, &self.params, fingerprint)?);
+        self.field = Some(shared_field(map, classes, &self.params, fingerprint)?);
         self.field_generation += 1;
         Ok(())
     }
@@ -1023,6 +1030,41 @@ mod tests {
         assert!(loc.field.as_ref().unwrap().matches(&moved, &table), "a new placement is used at once");
         loc.prepare_map(&map_a, &table).unwrap();
         assert!(loc.field.as_ref().unwrap().matches(&map_a, &table), "prepare_map always rebuilds");
+    }
+
+    #[test]
+    fn localizers_with_the_same_map_and_parameters_share_one_field() {
+        use spomp_core::{AerialMap, GridSpec, Point2};
+        // A map no other test uses (a different origin), so no field of another test is shared.
+        let spec = GridSpec::new(Point2::new(-7123.0, 411.0), 0.5, 40, 30);
+        let mut map = AerialMap::unknown(spec);
+        map.class.iter_mut().enumerate().for_each(|(i, c)| *c = [0, 3, 2][i % 7 % 3]);
+        let table = ClassTable::default_table();
+        let new = |params: LocalizationParams| {
+            let mut loc = CrossViewLocalizer::new(params).unwrap();
+            loc.prepare_map(&map, &table).unwrap();
+            loc
+        };
+        let field = |loc: &CrossViewLocalizer| loc.field.clone().unwrap();
+        let a = new(LocalizationParams::default());
+        let b = new(LocalizationParams { num_particles: 50, ..Default::default() });
+        assert!(Arc::ptr_eq(&field(&a), &field(&b)), "same map and planes parameters: one field");
+        let c = new(LocalizationParams { max_match_distance_m: 3.0, ..Default::default() });
+        assert!(!Arc::ptr_eq(&field(&a), &field(&c)), "other cost parameters: its own field");
+        let mut other = map.clone();
+        other.class[17] = 6;
+        let mut d = CrossViewLocalizer::new(LocalizationParams::default()).unwrap();
+        d.prepare_map(&other, &table).unwrap();
+        assert!(!Arc::ptr_eq(&field(&a), &field(&d)), "same version, other contents: its own field");
+        assert!(field(&d).matches(&other, &table));
+        // A shared field equals one built alone.
+        let alone = MatchField::build(&map, &table, &LocalizationParams::default()).unwrap();
+        assert_eq!(field(&a).planes, alone.planes);
+        assert_eq!(field(&a).unknown_cost_m, alone.unknown_cost_m);
+        // Once nobody holds it, it is gone: a new localizer builds it anew.
+        let weak = Arc::downgrade(&field(&a));
+        drop((a, b));
+        assert!(weak.upgrade().is_none());
     }
 
     #[test]
