@@ -32,7 +32,7 @@ pub(crate) struct Features {
     mean: Vec<f32>,
     /// Per channel 1 / standard deviation.
     inv_std: Vec<f32>,
-    /// Squared-distance scratch.
+    /// Squared-distance scratch, used during a rebuild and released after it.
     scratch: Vec<f32>,
 }
 
@@ -116,6 +116,9 @@ impl Features {
                 }
             }
         }
+        // The scratch is the size of the searched window (the whole map on a full rebuild, 4
+        // bytes a cell): give it back rather than hold it per robot between rebuilds.
+        self.scratch = Vec::new();
         self.normalise(map);
     }
 

@@ -10,6 +10,9 @@
 //! particle alike. Costs are stored as u8 levels so that one plane of an
 //! 800 × 600 map is 480 kB and the per-particle loop stays in cache.
 
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex, Weak};
+
 use spomp_core::{AerialMap, ClassId, ClassTable, GridSpec, UNKNOWN_CLASS};
 use spomp_raster::SquaredEdt;
 
@@ -102,14 +105,84 @@ pub(crate) struct MatchField {
     pub metres_per_level: f32,
     /// Per slot, cost of a cell landing on unknown, metres.
     pub unknown_cost_m: Vec<f32>,
+    /// A second fingerprint of the class layer, with another seed: two fields are shared only
+    /// when both agree (a 128-bit check on contents).
+    check: u64,
+    /// The parameters the planes depend on.
+    inputs: FieldInputs,
+}
+
+/// The parameters a [`MatchField`] is built from (the others do not change its planes).
+#[derive(Clone, Debug, PartialEq)]
+struct FieldInputs {
+    ground_classes: Vec<String>,
+    class_weights: BTreeMap<String, f64>,
+    max_match_distance_m: f64,
+    unknown_cost_factor: f64,
+}
+
+impl FieldInputs {
+    fn of(params: &LocalizationParams) -> Self {
+        FieldInputs {
+            ground_classes: params.ground_classes.clone(),
+            class_weights: params.class_weights.clone(),
+            max_match_distance_m: params.max_match_distance_m,
+            unknown_cost_factor: params.unknown_cost_factor,
+        }
+    }
+}
+
+/// Seed of the second fingerprint.
+const CHECK_SEED: u64 = 0x243F_6A88_85A3_08D3;
+
+/// Every match field alive in the process, so that localizers (robots of a team, trials run
+/// side by side) holding the same map with the same parameters share one set of planes
+/// instead of each building and holding its own: with a prior map, a team of UGVs starts with
+/// one map, and a UAV's broadcast gives several robots the same version. A field is a pure
+/// function of the map, the class table and [`FieldInputs`], so sharing changes no result.
+static SHARED_FIELDS: Mutex<Vec<Weak<MatchField>>> = Mutex::new(Vec::new());
+
+/// The match field of a map: one already alive somewhere in the process that was built from
+/// the same placement, version, contents (two 64-bit fingerprints), class table and
+/// parameters, or a new one (then offered to the others).
+pub(crate) fn shared_field(
+    map: &AerialMap,
+    table: &ClassTable,
+    params: &LocalizationParams,
+    fingerprint: u64,
+) -> Result<Arc<MatchField>, LocalizationError> {
+    check_map(map)?;
+    let check = fingerprint_seeded(&map.class, CHECK_SEED);
+    let inputs = FieldInputs::of(params);
+    let lock = || SHARED_FIELDS.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    {
+        let mut shared = lock();
+        shared.retain(|w| w.strong_count() > 0);
+        let found = shared
+            .iter()
+            .filter_map(Weak::upgrade)
+            .find(|f| f.matches_fingerprint(map, table, fingerprint) && f.check == check && f.inputs == inputs);
+        if let Some(field) = found {
+            return Ok(field);
+        }
+    }
+    let field = Arc::new(MatchField::build_with_fingerprint(map, table, params, fingerprint)?);
+    lock().push(Arc::downgrade(&field));
+    Ok(field)
 }
 
 /// A fast fingerprint of the class layer, so that two maps with the same version number but
 /// different contents are told apart.
 pub(crate) fn fingerprint(classes: &[ClassId]) -> u64 {
+    fingerprint_seeded(classes, 0)
+}
+
+/// [`fingerprint`] with its lanes started from `seed` (0: [`fingerprint`] itself).
+fn fingerprint_seeded(classes: &[ClassId], seed: u64) -> u64 {
     const K: u64 = 0x9E37_79B9_7F4A_7C15;
     // Four independent lanes so the multiplies overlap: this runs on every update.
-    let mut lanes = [K ^ classes.len() as u64, K.rotate_left(16), K.rotate_left(32), K.rotate_left(48)];
+    let mut lanes =
+        [K ^ classes.len() as u64, K.rotate_left(16), K.rotate_left(32), K.rotate_left(48)].map(|l| l ^ seed);
     let mut blocks = classes.chunks_exact(32);
     for block in &mut blocks {
         for (lane, word) in lanes.iter_mut().zip(block.chunks_exact(8)) {
@@ -460,6 +533,8 @@ impl MatchField {
             cells_of_slot,
             metres_per_level: (params.max_match_distance_m / MAX_KNOWN_LEVEL as f64) as f32,
             unknown_cost_m,
+            check: fingerprint_seeded(&map.class, CHECK_SEED),
+            inputs: FieldInputs::of(params),
         })
     }
 

@@ -1,12 +1,14 @@
 //! The particle filter over (x, y, yaw) in the aerial map frame.
 
+use std::sync::Arc;
+
 use rand::Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 use spomp_core::{AerialMap, ClassTable, PanoramaFrame, Pose2, PoseEstimate, Time, normalize_angle};
 
 use crate::error::LocalizationError;
-use crate::field::{MatchField, UNKNOWN_COST_LEVEL, check_map, fingerprint};
+use crate::field::{MatchField, UNKNOWN_COST_LEVEL, check_map, fingerprint, shared_field};
 use crate::motion::OdometryMotion;
 use crate::observation::LocalObservation;
 use crate::params::{LocalizationParams, PosePrior};
@@ -59,6 +61,8 @@ pub struct UpdateReport {
     /// `still_rotation_rad`) and the map was the same: the view was not fused again (no
     /// reweighting, resampling or injection; the other fields are left at their defaults).
     pub repeated_view: bool,
+    /// Particles held after the update (KLD sampling adapts the count at each resampling).
+    pub particles: usize,
 }
 
 /// `ln(Σ exp(a_i))` of two terms, safe for −∞.
@@ -79,6 +83,8 @@ pub struct CrossViewLocalizer {
     particles: Vec<Particle>,
     weights: Vec<f64>,
     resample_buffer: Vec<Particle>,
+    /// KLD histogram bins of the particles being counted (scratch).
+    kld_bins: Vec<(i64, i64, i64)>,
     log_likelihoods: Vec<f64>,
     scores: Vec<PoseScore>,
     scorer: Scorer,
@@ -86,7 +92,9 @@ pub struct CrossViewLocalizer {
     candidate_scores: Vec<PoseScore>,
     candidate_order: Vec<usize>,
     order: Vec<usize>,
-    field: Option<MatchField>,
+    /// Cost planes of the current map, shared with every localizer in the process that holds
+    /// the same map with the same parameters.
+    field: Option<Arc<MatchField>>,
     /// Frame time at which `field` was built by an update (None: built outside an update).
     field_built_at: Option<Time>,
     /// Incremented whenever `field` is rebuilt.
@@ -120,6 +128,7 @@ impl CrossViewLocalizer {
             particles: Vec::new(),
             weights: Vec::new(),
             resample_buffer: Vec::new(),
+            kld_bins: Vec::new(),
             log_likelihoods: Vec::new(),
             scores: Vec::new(),
             scorer: Scorer::default(),
@@ -253,7 +262,10 @@ impl CrossViewLocalizer {
     }
 
     /// Builds (or reuses) the per-class cost planes of a map: rebuilt whenever the map's
-    /// placement, version or contents, or the class table, differ from the last build. Call it
+    /// placement, version or contents, or the class table, differ from the last build. Planes
+    /// another localizer in the process already holds for the same map, table and parameters
+    /// are shared (by `Arc`), not built again: robots with the same prior map hold one set.
+    /// Call it
     /// ahead of time to keep the cost out of an update, or to force a new map in at once;
     /// [`Self::update`] itself rebuilds for a new version of the same map at most every
     /// `map_rebuild_interval_s`.
@@ -265,7 +277,7 @@ impl CrossViewLocalizer {
         }
         self.field = None;
         self.field_built_at = None;
-        self.field = Some(MatchField::build_with_fingerprint(map, classes, &self.params, fingerprint)?);
+        self.field = Some(shared_field(map, classes, &self.params, fingerprint)?);
         self.field_generation += 1;
         Ok(())
     }
@@ -365,6 +377,7 @@ impl CrossViewLocalizer {
             let report = UpdateReport {
                 effective_sample_size: effective_sample_size(&self.weights),
                 repeated_view: true,
+                particles: self.particles.len(),
                 ..Default::default()
             };
             self.refresh_estimate();
@@ -409,6 +422,7 @@ impl CrossViewLocalizer {
         let total_weight = self.observation.total_weight;
         if self.observation.is_empty() || total_weight <= 0.0 {
             report.effective_sample_size = effective_sample_size(&self.weights);
+            report.particles = self.particles.len();
             self.refresh_estimate();
             self.last_report = report;
             return Ok(report);
@@ -474,11 +488,23 @@ impl CrossViewLocalizer {
             tracking = ratio_fast < self.params.relocalization_min_cost_ratio;
             if self.params.relocalization_enabled && !tracking {
                 let p_inject = (1.0 - (fast - slow).exp()).clamp(0.0, self.params.max_relocalization_fraction);
-                inject = (p_inject * self.particles.len() as f64).round() as usize;
+                inject = (p_inject * self.params.num_particles as f64).round() as usize;
             }
         }
 
         if inject > 0 {
+            // Lost: many particles. A set that KLD sampling shrank while tracking is first
+            // drawn back up to `num_particles` (the same posterior, uniform weights), so the
+            // injected poses join a full set rather than replacing most of a small one.
+            if self.particles.len() < self.params.num_particles {
+                let offset = rng.random::<f64>();
+                self.systematic_resample(self.params.num_particles, offset);
+                std::mem::swap(&mut self.particles, &mut self.resample_buffer);
+                let n = self.particles.len();
+                self.weights.clear();
+                self.weights.resize(n, 1.0 / n as f64);
+                report.resampled = true;
+            }
             report.injected = self.inject_candidates(inject, max_ll, mix, rng);
         }
 
@@ -487,6 +513,7 @@ impl CrossViewLocalizer {
             self.resample(rng);
             report.resampled = true;
         }
+        report.particles = self.particles.len();
         self.refresh_estimate();
         if tracking {
             self.last_tracked = Some((self.estimate.pose, frame.odom_pose));
@@ -576,27 +603,69 @@ impl CrossViewLocalizer {
         count
     }
 
-    /// Systematic (low-variance) resampling into the spare buffer; weights become uniform.
+    /// Systematic (low-variance) resampling; weights become uniform. With `kld_sampling`, the
+    /// new set's size follows the KLD bound (see [`kld_particle_bound`]) for the number of
+    /// histogram bins the posterior occupies, counted on a systematic draw of `num_particles`
+    /// (the largest set: it finds every bin of noticeable weight), then the set is drawn again
+    /// at that size with the same offset. One random number per resampling either way, so
+    /// with `kld_sampling` off the filter is the fixed-size filter it was.
     fn resample<R: Rng + ?Sized>(&mut self, rng: &mut R) {
+        if self.particles.is_empty() {
+            return;
+        }
+        let offset = rng.random::<f64>();
+        let n_max = self.params.num_particles;
+        self.systematic_resample(n_max, offset);
+        if self.params.kld_sampling {
+            let k = self.occupied_bins();
+            let wanted = kld_particle_bound(k, self.params.kld_error, self.params.kld_quantile_z);
+            let n = wanted.clamp(self.params.min_particles.min(n_max), n_max);
+            if n < n_max {
+                self.systematic_resample(n, offset);
+            }
+        }
+        std::mem::swap(&mut self.particles, &mut self.resample_buffer);
         let n = self.particles.len();
-        if n == 0 {
+        self.weights.clear();
+        self.weights.resize(n, 1.0 / n as f64);
+    }
+
+    /// Draws `n` particles systematically from the weighted set into the spare buffer, with
+    /// the first pointer at `offset · (1 / n)` (`offset` in [0, 1)).
+    fn systematic_resample(&mut self, n: usize, offset: f64) {
+        self.resample_buffer.clear();
+        let m = self.particles.len();
+        if m == 0 || n == 0 {
             return;
         }
         let step = 1.0 / n as f64;
-        let mut target = rng.random::<f64>() * step;
+        let mut target = offset * step;
         let mut cumulative = self.weights.first().copied().unwrap_or(0.0);
         let mut j = 0usize;
-        self.resample_buffer.clear();
         for _ in 0..n {
-            while target > cumulative && j + 1 < n {
+            while target > cumulative && j + 1 < m {
                 j += 1;
-                cumulative += self.weights[j];
+                cumulative += self.weights.get(j).copied().unwrap_or(0.0);
             }
             self.resample_buffer.push(self.particles[j]);
             target += step;
         }
-        std::mem::swap(&mut self.particles, &mut self.resample_buffer);
-        self.weights.iter_mut().for_each(|w| *w = step);
+    }
+
+    /// Number of distinct (x, y, yaw) KLD histogram bins among the particles in the spare
+    /// buffer.
+    fn occupied_bins(&mut self) -> usize {
+        let (bxy, byaw) = (self.params.kld_bin_xy_m, self.params.kld_bin_yaw_rad);
+        let bin = |v: f64, size: f64| (v / size).floor().clamp(-1e15, 1e15) as i64;
+        self.kld_bins.clear();
+        self.kld_bins.extend(
+            self.resample_buffer
+                .iter()
+                .map(|p| (bin(p.x, bxy), bin(p.y, bxy), bin(p.yaw.rem_euclid(std::f64::consts::TAU), byaw))),
+        );
+        self.kld_bins.sort_unstable();
+        self.kld_bins.dedup();
+        self.kld_bins.len()
     }
 
     fn refresh_estimate(&mut self) {
@@ -641,6 +710,22 @@ impl CrossViewLocalizer {
     pub fn pose_at_odometry(&self, odom: &spomp_core::Odometry) -> PoseEstimate {
         PoseEstimate { stamp: odom.stamp, ..self.pose_at(odom.pose) }
     }
+}
+
+/// Fox's KLD-sampling bound: the number of samples from a posterior occupying `k` histogram
+/// bins such that, with probability 1 − δ, the Kullback–Leibler divergence between the
+/// sample-based and the true (binned) posterior is at most `epsilon`, z = z₁₋δ — the
+/// Wilson–Hilferty approximation of the χ² quantile with k − 1 degrees of freedom:
+/// n = (k − 1) / (2ε) · (1 − 2/(9(k − 1)) + √(2/(9(k − 1))) · z)³. One bin needs one sample.
+pub(crate) fn kld_particle_bound(k: usize, epsilon: f64, z: f64) -> usize {
+    if k <= 1 {
+        return 1;
+    }
+    let dof = (k - 1) as f64;
+    let a = 2.0 / (9.0 * dof);
+    let x = 1.0 - a + a.sqrt() * z;
+    let n = (dof / (2.0 * epsilon) * x * x * x).ceil();
+    if n.is_finite() && n < usize::MAX as f64 { n as usize } else { usize::MAX }
 }
 
 fn check_pose(p: Pose2, what: &'static str) -> Result<(), LocalizationError> {
@@ -842,6 +927,65 @@ mod tests {
     }
 
     #[test]
+    fn kld_bound_follows_fox_formula() {
+        assert_eq!(kld_particle_bound(0, 0.05, 2.326), 1);
+        assert_eq!(kld_particle_bound(1, 0.05, 2.326), 1);
+        // k = 2: 1/(2·0.05) · (1 − 2/9 + √(2/9) · 2.326)³ = 10 · 1.87424³ = 65.84 → 66.
+        assert_eq!(kld_particle_bound(2, 0.05, 2.326), 66);
+        // k = 11: 10/0.1 · (1 − 0.02222 + 0.14907 · 2.326)³ = 100 · 1.32452³ = 232.4 → 233.
+        assert_eq!(kld_particle_bound(11, 0.05, 2.326), 233);
+        // AMCL's defaults (ε = 0.01, z = 0.99), k = 11: 500 · 1.12535³ = 712.6 → 713.
+        assert_eq!(kld_particle_bound(11, 0.01, 0.99), 713);
+        let mut previous = 0;
+        for k in 2..2000 {
+            let n = kld_particle_bound(k, 0.05, 2.326);
+            assert!(n > previous, "grows with the bins: k = {k}");
+            assert!(n >= k - 1 && n <= kld_particle_bound(k, 0.02, 2.326));
+            previous = n;
+        }
+    }
+
+    /// Resamples a filter whose particles stand at `spread(i)` with uniform weights.
+    fn resampled_count(params: LocalizationParams, spread: impl Fn(usize) -> Particle) -> usize {
+        let mut loc = CrossViewLocalizer::new(params).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(6);
+        loc.initialize(&PosePrior::default(), Pose2::default(), Time::ZERO, &mut rng).unwrap();
+        for (i, p) in loc.particles.iter_mut().enumerate() {
+            *p = spread(i);
+        }
+        loc.resample(&mut rng);
+        assert!(loc.weights.iter().all(|&w| (w - 1.0 / loc.particles.len() as f64).abs() < 1e-15));
+        loc.particles.len()
+    }
+
+    #[test]
+    fn kld_sampling_keeps_few_particles_on_a_tight_cloud_and_all_on_a_wide_one() {
+        let params = LocalizationParams { kld_sampling: true, ..LocalizationParams::default() };
+        let (n_max, n_min) = (params.num_particles, params.min_particles);
+        // Everything in one bin: the minimum.
+        let tight = |i: usize| Particle { x: 10.1 + 0.001 * (i % 7) as f64, y: 3.2, yaw: 0.05 };
+        assert_eq!(resampled_count(params.clone(), tight), n_min);
+        // Spread over 2 × 2 xy bins and 2 heading bins = 8 bins: the bound for 8 bins.
+        let grid = |i: usize| Particle {
+            x: 0.25 + 0.5 * (i % 2) as f64,
+            y: 0.25 + 0.5 * ((i / 2) % 2) as f64,
+            yaw: if (i / 4).is_multiple_of(2) { 0.05 } else { 0.25 },
+        };
+        let eight = kld_particle_bound(8, params.kld_error, params.kld_quantile_z);
+        assert!(eight > n_min && eight < n_max, "{eight}");
+        assert_eq!(resampled_count(params.clone(), grid), eight);
+        // Spread over the whole city: the maximum.
+        let wide = |i: usize| Particle { x: 3.0 * i as f64, y: -(i as f64), yaw: 0.01 * i as f64 };
+        assert_eq!(resampled_count(params.clone(), wide), n_max);
+        // Off: always the fixed count.
+        let fixed = LocalizationParams { kld_sampling: false, ..params.clone() };
+        assert_eq!(resampled_count(fixed, tight), n_max);
+        // A minimum above the maximum means the maximum.
+        let small = LocalizationParams { num_particles: 40, ..params };
+        assert_eq!(resampled_count(small, tight), 40);
+    }
+
+    #[test]
     fn pose_at_composes_the_odometry_since_the_anchor() {
         let params = LocalizationParams { num_particles: 50, ..Default::default() };
         let mut loc = CrossViewLocalizer::new(params).unwrap();
@@ -886,6 +1030,41 @@ mod tests {
         assert!(loc.field.as_ref().unwrap().matches(&moved, &table), "a new placement is used at once");
         loc.prepare_map(&map_a, &table).unwrap();
         assert!(loc.field.as_ref().unwrap().matches(&map_a, &table), "prepare_map always rebuilds");
+    }
+
+    #[test]
+    fn localizers_with_the_same_map_and_parameters_share_one_field() {
+        use spomp_core::{AerialMap, GridSpec, Point2};
+        // A map no other test uses (a different origin), so no field of another test is shared.
+        let spec = GridSpec::new(Point2::new(-7123.0, 411.0), 0.5, 40, 30);
+        let mut map = AerialMap::unknown(spec);
+        map.class.iter_mut().enumerate().for_each(|(i, c)| *c = [0, 3, 2][i % 7 % 3]);
+        let table = ClassTable::default_table();
+        let new = |params: LocalizationParams| {
+            let mut loc = CrossViewLocalizer::new(params).unwrap();
+            loc.prepare_map(&map, &table).unwrap();
+            loc
+        };
+        let field = |loc: &CrossViewLocalizer| loc.field.clone().unwrap();
+        let a = new(LocalizationParams::default());
+        let b = new(LocalizationParams { num_particles: 50, ..Default::default() });
+        assert!(Arc::ptr_eq(&field(&a), &field(&b)), "same map and planes parameters: one field");
+        let c = new(LocalizationParams { max_match_distance_m: 3.0, ..Default::default() });
+        assert!(!Arc::ptr_eq(&field(&a), &field(&c)), "other cost parameters: its own field");
+        let mut other = map.clone();
+        other.class[17] = 6;
+        let mut d = CrossViewLocalizer::new(LocalizationParams::default()).unwrap();
+        d.prepare_map(&other, &table).unwrap();
+        assert!(!Arc::ptr_eq(&field(&a), &field(&d)), "same version, other contents: its own field");
+        assert!(field(&d).matches(&other, &table));
+        // A shared field equals one built alone.
+        let alone = MatchField::build(&map, &table, &LocalizationParams::default()).unwrap();
+        assert_eq!(field(&a).planes, alone.planes);
+        assert_eq!(field(&a).unknown_cost_m, alone.unknown_cost_m);
+        // Once nobody holds it, it is gone: a new localizer builds it anew.
+        let weak = Arc::downgrade(&field(&a));
+        drop((a, b));
+        assert!(weak.upgrade().is_none());
     }
 
     #[test]

@@ -12,8 +12,31 @@ use crate::error::LocalizationError;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct LocalizationParams {
-    /// Number of particles.
+    /// Number of particles the filter starts with and, with `kld_sampling`, the most it ever
+    /// holds (it grows back to this many when lost).
     pub num_particles: usize,
+    /// KLD-adaptive particle counts (Fox, "Adapting the sample size in particle filters
+    /// through KLD-sampling", 2003; AMCL's rule): at each resampling the filter keeps just
+    /// enough particles that, with probability 1 − δ (`kld_quantile_z` is the upper 1 − δ
+    /// quantile of the standard normal), the Kullback–Leibler divergence between the sampled
+    /// and the true posterior stays under `kld_error`, counting the (x, y, yaw) bins of size
+    /// `kld_bin_xy_m` × `kld_bin_xy_m` × `kld_bin_yaw_rad` that the posterior occupies: few
+    /// particles while tracking (a few bins), up to `num_particles` when lost (many bins).
+    /// Off (the default until a 10-seed study shows the team mission no worse with it: seeds
+    /// 1–10 gave 142 clusters with it against 148 without, within noise but unproven): always
+    /// `num_particles`.
+    pub kld_sampling: bool,
+    /// Fewest particles kept with `kld_sampling` (a value above `num_particles` means
+    /// `num_particles`: no adaptation).
+    pub min_particles: usize,
+    /// ε of KLD sampling: the bound on the Kullback–Leibler divergence.
+    pub kld_error: f64,
+    /// z₁₋δ of KLD sampling: the upper 1 − δ quantile of the standard normal (2.326: δ = 0.01).
+    pub kld_quantile_z: f64,
+    /// Side of a KLD histogram bin in x and y, metres.
+    pub kld_bin_xy_m: f64,
+    /// Width of a KLD histogram bin in heading, radians.
+    pub kld_bin_yaw_rad: f64,
 
     /// Odometry model: standard deviation of each rotation per radian of that rotation (α1).
     pub rot_noise_rad_per_rad: f64,
@@ -145,6 +168,12 @@ impl Default for LocalizationParams {
     fn default() -> Self {
         LocalizationParams {
             num_particles: 300,
+            kld_sampling: false,
+            min_particles: 50,
+            kld_error: 0.15,
+            kld_quantile_z: 2.326,
+            kld_bin_xy_m: 0.5,
+            kld_bin_yaw_rad: 10f64.to_radians(),
             rot_noise_rad_per_rad: 0.05,
             rot_noise_rad_per_m: 0.01,
             trans_noise_m_per_m: 0.05,
@@ -189,6 +218,15 @@ impl LocalizationParams {
         let unit = |v: f64| v.is_finite() && (0.0..=1.0).contains(&v);
         if self.num_particles == 0 || self.num_particles > 1_000_000 {
             return bad("num_particles must be in 1..=1000000");
+        }
+        if self.min_particles == 0 {
+            return bad("min_particles must be at least 1");
+        }
+        if !positive(self.kld_error) || !positive(self.kld_quantile_z) {
+            return bad("kld_error and kld_quantile_z must be finite and > 0");
+        }
+        if !positive(self.kld_bin_xy_m) || !positive(self.kld_bin_yaw_rad) {
+            return bad("kld_bin_xy_m and kld_bin_yaw_rad must be finite and > 0");
         }
         if ![self.rot_noise_rad_per_rad, self.rot_noise_rad_per_m, self.trans_noise_m_per_m, self.trans_noise_m_per_rad]
             .into_iter()

@@ -88,7 +88,7 @@ fn tracks_a_100_m_loop_from_a_2_m_5_degree_prior_error() {
     let truth = loop_route(&block_loop(), 1.5, 1.0);
     assert!(truth.len() >= 70, "a loop of about 110 m at 1.5 m per panorama");
     let run = drive(
-        &LocalizationParams::default(),
+        &LocalizationParams { kld_sampling: true, ..Default::default() },
         &world.map,
         &world,
         &truth,
@@ -100,7 +100,12 @@ fn tracks_a_100_m_loop_from_a_2_m_5_degree_prior_error() {
     let max = run.filter_errors.iter().copied().fold(0.0, f64::max);
     let odo_med = median(run.odometry_errors.clone());
     let odo_final = *run.odometry_errors.last().unwrap();
+    let mut counts: Vec<usize> = run.reports.iter().map(|r| r.particles).collect();
+    counts.sort_unstable();
+    let median_count = counts[counts.len() / 2];
     eprintln!("filter median {med:.2} m, max {max:.2} m; odometry median {odo_med:.2} m, final {odo_final:.2} m");
+    eprintln!("particles: median {median_count}, range {:?}", (counts[0], counts[counts.len() - 1]));
+    assert!(median_count < 200, "KLD sampling keeps fewer than 300 particles while tracking");
     assert!(med < 2.0, "median error {med} m");
     assert!(max < 5.0, "max error {max} m");
     assert!(med < 0.5 * odo_med, "filter median {med} m vs odometry alone {odo_med} m");
@@ -143,7 +148,7 @@ fn recovers_from_a_30_m_kidnapping_within_60_s() {
     let jump = position_error(truth[kidnap_at - 1], truth[kidnap_at]);
     assert!(jump > 20.0, "the robot is carried off by {jump} m");
     let run = drive(
-        &LocalizationParams::default(),
+        &LocalizationParams { kld_sampling: true, ..Default::default() },
         &world.map,
         &world,
         &truth,
@@ -160,6 +165,13 @@ fn recovers_from_a_30_m_kidnapping_within_60_s() {
     };
     eprintln!("recovered {} updates after the kidnapping", k - kidnap_at);
     assert!(k - kidnap_at <= 60, "took {} updates", k - kidnap_at);
+    // KLD sampling: few particles while tracking, all of them while lost, few again after.
+    let counts: Vec<usize> = run.reports.iter().map(|r| r.particles).collect();
+    eprintln!("particles per update: {counts:?}");
+    let max = LocalizationParams::default().num_particles;
+    assert!(counts[kidnap_at - 3..kidnap_at].iter().all(|&n| n < max / 2), "tracking: {counts:?}");
+    assert!(counts[kidnap_at..k].contains(&max), "lost: back to {max} particles: {counts:?}");
+    assert!(counts.last().is_some_and(|&n| n < max / 2), "tracking again: {counts:?}");
 }
 
 /// Not part of the quick suite: the same scenarios over many seeds, to see the spread of
