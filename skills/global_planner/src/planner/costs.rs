@@ -1,0 +1,195 @@
+//! Edge costs: −log P summed along an edge from the learned traversability (MLP trained online
+//! on scan labels) or, with learning off, the class-rank cost; experience on top.
+
+#[allow(clippy::wildcard_imports)]
+use super::*;
+
+impl GlobalPlanner {
+    /// Cost of the cells sampled along a segment from the map alone.
+    pub(super) fn base_cost(&mut self, samples: &[u32]) -> f64 {
+        let Some(map) = &self.map else { return 0.0 };
+        if !self.params.learning.enabled {
+            return self.class_rank_cost(map, samples);
+        }
+        let channels = self.features.channels();
+        let mut feats = std::mem::take(&mut self.segment_features);
+        feats.clear();
+        for &s in samples {
+            feats.resize(feats.len() + channels, 0.0);
+            let start = feats.len() - channels;
+            if !self.features.fill(map, s as usize, &mut feats[start..]) {
+                feats.truncate(start);
+            }
+        }
+        let cost = self.learned_cost(&feats, samples.len());
+        self.segment_features = feats;
+        cost
+    }
+
+    /// Σ −log T over `n_samples` samples, of which the rows of `features` are the mapped ones:
+    /// the mean over mapped samples × `n_samples` (paper); −log 0.5 per sample when nothing is
+    /// mapped or the model is untrained.
+    pub(super) fn learned_cost(&mut self, features: &[f32], n_samples: usize) -> f64 {
+        let n = n_samples.max(1) as f64;
+        let channels = self.features.channels();
+        let known = features.len() / channels.max(1);
+        if !self.model.is_trained() || known == 0 {
+            return n * std::f64::consts::LN_2;
+        }
+        let floor = self.params.learning.probability_floor.clamp(1e-12, 0.5);
+        let mut sum = 0.0;
+        for row in features.chunks_exact(channels) {
+            let t = self.model.probability(row) as f64;
+            let t = if t.is_finite() { t.clamp(floor, 1.0) } else { floor };
+            sum -= t.ln();
+        }
+        sum / known as f64 * n
+    }
+
+    /// The learning-off ablation: W = 100^T_cls − 1 + D, T_cls the rank of the hardest class on
+    /// the edge, D the least distance from a sample to the next harder class present.
+    pub(super) fn class_rank_cost(&self, map: &AerialMap, samples: &[u32]) -> f64 {
+        let mut hardest: Option<u8> = None;
+        for &s in samples {
+            let c = map.class.get(s as usize).copied().unwrap_or(UNKNOWN_CLASS);
+            if c != UNKNOWN_CLASS {
+                let r = self.rank_of_class[c as usize];
+                hardest = Some(hardest.map_or(r, |h: u8| h.max(r)));
+            }
+        }
+        let t_cls = hardest.unwrap_or(self.params.graph.max_class_rank);
+        let next_rank = self.classes.classes.iter().map(|c| c.rank).filter(|&r| r > t_cls).min();
+        let mut d = self.params.learning.class_distance_cap_m;
+        if let Some(next) = next_rank {
+            for &s in samples {
+                for c in self.classes.classes.iter().filter(|c| c.rank == next) {
+                    d = d.min(self.features.class_distance_m(s as usize, c.index) as f64);
+                }
+            }
+        }
+        100f64.powi(t_cls as i32) - 1.0 + d
+    }
+
+    pub(super) fn experienced_cost(&self, base: f64, n_samples: usize, exp: &EdgeExperience) -> f64 {
+        let p = &self.params.experience;
+        let n = n_samples.max(1) as f64;
+        let nll = |prob: f64| -prob.clamp(1e-12, 1.0).ln();
+        match exp.state {
+            EdgeState::Unknown => base,
+            EdgeState::Trav => base.min(n * nll(p.trav_sample_probability)),
+            EdgeState::NotTrav => base + n * nll(p.not_trav_sample_probability),
+        }
+    }
+
+    /// Recomputes every edge's cost; `map_changed` also refreshes the cached sample features.
+    pub(super) fn refresh_all_costs(&mut self, map_changed: bool) {
+        let mut ids = std::mem::take(&mut self.edge_ids);
+        ids.clear();
+        ids.extend(self.graph.edge_indices());
+        let learning = self.params.learning.enabled;
+        for &e in &ids {
+            let Some(d) = self.graph.edge_weight_mut(e) else { continue };
+            let mut samples = std::mem::take(&mut d.samples);
+            let mut feats = std::mem::take(&mut d.features);
+            let base = if !learning {
+                self.base_cost(&samples)
+            } else {
+                if map_changed || (feats.is_empty() && !samples.is_empty()) {
+                    self.base_cost(&samples);
+                    std::mem::swap(&mut feats, &mut self.segment_features);
+                }
+                self.learned_cost(&feats, samples.len())
+            };
+            if let Some(d) = self.graph.edge_weight_mut(e) {
+                std::mem::swap(&mut d.samples, &mut samples);
+                std::mem::swap(&mut d.features, &mut feats);
+                d.base_cost = base;
+            }
+            self.refresh_edge_cost(e);
+        }
+        self.edge_ids = ids;
+        self.refresh_heuristic_rate();
+    }
+
+    pub(super) fn refresh_edge_cost(&mut self, e: EdgeIndex<u32>) {
+        let Some(d) = self.graph.edge_weight(e) else {
+            return;
+        };
+        let cost = self.experienced_cost(d.base_cost, d.samples.len(), &d.experience);
+        if let Some(d) = self.graph.edge_weight_mut(e) {
+            d.cost = cost;
+        }
+    }
+
+    /// Least cost per metre over all edges: A*'s heuristic rate, admissible by construction.
+    pub(super) fn refresh_heuristic_rate(&mut self) {
+        let mut rate = f64::INFINITY;
+        for d in self.graph.edge_weights() {
+            if d.length_m > 1e-9 {
+                rate = rate.min(d.cost / d.length_m);
+            } else {
+                rate = rate.min(0.0);
+            }
+        }
+        self.min_cost_per_m = if rate.is_finite() { rate.max(0.0) } else { 0.0 };
+    }
+
+    /// Runs a training round if learning is on, at least the training period passed since the
+    /// last round and enough cells are labelled; then refreshes every edge's cost.
+    pub fn train(&mut self, now: Time, rng: &mut impl Rng) -> TrainOutcome {
+        let l = &self.params.learning;
+        if !l.enabled {
+            return TrainOutcome::Disabled;
+        }
+        if let Some(last) = self.last_train
+            && now.secs_since(last) < l.train_period_s
+        {
+            return TrainOutcome::TooSoon;
+        }
+        let Some(map) = &self.map else {
+            return TrainOutcome::NotEnoughLabels { labels: 0 };
+        };
+        let channels = self.features.channels();
+        self.train_x.clear();
+        self.train_y.clear();
+        self.feature_scratch.resize(channels, 0.0);
+        for (cell, label) in self.votes.labels(l.votes_to_label) {
+            if self.features.fill(map, cell, &mut self.feature_scratch) {
+                self.train_x.extend_from_slice(&self.feature_scratch);
+                self.train_y.push(label);
+            }
+        }
+        let labels = self.train_y.len();
+        if labels < l.min_labels.max(1) {
+            return TrainOutcome::NotEnoughLabels { labels };
+        }
+        let settings = TrainSettings {
+            l2: l.l2_regularization as f32,
+            step_size: l.step_size as f32,
+            decay: l.rmsprop_decay as f32,
+            epsilon: l.rmsprop_epsilon as f32,
+            batch_size: l.batch_size.max(1),
+            samples: l.samples_per_round,
+        };
+        let loss = self.model.train(&self.train_x, &self.train_y, settings, rng);
+        self.last_train = Some(now);
+        self.training_rounds += 1;
+        self.refresh_all_costs(false);
+        TrainOutcome::Trained { labels, loss }
+    }
+
+    /// Learned probability that the cell under `p` is traversable (0.5 before training); `None`
+    /// off the map or on unmapped cells.
+    pub fn traversability_at(&mut self, p: Point2) -> Option<f64> {
+        if !(p.x.is_finite() && p.y.is_finite()) {
+            return None;
+        }
+        let map = self.map.as_ref()?;
+        let cell = map.spec.cell_at(p)?;
+        let i = map.spec.index(cell);
+        if !self.features.fill(map, i, &mut self.feature_scratch) {
+            return None;
+        }
+        Some(self.model.probability(&self.feature_scratch) as f64)
+    }
+}

@@ -1,0 +1,127 @@
+//! Experience from reachability scans: training labels (votes) and edge states
+//! (trav / not_trav / unk_trav) per the paper's rules.
+
+#[allow(clippy::wildcard_imports)]
+use super::*;
+
+impl GlobalPlanner {
+    /// Takes in a reachability scan: its cells vote for training labels, and (with graph updates
+    /// on) every edge near it is judged trav / not_trav / unk_trav. `own` is true for the robot's
+    /// own scans; other robots' scans can never remove an edge.
+    pub fn add_scan(&mut self, scan: &ReachabilityScan, own: bool) -> Result<ScanUpdate, ScanError> {
+        let mut region = std::mem::take(&mut self.region);
+        let loaded = region.load(scan, self.params.learning.max_scan_range_m);
+        let mut update = ScanUpdate::default();
+        if loaded.is_ok() && self.map.is_some() {
+            if self.params.learning.enabled {
+                update.cells_voted = self.vote(&region);
+            }
+            if self.params.experience.graph_updates {
+                self.judge_edges(&region, own, &mut update);
+            }
+        }
+        self.region = region;
+        loaded.map(|()| update)
+    }
+
+    pub(super) fn vote(&mut self, region: &StarRegion) -> usize {
+        let Some(map) = &self.map else { return 0 };
+        let spec = map.spec;
+        let res = spec.resolution_m;
+        let depth = self.params.learning.not_trav_depth_m.max(0.0);
+        let reach = region.max_range_m + depth;
+        let o = region.origin;
+        let c0 = ((o.x - reach - spec.origin.x) / res).floor().max(0.0) as i64;
+        let r0 = ((o.y - reach - spec.origin.y) / res).floor().max(0.0) as i64;
+        let c1 = (((o.x + reach - spec.origin.x) / res).ceil() as i64).min(spec.width as i64 - 1);
+        let r1 = (((o.y + reach - spec.origin.y) / res).ceil() as i64).min(spec.height as i64 - 1);
+        self.votes.begin_scan();
+        let n = region.range_m.len();
+        let mut voted = 0;
+        for row in r0..=r1 {
+            for col in c0..=c1 {
+                let cell = Cell::new(col as u32, row as u32);
+                let p = spec.center(cell);
+                let dist = p.distance(o);
+                if dist > reach {
+                    continue;
+                }
+                let label = if region.contains(p) {
+                    Some(true)
+                } else {
+                    let bin = (region.bin_position(p).round() as usize) % n;
+                    let r = region.range_m[bin];
+                    (region.obstacle[bin] && dist > r && dist <= r + depth).then_some(false)
+                };
+                if let Some(t) = label
+                    && self.votes.vote(spec.index(cell), t)
+                {
+                    voted += 1;
+                }
+            }
+        }
+        voted
+    }
+
+    pub(super) fn judge_edges(&mut self, region: &StarRegion, own: bool, update: &mut ScanUpdate) {
+        let x = &self.params.experience;
+        let judging = Judging {
+            window_rad: x.crossing_window_rad,
+            on_edge_radius_m: x.on_edge_radius_m,
+            min_crossing_range_m: x.min_crossing_range_m,
+        };
+        let mut changed = std::mem::take(&mut self.judged);
+        changed.clear();
+        let mut points = Vec::new();
+        for e in self.graph.edge_indices() {
+            if !self.edge_points(e, &mut points) {
+                continue;
+            }
+            if polyline_point_distance(&points, region.origin) > region.max_range_m {
+                continue;
+            }
+            let obs = region.classify_polyline(&points, &judging);
+            update.observed[match obs {
+                EdgeObservation::Trav => 0,
+                EdgeObservation::NotTrav => 1,
+                EdgeObservation::UnkTrav => 2,
+            }] += 1;
+            if obs != EdgeObservation::UnkTrav {
+                changed.push((e, obs));
+            }
+        }
+        let params = self.params.experience.clone();
+        for &(e, obs) in &changed {
+            let Some(d) = self.graph.edge_weight_mut(e) else {
+                continue;
+            };
+            // An edge routed through a passage the aerial elevation shows (a curb ramp) is
+            // marked, never removed, by the robot's own not_trav observations, as by other
+            // robots': seen from beside the passage, a scan's safe region ends at the corner of
+            // the curb, whatever the passage holds. Being stuck on it still blocks it for the
+            // robot (the navigation's own record).
+            let removable = own && d.via.is_empty();
+            match d.experience.observe(obs, removable, &params) {
+                Transition::None => {}
+                Transition::Changed => {
+                    update.edges_changed += 1;
+                    self.refresh_edge_cost(e);
+                }
+                Transition::Removed => {
+                    update.edges_changed += 1;
+                    update.edges_removed += 1;
+                    if let Some((a, b)) = self.graph.edge_endpoints(e) {
+                        let key = pair(a, b);
+                        self.removed_pairs.insert(key);
+                        self.edge_of_pair.remove(&key);
+                    }
+                    self.graph.remove_edge(e);
+                }
+            }
+        }
+        self.judged = changed;
+        if update.edges_changed > 0 {
+            self.refresh_heuristic_rate();
+        }
+    }
+}
