@@ -64,6 +64,14 @@ pub fn wall_seconds(text: &str) -> Result<f64, String> {
     }
 }
 
+/// A real-time factor: simulated seconds per wall second, finite, 0.01 to 1000.
+pub fn rate(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && (0.01..=1000.0).contains(&v) => Ok(v),
+        _ => Err(format!("expected a rate between 0.01 and 1000 (× real time), got `{text}`")),
+    }
+}
+
 /// A period in seconds: 0 (never) up to the longest mission duration.
 pub fn period(text: &str) -> Result<f64, String> {
     let v = text.trim().parse::<f64>().map_err(|_| format!("`{text}` is not a number of seconds"))?;

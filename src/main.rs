@@ -18,8 +18,10 @@ macro_rules! out {
 
 mod args;
 mod commands;
+mod farm_cmd;
 mod log_cmd;
 mod plan_cmd;
+mod run_cmd;
 mod sim_cmd;
 mod sim_plots;
 mod terrain_cmd;
@@ -63,6 +65,9 @@ enum Command {
     /// Run a mission in the built-in simulator: summary table, `summary.json`, `run.mcap` and
     /// plots per trial under the output folder.
     Sim(sim_cmd::SimArgs),
+    /// Run one robot of a mission over ROS 2: on a real robot, or driving a robot of
+    /// `spomp sim --ros2`.
+    Run(run_cmd::RunArgs),
     /// Print the JSON Schema of the mission language (for editors' YAML language servers).
     Schema,
     /// List the node types with their ports.
@@ -292,6 +297,7 @@ fn main() -> ExitCode {
         Command::Log { action: LogCommand::Check { log, json } } => log_cmd::check(&log, json),
         Command::Log { action: LogCommand::Recover { log, out, json } } => log_cmd::recover(&log, &out, json),
         Command::Sim(args) => sim_cmd::sim(&args),
+        Command::Run(args) => run_cmd::run(&args),
         Command::Schema => commands::schema(),
         Command::Nodes { json, markdown, name } => commands::nodes(json, markdown, name.as_deref()),
         Command::World { action } => run_world(action),

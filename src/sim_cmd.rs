@@ -74,6 +74,26 @@ pub struct SimArgs {
     /// (repeatable).
     #[arg(long = "allow-dir", value_name = "DIR")]
     pub allow_dirs: Vec<PathBuf>,
+    /// Run as a ROS 2 robot farm: publish the UGVs' sensors and `/clock` and take their
+    /// commands from `spomp run --use-sim-time` processes instead of ticking their trees.
+    #[arg(long)]
+    pub ros2: bool,
+    /// With --ros2: simulated seconds per wall second.
+    #[arg(long, default_value_t = 1.0, value_parser = crate::args::rate, requires = "ros2")]
+    pub rate: f64,
+    /// With --ros2: the DDS domain (default: the driven robots' `ros2.domain_id`).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(0..=232), requires = "ros2")]
+    pub domain_id: Option<u16>,
+    /// With --ros2: only this local address carries DDS discovery (repeatable).
+    #[arg(long = "interface", value_name = "IP", requires = "ros2")]
+    pub interfaces: Vec<std::net::IpAddr>,
+    /// With --ros2: drive only this robot over ROS 2 (repeatable; default every UGV).
+    #[arg(long, value_name = "ID", requires = "ros2")]
+    pub drive: Vec<String>,
+    /// With --ros2: wait this long for the `spomp run` processes before the clock starts,
+    /// seconds.
+    #[arg(long, default_value_t = 60.0, value_parser = crate::args::wall_seconds, requires = "ros2")]
+    pub wait_s: f64,
 }
 
 /// The combined summary of all trials.
@@ -132,6 +152,27 @@ pub fn sim(args: &SimArgs) -> Result<ExitCode> {
         if !mission.team.iter().any(|r| &r.id == robot) {
             let ids: Vec<&str> = mission.team.iter().map(|r| r.id.as_str()).collect();
             return usage(format!("--kill {robot}@…: no robot `{robot}` in the team; robots are: {}", ids.join(", ")));
+        }
+    }
+    if args.ros2 && trials > 1 {
+        return usage(format!("--ros2 runs one trial (the robots' processes drive one world); got {trials} trials"));
+    }
+    for robot in &args.drive {
+        match mission.team.iter().find(|r| &r.id == robot) {
+            None => {
+                let ids: Vec<&str> = mission.team.iter().map(|r| r.id.as_str()).collect();
+                return usage(format!(
+                    "--drive {robot}: no robot `{robot}` in the team; robots are: {}",
+                    ids.join(", ")
+                ));
+            }
+            Some(r) if r.kind != RobotKind::Ugv => {
+                return usage(format!(
+                    "--drive {robot}: only UGVs can be driven over ROS 2 (`{robot}` is a {})",
+                    r.kind
+                ));
+            }
+            Some(_) => {}
         }
     }
     if first_seed.checked_add(u64::from(trials) - 1).is_none() {
@@ -327,8 +368,21 @@ fn run_trial(
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
     let options = SimOptions { seed, time_limit_s: args.time_limit_s, faults: faults.clone(), ..SimOptions::default() };
-    let sim = Simulation::new(loaded, &spomp_robot::registry(), Arc::new(world), options)
+    let mut sim = Simulation::new(loaded, &spomp_robot::registry(), Arc::new(world), options)
         .with_context(|| format!("setting up `{}` (seed {seed})", mission.mission))?;
+    if args.ros2 {
+        let farm = crate::farm_cmd::FarmDrivers::new(
+            mission,
+            &crate::farm_cmd::FarmOptions {
+                rate: args.rate,
+                domain_id: args.domain_id,
+                interfaces: args.interfaces.clone(),
+                drive: args.drive.clone(),
+                wait_s: args.wait_s,
+            },
+        )?;
+        sim.drive_externally(Box::new(farm)).context("handing the robots to the farm")?;
+    }
     let mcap_path = trial_dir.join("run.mcap");
     let recorder = if args.no_mcap {
         None

@@ -135,6 +135,26 @@ impl Default for Covariance36 {
     }
 }
 
+impl<'de> Deserialize<'de> for Covariance36 {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visit;
+        impl<'de> serde::de::Visitor<'de> for Visit {
+            type Value = Covariance36;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("36 float64 values")
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Covariance36, A::Error> {
+                let mut out = [0.0; 36];
+                for (i, slot) in out.iter_mut().enumerate() {
+                    *slot = seq.next_element()?.ok_or_else(|| serde::de::Error::invalid_length(i, &self))?;
+                }
+                Ok(Covariance36(out))
+            }
+        }
+        d.deserialize_tuple(36, Visit)
+    }
+}
+
 impl Serialize for Covariance36 {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         let mut t = s.serialize_tuple(36)?;
@@ -146,7 +166,7 @@ impl Serialize for Covariance36 {
 }
 
 /// `geometry_msgs/PoseWithCovariance`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PoseWithCovariance {
     /// Pose.
     pub pose: Pose,
@@ -155,7 +175,7 @@ pub struct PoseWithCovariance {
 }
 
 /// `geometry_msgs/TwistWithCovariance`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct TwistWithCovariance {
     /// Twist.
     pub twist: Twist,
@@ -164,7 +184,7 @@ pub struct TwistWithCovariance {
 }
 
 /// `nav_msgs/Odometry`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Odometry {
     /// Header (frame of the pose).
     pub header: Header,
@@ -254,6 +274,247 @@ pub struct Log {
 pub struct StringMsg {
     /// Text.
     pub data: String,
+}
+
+/// `geometry_msgs/PoseWithCovarianceStamped`: the robot's pose estimate.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PoseWithCovarianceStamped {
+    /// Header (the map frame).
+    pub header: Header,
+    /// Pose and covariance.
+    pub pose: PoseWithCovariance,
+}
+
+/// `geometry_msgs/Transform`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Transform {
+    /// Translation.
+    pub translation: Vector3,
+    /// Rotation.
+    pub rotation: Quaternion,
+}
+
+/// `geometry_msgs/TransformStamped`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TransformStamped {
+    /// Header: the parent frame.
+    pub header: Header,
+    /// The child frame.
+    pub child_frame_id: String,
+    /// Child in parent.
+    pub transform: Transform,
+}
+
+/// `tf2_msgs/TFMessage`: what `/tf` carries.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TfMessage {
+    /// Transforms.
+    pub transforms: Vec<TransformStamped>,
+}
+
+/// `sensor_msgs/NavSatStatus`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct NavSatStatus {
+    /// -1 no fix, 0 fix, 1 SBAS fix, 2 GBAS fix.
+    pub status: i8,
+    /// Bit mask of the satellite systems used.
+    pub service: u16,
+}
+
+/// `sensor_msgs/NavSatFix`: a GNSS position.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct NavSatFix {
+    /// Header.
+    pub header: Header,
+    /// Fix status.
+    pub status: NavSatStatus,
+    /// Degrees, positive north.
+    pub latitude: f64,
+    /// Degrees, positive east.
+    pub longitude: f64,
+    /// Metres above the WGS 84 ellipsoid.
+    pub altitude: f64,
+    /// East-north-up covariance, m², row-major.
+    pub position_covariance: [f64; 9],
+    /// 0 unknown, 1 approximated, 2 diagonal known, 3 known.
+    pub position_covariance_type: u8,
+}
+
+/// `std_msgs/ColorRGBA`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ColorRgba {
+    /// Red, 0–1.
+    pub r: f32,
+    /// Green, 0–1.
+    pub g: f32,
+    /// Blue, 0–1.
+    pub b: f32,
+    /// Opacity, 0–1.
+    pub a: f32,
+}
+
+/// `builtin_interfaces/Duration`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RosDuration {
+    /// Seconds.
+    pub sec: i32,
+    /// Nanoseconds within the second.
+    pub nanosec: u32,
+}
+
+/// `sensor_msgs/CompressedImage` (only as a part of [`Marker`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CompressedImage {
+    /// Header.
+    pub header: Header,
+    /// `png`, `jpeg`, …
+    pub format: String,
+    /// Encoded image.
+    pub data: Vec<u8>,
+}
+
+/// `visualization_msgs/UVCoordinate`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct UvCoordinate {
+    /// u.
+    pub u: f32,
+    /// v.
+    pub v: f32,
+}
+
+/// `visualization_msgs/MeshFile`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MeshFile {
+    /// File name.
+    pub filename: String,
+    /// File contents.
+    pub data: Vec<u8>,
+}
+
+/// `visualization_msgs/Marker` (ROS 2 Humble and later layout): goals and claims.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Marker {
+    /// Header.
+    pub header: Header,
+    /// Namespace.
+    pub ns: String,
+    /// Id within the namespace.
+    pub id: i32,
+    /// Shape: 0 arrow, 1 cube, 2 sphere, 3 cylinder, 9 text, …
+    pub r#type: i32,
+    /// 0 add/modify, 2 delete, 3 delete all.
+    pub action: i32,
+    /// Pose.
+    pub pose: Pose,
+    /// Size, metres.
+    pub scale: Vector3,
+    /// Colour.
+    pub color: ColorRgba,
+    /// How long it stays (0 = forever).
+    pub lifetime: RosDuration,
+    /// Re-transform every frame.
+    pub frame_locked: bool,
+    /// Points (lines, point lists).
+    pub points: Vec<Vector3>,
+    /// Per-point colours.
+    pub colors: Vec<ColorRgba>,
+    /// Texture resource.
+    pub texture_resource: String,
+    /// Texture.
+    pub texture: CompressedImage,
+    /// Texture coordinates.
+    pub uv_coordinates: Vec<UvCoordinate>,
+    /// Text (text markers).
+    pub text: String,
+    /// Mesh resource.
+    pub mesh_resource: String,
+    /// Mesh file.
+    pub mesh_file: MeshFile,
+    /// Use the mesh's materials.
+    pub mesh_use_embedded_materials: bool,
+}
+
+/// `visualization_msgs/MarkerArray`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MarkerArray {
+    /// Markers.
+    pub markers: Vec<Marker>,
+}
+
+/// `diagnostic_msgs/KeyValue`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct KeyValue {
+    /// Key.
+    pub key: String,
+    /// Value.
+    pub value: String,
+}
+
+/// `diagnostic_msgs/DiagnosticStatus`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosticStatus {
+    /// 0 OK, 1 WARN, 2 ERROR, 3 STALE.
+    pub level: u8,
+    /// What is reported on.
+    pub name: String,
+    /// Summary.
+    pub message: String,
+    /// Hardware.
+    pub hardware_id: String,
+    /// Figures.
+    pub values: Vec<KeyValue>,
+}
+
+/// `diagnostic_msgs/DiagnosticArray`: the robot's health.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosticArray {
+    /// Header.
+    pub header: Header,
+    /// Statuses.
+    pub status: Vec<DiagnosticStatus>,
+}
+
+/// `std_msgs/Bool`: the e-stop.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct BoolMsg {
+    /// Value.
+    pub data: bool,
+}
+
+/// `rosgraph_msgs/Clock`: simulated time on `/clock`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Clock {
+    /// The time.
+    pub clock: RosTime,
+}
+
+/// `std_msgs/MultiArrayDimension`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MultiArrayDimension {
+    /// Label.
+    pub label: String,
+    /// Size.
+    pub size: u32,
+    /// Stride.
+    pub stride: u32,
+}
+
+/// `std_msgs/MultiArrayLayout`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MultiArrayLayout {
+    /// Dimensions.
+    pub dim: Vec<MultiArrayDimension>,
+    /// Offset of the first element.
+    pub data_offset: u32,
+}
+
+/// `std_msgs/UInt8MultiArray`: opaque bytes (team-state sync messages between robots).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct BytesMsg {
+    /// Layout (unused: one flat dimension).
+    pub layout: MultiArrayLayout,
+    /// Bytes.
+    pub data: Vec<u8>,
 }
 
 // ROS 2 interface definitions as `ros2msg` schemas expect them: the type's own fields, then
@@ -362,6 +623,94 @@ impl RosMessage for StringMsg {
     const DEFINITION: &'static str = "string data\n";
 }
 
+impl RosMessage for PoseWithCovarianceStamped {
+    const TYPE_NAME: &'static str = "geometry_msgs/msg/PoseWithCovarianceStamped";
+    const DEFINITION: &'static str = concat!(
+        "std_msgs/Header header\nPoseWithCovariance pose\n",
+        header_deps!(),
+        dependency!("geometry_msgs/PoseWithCovariance", "Pose pose\nfloat64[36] covariance\n"),
+        pose_deps!()
+    );
+}
+
+impl RosMessage for TfMessage {
+    const TYPE_NAME: &'static str = "tf2_msgs/msg/TFMessage";
+    const DEFINITION: &'static str = concat!(
+        "geometry_msgs/TransformStamped[] transforms\n",
+        dependency!(
+            "geometry_msgs/TransformStamped",
+            "std_msgs/Header header\nstring child_frame_id\nTransform transform\n"
+        ),
+        header_deps!(),
+        dependency!("geometry_msgs/Transform", "Vector3 translation\nQuaternion rotation\n"),
+        dependency!("geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n"),
+        dependency!("geometry_msgs/Quaternion", "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n")
+    );
+}
+
+impl RosMessage for NavSatFix {
+    const TYPE_NAME: &'static str = "sensor_msgs/msg/NavSatFix";
+    const DEFINITION: &'static str = concat!(
+        "std_msgs/Header header\nNavSatStatus status\nfloat64 latitude\nfloat64 longitude\nfloat64 altitude\nfloat64[9] position_covariance\nuint8 COVARIANCE_TYPE_UNKNOWN=0\nuint8 COVARIANCE_TYPE_APPROXIMATED=1\nuint8 COVARIANCE_TYPE_DIAGONAL_KNOWN=2\nuint8 COVARIANCE_TYPE_KNOWN=3\nuint8 position_covariance_type\n",
+        header_deps!(),
+        dependency!(
+            "sensor_msgs/NavSatStatus",
+            "int8 STATUS_NO_FIX=-1\nint8 STATUS_FIX=0\nint8 STATUS_SBAS_FIX=1\nint8 STATUS_GBAS_FIX=2\nint8 status\nuint16 SERVICE_GPS=1\nuint16 SERVICE_GLONASS=2\nuint16 SERVICE_COMPASS=4\nuint16 SERVICE_GALILEO=8\nuint16 service\n"
+        )
+    );
+}
+
+impl RosMessage for MarkerArray {
+    const TYPE_NAME: &'static str = "visualization_msgs/msg/MarkerArray";
+    const DEFINITION: &'static str = concat!(
+        "Marker[] markers\n",
+        dependency!(
+            "visualization_msgs/Marker",
+            "std_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\ngeometry_msgs/Pose pose\ngeometry_msgs/Vector3 scale\nstd_msgs/ColorRGBA color\nbuiltin_interfaces/Duration lifetime\nbool frame_locked\ngeometry_msgs/Point[] points\nstd_msgs/ColorRGBA[] colors\nstring texture_resource\nsensor_msgs/CompressedImage texture\nUVCoordinate[] uv_coordinates\nstring text\nstring mesh_resource\nMeshFile mesh_file\nbool mesh_use_embedded_materials\n"
+        ),
+        header_deps!(),
+        pose_deps!(),
+        dependency!("geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n"),
+        dependency!("std_msgs/ColorRGBA", "float32 r\nfloat32 g\nfloat32 b\nfloat32 a\n"),
+        dependency!("builtin_interfaces/Duration", "int32 sec\nuint32 nanosec\n"),
+        dependency!("sensor_msgs/CompressedImage", "std_msgs/Header header\nstring format\nuint8[] data\n"),
+        dependency!("visualization_msgs/UVCoordinate", "float32 u\nfloat32 v\n"),
+        dependency!("visualization_msgs/MeshFile", "string filename\nuint8[] data\n")
+    );
+}
+
+impl RosMessage for DiagnosticArray {
+    const TYPE_NAME: &'static str = "diagnostic_msgs/msg/DiagnosticArray";
+    const DEFINITION: &'static str = concat!(
+        "std_msgs/Header header\nDiagnosticStatus[] status\n",
+        header_deps!(),
+        dependency!(
+            "diagnostic_msgs/DiagnosticStatus",
+            "byte OK=0\nbyte WARN=1\nbyte ERROR=2\nbyte STALE=3\nbyte level\nstring name\nstring message\nstring hardware_id\nKeyValue[] values\n"
+        ),
+        dependency!("diagnostic_msgs/KeyValue", "string key\nstring value\n")
+    );
+}
+
+impl RosMessage for BoolMsg {
+    const TYPE_NAME: &'static str = "std_msgs/msg/Bool";
+    const DEFINITION: &'static str = "bool data\n";
+}
+
+impl RosMessage for Clock {
+    const TYPE_NAME: &'static str = "rosgraph_msgs/msg/Clock";
+    const DEFINITION: &'static str = concat!("builtin_interfaces/Time clock\n", time_dep!());
+}
+
+impl RosMessage for BytesMsg {
+    const TYPE_NAME: &'static str = "std_msgs/msg/UInt8MultiArray";
+    const DEFINITION: &'static str = concat!(
+        "MultiArrayLayout layout\nuint8[] data\n",
+        dependency!("std_msgs/MultiArrayLayout", "MultiArrayDimension[] dim\nuint32 data_offset\n"),
+        dependency!("std_msgs/MultiArrayDimension", "string label\nuint32 size\nuint32 stride\n")
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -374,7 +723,19 @@ mod tests {
 
     #[test]
     fn definitions_name_every_dependency_once() {
-        for def in [PoseStamped::DEFINITION, Odometry::DEFINITION, Path::DEFINITION, Image::DEFINITION] {
+        for def in [
+            PoseStamped::DEFINITION,
+            Odometry::DEFINITION,
+            Path::DEFINITION,
+            Image::DEFINITION,
+            PoseWithCovarianceStamped::DEFINITION,
+            TfMessage::DEFINITION,
+            NavSatFix::DEFINITION,
+            MarkerArray::DEFINITION,
+            DiagnosticArray::DEFINITION,
+            Clock::DEFINITION,
+            BytesMsg::DEFINITION,
+        ] {
             let deps: Vec<&str> = def.lines().filter_map(|l| l.strip_prefix("MSG: ")).collect();
             let mut sorted = deps.clone();
             sorted.sort();

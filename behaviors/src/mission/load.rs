@@ -567,6 +567,9 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, roots: &[PathBuf], di
         {
             bad(&["team", &idx, "localization"], "uncertainties and noise cannot be negative".into());
         }
+        if let Some(ros) = &r.ros2 {
+            check_ros2(ros, &idx, &mut bad);
+        }
     }
     if let Some(sim) = &m.sim {
         if let Some(super::schema::WorldSpec::Dir(dir)) = &sim.world
@@ -748,4 +751,106 @@ fn check_team(
             ));
         }
     }
+}
+
+/// Topic roles a robot's `ros2.topics` may rename (the ROS 2 adapter's inputs and outputs).
+pub const ROS2_TOPIC_ROLES: &[&str] = &[
+    "odom",
+    "panorama/depth",
+    "panorama/semantic",
+    "gps",
+    "pose_in",
+    "cmd_vel",
+    "setpoint",
+    "pose_estimate",
+    "path",
+    "goals",
+    "reachability",
+    "diagnostics",
+    "estop",
+    "team/in",
+    "team/out",
+];
+
+fn check_ros2(ros: &super::schema::Ros2Spec, idx: &str, bad: &mut impl FnMut(&[&str], String)) {
+    for (field, v) in [("odometry_timeout_s", ros.odometry_timeout_s), ("panorama_timeout_s", ros.panorama_timeout_s)] {
+        if !(v.is_finite() && v > 0.0 && v <= 3600.0) {
+            bad(&["team", idx, "ros2", field], format!("expected a time in (0, 3600] seconds, found {v}"));
+        }
+    }
+    if !(ros.panorama_v_fov_deg.is_finite() && ros.panorama_v_fov_deg > 0.0 && ros.panorama_v_fov_deg <= 180.0) {
+        bad(
+            &["team", idx, "ros2", "panorama_v_fov_deg"],
+            format!("expected (0, 180] degrees, found {}", ros.panorama_v_fov_deg),
+        );
+    }
+    if !(ros.sensor_height_m.is_finite() && (0.0..=100.0).contains(&ros.sensor_height_m)) {
+        bad(&["team", idx, "ros2", "sensor_height_m"], format!("expected 0..100 m, found {}", ros.sensor_height_m));
+    }
+    if let Some(scale) = ros.depth_scale_m
+        && !(scale.is_finite() && scale > 0.0 && scale <= 1.0)
+    {
+        bad(&["team", idx, "ros2", "depth_scale_m"], format!("expected metres per count in (0, 1], found {scale}"));
+    }
+    if let Some(o) = &ros.gps_origin {
+        if !(o.latitude_deg.is_finite() && o.latitude_deg.abs() <= 90.0) {
+            bad(
+                &["team", idx, "ros2", "gps_origin", "latitude_deg"],
+                format!("expected -90..90 degrees, found {}", o.latitude_deg),
+            );
+        }
+        if !(o.longitude_deg.is_finite() && o.longitude_deg.abs() <= 180.0) {
+            bad(
+                &["team", idx, "ros2", "gps_origin", "longitude_deg"],
+                format!("expected -180..180 degrees, found {}", o.longitude_deg),
+            );
+        }
+        if !o.altitude_m.is_finite() {
+            bad(
+                &["team", idx, "ros2", "gps_origin", "altitude_m"],
+                format!("expected a finite height, found {}", o.altitude_m),
+            );
+        }
+    }
+    for (i, addr) in ros.interfaces.iter().enumerate() {
+        if addr.parse::<std::net::IpAddr>().is_err() {
+            bad(
+                &["team", idx, "ros2", "interfaces", &i.to_string()],
+                format!("expected an IP address, found `{addr}`"),
+            );
+        }
+    }
+    for (role, name) in &ros.topics {
+        if !ROS2_TOPIC_ROLES.contains(&role.as_str()) {
+            bad(
+                &["team", idx, "ros2", "topics", role],
+                format!("unknown topic role `{role}`; roles are: {}", ROS2_TOPIC_ROLES.join(", ")),
+            );
+        } else if !valid_ros_name(name) {
+            bad(
+                &["team", idx, "ros2", "topics", role],
+                format!(
+                    "`{name}` is not a ROS 2 topic name (letters, digits, `_` and `/` separators, not starting with a digit)"
+                ),
+            );
+        }
+    }
+    if let Some(ns) = &ros.namespace
+        && !(ns.is_empty() || ns == "/" || valid_ros_name(ns))
+    {
+        bad(&["team", idx, "ros2", "namespace"], format!("`{ns}` is not a ROS 2 namespace"));
+    }
+}
+
+/// A ROS 2 topic or namespace name: `/`-separated tokens of letters, digits and `_`, no token
+/// starting with a digit, no empty token but an optional leading `/`.
+pub fn valid_ros_name(name: &str) -> bool {
+    let body = name.strip_prefix('/').unwrap_or(name);
+    !body.is_empty()
+        && body.split('/').all(|t| {
+            !t.is_empty()
+                && !t.starts_with(|c: char| c.is_ascii_digit())
+                && t.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+                && !t.contains("__")
+        })
 }

@@ -145,9 +145,87 @@ pub struct Ros2Spec {
     /// Topic namespace (default `/<id>`).
     #[serde(default)]
     pub namespace: Option<String>,
-    /// DDS domain id.
+    /// DDS domain id (`spomp run --domain-id` and `ROS_DOMAIN_ID` override it).
     #[serde(default)]
     pub domain_id: u16,
+    /// Topic names by role, replacing the defaults (`odom`, `panorama/depth`, `cmd_vel`, …; see
+    /// `docs/robots.md`); a name without a leading `/` is under the namespace.
+    #[serde(default)]
+    pub topics: std::collections::BTreeMap<String, String>,
+    /// Only these local IPv4 addresses carry DDS discovery and data (e.g. `[127.0.0.1]`); empty:
+    /// every interface.
+    #[serde(default)]
+    pub interfaces: Vec<String>,
+    /// Stop (zero velocity) when odometry is older than this, seconds.
+    #[serde(default = "default_odometry_timeout")]
+    pub odometry_timeout_s: f64,
+    /// Stop when the newest panorama is older than this, seconds.
+    #[serde(default = "default_panorama_timeout")]
+    pub panorama_timeout_s: f64,
+    /// Metres per count of a `16UC1`/`mono16` depth image (0 means no return).
+    #[serde(default)]
+    pub depth_scale_m: Option<f64>,
+    /// Vertical field of view of the panorama images, degrees (rows spread evenly over it,
+    /// centred on the horizon).
+    #[serde(default = "default_v_fov")]
+    pub panorama_v_fov_deg: f64,
+    /// Height of the panorama sensor above the ground, metres.
+    #[serde(default = "default_sensor_height")]
+    pub sensor_height_m: f64,
+    /// Take time from `/clock` (a simulator's) instead of the wall clock.
+    #[serde(default)]
+    pub use_sim_time: bool,
+    /// The GNSS reference: `sensor_msgs/NavSatFix` positions are converted to the map frame
+    /// (east = +x, north = +y) around this point. Without it, NavSatFix input is refused.
+    #[serde(default)]
+    pub gps_origin: Option<GpsOrigin>,
+}
+
+impl Default for Ros2Spec {
+    fn default() -> Self {
+        Ros2Spec {
+            namespace: None,
+            domain_id: 0,
+            topics: Default::default(),
+            interfaces: Vec::new(),
+            odometry_timeout_s: default_odometry_timeout(),
+            panorama_timeout_s: default_panorama_timeout(),
+            depth_scale_m: None,
+            panorama_v_fov_deg: default_v_fov(),
+            sensor_height_m: default_sensor_height(),
+            use_sim_time: false,
+            gps_origin: None,
+        }
+    }
+}
+
+/// A WGS 84 point: the map frame's origin for GNSS input.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GpsOrigin {
+    /// Degrees, positive north.
+    pub latitude_deg: f64,
+    /// Degrees, positive east.
+    pub longitude_deg: f64,
+    /// Metres above the ellipsoid (of the map frame's z = 0).
+    #[serde(default)]
+    pub altitude_m: f64,
+}
+
+fn default_odometry_timeout() -> f64 {
+    0.5
+}
+
+fn default_panorama_timeout() -> f64 {
+    3.0
+}
+
+fn default_v_fov() -> f64 {
+    90.0
+}
+
+fn default_sensor_height() -> f64 {
+    0.4
 }
 
 /// Goal sources and coordination limits.

@@ -16,7 +16,8 @@ use spomp_core::{GoalId, Point2, RobotId, Time};
 use crate::record::{GoalOrigin, Record, RecordBody, RecordKey};
 
 /// Status of a goal as the team sees it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum GoalStatus {
     /// Known, nobody heading there.
     Identified,
@@ -27,7 +28,7 @@ pub enum GoalStatus {
 }
 
 /// An active claim.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ClaimInfo {
     /// Claimant.
     pub robot: RobotId,
@@ -37,8 +38,9 @@ pub struct ClaimInfo {
     pub stamp: Time,
 }
 
-/// A goal as the team sees it, with its aliases merged in.
-#[derive(Clone, Debug, PartialEq)]
+/// A goal as the team sees it, with its aliases merged in (serialisable: a robot publishes its
+/// view for operators and the simulator farm).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GoalView {
     /// Canonical id (the earliest identified goal of the group).
     pub id: GoalId,

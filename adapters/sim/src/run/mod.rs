@@ -14,6 +14,7 @@
 //! Everything a run produces goes to a [`SimObserver`] (the CLI records it to MCAP) and into
 //! the [`RunSummary`].
 
+mod external;
 mod setup;
 mod summary;
 
@@ -34,6 +35,7 @@ use spomp_mapping::{CompressionParams, PngLevel};
 use spomp_robot::{PoseInput, Robot, RobotRuntime, RobotSetup};
 use spomp_teamstate::{GoalOrigin, Tier, TierSet};
 
+pub use external::{DrivenTeamMessage, ExternalDrivers};
 pub use setup::{faults_for_mission, operating_area, radio_for_mission, world_for_mission};
 pub use summary::{
     ClusterSummary, ErrorStats, GoalSummary, NavigationInForce, Outcome, ProblemCount, RobotSummary, RunSummary,
@@ -226,6 +228,8 @@ struct SimRobot {
     localization_error_series: Vec<(f64, f64)>,
     last_path_len: usize,
     trajectory: Vec<Point2>,
+    /// Driven from outside (see [`ExternalDrivers`]): its own `robot` is not ticked.
+    external: bool,
 }
 
 impl SimRobot {
@@ -295,6 +299,28 @@ pub struct Simulation {
     obstacles: Vec<Obstacle>,
     /// Scratch: the obstacles other than one robot's own body.
     others: Vec<Obstacle>,
+    /// What drives the robots driven from outside, if any are.
+    drivers: Option<Box<dyn ExternalDrivers>>,
+    /// Messages driven robots sent, waiting for the next radio period.
+    driven_outbox: Vec<DrivenTeamMessage>,
+}
+
+/// Claim bookkeeping for the "time heading to a goal" metric: events when the held goal
+/// changes, time accumulated on the one held.
+fn note_claim(r: &mut SimRobot, held: Option<GoalId>, now: Time, dt: f64, observer: &mut dyn SimObserver) {
+    let id = r.id.clone();
+    if held != r.held {
+        if let Some(old) = &r.held {
+            observer.on_event(now, &SimEvent::GoalReleased { goal: old.to_string(), by: id.to_string() });
+        }
+        if let Some(new) = &held {
+            observer.on_event(now, &SimEvent::GoalClaimed { goal: new.to_string(), by: id.to_string() });
+        }
+        r.held = held.clone();
+    }
+    if let Some(g) = held {
+        *r.claim_time_s.entry(g).or_insert(0.0) += dt;
+    }
 }
 
 /// Every UGV body but the `own`-th, into `out` (reused across steps).
@@ -402,6 +428,7 @@ impl Simulation {
                 localization_error_series: Vec::new(),
                 last_path_len: 0,
                 trajectory: vec![start.position()],
+                external: false,
             });
         }
         let time_limit_s = options.time_limit_s.unwrap_or(mission.time_limit_s);
@@ -431,7 +458,30 @@ impl Simulation {
             outcome: None,
             obstacles: Vec::new(),
             others: Vec::new(),
+            drivers: None,
+            driven_outbox: Vec::new(),
         })
+    }
+
+    /// Hands the robots `drivers` drives over to it (see [`ExternalDrivers`]). Only UGVs can be
+    /// driven from outside: a UAV's map building needs the camera tiles only the simulator
+    /// renders. Returns the ids now driven.
+    pub fn drive_externally(&mut self, drivers: Box<dyn ExternalDrivers>) -> Result<Vec<RobotId>, SimError> {
+        let mut driven = Vec::new();
+        for r in &mut self.robots {
+            if drivers.drives(&r.id) {
+                if r.kind != RobotKind::Ugv {
+                    return Err(SimError::invalid(
+                        "driven robot",
+                        format!("robot `{}` is a {}: only UGVs can be driven from outside the simulator", r.id, r.kind),
+                    ));
+                }
+                r.external = true;
+                driven.push(r.id.clone());
+            }
+        }
+        self.drivers = Some(drivers);
+        Ok(driven)
     }
 
     /// Simulated time now.
@@ -525,6 +575,10 @@ impl Simulation {
         self.now = Time::from_nanos(self.now.nanos + self.dt_ns);
         let now = self.now;
         let dt = self.options.dt_s;
+        if let Some(d) = self.drivers.as_mut() {
+            d.begin_step(now);
+            self.driven_outbox.extend(d.take_team_messages());
+        }
         self.apply_kills(observer);
         self.move_bodies(dt);
         self.sense(observer);
@@ -633,11 +687,25 @@ impl Simulation {
                     }
                     let odom = odometry.update(now, truth, ugv.twist());
                     observer.on_odometry(&r.id, &odom);
+                    let driver = self.drivers.as_mut().filter(|_| r.external);
+                    others_than(&self.obstacles, own, &mut self.others);
+                    if let Some(d) = driver {
+                        d.odometry(&r.id, &odom);
+                        if let Some(src) = truth_source.as_mut() {
+                            d.pose(&r.id, &src.estimate(now, truth), ugv.base_elevation_m() as f64);
+                        }
+                        if let Some(frame) =
+                            sensor.poll_among(now, world, truth, ugv.base_elevation_m(), odom.pose, &self.others)
+                        {
+                            observer.on_panorama(&r.id, &frame);
+                            d.panorama(&r.id, &frame);
+                        }
+                        continue;
+                    }
                     r.robot.on_odometry(odom);
                     if let Some(src) = truth_source.as_mut() {
                         r.robot.on_external_pose(src.estimate(now, truth));
                     }
-                    others_than(&self.obstacles, own, &mut self.others);
                     if let Some(frame) =
                         sensor.poll_among(now, world, truth, ugv.base_elevation_m(), odom.pose, &self.others)
                     {
@@ -723,18 +791,43 @@ impl Simulation {
                 let budget = credit.get(k).copied().unwrap_or(0);
                 let from = self.robots[a].id.clone();
                 let to = self.robots[b].id.clone();
-                // Over the wire: encoded, decoded and checked by the receiver.
-                let Some(bytes) =
-                    self.robots[a].robot.team_message_for(&to, tiers, usize::try_from(budget).unwrap_or(usize::MAX))
-                else {
-                    continue;
+                // Over the wire: encoded, decoded and checked by the receiver. A driven robot's
+                // messages were sent already; the link carries those it has room for (a small
+                // link, coordination only, cannot tell tiers apart in them: it carries none).
+                let messages: Vec<Vec<u8>> = if self.robots[a].external {
+                    let mut budget = if link.tier == LinkTier::All { budget } else { 0 };
+                    let mut out = Vec::new();
+                    self.driven_outbox.retain(|m| {
+                        if m.from != from || m.to != to {
+                            return true;
+                        }
+                        if (m.bytes.len() as u64) <= budget {
+                            budget -= m.bytes.len() as u64;
+                            out.push(m.bytes.clone());
+                        }
+                        false
+                    });
+                    out
+                } else {
+                    self.robots[a]
+                        .robot
+                        .team_message_for(&to, tiers, usize::try_from(budget).unwrap_or(usize::MAX))
+                        .into_iter()
+                        .collect()
                 };
-                if let Some(c) = credit.get_mut(k) {
-                    *c = c.saturating_sub(bytes.len() as u64);
+                for bytes in messages {
+                    if let Some(c) = credit.get_mut(k) {
+                        *c = c.saturating_sub(bytes.len() as u64);
+                    }
+                    match self.drivers.as_mut().filter(|_| self.robots[b].external) {
+                        Some(d) => d.deliver_team_message(&to, &from, &bytes),
+                        None => self.robots[b].robot.on_team_message(&from, &bytes),
+                    }
                 }
-                self.robots[b].robot.on_team_message(&from, &bytes);
             }
         }
+        // What driven robots sent over links that are down is lost, as on a radio.
+        self.driven_outbox.clear();
         self.link_credit = credit;
         self.last_sync = self.now;
         self.links = links;
@@ -746,6 +839,16 @@ impl Simulation {
         let mut recorder = Recorder::default();
         for r in &mut self.robots {
             if !r.alive() {
+                continue;
+            }
+            if r.external {
+                if let Some(d) = self.drivers.as_mut() {
+                    r.command = d.command(&r.id, now).unwrap_or(Twist2::ZERO);
+                    let id = r.id.clone();
+                    let held =
+                        d.goals(&id).iter().find(|g| g.visited.is_none() && g.is_held_by(&id)).map(|g| g.id.clone());
+                    note_claim(r, held, now, dt, observer);
+                }
                 continue;
             }
             if now >= r.next_tick {
@@ -793,18 +896,7 @@ impl Simulation {
                     .iter()
                     .find(|g| g.visited.is_none() && g.is_held_by(&id))
                     .map(|g| g.id.clone());
-                if held != r.held {
-                    if let Some(old) = &r.held {
-                        observer.on_event(now, &SimEvent::GoalReleased { goal: old.to_string(), by: id.to_string() });
-                    }
-                    if let Some(new) = &held {
-                        observer.on_event(now, &SimEvent::GoalClaimed { goal: new.to_string(), by: id.to_string() });
-                    }
-                    r.held = held.clone();
-                }
-                if let Some(g) = held {
-                    *r.claim_time_s.entry(g).or_insert(0.0) += dt;
-                }
+                note_claim(r, held, now, dt, observer);
             }
         }
     }
@@ -814,7 +906,15 @@ impl Simulation {
         let now = self.now;
         let mut own_visits = Vec::new();
         for (ri, r) in self.robots.iter().enumerate() {
-            for g in r.robot.team().goals() {
+            let reported;
+            let goals: &[spomp_teamstate::GoalView] = match self.drivers.as_ref().filter(|_| r.external) {
+                Some(d) => {
+                    reported = d.goals(&r.id);
+                    &reported
+                }
+                None => r.robot.team().goals(),
+            };
+            for g in goals {
                 for a in &g.aliases {
                     self.aliases.insert(a.clone(), g.id.clone());
                 }
@@ -985,9 +1085,10 @@ impl Simulation {
     fn check_end(&mut self, observer: &mut dyn SimObserver) {
         let done = match self.mission.complete_when {
             CompleteWhen::AllGoalsVisited => self.all_goals_visited(),
-            CompleteWhen::AllTreesDone => {
-                self.robots.iter().filter(|r| r.alive()).all(|r| r.robot.tree().status().is_done())
-            }
+            CompleteWhen::AllTreesDone => self.robots.iter().filter(|r| r.alive()).all(|r| match &self.drivers {
+                Some(d) if r.external => d.tree_done(&r.id),
+                _ => r.robot.tree().status().is_done(),
+            }),
             // Such a mission runs for its whole time limit: reaching it is its completion.
             CompleteWhen::TimeLimit => self.now >= self.time_limit,
         };

@@ -1,0 +1,431 @@
+//! Between spomp's types and the ROS 2 messages of [`spomp_core::ros`] (the recorder's own).
+//!
+//! Frames follow REP-105 with the robot id as prefix: `map`, `<id>/odom`, `<id>/base_link`,
+//! `<id>/lidar`; units follow REP-103 (metres, radians, x forward / east, z up).
+
+use std::sync::Arc;
+
+use spomp_core::panorama::range_to_count;
+use spomp_core::ros;
+use spomp_core::{
+    ClassId, DepthPanorama, FlightCommand, Odometry, PanoramaGeometry, Point2, Pose2, PoseEstimate, ReachabilityScan,
+    SemanticPanorama, Time, Twist2, UNKNOWN_CLASS,
+};
+
+use crate::clock::TimeBase;
+
+/// Why a message could not be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ConvertError {
+    /// An image whose encoding is not the one its topic carries.
+    #[error("{topic}: expected encoding {expected}, found `{found}`")]
+    Encoding {
+        /// Topic role.
+        topic: &'static str,
+        /// Accepted encodings.
+        expected: &'static str,
+        /// What arrived.
+        found: String,
+    },
+    /// An image whose size, step or data length disagree.
+    #[error("{topic}: {height}×{width} image with step {step} needs {needed} bytes, has {actual}")]
+    Size {
+        /// Topic role.
+        topic: &'static str,
+        /// Rows.
+        height: u32,
+        /// Columns.
+        width: u32,
+        /// Bytes per row.
+        step: u32,
+        /// Bytes needed.
+        needed: u64,
+        /// Bytes present.
+        actual: usize,
+    },
+    /// A value that is not finite or out of range.
+    #[error("{0}")]
+    Value(String),
+}
+
+/// Yaw of a quaternion (rotation about +z of its heading).
+pub fn yaw_of(q: &ros::Quaternion) -> f64 {
+    (2.0 * (q.w * q.z + q.x * q.y)).atan2(1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+}
+
+/// Robot odometry from `nav_msgs/Odometry` (pose in the odometry frame, twist in the body frame).
+pub fn odometry_from_ros(msg: &ros::Odometry, base: &TimeBase) -> Result<Odometry, ConvertError> {
+    let p = &msg.pose.pose;
+    let pose = Pose2::new(p.position.x, p.position.y, yaw_of(&p.orientation));
+    let twist = Twist2 { v: msg.twist.twist.linear.x, omega: msg.twist.twist.angular.z };
+    if ![pose.x, pose.y, pose.yaw, twist.v, twist.omega].iter().all(|v| v.is_finite()) {
+        return Err(ConvertError::Value("odometry: a pose or twist value is not finite".into()));
+    }
+    Ok(Odometry { stamp: base.to_robot(msg.header.stamp), pose, twist })
+}
+
+/// `nav_msgs/Odometry` from robot odometry.
+pub fn odometry_to_ros(robot: &str, odom: &Odometry, base: &TimeBase) -> ros::Odometry {
+    let mut msg = ros::Odometry {
+        header: ros::Header { stamp: base.to_ros(odom.stamp), frame_id: format!("{robot}/odom") },
+        child_frame_id: format!("{robot}/base_link"),
+        ..Default::default()
+    };
+    msg.pose.pose = ros::Pose::from_pose2(odom.pose, 0.0);
+    msg.twist.twist.linear.x = odom.twist.v;
+    msg.twist.twist.angular.z = odom.twist.omega;
+    msg
+}
+
+/// A velocity command as `geometry_msgs/Twist`.
+pub fn twist_to_ros(cmd: Twist2) -> ros::Twist {
+    let mut msg = ros::Twist::default();
+    msg.linear.x = cmd.v;
+    msg.angular.z = cmd.omega;
+    msg
+}
+
+/// A velocity command from `geometry_msgs/Twist` (non-finite values are refused).
+pub fn twist_from_ros(msg: &ros::Twist) -> Result<Twist2, ConvertError> {
+    let cmd = Twist2 { v: msg.linear.x, omega: msg.angular.z };
+    if cmd.v.is_finite() && cmd.omega.is_finite() {
+        Ok(cmd)
+    } else {
+        Err(ConvertError::Value("cmd_vel: not finite".into()))
+    }
+}
+
+/// A UAV position setpoint (`geometry_msgs/PoseStamped` in `map`, as a PX4/MAVROS offboard bridge
+/// takes it: x east, y north, z up), facing the direction of travel from `from`.
+pub fn setpoint_to_ros(cmd: &FlightCommand, from: Option<Point2>, stamp: Time, base: &TimeBase) -> ros::PoseStamped {
+    let yaw = from.map_or(0.0, |p| (cmd.target.y - p.y).atan2(cmd.target.x - p.x));
+    ros::PoseStamped {
+        header: ros::Header { stamp: base.to_ros(stamp), frame_id: "map".into() },
+        pose: ros::Pose::from_pose2(Pose2::new(cmd.target.x, cmd.target.y, yaw), cmd.altitude_m),
+    }
+}
+
+/// A map-frame pose input (`geometry_msgs/PoseStamped`: a UAV's local position, a surveyed
+/// pose, a simulator's truth) as a pose estimate.
+pub fn pose_from_ros(msg: &ros::PoseStamped, base: &TimeBase) -> Result<PoseEstimate, ConvertError> {
+    let p = &msg.pose;
+    let pose = Pose2::new(p.position.x, p.position.y, yaw_of(&p.orientation));
+    if ![pose.x, pose.y, pose.yaw].iter().all(|v| v.is_finite()) {
+        return Err(ConvertError::Value("pose input: not finite".into()));
+    }
+    Ok(PoseEstimate { stamp: base.to_robot(msg.header.stamp), pose, covariance: [0.0; 9], confidence: 1.0 })
+}
+
+/// A map-frame pose as `geometry_msgs/PoseStamped`.
+pub fn pose_to_ros(pose: Pose2, z: f64, stamp: Time, base: &TimeBase) -> ros::PoseStamped {
+    ros::PoseStamped {
+        header: ros::Header { stamp: base.to_ros(stamp), frame_id: "map".into() },
+        pose: ros::Pose::from_pose2(pose, z),
+    }
+}
+
+/// WGS 84 → local east-north on the tangent plane at the origin. Good to centimetres over the
+/// few kilometres of a mission area.
+pub fn gps_to_map(lat_deg: f64, lon_deg: f64, origin_lat_deg: f64, origin_lon_deg: f64) -> Point2 {
+    // WGS 84 radii of curvature at the origin's latitude.
+    const A: f64 = 6_378_137.0;
+    const E2: f64 = 6.694_379_990_14e-3;
+    let lat0 = origin_lat_deg.to_radians();
+    let s = lat0.sin();
+    let w = (1.0 - E2 * s * s).sqrt();
+    let meridian = A * (1.0 - E2) / (w * w * w);
+    let normal = A / w;
+    let d_lat = (lat_deg - origin_lat_deg).to_radians();
+    let mut d_lon = (lon_deg - origin_lon_deg).to_radians();
+    if d_lon > std::f64::consts::PI {
+        d_lon -= std::f64::consts::TAU;
+    } else if d_lon < -std::f64::consts::PI {
+        d_lon += std::f64::consts::TAU;
+    }
+    Point2::new(d_lon * normal * lat0.cos(), d_lat * meridian)
+}
+
+/// A GNSS fix as a position estimate (the heading is unknown: the estimate's yaw is 0 with an
+/// infinite variance). Fixes without a fix (status −1) or with non-finite values are refused.
+pub fn navsat_to_estimate(
+    msg: &ros::NavSatFix,
+    origin: (f64, f64),
+    base: &TimeBase,
+) -> Result<PoseEstimate, ConvertError> {
+    if msg.status.status < 0 {
+        return Err(ConvertError::Value("gps: no fix".into()));
+    }
+    if !(msg.latitude.is_finite() && msg.longitude.is_finite()) {
+        return Err(ConvertError::Value("gps: latitude or longitude not finite".into()));
+    }
+    let p = gps_to_map(msg.latitude, msg.longitude, origin.0, origin.1);
+    let var = |v: f64| if v.is_finite() && v > 0.0 { v } else { 1.0 };
+    let mut covariance = [0.0; 9];
+    covariance[0] = var(msg.position_covariance[0]);
+    covariance[4] = var(msg.position_covariance[4]);
+    covariance[8] = f64::INFINITY;
+    Ok(PoseEstimate {
+        stamp: base.to_robot(msg.header.stamp),
+        pose: Pose2::new(p.x, p.y, 0.0),
+        covariance,
+        confidence: 1.0,
+    })
+}
+
+/// Checks an image's shape: `bytes_per_pixel` per pixel, rows of `step` bytes.
+fn check_image(img: &ros::Image, topic: &'static str, bytes_per_pixel: u32) -> Result<(), ConvertError> {
+    let needed = u64::from(img.step) * u64::from(img.height);
+    let row_ok = u64::from(img.step) >= u64::from(img.width) * u64::from(bytes_per_pixel);
+    if !row_ok || (img.data.len() as u64) < needed || img.width == 0 || img.height == 0 {
+        return Err(ConvertError::Size {
+            topic,
+            height: img.height,
+            width: img.width,
+            step: img.step,
+            needed,
+            actual: img.data.len(),
+        });
+    }
+    Ok(())
+}
+
+/// A depth panorama from a `16UC1`/`mono16` image of range counts (`scale_m` metres per count,
+/// 0 = no return) or a `32FC1` image of metres.
+pub fn depth_from_ros(img: &ros::Image, v_fov_rad: f64, scale_m: f64) -> Result<DepthPanorama, ConvertError> {
+    let geometry = PanoramaGeometry { rows: img.height as usize, cols: img.width as usize, v_fov_rad };
+    let mut range_m = Vec::with_capacity(geometry.len());
+    match img.encoding.as_str() {
+        "16UC1" | "mono16" => {
+            check_image(img, "panorama/depth", 2)?;
+            for r in 0..geometry.rows {
+                let row = &img.data[r * img.step as usize..][..geometry.cols * 2];
+                for px in row.chunks_exact(2) {
+                    let bytes = [px[0], px[1]];
+                    let count =
+                        if img.is_bigendian != 0 { u16::from_be_bytes(bytes) } else { u16::from_le_bytes(bytes) };
+                    range_m.push((f64::from(count) * scale_m) as f32);
+                }
+            }
+        }
+        "32FC1" => {
+            check_image(img, "panorama/depth", 4)?;
+            for r in 0..geometry.rows {
+                let row = &img.data[r * img.step as usize..][..geometry.cols * 4];
+                for px in row.chunks_exact(4) {
+                    let bytes = [px[0], px[1], px[2], px[3]];
+                    let v = if img.is_bigendian != 0 { f32::from_be_bytes(bytes) } else { f32::from_le_bytes(bytes) };
+                    range_m.push(if v.is_finite() && v > 0.0 { v } else { 0.0 });
+                }
+            }
+        }
+        other => {
+            return Err(ConvertError::Encoding {
+                topic: "panorama/depth",
+                expected: "16UC1, mono16 or 32FC1",
+                found: other.into(),
+            });
+        }
+    }
+    Ok(DepthPanorama { geometry, range_m })
+}
+
+/// A depth panorama as a `mono16` image of range counts.
+pub fn depth_to_ros(robot: &str, depth: &DepthPanorama, scale_m: f64, stamp: Time, base: &TimeBase) -> ros::Image {
+    let g = depth.geometry;
+    let mut data = Vec::with_capacity(g.len() * 2);
+    for &m in &depth.range_m {
+        data.extend_from_slice(&range_to_count(m, scale_m).to_le_bytes());
+    }
+    ros::Image {
+        header: ros::Header { stamp: base.to_ros(stamp), frame_id: format!("{robot}/lidar") },
+        height: g.rows as u32,
+        width: g.cols as u32,
+        encoding: "mono16".into(),
+        is_bigendian: 0,
+        step: (g.cols * 2) as u32,
+        data,
+    }
+}
+
+/// Semantic labels from a `mono8`/`8UC1` image; labels beyond the class table become unknown.
+pub fn semantic_from_ros(img: &ros::Image, v_fov_rad: f64, classes: usize) -> Result<SemanticPanorama, ConvertError> {
+    if !matches!(img.encoding.as_str(), "mono8" | "8UC1") {
+        return Err(ConvertError::Encoding {
+            topic: "panorama/semantic",
+            expected: "mono8 or 8UC1",
+            found: img.encoding.clone(),
+        });
+    }
+    check_image(img, "panorama/semantic", 1)?;
+    let geometry = PanoramaGeometry { rows: img.height as usize, cols: img.width as usize, v_fov_rad };
+    let mut class: Vec<ClassId> = Vec::with_capacity(geometry.len());
+    for r in 0..geometry.rows {
+        let row = &img.data[r * img.step as usize..][..geometry.cols];
+        class.extend(row.iter().map(|&c| if (c as usize) < classes { c } else { UNKNOWN_CLASS }));
+    }
+    Ok(SemanticPanorama { geometry, class })
+}
+
+/// Semantic labels as a `mono8` image.
+pub fn semantic_to_ros(robot: &str, sem: &SemanticPanorama, stamp: Time, base: &TimeBase) -> ros::Image {
+    let g = sem.geometry;
+    ros::Image {
+        header: ros::Header { stamp: base.to_ros(stamp), frame_id: format!("{robot}/lidar") },
+        height: g.rows as u32,
+        width: g.cols as u32,
+        encoding: "mono8".into(),
+        is_bigendian: 0,
+        step: g.cols as u32,
+        data: sem.class.clone(),
+    }
+}
+
+/// The pose estimate as `geometry_msgs/PoseWithCovarianceStamped` in `map` (x, y, yaw
+/// variances placed in the 6 × 6 matrix; z, roll, pitch unknown).
+pub fn estimate_to_ros(est: &PoseEstimate, base: &TimeBase) -> ros::PoseWithCovarianceStamped {
+    let mut cov = [0.0; 36];
+    let map = [0usize, 1, 5];
+    for (i, &a) in map.iter().enumerate() {
+        for (j, &b) in map.iter().enumerate() {
+            cov[a * 6 + b] = est.covariance[i * 3 + j];
+        }
+    }
+    for k in [2usize, 3, 4] {
+        cov[k * 6 + k] = 1e6;
+    }
+    ros::PoseWithCovarianceStamped {
+        header: ros::Header { stamp: base.to_ros(est.stamp), frame_id: "map".into() },
+        pose: ros::PoseWithCovariance {
+            pose: ros::Pose::from_pose2(est.pose, 0.0),
+            covariance: ros::Covariance36(cov),
+        },
+    }
+}
+
+/// The `map → <id>/odom` transform that puts the odometry pose at the estimate:
+/// T(map←odom) = T(map←base) · T(odom←base)⁻¹.
+pub fn map_to_odom(robot: &str, estimate: Pose2, odom: Pose2, stamp: Time, base: &TimeBase) -> ros::TfMessage {
+    let yaw = estimate.yaw - odom.yaw;
+    let (s, c) = yaw.sin_cos();
+    let x = estimate.x - (c * odom.x - s * odom.y);
+    let y = estimate.y - (s * odom.x + c * odom.y);
+    ros::TfMessage {
+        transforms: vec![ros::TransformStamped {
+            header: ros::Header { stamp: base.to_ros(stamp), frame_id: "map".into() },
+            child_frame_id: format!("{robot}/odom"),
+            transform: ros::Transform {
+                translation: ros::Vector3 { x, y, z: 0.0 },
+                rotation: ros::Quaternion::from_yaw(yaw),
+            },
+        }],
+    }
+}
+
+/// A planned path as `nav_msgs/Path` in `map`.
+pub fn path_to_ros(points: &[Point2], stamp: Time, base: &TimeBase) -> ros::Path {
+    let header = ros::Header { stamp: base.to_ros(stamp), frame_id: "map".into() };
+    let poses = points
+        .iter()
+        .map(|p| ros::PoseStamped {
+            header: header.clone(),
+            pose: ros::Pose::from_pose2(Pose2::new(p.x, p.y, 0.0), 0.0),
+        })
+        .collect();
+    ros::Path { header, poses }
+}
+
+/// A reachability scan as `sensor_msgs/LaserScan` in `<id>/base_link` (bin i at angle −i·2π/N,
+/// intensity 1 where a known obstacle ends the bin) — the recorder's layout.
+pub fn scan_to_ros(scan: &ReachabilityScan, base: &TimeBase) -> ros::LaserScan {
+    let n = scan.bins().max(1);
+    let step = -(std::f64::consts::TAU / n as f64) as f32;
+    ros::LaserScan {
+        header: ros::Header { stamp: base.to_ros(scan.stamp), frame_id: format!("{}/base_link", scan.robot) },
+        angle_min: 0.0,
+        angle_max: step * (n as f32 - 1.0),
+        angle_increment: step,
+        time_increment: 0.0,
+        scan_time: 0.0,
+        range_min: 0.0,
+        range_max: scan.range_m.iter().copied().fold(0.0, f32::max),
+        ranges: scan.range_m.clone(),
+        intensities: scan.obstacle.iter().map(|&o| if o { 1.0 } else { 0.0 }).collect(),
+    }
+}
+
+/// One goal as the markers show it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GoalMarker {
+    /// Goal id, as text.
+    pub id: String,
+    /// Map position.
+    pub position: Point2,
+    /// Who holds it, if anyone.
+    pub claimed_by: Option<String>,
+    /// Who visited it, if anyone.
+    pub visited_by: Option<String>,
+}
+
+/// Goals and claims as `visualization_msgs/MarkerArray`: one cylinder per goal (grey open,
+/// orange claimed, green visited) and a text label with its id and holder. The first marker
+/// deletes all earlier ones, so goals that merged disappear.
+pub fn goals_to_ros(goals: &[GoalMarker], stamp: Time, base: &TimeBase) -> ros::MarkerArray {
+    let header = ros::Header { stamp: base.to_ros(stamp), frame_id: "map".into() };
+    let mut markers = vec![ros::Marker { header: header.clone(), ns: "goals".into(), action: 3, ..Default::default() }];
+    for (k, g) in goals.iter().enumerate() {
+        let color = match (&g.visited_by, &g.claimed_by) {
+            (Some(_), _) => ros::ColorRgba { r: 0.2, g: 0.8, b: 0.2, a: 0.9 },
+            (None, Some(_)) => ros::ColorRgba { r: 1.0, g: 0.6, b: 0.0, a: 0.9 },
+            (None, None) => ros::ColorRgba { r: 0.6, g: 0.6, b: 0.6, a: 0.9 },
+        };
+        let pose = ros::Pose::from_pose2(Pose2::new(g.position.x, g.position.y, 0.0), 1.0);
+        markers.push(ros::Marker {
+            header: header.clone(),
+            ns: "goals".into(),
+            id: k as i32,
+            r#type: 3,
+            pose,
+            scale: ros::Vector3 { x: 3.0, y: 3.0, z: 2.0 },
+            color,
+            ..Default::default()
+        });
+        let holder = g
+            .visited_by
+            .as_ref()
+            .map(|r| format!(" visited by {r}"))
+            .or_else(|| g.claimed_by.as_ref().map(|r| format!(" claimed by {r}")));
+        let mut text_pose = pose;
+        text_pose.position.z = 3.5;
+        markers.push(ros::Marker {
+            header: header.clone(),
+            ns: "goal_labels".into(),
+            id: k as i32,
+            r#type: 9,
+            pose: text_pose,
+            scale: ros::Vector3 { x: 0.0, y: 0.0, z: 1.5 },
+            color: ros::ColorRgba { r: 1.0, g: 1.0, b: 1.0, a: 1.0 },
+            text: format!("{}{}", g.id, holder.unwrap_or_default()),
+            ..Default::default()
+        });
+    }
+    ros::MarkerArray { markers }
+}
+
+/// Wraps a depth and a semantic panorama of one instant into a frame.
+pub fn frame(
+    seq: u64,
+    stamp: Time,
+    odom_pose: Pose2,
+    sensor_height_m: f64,
+    depth: DepthPanorama,
+    semantic: SemanticPanorama,
+) -> spomp_core::PanoramaFrame {
+    spomp_core::PanoramaFrame {
+        seq,
+        stamp,
+        odom_pose,
+        sensor_height_m,
+        depth: Arc::new(depth),
+        semantic: Arc::new(semantic),
+    }
+}

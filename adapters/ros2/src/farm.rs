@@ -1,0 +1,249 @@
+//! The simulator's side of a robot farm: it publishes the simulated robots' sensors and
+//! `/clock`, and takes their commands, team-state messages and mission status from the
+//! `spomp run` processes that drive them. Everything here is in spomp's types, so the simulator
+//! needs no ROS 2 knowledge (the CLI connects the two).
+
+use std::collections::VecDeque;
+
+use ros2_client::{Publisher, Subscription};
+use spomp_behaviors::mission::schema::Ros2Spec;
+use spomp_core::ros;
+use spomp_core::{FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, Time, Twist2};
+use spomp_teamstate::GoalView;
+
+use crate::clock::TimeBase;
+use crate::convert;
+use crate::dds::{DdsError, DdsNode, DdsSettings, sensor_qos, state_qos};
+use crate::run::MissionStatus;
+use crate::topics::{CLOCK_TOPIC, TopicNames};
+
+/// A team-state message one driven robot sent to another.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TeamPacket {
+    /// Sender.
+    pub from: String,
+    /// Addressee.
+    pub to: String,
+    /// The sync message, as encoded by the sender.
+    pub bytes: Vec<u8>,
+}
+
+/// What the farm knows of one driven robot.
+struct FarmRobot {
+    id: String,
+    odom: Publisher<ros::Odometry>,
+    depth: Publisher<ros::Image>,
+    semantic: Publisher<ros::Image>,
+    pose_in: Publisher<ros::PoseStamped>,
+    team_in: Publisher<ros::BytesMsg>,
+    cmd_vel: Subscription<ros::Twist>,
+    setpoint: Subscription<ros::PoseStamped>,
+    team_out: Subscription<ros::BytesMsg>,
+    status: Subscription<ros::StringMsg>,
+    depth_scale_m: f64,
+    /// Newest velocity command and the simulated time it arrived.
+    command: Option<(Twist2, Time)>,
+    /// Newest setpoint and the simulated time it arrived.
+    setpoint_cmd: Option<(FlightCommand, Time)>,
+    goals: Vec<GoalView>,
+    tree: String,
+}
+
+/// The ROS 2 link of a simulator whose robots are driven by `spomp run` processes.
+pub struct FarmLink {
+    robots: Vec<FarmRobot>,
+    clock: Publisher<ros::Clock>,
+    outbox: VecDeque<TeamPacket>,
+    malformed: u64,
+    // Entities before the node: they are dropped first.
+    _node: DdsNode,
+}
+
+/// A robot's command older than this (simulated time) is stale: the simulator stops the robot.
+pub const COMMAND_TIMEOUT_S: f64 = 0.5;
+
+impl FarmLink {
+    /// A link for `robots` (id and `ros2:` settings each) in `dds`'s domain.
+    pub fn new(dds: &DdsSettings, robots: &[(String, Option<Ros2Spec>)]) -> Result<Self, DdsError> {
+        let mut node = DdsNode::new(dds, "/", "spomp_sim")?;
+        let clock = node.publisher(CLOCK_TOPIC, &state_qos(1))?;
+        let mut out = Vec::new();
+        for (id, spec) in robots {
+            let t = TopicNames::resolve(id, spec.as_ref());
+            out.push(FarmRobot {
+                id: id.clone(),
+                odom: node.publisher(t.get("odom"), &state_qos(20))?,
+                depth: node.publisher(t.get("panorama/depth"), &state_qos(2))?,
+                semantic: node.publisher(t.get("panorama/semantic"), &state_qos(2))?,
+                pose_in: node.publisher(t.get("pose_in"), &state_qos(5))?,
+                team_in: node.publisher(t.get("team/in"), &state_qos(64))?,
+                cmd_vel: node.subscription(t.get("cmd_vel"), &sensor_qos(1))?,
+                setpoint: node.subscription(t.get("setpoint"), &sensor_qos(1))?,
+                team_out: node.subscription(t.get("team/out"), &sensor_qos(64))?,
+                status: node.subscription(&t.status(), &sensor_qos(1))?,
+                depth_scale_m: spec
+                    .as_ref()
+                    .and_then(|s| s.depth_scale_m)
+                    .unwrap_or(spomp_core::panorama::DEFAULT_RANGE_SCALE_M),
+                command: None,
+                setpoint_cmd: None,
+                goals: Vec::new(),
+                tree: String::new(),
+            });
+        }
+        Ok(FarmLink { robots: out, clock, outbox: VecDeque::new(), malformed: 0, _node: node })
+    }
+
+    fn robot(&self, id: &str) -> Option<&FarmRobot> {
+        self.robots.iter().find(|r| r.id == id)
+    }
+
+    /// Whether `id` is driven over this link.
+    pub fn drives(&self, id: &str) -> bool {
+        self.robot(id).is_some()
+    }
+
+    /// Publishes the simulated time.
+    pub fn publish_clock(&self, now: Time) {
+        let _ = self.clock.publish(ros::Clock { clock: now.into() });
+    }
+
+    /// Publishes a robot's odometry.
+    pub fn publish_odometry(&self, id: &str, odom: &Odometry) {
+        if let Some(r) = self.robot(id) {
+            let _ = r.odom.publish(convert::odometry_to_ros(id, odom, &TimeBase::SIMULATED));
+        }
+    }
+
+    /// Publishes a robot's panorama: depth (`mono16` counts) and labels (`mono8`), same stamp.
+    pub fn publish_panorama(&self, id: &str, frame: &PanoramaFrame) {
+        if let Some(r) = self.robot(id) {
+            let base = TimeBase::SIMULATED;
+            let _ = r.depth.publish(convert::depth_to_ros(id, &frame.depth, r.depth_scale_m, frame.stamp, &base));
+            let _ = r.semantic.publish(convert::semantic_to_ros(id, &frame.semantic, frame.stamp, &base));
+        }
+    }
+
+    /// Publishes a map-frame pose for a robot (a UAV's position, or truth where the mission
+    /// asks for it).
+    pub fn publish_pose(&self, id: &str, est: &PoseEstimate, z_m: f64) {
+        if let Some(r) = self.robot(id) {
+            let _ = r.pose_in.publish(convert::pose_to_ros(est.pose, z_m, est.stamp, &TimeBase::SIMULATED));
+        }
+    }
+
+    /// Takes everything the robots sent; `now` is the simulated time of arrival.
+    pub fn poll(&mut self, now: Time) {
+        for r in &mut self.robots {
+            loop {
+                match r.cmd_vel.take() {
+                    Ok(Some((msg, _))) => match convert::twist_from_ros(&msg) {
+                        Ok(cmd) => r.command = Some((cmd, now)),
+                        Err(_) => self.malformed += 1,
+                    },
+                    Ok(None) => break,
+                    Err(_) => self.malformed += 1,
+                }
+            }
+            loop {
+                match r.setpoint.take() {
+                    Ok(Some((msg, _))) => {
+                        let p = msg.pose.position;
+                        if [p.x, p.y, p.z].iter().all(|v| v.is_finite()) {
+                            let cmd = FlightCommand {
+                                target: Point2::new(p.x, p.y),
+                                altitude_m: p.z,
+                                speed_mps: f64::INFINITY,
+                            };
+                            r.setpoint_cmd = Some((cmd, now));
+                        } else {
+                            self.malformed += 1;
+                        }
+                    }
+                    Ok(None) => break,
+                    Err(_) => self.malformed += 1,
+                }
+            }
+            loop {
+                match r.team_out.take() {
+                    Ok(Some((msg, _))) => match msg.layout.dim.first() {
+                        Some(d) if !d.label.is_empty() => {
+                            self.outbox.push_back(TeamPacket {
+                                from: r.id.clone(),
+                                to: d.label.clone(),
+                                bytes: msg.data,
+                            });
+                        }
+                        _ => self.malformed += 1,
+                    },
+                    Ok(None) => break,
+                    Err(_) => self.malformed += 1,
+                }
+            }
+            loop {
+                match r.status.take() {
+                    Ok(Some((msg, _))) => match serde_json::from_str::<MissionStatus<'_>>(&msg.data) {
+                        Ok(status) if status.robot == r.id => {
+                            r.goals = status.goals;
+                            r.tree = status.tree;
+                        }
+                        _ => self.malformed += 1,
+                    },
+                    Ok(None) => break,
+                    Err(_) => self.malformed += 1,
+                }
+            }
+        }
+    }
+
+    /// The robot's velocity command if a fresh one arrived (within [`COMMAND_TIMEOUT_S`] of
+    /// `now`); `None` means stop.
+    pub fn command(&self, id: &str, now: Time) -> Option<Twist2> {
+        let (cmd, at) = self.robot(id)?.command?;
+        ((now.nanos - at.nanos) as f64 * 1e-9 <= COMMAND_TIMEOUT_S).then_some(cmd)
+    }
+
+    /// The robot's setpoint if a fresh one arrived; `None` means hover.
+    pub fn setpoint(&self, id: &str, now: Time) -> Option<FlightCommand> {
+        let (cmd, at) = self.robot(id)?.setpoint_cmd?;
+        ((now.nanos - at.nanos) as f64 * 1e-9 <= COMMAND_TIMEOUT_S).then_some(cmd)
+    }
+
+    /// Team-state messages sent since the last call, oldest first.
+    pub fn take_team_packets(&mut self) -> Vec<TeamPacket> {
+        self.outbox.drain(..).collect()
+    }
+
+    /// Delivers a team-state message to a driven robot.
+    pub fn deliver_team(&self, to: &str, from: &str, bytes: &[u8]) {
+        if let Some(r) = self.robot(to) {
+            let msg = ros::BytesMsg {
+                layout: ros::MultiArrayLayout {
+                    dim: vec![ros::MultiArrayDimension {
+                        label: from.to_string(),
+                        size: bytes.len() as u32,
+                        stride: bytes.len() as u32,
+                    }],
+                    data_offset: 0,
+                },
+                data: bytes.to_vec(),
+            };
+            let _ = r.team_in.publish(msg);
+        }
+    }
+
+    /// The goals as a driven robot last reported them.
+    pub fn goals(&self, id: &str) -> &[GoalView] {
+        self.robot(id).map_or(&[], |r| r.goals.as_slice())
+    }
+
+    /// The root status a driven robot last reported (`""` before its first report).
+    pub fn tree_status(&self, id: &str) -> &str {
+        self.robot(id).map_or("", |r| r.tree.as_str())
+    }
+
+    /// Messages that could not be used.
+    pub fn malformed(&self) -> u64 {
+        self.malformed
+    }
+}

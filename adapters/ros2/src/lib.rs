@@ -1,0 +1,31 @@
+//! `spomp-ros2`: a spomp robot over ROS 2, and the simulator as a ROS 2 robot farm.
+//!
+//! Built on `ros2-client` (RustDDS): no ROS installation is needed. The robot side
+//! ([`run::RobotNode`]) drives the same [`spomp_robot::Robot`] every adapter drives: it turns
+//! ROS 2 inputs (odometry, panorama images, a GNSS fix or a local pose, team-state bytes, an
+//! e-stop) into the robot's inputs, ticks it at its rate, and publishes its outputs (velocity
+//! commands or position setpoints, the pose estimate and `map → odom` on `/tf`, the path,
+//! goals and claims as markers, the reachability scan, node transitions on `/rosout`, health
+//! on `/diagnostics`), with watchdogs that stop the robot when its inputs go stale.
+//!
+//! The farm side ([`farm::FarmLink`]) is what a simulator needs to let separate `spomp run`
+//! processes drive its robots: it publishes their sensors and `/clock`, and takes their commands
+//! and team-state messages. This crate depends on no other adapter; the CLI wires them.
+
+pub mod clock;
+pub mod convert;
+pub mod dds;
+pub mod farm;
+
+pub mod pairing;
+pub mod run;
+pub mod settings;
+pub mod topics;
+
+pub use clock::TimeBase;
+pub use dds::{DdsError, DdsSettings};
+pub use farm::FarmLink;
+
+pub use run::{RobotNode, RunObserver, RunReport};
+pub use settings::{RunSettings, SettingsError};
+pub use topics::TopicNames;

@@ -1,0 +1,807 @@
+//! `spomp run`: one robot over ROS 2.
+//!
+//! One thread owns the [`Robot`]. Each pass of its loop takes what arrived (odometry, images,
+//! a position, team-state bytes, the e-stop, `/clock`), feeds it to the robot, ticks the robot
+//! when its period is due, and publishes what the robot wants done. Commands are published at
+//! the tick rate and are the safe ones whenever something is wrong: zero velocity (a UAV holds
+//! its position) while odometry or panoramas are stale, while the e-stop is engaged, and once at
+//! shutdown.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use ros2_client::{Publisher, Subscription};
+use serde::Serialize;
+use spomp_behaviors::trace::{Recorder, TransitionRecord};
+use spomp_core::ros;
+use spomp_core::{
+    FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, RobotKind, Time, Twist2,
+};
+use spomp_robot::Robot;
+use spomp_teamstate::TierSet;
+
+use crate::clock::{TimeBase, ros_nanos, wall_nanos};
+use crate::convert::{self, GoalMarker};
+use crate::dds::{DdsError, DdsNode, latched_qos, sensor_qos, state_qos};
+use crate::pairing::{OdometryHistory, PanoramaPairer};
+use crate::settings::RunSettings;
+use crate::topics::{CLOCK_TOPIC, ROSOUT_TOPIC, TF_TOPIC};
+
+/// What a run produced, for the CLI's recorder (`--record`) and tests. Every method has an
+/// empty default.
+pub trait RunObserver {
+    /// Odometry as the robot received it.
+    fn on_odometry(&mut self, _robot: &str, _odom: &Odometry) {}
+    /// A panorama as the robot received it.
+    fn on_panorama(&mut self, _robot: &str, _frame: &PanoramaFrame) {}
+    /// A pose input (GNSS, local position) as the robot received it.
+    fn on_external_pose(&mut self, _robot: &str, _estimate: &PoseEstimate) {}
+    /// Team-state bytes received from a peer.
+    fn on_team_in(&mut self, _robot: &str, _now: Time, _from: &str, _bytes: &[u8]) {}
+    /// Team-state bytes sent to a peer.
+    fn on_team_out(&mut self, _robot: &str, _now: Time, _to: &str, _bytes: &[u8]) {}
+    /// The velocity command published (UGV).
+    fn on_command(&mut self, _robot: &str, _now: Time, _cmd: Twist2) {}
+    /// The setpoint published (UAV).
+    fn on_flight(&mut self, _robot: &str, _now: Time, _cmd: Option<&FlightCommand>) {}
+    /// The pose estimate.
+    fn on_estimate(&mut self, _robot: &str, _estimate: &PoseEstimate) {}
+    /// Node transitions of one tick.
+    fn on_transitions(&mut self, _robot: &str, _records: &[TransitionRecord]) {}
+    /// A new reachability scan.
+    fn on_scan(&mut self, _scan: &ReachabilityScan) {}
+    /// A new planned path.
+    fn on_path(&mut self, _robot: &str, _now: Time, _path: &[Point2]) {}
+    /// A problem the robot met, or an input that was refused.
+    fn on_problem(&mut self, _robot: &str, _now: Time, _message: &str) {}
+}
+
+/// An observer that ignores everything.
+pub struct NoRunObserver;
+impl RunObserver for NoRunObserver {}
+
+/// Why the robot stopped itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopReason {
+    /// Nothing: driving.
+    None,
+    /// No odometry yet, or it is older than the limit.
+    OdometryStale,
+    /// No panorama yet, or the newest is older than the limit.
+    PanoramaStale,
+    /// The e-stop is engaged.
+    EStop,
+    /// `/clock` stopped advancing (use_sim_time).
+    ClockStalled,
+}
+
+/// Figures of a run (also published on `/diagnostics`).
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct RunReport {
+    /// Robot id.
+    pub robot: String,
+    /// Robot time at the end, seconds.
+    pub robot_time_s: f64,
+    /// Wall time of the loop, seconds.
+    pub wall_s: f64,
+    /// Tree ticks.
+    pub ticks: u64,
+    /// Ticks that started later than one period after they were due.
+    pub tick_overruns: u64,
+    /// Ticks per wall second, measured.
+    pub tick_rate_hz: f64,
+    /// Tree tick rate the role asks for.
+    pub target_tick_hz: f64,
+    /// Longest tick (maintain + tree), milliseconds.
+    pub max_tick_ms: f64,
+    /// Longest panorama processing (localization, terrain analysis), milliseconds.
+    pub max_panorama_ms: f64,
+    /// Odometry receipt → next command published, milliseconds: median.
+    pub odometry_to_command_p50_ms: f64,
+    /// Same, 99th percentile.
+    pub odometry_to_command_p99_ms: f64,
+    /// Panorama receipt → first command published after it was processed, milliseconds: median.
+    pub panorama_to_command_p50_ms: f64,
+    /// Same, 99th percentile.
+    pub panorama_to_command_p99_ms: f64,
+    /// Inputs received, by kind.
+    pub received: InputCounts,
+    /// Inputs refused (malformed), all kinds.
+    pub malformed_inputs: u64,
+    /// Inputs dropped (superseded before use, or no odometry at their stamp).
+    pub dropped_inputs: u64,
+    /// Commands published.
+    pub commands: u64,
+    /// Commands published as a safety stop.
+    pub safety_stops: u64,
+    /// Final status of the tree.
+    pub tree_status: String,
+}
+
+/// Inputs received, by kind.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct InputCounts {
+    /// Odometry messages.
+    pub odometry: u64,
+    /// Panoramas (depth + labels paired).
+    pub panoramas: u64,
+    /// Pose inputs.
+    pub poses: u64,
+    /// Team-state messages.
+    pub team: u64,
+    /// `/clock` messages.
+    pub clock: u64,
+}
+
+/// Why a run could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// DDS.
+    #[error(transparent)]
+    Dds(#[from] DdsError),
+}
+
+struct Inputs {
+    odom: Subscription<ros::Odometry>,
+    depth: Subscription<ros::Image>,
+    semantic: Subscription<ros::Image>,
+    gps: Subscription<ros::NavSatFix>,
+    pose_in: Subscription<ros::PoseStamped>,
+    estop: Subscription<ros::BoolMsg>,
+    team_in: Subscription<ros::BytesMsg>,
+    clock: Option<Subscription<ros::Clock>>,
+}
+
+struct Outputs {
+    cmd_vel: Publisher<ros::Twist>,
+    setpoint: Publisher<ros::PoseStamped>,
+    estimate: Publisher<ros::PoseWithCovarianceStamped>,
+    tf: Publisher<ros::TfMessage>,
+    path: Publisher<ros::Path>,
+    goals: Publisher<ros::MarkerArray>,
+    scan: Publisher<ros::LaserScan>,
+    rosout: Publisher<ros::Log>,
+    diagnostics: Publisher<ros::DiagnosticArray>,
+    team_out: Publisher<ros::BytesMsg>,
+    status: Publisher<ros::StringMsg>,
+}
+
+/// One robot on ROS 2.
+pub struct RobotNode {
+    robot: Robot,
+    settings: RunSettings,
+    peers: Vec<RobotId>,
+    // Entities before the node: they are dropped first.
+    inputs: Inputs,
+    outputs: Outputs,
+    _node: DdsNode,
+}
+
+/// Wall-clock budget of one pass when nothing arrives: the loop sleeps this long at most.
+const IDLE_SLEEP: Duration = Duration::from_millis(2);
+/// `/clock` not advancing for this long (wall) counts as a stalled simulator.
+const CLOCK_STALL: Duration = Duration::from_secs(2);
+/// Diagnostics, goal markers and mission status are published this often (robot time), seconds.
+const STATUS_PERIOD_S: f64 = 1.0;
+
+impl RobotNode {
+    /// Creates the ROS 2 node of `robot` with `settings`; `peers` are the other robots of the
+    /// team (team-state messages go to each of them).
+    pub fn new(robot: Robot, settings: RunSettings, peers: Vec<RobotId>) -> Result<Self, RunError> {
+        let mut node = DdsNode::new(&settings.dds, settings.topics.namespace(), "spomp")?;
+        let t = &settings.topics;
+        let inputs = Inputs {
+            odom: node.subscription(t.get("odom"), &sensor_qos(20))?,
+            depth: node.subscription(t.get("panorama/depth"), &sensor_qos(2))?,
+            semantic: node.subscription(t.get("panorama/semantic"), &sensor_qos(2))?,
+            gps: node.subscription(t.get("gps"), &sensor_qos(5))?,
+            pose_in: node.subscription(t.get("pose_in"), &sensor_qos(5))?,
+            estop: node.subscription(t.get("estop"), &sensor_qos(5))?,
+            team_in: node.subscription(t.get("team/in"), &sensor_qos(64))?,
+            clock: if settings.use_sim_time { Some(node.subscription(CLOCK_TOPIC, &sensor_qos(1))?) } else { None },
+        };
+        let outputs = Outputs {
+            cmd_vel: node.publisher(t.get("cmd_vel"), &state_qos(1))?,
+            setpoint: node.publisher(t.get("setpoint"), &state_qos(1))?,
+            estimate: node.publisher(t.get("pose_estimate"), &state_qos(1))?,
+            tf: node.publisher(TF_TOPIC, &state_qos(100))?,
+            path: node.publisher(t.get("path"), &latched_qos(1))?,
+            goals: node.publisher(t.get("goals"), &latched_qos(1))?,
+            scan: node.publisher(t.get("reachability"), &state_qos(1))?,
+            rosout: node.publisher(ROSOUT_TOPIC, &state_qos(1000))?,
+            diagnostics: node.publisher(t.get("diagnostics"), &state_qos(10))?,
+            team_out: node.publisher(t.get("team/out"), &state_qos(64))?,
+            status: node.publisher(&settings.topics.status(), &latched_qos(1))?,
+        };
+        Ok(RobotNode { robot, settings, peers, inputs, outputs, _node: node })
+    }
+
+    /// The robot.
+    pub fn robot(&self) -> &Robot {
+        &self.robot
+    }
+
+    /// Runs until `stop` is set (SIGINT/SIGTERM) or, when given, until robot time `until_s`;
+    /// publishes a safety stop before returning.
+    pub fn run(&mut self, stop: &AtomicBool, until_s: Option<f64>, observer: &mut dyn RunObserver) -> RunReport {
+        let mut state = LoopState::new(&self.settings, self.robot.tick_hz());
+        let started = Instant::now();
+        let id = self.robot.id().to_string();
+        let mut transitions = Recorder::default();
+        while !stop.load(Ordering::SeqCst) {
+            let got = self.take_inputs(&mut state, observer);
+            let Some(now) = state.now() else {
+                // use_sim_time and no /clock yet: nothing to time anything by.
+                std::thread::sleep(IDLE_SLEEP);
+                continue;
+            };
+            if until_s.is_some_and(|u| now.as_secs_f64() >= u) {
+                break;
+            }
+            if let Some(frame) = state.pending_frame(&self.settings) {
+                let t0 = Instant::now();
+                let frame = Arc::new(frame);
+                observer.on_panorama(&id, &frame);
+                self.robot.on_panorama(frame);
+                state.report.max_panorama_ms = state.report.max_panorama_ms.max(ms(t0.elapsed()));
+                state.panorama_processed = Some(state.panorama_rx.unwrap_or(t0));
+                self.publish_perception(&mut state, observer);
+            }
+            let stop_reason = state.stop_reason(now, &self.settings);
+            if stop_reason == StopReason::EStop && !state.halted {
+                self.robot.halt(now, Some(&mut transitions));
+                state.halted = true;
+            }
+            if now >= state.next_tick {
+                let tick_start = Instant::now();
+                let overrun = now.nanos - state.next_tick.nanos > state.period.nanos;
+                state.report.tick_overruns += u64::from(overrun && state.report.ticks > 0);
+                state.next_tick = if overrun { now } else { state.next_tick };
+                state.next_tick = Time::from_nanos(state.next_tick.nanos + state.period.nanos);
+                if stop_reason != StopReason::EStop {
+                    state.halted = false;
+                    self.robot.maintain(now);
+                    state.status = self.robot.tick(now, Some(&mut transitions));
+                    state.report.ticks += 1;
+                }
+                state.report.max_tick_ms = state.report.max_tick_ms.max(ms(tick_start.elapsed()));
+                self.publish_command(&mut state, now, stop_reason, observer);
+                self.publish_transitions(&mut transitions, observer);
+                for p in self.robot.take_problems() {
+                    observer.on_problem(&id, now, &p);
+                    state.last_problem = Some(p);
+                }
+                self.publish_state(&mut state, now, observer);
+            }
+            if now >= state.next_team {
+                state.next_team = Time::from_nanos(now.nanos + Time::from_secs_f64(self.settings.team_period_s).nanos);
+                self.send_team(now, observer);
+            }
+            if now >= state.next_status {
+                state.next_status = Time::from_nanos(now.nanos + Time::from_secs_f64(STATUS_PERIOD_S).nanos);
+                self.publish_status(&mut state, now, stop_reason, started.elapsed());
+            }
+            if !got {
+                std::thread::sleep(IDLE_SLEEP);
+            }
+        }
+        // Shutdown: one last safe command, whatever the state.
+        if let Some(now) = state.now() {
+            self.robot.halt(now, Some(&mut transitions));
+            self.publish_transitions(&mut transitions, observer);
+            self.publish_command(&mut state, now, StopReason::EStop, observer);
+            state.report.robot_time_s = now.as_secs_f64();
+        }
+        state.finish(&id, started.elapsed(), self.robot.tick_hz())
+    }
+
+    /// Takes every pending input; true if anything arrived.
+    fn take_inputs(&mut self, state: &mut LoopState, observer: &mut dyn RunObserver) -> bool {
+        let id = self.robot.id().to_string();
+        let mut got = false;
+        if let Some(clock) = &self.inputs.clock {
+            while let Ok(Some((msg, _))) = clock.take() {
+                got = true;
+                state.report.received.clock += 1;
+                let t = Time::from_nanos(ros_nanos(msg.clock));
+                if state.sim_now.is_none_or(|n| t > n) {
+                    state.sim_now = Some(t);
+                    state.clock_rx = Some(Instant::now());
+                }
+            }
+        }
+        let base = state.base;
+        while let Some(msg) = take(&self.inputs.odom, &mut state.report.malformed_inputs) {
+            got = true;
+            match convert::odometry_from_ros(&msg, &base) {
+                Ok(odom) => {
+                    state.report.received.odometry += 1;
+                    state.odom_rx = Some((state.now().unwrap_or(odom.stamp), Instant::now()));
+                    state.history.push(odom);
+                    observer.on_odometry(&id, &odom);
+                    self.robot.on_odometry(odom);
+                }
+                Err(e) => state.refuse(&id, observer, &e.to_string()),
+            }
+        }
+        while let Some(msg) = take(&self.inputs.depth, &mut state.report.malformed_inputs) {
+            got = true;
+            match convert::depth_from_ros(&msg, self.settings.v_fov_rad, self.settings.depth_scale_m) {
+                Ok(d) => {
+                    if let Some(pair) = state.pairer.push_depth(base.to_robot(msg.header.stamp), d) {
+                        state.set_pair(pair);
+                    }
+                }
+                Err(e) => state.refuse(&id, observer, &e.to_string()),
+            }
+        }
+        while let Some(msg) = take(&self.inputs.semantic, &mut state.report.malformed_inputs) {
+            got = true;
+            let classes = self.robot.runtime().classes().classes.len();
+            match convert::semantic_from_ros(&msg, self.settings.v_fov_rad, classes) {
+                Ok(s) => {
+                    if let Some(pair) = state.pairer.push_semantic(base.to_robot(msg.header.stamp), s) {
+                        state.set_pair(pair);
+                    }
+                }
+                Err(e) => state.refuse(&id, observer, &e.to_string()),
+            }
+        }
+        while let Some(msg) = take(&self.inputs.gps, &mut state.report.malformed_inputs) {
+            got = true;
+            let Some(origin) = self.settings.gps_origin else {
+                state.refuse(&id, observer, "gps: a NavSatFix arrived but the mission gives no ros2.gps_origin");
+                continue;
+            };
+            match convert::navsat_to_estimate(&msg, origin, &base) {
+                Ok(est) => self.external_pose(state, est, observer),
+                Err(e) => state.refuse(&id, observer, &e.to_string()),
+            }
+        }
+        while let Some(msg) = take(&self.inputs.pose_in, &mut state.report.malformed_inputs) {
+            got = true;
+            match convert::pose_from_ros(&msg, &base) {
+                Ok(est) => self.external_pose(state, est, observer),
+                Err(e) => state.refuse(&id, observer, &e.to_string()),
+            }
+        }
+        while let Some(msg) = take(&self.inputs.estop, &mut state.report.malformed_inputs) {
+            got = true;
+            if msg.data != state.estop {
+                let now = state.now().unwrap_or(Time::ZERO);
+                let what = if msg.data { "e-stop engaged: tree halted" } else { "e-stop released" };
+                observer.on_problem(&id, now, what);
+                self.log(now, if msg.data { 30 } else { 20 }, what.into());
+            }
+            state.estop = msg.data;
+        }
+        while let Some(msg) = take(&self.inputs.team_in, &mut state.report.malformed_inputs) {
+            got = true;
+            let Some(from) = msg.layout.dim.first().map(|d| d.label.clone()).filter(|f| !f.is_empty()) else {
+                state.refuse(&id, observer, "team/in: a message without its sender (layout.dim[0].label)");
+                continue;
+            };
+            state.report.received.team += 1;
+            let now = state.now().unwrap_or(Time::ZERO);
+            observer.on_team_in(&id, now, &from, &msg.data);
+            self.robot.on_team_message(&RobotId::new(&from), &msg.data);
+        }
+        got
+    }
+
+    fn external_pose(&mut self, state: &mut LoopState, est: PoseEstimate, observer: &mut dyn RunObserver) {
+        state.report.received.poses += 1;
+        observer.on_external_pose(self.robot.id().as_str(), &est);
+        self.robot.on_external_pose(est);
+    }
+
+    fn publish_command(
+        &mut self,
+        state: &mut LoopState,
+        now: Time,
+        reason: StopReason,
+        observer: &mut dyn RunObserver,
+    ) {
+        let id = self.robot.id().to_string();
+        let safe = reason != StopReason::None;
+        state.report.commands += 1;
+        state.report.safety_stops += u64::from(safe);
+        match self.robot.kind() {
+            RobotKind::Uav => {
+                let cmd = if safe { None } else { self.robot.flight() };
+                let here = self.robot.pose().map(|p| p.pose);
+                let msg = match (&cmd, here) {
+                    (Some(c), _) => Some(convert::setpoint_to_ros(c, here.map(|p| p.position()), now, &state.base)),
+                    // Hover: hold where it is (a setpoint stream must not stop in offboard mode).
+                    (None, Some(p)) => {
+                        let alt = state.last_altitude_m.unwrap_or(0.0);
+                        Some(convert::pose_to_ros(p, alt, now, &state.base))
+                    }
+                    (None, None) => None,
+                };
+                if let Some(c) = &cmd {
+                    state.last_altitude_m = Some(c.altitude_m);
+                }
+                if let Some(m) = msg {
+                    let _ = self.outputs.setpoint.publish(m);
+                }
+                observer.on_flight(&id, now, cmd.as_ref());
+            }
+            _ => {
+                let cmd = if safe { Twist2::ZERO } else { self.robot.command().unwrap_or(Twist2::ZERO) };
+                let _ = self.outputs.cmd_vel.publish(convert::twist_to_ros(cmd));
+                observer.on_command(&id, now, cmd);
+            }
+        }
+        let published = Instant::now();
+        if let Some((_, rx)) = state.odom_rx {
+            state.odom_latency.push(ms(published.duration_since(rx)));
+        }
+        if let Some(rx) = state.panorama_processed.take() {
+            state.panorama_latency.push(ms(published.duration_since(rx)));
+        }
+    }
+
+    fn publish_transitions(&mut self, transitions: &mut Recorder, observer: &mut dyn RunObserver) {
+        if transitions.records.is_empty() {
+            return;
+        }
+        let id = self.robot.id().to_string();
+        observer.on_transitions(&id, &transitions.records);
+        for r in &transitions.records {
+            let msg = ros::Log {
+                stamp: r.time.into(),
+                level: 20,
+                name: format!("{id}/{}", r.path),
+                msg: format!("{} -> {} (tick {}, node {})", r.from, r.to, r.tick, r.node_id),
+                ..Default::default()
+            };
+            let _ = self.outputs.rosout.publish(msg);
+        }
+        transitions.records.clear();
+    }
+
+    fn log(&self, now: Time, level: u8, msg: String) {
+        let _ = self.outputs.rosout.publish(ros::Log {
+            stamp: now.into(),
+            level,
+            name: self.robot.id().to_string(),
+            msg,
+            ..Default::default()
+        });
+    }
+
+    /// After a panorama: the scan.
+    fn publish_perception(&mut self, state: &mut LoopState, observer: &mut dyn RunObserver) {
+        if let Some(scan) = self.robot.latest_scan()
+            && state.last_scan != Some(scan.stamp)
+        {
+            state.last_scan = Some(scan.stamp);
+            observer.on_scan(scan);
+            let _ = self.outputs.scan.publish(convert::scan_to_ros(scan, &state.base));
+        }
+    }
+
+    /// After a tick: estimate and transform, path.
+    fn publish_state(&mut self, state: &mut LoopState, now: Time, observer: &mut dyn RunObserver) {
+        let id = self.robot.id().to_string();
+        if let Some(est) = self.robot.pose()
+            && state.last_estimate != Some(est.stamp)
+        {
+            state.last_estimate = Some(est.stamp);
+            observer.on_estimate(&id, &est);
+            let _ = self.outputs.estimate.publish(convert::estimate_to_ros(&est, &state.base));
+            if let Some(odom) = state.history.pose_at(est.stamp) {
+                let _ = self.outputs.tf.publish(convert::map_to_odom(&id, est.pose, odom, est.stamp, &state.base));
+            }
+        }
+        let path = self.robot.planned_path().unwrap_or(&[]);
+        if path.len() != state.last_path_len || path.first() != state.last_path_start.as_ref() {
+            state.last_path_len = path.len();
+            state.last_path_start = path.first().copied();
+            observer.on_path(&id, now, path);
+            let _ = self.outputs.path.publish(convert::path_to_ros(path, now, &state.base));
+        }
+    }
+
+    fn send_team(&mut self, now: Time, observer: &mut dyn RunObserver) {
+        let id = self.robot.id().to_string();
+        for peer in &self.peers {
+            let Some(bytes) = self.robot.team_message_for(peer, TierSet::ALL, self.settings.team_budget_bytes) else {
+                continue;
+            };
+            observer.on_team_out(&id, now, peer.as_str(), &bytes);
+            let msg = ros::BytesMsg {
+                layout: ros::MultiArrayLayout {
+                    dim: vec![ros::MultiArrayDimension {
+                        label: peer.to_string(),
+                        size: bytes.len() as u32,
+                        stride: bytes.len() as u32,
+                    }],
+                    data_offset: 0,
+                },
+                data: bytes,
+            };
+            let _ = self.outputs.team_out.publish(msg);
+        }
+    }
+
+    fn publish_status(&mut self, state: &mut LoopState, now: Time, reason: StopReason, wall: Duration) {
+        let id = self.robot.id().to_string();
+        let goals: Vec<GoalMarker> = self
+            .robot
+            .team()
+            .goals()
+            .iter()
+            .map(|g| GoalMarker {
+                id: g.id.to_string(),
+                position: g.position,
+                claimed_by: g.claimant.as_ref().map(|c| c.robot.to_string()),
+                visited_by: g.visited.as_ref().map(|(_, r)| r.to_string()),
+            })
+            .collect();
+        let _ = self.outputs.goals.publish(convert::goals_to_ros(&goals, now, &state.base));
+        let status = MissionStatus {
+            robot: &id,
+            time_s: now.as_secs_f64(),
+            tree: state.status.to_string(),
+            stop: reason,
+            goals: self.robot.team().goals().to_vec(),
+        };
+        if let Ok(data) = serde_json::to_string(&status) {
+            let _ = self.outputs.status.publish(ros::StringMsg { data });
+        }
+        let report = state.snapshot(&id, wall, self.robot.tick_hz());
+        let level = match reason {
+            StopReason::None if state.last_problem.is_none() => 0,
+            StopReason::None | StopReason::EStop => 1,
+            _ => 2,
+        };
+        let message = match reason {
+            StopReason::None => state.last_problem.take().unwrap_or_else(|| "running".into()),
+            other => format!("stopped: {}", serde_json::to_string(&other).unwrap_or_default().trim_matches('"')),
+        };
+        let mut values = vec![kv("tree", &report.tree_status)];
+        if let Ok(serde_json::Value::Object(fields)) = serde_json::to_value(&report) {
+            for (k, v) in fields {
+                if !matches!(k.as_str(), "robot" | "tree_status") {
+                    values.push(kv(&k, &v.to_string()));
+                }
+            }
+        }
+        let msg = ros::DiagnosticArray {
+            header: ros::Header { stamp: state.base.to_ros(now), frame_id: String::new() },
+            status: vec![ros::DiagnosticStatus {
+                level,
+                name: format!("spomp/{id}"),
+                message,
+                hardware_id: id.clone(),
+                values,
+            }],
+        };
+        let _ = self.outputs.diagnostics.publish(msg);
+    }
+}
+
+fn kv(key: &str, value: &str) -> ros::KeyValue {
+    ros::KeyValue { key: key.into(), value: value.into() }
+}
+
+/// The mission status a robot publishes (JSON on `<ns>/team/status`): its view of the team's
+/// goals, claims and visits — what an operator's console or the simulator farm reads.
+#[derive(Debug, Serialize, serde::Deserialize)]
+pub struct MissionStatus<'a> {
+    /// Robot id.
+    #[serde(borrow)]
+    pub robot: &'a str,
+    /// Robot time, seconds.
+    pub time_s: f64,
+    /// Root status of its tree.
+    pub tree: String,
+    /// Why it is stopped, if it is.
+    pub stop: StopReason,
+    /// Its view of the goals.
+    pub goals: Vec<spomp_teamstate::GoalView>,
+}
+
+/// Takes one message; a message that does not decode is counted and skipped.
+fn take<M: serde::de::DeserializeOwned + 'static>(sub: &Subscription<M>, malformed: &mut u64) -> Option<M> {
+    loop {
+        match sub.take() {
+            Ok(Some((msg, _))) => return Some(msg),
+            Ok(None) => return None,
+            Err(_) => *malformed += 1,
+        }
+    }
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+struct LoopState {
+    base: TimeBase,
+    use_sim_time: bool,
+    sim_now: Option<Time>,
+    clock_rx: Option<Instant>,
+    period: Time,
+    next_tick: Time,
+    next_team: Time,
+    next_status: Time,
+    status: spomp_behaviors::Status,
+    history: OdometryHistory,
+    pairer: PanoramaPairer,
+    pair: Option<crate::pairing::PanoramaPair>,
+    pair_seq: u64,
+    /// Robot time of the newest odometry's receipt, and its wall instant.
+    odom_rx: Option<(Time, Instant)>,
+    /// Robot time of the newest panorama's stamp.
+    panorama_stamp: Option<Time>,
+    panorama_rx: Option<Instant>,
+    panorama_processed: Option<Instant>,
+    estop: bool,
+    halted: bool,
+    last_altitude_m: Option<f64>,
+    last_scan: Option<Time>,
+    last_estimate: Option<Time>,
+    last_path_len: usize,
+    last_path_start: Option<Point2>,
+    last_problem: Option<String>,
+    odom_latency: VecDeque<f64>,
+    panorama_latency: VecDeque<f64>,
+    report: RunReport,
+}
+
+/// Latency samples kept for the percentiles.
+const LATENCY_SAMPLES: usize = 4096;
+
+trait PushBounded {
+    fn push(&mut self, v: f64);
+}
+impl PushBounded for VecDeque<f64> {
+    fn push(&mut self, v: f64) {
+        if self.len() == LATENCY_SAMPLES {
+            self.pop_front();
+        }
+        self.push_back(v);
+    }
+}
+
+impl LoopState {
+    fn new(settings: &RunSettings, tick_hz: f64) -> Self {
+        let base = if settings.use_sim_time { TimeBase::SIMULATED } else { TimeBase::wall_now() };
+        LoopState {
+            base,
+            use_sim_time: settings.use_sim_time,
+            sim_now: None,
+            clock_rx: None,
+            period: Time::from_secs_f64(1.0 / tick_hz),
+            next_tick: Time::ZERO,
+            next_team: Time::ZERO,
+            next_status: Time::ZERO,
+            status: spomp_behaviors::Status::Idle,
+            history: OdometryHistory::new(400),
+            pairer: PanoramaPairer::default(),
+            pair: None,
+            pair_seq: 0,
+            odom_rx: None,
+            panorama_stamp: None,
+            panorama_rx: None,
+            panorama_processed: None,
+            estop: false,
+            halted: false,
+            last_altitude_m: None,
+            last_scan: None,
+            last_estimate: None,
+            last_path_len: 0,
+            last_path_start: None,
+            last_problem: None,
+            odom_latency: VecDeque::new(),
+            panorama_latency: VecDeque::new(),
+            report: RunReport::default(),
+        }
+    }
+
+    /// Robot time now: `/clock`'s, or the wall clock's since the start.
+    fn now(&self) -> Option<Time> {
+        if self.use_sim_time { self.sim_now } else { Some(Time::from_nanos(wall_nanos() - self.base.epoch_nanos())) }
+    }
+
+    fn refuse(&mut self, robot: &str, observer: &mut dyn RunObserver, why: &str) {
+        self.report.malformed_inputs += 1;
+        observer.on_problem(robot, self.now().unwrap_or(Time::ZERO), why);
+        self.last_problem = Some(why.to_string());
+    }
+
+    fn set_pair(&mut self, pair: crate::pairing::PanoramaPair) {
+        if self.pair.replace(pair).is_some() {
+            self.report.dropped_inputs += 1;
+        }
+        self.panorama_rx = Some(Instant::now());
+    }
+
+    /// The paired panorama once odometry reaches its stamp.
+    fn pending_frame(&mut self, settings: &RunSettings) -> Option<PanoramaFrame> {
+        let stamp = self.pair.as_ref()?.0;
+        let odom_pose = match self.history.pose_at(stamp) {
+            Some(p) => p,
+            None => {
+                // Odometry has not reached the stamp yet: wait, unless it is already past it
+                // (then the panorama is older than the history and can never be placed).
+                if self.history.latest().is_some_and(|o| o.stamp > stamp) {
+                    self.pair = None;
+                    self.report.dropped_inputs += 1;
+                }
+                return None;
+            }
+        };
+        let (t, depth, semantic) = self.pair.take()?;
+        self.pair_seq += 1;
+        self.panorama_stamp = Some(t);
+        self.report.received.panoramas += 1;
+        Some(convert::frame(self.pair_seq, t, odom_pose, settings.sensor_height_m, depth, semantic))
+    }
+
+    fn stop_reason(&self, now: Time, settings: &RunSettings) -> StopReason {
+        if self.estop {
+            return StopReason::EStop;
+        }
+        if self.use_sim_time && self.clock_rx.is_none_or(|rx| rx.elapsed() > CLOCK_STALL) {
+            return StopReason::ClockStalled;
+        }
+        let age = |t: Time| (now.nanos - t.nanos) as f64 * 1e-9;
+        match self.odom_rx {
+            Some((t, _)) if age(t) <= settings.odometry_timeout_s => {}
+            _ => return StopReason::OdometryStale,
+        }
+        match self.panorama_stamp {
+            Some(t) if age(t) <= settings.panorama_timeout_s => StopReason::None,
+            _ => StopReason::PanoramaStale,
+        }
+    }
+
+    fn snapshot(&self, robot: &str, wall: Duration, tick_hz: f64) -> RunReport {
+        let mut r = self.report.clone();
+        r.robot = robot.to_string();
+        r.wall_s = wall.as_secs_f64();
+        r.target_tick_hz = tick_hz;
+        r.tick_rate_hz = if r.wall_s > 0.0 { r.ticks as f64 / r.wall_s } else { 0.0 };
+        r.dropped_inputs += self.pairer.dropped();
+        r.tree_status = self.status.to_string();
+        r.robot_time_s = self.now().map_or(0.0, |t| t.as_secs_f64());
+        (r.odometry_to_command_p50_ms, r.odometry_to_command_p99_ms) = percentiles(&self.odom_latency);
+        (r.panorama_to_command_p50_ms, r.panorama_to_command_p99_ms) = percentiles(&self.panorama_latency);
+        r
+    }
+
+    fn finish(self, robot: &str, wall: Duration, tick_hz: f64) -> RunReport {
+        self.snapshot(robot, wall, tick_hz)
+    }
+}
+
+/// Median and 99th percentile.
+fn percentiles(samples: &VecDeque<f64>) -> (f64, f64) {
+    if samples.is_empty() {
+        return (0.0, 0.0);
+    }
+    let mut v: Vec<f64> = samples.iter().copied().collect();
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    (at(0.5), at(0.99))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_of_a_known_series() {
+        let s: VecDeque<f64> = (1..=100).map(f64::from).collect();
+        let (p50, p99) = percentiles(&s);
+        assert!((p50 - 50.0).abs() <= 1.0 && (p99 - 99.0).abs() <= 1.0, "{p50} {p99}");
+        assert_eq!(percentiles(&VecDeque::new()), (0.0, 0.0));
+    }
+}

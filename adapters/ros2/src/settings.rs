@@ -1,0 +1,91 @@
+//! What `spomp run` needs to know beyond the robot itself: names, DDS, input formats, limits.
+
+use std::net::IpAddr;
+
+use spomp_behaviors::mission::schema::MissionFile;
+use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
+
+use crate::dds::DdsSettings;
+use crate::topics::TopicNames;
+
+/// Why the settings could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum SettingsError {
+    /// The robot is not in the mission's team.
+    #[error("robot `{0}` is not in the mission's team (team: {1})")]
+    UnknownRobot(String, String),
+    /// A bad value (the loader checks the mission's; this is for the environment).
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// Settings of one robot's ROS 2 side.
+#[derive(Debug, Clone)]
+pub struct RunSettings {
+    /// Robot id.
+    pub robot: String,
+    /// Topic names.
+    pub topics: TopicNames,
+    /// DDS domain and interfaces.
+    pub dds: DdsSettings,
+    /// Stop when odometry is older than this, seconds.
+    pub odometry_timeout_s: f64,
+    /// Stop when the newest panorama is older than this, seconds.
+    pub panorama_timeout_s: f64,
+    /// Metres per depth count.
+    pub depth_scale_m: f64,
+    /// Vertical field of view of the panorama images, radians.
+    pub v_fov_rad: f64,
+    /// Sensor height above ground, metres.
+    pub sensor_height_m: f64,
+    /// Time from `/clock`.
+    pub use_sim_time: bool,
+    /// GNSS origin (latitude, longitude), degrees.
+    pub gps_origin: Option<(f64, f64)>,
+    /// Team-state messages to each peer at most this often, seconds.
+    pub team_period_s: f64,
+    /// Byte budget of one team-state message.
+    pub team_budget_bytes: usize,
+}
+
+impl RunSettings {
+    /// Robot `id` of `mission` with its `ros2:` settings; `domain_id` (the command line's)
+    /// overrides the mission's, and the ROS 2 environment (`ROS_DOMAIN_ID`,
+    /// `ROS_AUTOMATIC_DISCOVERY_RANGE`) overrides both where set.
+    pub fn from_mission(mission: &MissionFile, id: &str, domain_id: Option<u16>) -> Result<Self, SettingsError> {
+        let spec = mission.team.iter().find(|r| r.id == id).ok_or_else(|| {
+            SettingsError::UnknownRobot(
+                id.into(),
+                mission.team.iter().map(|r| r.id.as_str()).collect::<Vec<_>>().join(", "),
+            )
+        })?;
+        let ros = spec.ros2.clone().unwrap_or_default();
+        let interfaces = ros
+            .interfaces
+            .iter()
+            .map(|a| {
+                a.parse::<IpAddr>()
+                    .map_err(|_| SettingsError::Invalid(format!("ros2.interfaces: `{a}` is not an IP address")))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut dds = DdsSettings { domain_id: ros.domain_id, interfaces };
+        dds = dds.with_ros_environment().map_err(SettingsError::Invalid)?;
+        if let Some(d) = domain_id {
+            dds.domain_id = d;
+        }
+        Ok(RunSettings {
+            robot: id.into(),
+            topics: TopicNames::resolve(id, spec.ros2.as_ref()),
+            dds,
+            odometry_timeout_s: ros.odometry_timeout_s,
+            panorama_timeout_s: ros.panorama_timeout_s,
+            depth_scale_m: ros.depth_scale_m.unwrap_or(DEFAULT_RANGE_SCALE_M),
+            v_fov_rad: ros.panorama_v_fov_deg.to_radians(),
+            sensor_height_m: ros.sensor_height_m,
+            use_sim_time: ros.use_sim_time,
+            gps_origin: ros.gps_origin.map(|o| (o.latitude_deg, o.longitude_deg)),
+            team_period_s: 1.0,
+            team_budget_bytes: (mission.comms.bandwidth_bytes_per_s.clamp(1_000.0, 1e9)) as usize,
+        })
+    }
+}

@@ -1,0 +1,160 @@
+//! `spomp sim --ros2`: the simulator as a ROS 2 robot farm. The simulator moves the bodies and
+//! renders the sensors; `spomp run` processes (one per driven robot) decide what the robots do.
+
+use std::net::IpAddr;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use spomp_behaviors::mission::MissionFile;
+use spomp_core::{FlightCommand, Odometry, PanoramaFrame, PoseEstimate, RobotId, RobotKind, Time, Twist2};
+use spomp_ros2::{DdsSettings, FarmLink};
+use spomp_sim::run::{DrivenTeamMessage, ExternalDrivers};
+use spomp_teamstate::GoalView;
+
+/// How the farm runs.
+#[derive(Debug, Clone)]
+pub struct FarmOptions {
+    /// Simulated seconds per wall second.
+    pub rate: f64,
+    /// DDS domain (default: the first driven robot's `ros2.domain_id`).
+    pub domain_id: Option<u16>,
+    /// Interfaces DDS may use (empty: every one).
+    pub interfaces: Vec<IpAddr>,
+    /// Robots to drive (empty: every UGV).
+    pub drive: Vec<String>,
+    /// How long to wait for the `spomp run` processes before the clock starts, wall seconds.
+    pub wait_s: f64,
+}
+
+/// The farm's side of the simulation.
+pub struct FarmDrivers {
+    link: FarmLink,
+    driven: Vec<String>,
+    rate: f64,
+    /// Wall instant of simulated time zero (set once every robot reported).
+    start: Option<Instant>,
+    wait_s: f64,
+}
+
+impl FarmDrivers {
+    /// A farm for `mission`: publishes the driven robots' sensors and `/clock`.
+    pub fn new(mission: &MissionFile, options: &FarmOptions) -> Result<Self> {
+        let driven: Vec<String> = if options.drive.is_empty() {
+            mission.team.iter().filter(|r| r.kind == RobotKind::Ugv).map(|r| r.id.clone()).collect()
+        } else {
+            options.drive.clone()
+        };
+        let robots: Vec<(String, Option<spomp_behaviors::mission::schema::Ros2Spec>)> = driven
+            .iter()
+            .map(|id| (id.clone(), mission.team.iter().find(|r| &r.id == id).and_then(|r| r.ros2.clone())))
+            .collect();
+        let first = robots.first().and_then(|(_, s)| s.as_ref());
+        let mut dds = DdsSettings {
+            domain_id: first.map_or(0, |s| s.domain_id),
+            interfaces: first.map(|s| s.interfaces.iter().filter_map(|a| a.parse().ok()).collect()).unwrap_or_default(),
+        }
+        .with_ros_environment()
+        .map_err(anyhow::Error::msg)?;
+        if let Some(d) = options.domain_id {
+            dds.domain_id = d;
+        }
+        if !options.interfaces.is_empty() {
+            dds.interfaces = options.interfaces.clone();
+        }
+        let link = FarmLink::new(&dds, &robots).context("starting the farm's ROS 2 node")?;
+        eprintln!(
+            "spomp sim --ros2: driving {} over DDS domain {} at {}× real time; start `spomp run MISSION --robot ID --use-sim-time` for each",
+            driven.join(", "),
+            dds.domain_id,
+            options.rate
+        );
+        Ok(FarmDrivers { link, driven, rate: options.rate, start: None, wait_s: options.wait_s })
+    }
+
+    /// Publishes `/clock` at zero until every driven robot reports its status (or the wait ends).
+    fn wait_for_robots(&mut self) {
+        let deadline = Instant::now() + Duration::from_secs_f64(self.wait_s);
+        loop {
+            self.link.publish_clock(Time::ZERO);
+            self.link.poll(Time::ZERO);
+            let missing: Vec<&str> =
+                self.driven.iter().filter(|id| self.link.tree_status(id).is_empty()).map(String::as_str).collect();
+            if missing.is_empty() {
+                break;
+            }
+            if Instant::now() >= deadline {
+                eprintln!(
+                    "spomp sim --ros2: starting without {} (no status after {:.0} s)",
+                    missing.join(", "),
+                    self.wait_s
+                );
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+impl ExternalDrivers for FarmDrivers {
+    fn drives(&self, robot: &RobotId) -> bool {
+        self.driven.iter().any(|d| d == robot.as_str())
+    }
+
+    fn begin_step(&mut self, now: Time) {
+        let start = match self.start {
+            Some(s) => s,
+            None => {
+                self.wait_for_robots();
+                *self.start.insert(Instant::now())
+            }
+        };
+        // Real time × rate: wait until the wall clock catches up with the simulated one.
+        let due = start + Duration::from_secs_f64(now.as_secs_f64() / self.rate);
+        let wait = due.saturating_duration_since(Instant::now());
+        if !wait.is_zero() {
+            std::thread::sleep(wait);
+        }
+        self.link.publish_clock(now);
+        self.link.poll(now);
+    }
+
+    fn odometry(&mut self, robot: &RobotId, odom: &Odometry) {
+        self.link.publish_odometry(robot.as_str(), odom);
+    }
+
+    fn panorama(&mut self, robot: &RobotId, frame: &PanoramaFrame) {
+        self.link.publish_panorama(robot.as_str(), frame);
+    }
+
+    fn pose(&mut self, robot: &RobotId, estimate: &PoseEstimate, z_m: f64) {
+        self.link.publish_pose(robot.as_str(), estimate, z_m);
+    }
+
+    fn command(&mut self, robot: &RobotId, now: Time) -> Option<Twist2> {
+        self.link.command(robot.as_str(), now)
+    }
+
+    fn flight(&mut self, robot: &RobotId, now: Time) -> Option<FlightCommand> {
+        self.link.setpoint(robot.as_str(), now)
+    }
+
+    fn take_team_messages(&mut self) -> Vec<DrivenTeamMessage> {
+        self.link
+            .take_team_packets()
+            .into_iter()
+            .map(|p| DrivenTeamMessage { from: RobotId::new(&p.from), to: RobotId::new(&p.to), bytes: p.bytes })
+            .collect()
+    }
+
+    fn deliver_team_message(&mut self, to: &RobotId, from: &RobotId, bytes: &[u8]) {
+        self.link.deliver_team(to.as_str(), from.as_str(), bytes);
+    }
+
+    fn goals(&self, robot: &RobotId) -> Vec<GoalView> {
+        self.link.goals(robot.as_str()).to_vec()
+    }
+
+    fn tree_done(&self, robot: &RobotId) -> bool {
+        matches!(self.link.tree_status(robot.as_str()), "success" | "failure")
+    }
+}

@@ -1,0 +1,249 @@
+//! `spomp run`: one robot of a mission, on a real robot (or a simulator farm) over ROS 2.
+
+use std::net::IpAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use anyhow::{Context, Result, bail};
+use spomp_behaviors::mission::{LoadOptions, load_mission_with};
+use spomp_behaviors::trace::TransitionRecord;
+use spomp_core::{
+    FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, Time, Twist2,
+};
+use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
+use spomp_robot::Robot;
+use spomp_ros2::{RobotNode, RunObserver, RunSettings};
+
+/// Options of `spomp run`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct RunArgs {
+    /// Mission file.
+    pub mission: PathBuf,
+    /// The robot of the mission's team this process is.
+    #[arg(long)]
+    pub robot: String,
+    /// DDS domain id (default: the robot's `ros2.domain_id`, else `ROS_DOMAIN_ID`, else 0).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(0..=232))]
+    pub domain_id: Option<u16>,
+    /// Only this local address carries DDS discovery (repeatable; e.g. 127.0.0.1). Default:
+    /// the robot's `ros2.interfaces`, or every interface.
+    #[arg(long = "interface", value_name = "IP")]
+    pub interfaces: Vec<IpAddr>,
+    /// Take time from `/clock` (a simulator's), whatever the mission says.
+    #[arg(long)]
+    pub use_sim_time: bool,
+    /// Record every input and output to this MCAP log (the channels of `spomp sim`'s logs).
+    #[arg(long, value_name = "LOG.mcap")]
+    pub record: Option<PathBuf>,
+    /// Seed of the robot's random stream (default: the mission's `sim.seed`, else 1 — the
+    /// simulator's, so a farm run and a simulated run start alike).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Stop after this much robot time, seconds (default: run until SIGINT/SIGTERM).
+    #[arg(long, value_parser = crate::args::time_limit, allow_hyphen_values = true)]
+    pub until_s: Option<f64>,
+    /// Print the run's figures as JSON at the end.
+    #[arg(long)]
+    pub json: bool,
+    /// Print the topic table and exit.
+    #[arg(long)]
+    pub topics: bool,
+    /// A folder besides the mission's own that its includes, plan files and world may be in
+    /// (repeatable).
+    #[arg(long = "allow-dir", value_name = "DIR")]
+    pub allow_dirs: Vec<PathBuf>,
+}
+
+/// Runs `spomp run`.
+pub fn run(args: &RunArgs) -> Result<ExitCode> {
+    let registry = spomp_robot::registry();
+    let options = LoadOptions { allowed_dirs: args.allow_dirs.clone() };
+    let loaded = load_mission_with(&args.mission, &registry, &options);
+    if !loaded.is_valid() {
+        crate::commands::print_diagnostics(&loaded);
+        return Ok(ExitCode::from(1));
+    }
+    let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
+    let mut settings = match RunSettings::from_mission(mission, &args.robot, args.domain_id) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("error: --robot: {e}");
+            return Ok(ExitCode::from(2));
+        }
+    };
+    if !args.interfaces.is_empty() {
+        settings.dds.interfaces = args.interfaces.clone();
+    }
+    settings.use_sim_time |= args.use_sim_time;
+    if args.topics {
+        for (role, name) in settings.topics.iter() {
+            out!("{role:<18} {name}");
+        }
+        out!("{:<18} {}", "team/status", settings.topics.status());
+        return Ok(ExitCode::SUCCESS);
+    }
+    let seed = args.seed.or(mission.sim.as_ref().and_then(|s| s.seed)).unwrap_or(1);
+    // The operating area (map grid, class table, prior map) is the mission's world, as in `sim`.
+    let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
+        .with_context(|| format!("building the operating area of `{}`", mission.mission))?;
+    let area = spomp_sim::run::operating_area(mission, &world);
+    let robot = Robot::from_mission(&loaded, &args.robot, &area, seed, &registry)
+        .with_context(|| format!("setting up robot `{}`", args.robot))?;
+    let peers: Vec<RobotId> = mission.team.iter().filter(|r| r.id != args.robot).map(|r| RobotId::new(&r.id)).collect();
+    let mut node = RobotNode::new(robot, settings.clone(), peers).context("starting the ROS 2 node")?;
+
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register_conditional_shutdown(sig, 130, stop.clone())
+            .context("installing signal handlers")?;
+        signal_hook::flag::register(sig, stop.clone()).context("installing signal handlers")?;
+    }
+    let recorder = match &args.record {
+        Some(path) => Some(
+            Recorder::create(path, RecorderOptions { panorama_downsample: 1, ..RecorderOptions::default() })
+                .with_context(|| format!("creating {}", path.display()))?,
+        ),
+        None => None,
+    };
+    if !args.json {
+        eprintln!(
+            "spomp run: robot {} on DDS domain {} ({}), {}; Ctrl-C stops it",
+            args.robot,
+            settings.dds.domain_id,
+            if settings.dds.interfaces.is_empty() {
+                "all interfaces".to_string()
+            } else {
+                settings.dds.interfaces.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
+            },
+            if settings.use_sim_time { "time from /clock" } else { "wall-clock time" },
+        );
+    }
+    let mut observer = RecordingObserver { recorder, error: None };
+    let report = node.run(&stop, args.until_s, &mut observer);
+    if let Some(rec) = observer.recorder.take() {
+        rec.finish().context("finishing the log")?;
+    }
+    if let Some(e) = observer.error {
+        return Err(e.context("recording"));
+    }
+    if args.json {
+        out!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        out!(
+            "robot {}: {:.1} s, {} ticks ({:.1}/s of {:.1}/s), {} overruns, longest tick {:.1} ms, longest panorama {:.1} ms",
+            report.robot,
+            report.robot_time_s,
+            report.ticks,
+            report.tick_rate_hz,
+            report.target_tick_hz,
+            report.tick_overruns,
+            report.max_tick_ms,
+            report.max_panorama_ms
+        );
+        out!(
+            "latency: odometry → command {:.1} ms median, {:.1} ms p99; panorama → command {:.1} ms median, {:.1} ms p99",
+            report.odometry_to_command_p50_ms,
+            report.odometry_to_command_p99_ms,
+            report.panorama_to_command_p50_ms,
+            report.panorama_to_command_p99_ms
+        );
+        out!(
+            "inputs: {} odometry, {} panoramas, {} poses, {} team; {} malformed, {} dropped; tree {}",
+            report.received.odometry,
+            report.received.panoramas,
+            report.received.poses,
+            report.received.team,
+            report.malformed_inputs,
+            report.dropped_inputs,
+            report.tree_status
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Records a robot's inputs and outputs with the channels of `spomp sim`'s logs.
+struct RecordingObserver {
+    recorder: Option<Recorder<SafeFile>>,
+    error: Option<anyhow::Error>,
+}
+
+impl RecordingObserver {
+    fn record(&mut self, f: impl FnOnce(&mut Recorder<SafeFile>) -> Result<(), spomp_mcap::RecordError>) {
+        if self.error.is_some() {
+            return;
+        }
+        if let Some(rec) = self.recorder.as_mut()
+            && let Err(e) = f(rec)
+        {
+            self.error = Some(e.into());
+        }
+    }
+}
+
+impl RunObserver for RecordingObserver {
+    fn on_odometry(&mut self, robot: &str, odom: &Odometry) {
+        self.record(|r| r.odometry(robot, odom));
+    }
+
+    fn on_panorama(&mut self, robot: &str, frame: &PanoramaFrame) {
+        self.record(|r| r.panorama(robot, frame.stamp, &frame.depth, Some(&frame.semantic)));
+    }
+
+    fn on_external_pose(&mut self, robot: &str, estimate: &PoseEstimate) {
+        self.record(|r| r.pose(robot, estimate.stamp, estimate.pose, 0.0));
+    }
+
+    fn on_team_in(&mut self, robot: &str, now: Time, from: &str, bytes: &[u8]) {
+        let topic = format!("/{robot}/team/in");
+        self.record(|r| r.json(&topic, now, &serde_json::json!({ "from": from, "bytes": bytes.len() })));
+    }
+
+    fn on_team_out(&mut self, robot: &str, now: Time, to: &str, bytes: &[u8]) {
+        let topic = format!("/{robot}/team/out");
+        self.record(|r| r.json(&topic, now, &serde_json::json!({ "to": to, "bytes": bytes.len() })));
+    }
+
+    fn on_command(&mut self, robot: &str, now: Time, cmd: Twist2) {
+        self.record(|r| r.command(robot, now, cmd));
+    }
+
+    fn on_flight(&mut self, robot: &str, now: Time, cmd: Option<&FlightCommand>) {
+        let topic = format!("/{robot}/setpoint");
+        self.record(|r| r.json(&topic, now, &cmd));
+    }
+
+    fn on_estimate(&mut self, robot: &str, estimate: &PoseEstimate) {
+        let topic = format!("/{robot}/pose_estimate");
+        let msg = spomp_core::ros::PoseStamped {
+            header: spomp_core::ros::Header::new(estimate.stamp, "map"),
+            pose: spomp_core::ros::Pose::from_pose2(estimate.pose, 0.0),
+        };
+        self.record(|r| r.log(&topic, estimate.stamp, &msg));
+    }
+
+    fn on_transitions(&mut self, robot: &str, records: &[TransitionRecord]) {
+        self.record(|r| r.transitions(robot, records));
+    }
+
+    fn on_scan(&mut self, scan: &ReachabilityScan) {
+        self.record(|r| r.reachability(scan));
+    }
+
+    fn on_path(&mut self, robot: &str, now: Time, path: &[Point2]) {
+        self.record(|r| r.path(robot, now, path));
+    }
+
+    fn on_problem(&mut self, robot: &str, now: Time, message: &str) {
+        let topic = format!("/{robot}/rosout");
+        let msg = spomp_core::ros::Log {
+            stamp: now.into(),
+            level: 30,
+            name: robot.to_string(),
+            msg: message.to_string(),
+            ..Default::default()
+        };
+        self.record(|r| r.log(&topic, now, &msg));
+    }
+}
