@@ -188,14 +188,14 @@ impl<E: 'static> Reactive<E> {
 
 impl<E: 'static> Behavior<E> for Reactive<E> {
     fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
-        let mut skipped = 0;
+        // The hot loop counts nothing: whether every child was skipped is asked only at the
+        // end, from their statuses (a skipped child is neither running nor decisive).
         for i in 0..self.children.len() {
             match self.children[i].tick(ctx) {
                 Status::Running => {
                     halt_all(&mut self.children[i + 1..], ctx);
                     return Status::Running;
                 }
-                Status::Skipped => skipped += 1,
                 s if s == self.decisive => {
                     halt_all(&mut self.children[i + 1..], ctx);
                     reset_all(&mut self.children, ctx);
@@ -204,8 +204,9 @@ impl<E: 'static> Behavior<E> for Reactive<E> {
                 _ => {}
             }
         }
+        let all_skipped = self.children.iter().all(|c| c.status() == Status::Skipped);
         reset_all(&mut self.children, ctx);
-        if skipped == self.children.len() { Status::Skipped } else { opposite(self.decisive) }
+        if all_skipped { Status::Skipped } else { opposite(self.decisive) }
     }
     fn halt(&mut self, ctx: &mut TickContext<'_, E>) {
         halt_all(&mut self.children, ctx);
