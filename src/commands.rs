@@ -5,10 +5,12 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
+use spomp_behaviors::NodeRegistry;
 use spomp_behaviors::mission::json_schema::mission_schema;
 use spomp_behaviors::mission::yaml::Loc;
 use spomp_behaviors::mission::{Diagnostic, LoadOptions, LoadedMission, Rendered, Stage, load_mission_with};
 use spomp_behaviors::registry::PortDirection;
+use spomp_robot::RobotRuntime;
 
 /// Renders a mission's diagnostics with their source lines.
 fn render_diagnostics(loaded: &LoadedMission) -> String {
@@ -43,14 +45,14 @@ pub fn validate(
     json: bool,
     dry_run: Option<crate::sim_cmd::DryRunLimits>,
     options: &LoadOptions,
+    registry: &NodeRegistry<RobotRuntime>,
 ) -> Result<ExitCode> {
-    let registry = spomp_robot::registry();
     let mut all = Vec::new();
     let mut dry_runs = Vec::new();
     let mut failed_runs = 0;
     let mut human = String::new();
     for file in files {
-        let loaded = load_mission_with(file, &registry, options);
+        let loaded = load_mission_with(file, registry, options);
         if loaded.diagnostics.is_empty() {
             if let Some(m) = &loaded.mission {
                 human.push_str(&format!(
@@ -66,7 +68,7 @@ pub fn validate(
                     let _ = write!(std::io::stdout().lock(), "{human}");
                     human.clear();
                 }
-                match crate::sim_cmd::dry_run(&loaded, json, limits) {
+                match crate::sim_cmd::dry_run(&loaded, json, limits, registry) {
                     Ok((ok, value)) => {
                         if !ok {
                             failed_runs += 1;
@@ -108,15 +110,19 @@ pub fn validate(
 }
 
 /// `spomp schema`.
-pub fn schema() -> Result<ExitCode> {
-    let schema = mission_schema(&spomp_robot::registry());
+pub fn schema(registry: &NodeRegistry<RobotRuntime>) -> Result<ExitCode> {
+    let schema = mission_schema(registry);
     emit(&format!("{}\n", serde_json::to_string_pretty(&schema).context("serialising the schema")?));
     Ok(ExitCode::SUCCESS)
 }
 
 /// `spomp nodes`.
-pub fn nodes(json: bool, markdown: bool, only: Option<&str>) -> Result<ExitCode> {
-    let registry = spomp_robot::registry();
+pub fn nodes(
+    json: bool,
+    markdown: bool,
+    only: Option<&str>,
+    registry: &NodeRegistry<RobotRuntime>,
+) -> Result<ExitCode> {
     if markdown {
         emit(&registry.reference_markdown());
         return Ok(ExitCode::SUCCESS);

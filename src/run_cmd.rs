@@ -13,7 +13,8 @@ use spomp_core::{
     FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, Time, Twist2,
 };
 use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
-use spomp_robot::Robot;
+use spomp_behaviors::NodeRegistry;
+use spomp_robot::{Robot, RobotRuntime};
 use spomp_ros2::{RobotNode, RunObserver, RunSettings};
 
 /// Options of `spomp run`.
@@ -57,10 +58,9 @@ pub struct RunArgs {
 }
 
 /// Runs `spomp run`.
-pub fn run(args: &RunArgs) -> Result<ExitCode> {
-    let registry = spomp_robot::registry();
+pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<ExitCode> {
     let options = LoadOptions { allowed_dirs: args.allow_dirs.clone() };
-    let loaded = load_mission_with(&args.mission, &registry, &options);
+    let loaded = load_mission_with(&args.mission, registry, &options);
     if !loaded.is_valid() {
         crate::commands::print_diagnostics(&loaded);
         return Ok(ExitCode::from(1));
@@ -89,7 +89,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the operating area of `{}`", mission.mission))?;
     let area = spomp_sim::run::operating_area(mission, &world);
-    let robot = Robot::from_mission(&loaded, &args.robot, &area, seed, &registry)
+    let robot = Robot::from_mission(&loaded, &args.robot, &area, seed, registry)
         .with_context(|| format!("setting up robot `{}`", args.robot))?;
     let peers: Vec<RobotId> = mission.team.iter().filter(|r| r.id != args.robot).map(|r| RobotId::new(&r.id)).collect();
     let mut node = RobotNode::new(robot, settings.clone(), peers).context("starting the ROS 2 node")?;

@@ -11,11 +11,13 @@ use anyhow::{Context, Result, bail};
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
+use spomp_behaviors::NodeRegistry;
 use spomp_behaviors::mission::{LoadOptions, LoadedMission, load_mission_with};
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
 use spomp_core::{Odometry, PanoramaFrame, PanoramaGeometry, Point2, ReachabilityScan, RobotId, RobotKind, Time};
 use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
+use spomp_robot::RobotRuntime;
 use spomp_sim::run::{RobotSnapshot, RunResult, RunSummary, SimEvent, SimObserver, SimOptions, Simulation};
 use spomp_sim::{Blackout, Faults, KillFault};
 
@@ -135,10 +137,9 @@ fn usage(message: String) -> Result<ExitCode> {
 }
 
 /// `spomp sim`.
-pub fn sim(args: &SimArgs) -> Result<ExitCode> {
-    let registry = spomp_robot::registry();
+pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<ExitCode> {
     let options = LoadOptions { allowed_dirs: args.allow_dirs.clone() };
-    let loaded = load_mission_with(&args.mission, &registry, &options);
+    let loaded = load_mission_with(&args.mission, registry, &options);
     if !loaded.is_valid() {
         crate::commands::print_diagnostics(&loaded);
         return Ok(ExitCode::from(1));
@@ -226,7 +227,7 @@ pub fn sim(args: &SimArgs) -> Result<ExitCode> {
                     .unwrap_or_else(|_| ProgressStyle::default_bar()),
             );
             bar.set_prefix(seed.to_string());
-            let r = run_trial(&loaded, seed, args, &faults, &out_dir, &bar, &interrupted);
+            let r = run_trial(Loaded { mission: &loaded, registry }, seed, args, &faults, &out_dir, &bar, &interrupted);
             bar.finish_and_clear();
             progress.remove(&bar);
             if let Some(o) = &overall {
@@ -353,8 +354,14 @@ fn cli_faults(args: &SimArgs) -> Faults {
     f
 }
 
+/// The loaded mission and the node registry its trees are built with.
+struct Loaded<'a> {
+    mission: &'a LoadedMission,
+    registry: &'a NodeRegistry<RobotRuntime>,
+}
+
 fn run_trial(
-    loaded: &LoadedMission,
+    inputs: Loaded<'_>,
     seed: u64,
     args: &SimArgs,
     faults: &Faults,
@@ -362,13 +369,14 @@ fn run_trial(
     bar: &ProgressBar,
     interrupted: &AtomicBool,
 ) -> Result<RunSummary> {
+    let Loaded { mission: loaded, registry } = inputs;
     let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
     let trial_dir = output_path(out_dir, &format!("trial-{seed}"))?;
     std::fs::create_dir_all(trial_dir.join("plots")).with_context(|| format!("creating {}", trial_dir.display()))?;
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
     let options = SimOptions { seed, time_limit_s: args.time_limit_s, faults: faults.clone(), ..SimOptions::default() };
-    let mut sim = Simulation::new(loaded, &spomp_robot::registry(), Arc::new(world), options)
+    let mut sim = Simulation::new(loaded, registry, Arc::new(world), options)
         .with_context(|| format!("setting up `{}` (seed {seed})", mission.mission))?;
     if args.ros2 {
         let farm = crate::farm_cmd::FarmDrivers::new(
@@ -691,13 +699,18 @@ pub struct DryRunLimits {
 
 /// `spomp validate --dry-run` for one valid mission: runs it once in the simulator and reports
 /// whether it ends within its time limit, which nodes were ticked and the outcome.
-pub fn dry_run(loaded: &LoadedMission, json: bool, limits: DryRunLimits) -> Result<(bool, serde_json::Value)> {
+pub fn dry_run(
+    loaded: &LoadedMission,
+    json: bool,
+    limits: DryRunLimits,
+    registry: &NodeRegistry<RobotRuntime>,
+) -> Result<(bool, serde_json::Value)> {
     let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
     let seed = mission.sim.as_ref().and_then(|s| s.seed).unwrap_or(1);
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
     let options = SimOptions { seed, time_limit_s: limits.time_limit_s, ..SimOptions::default() };
-    let sim = Simulation::new(loaded, &spomp_robot::registry(), Arc::new(world), options)
+    let sim = Simulation::new(loaded, registry, Arc::new(world), options)
         .with_context(|| format!("setting up `{}` in the simulator", mission.mission))?;
     let start = Instant::now();
     let result =

@@ -98,6 +98,30 @@ pub enum BbValue {
     Params(Arc<serde_json::Value>),
 }
 
+impl From<bool> for BbValue {
+    fn from(v: bool) -> Self {
+        BbValue::Bool(v)
+    }
+}
+
+impl From<i64> for BbValue {
+    fn from(v: i64) -> Self {
+        BbValue::Int(v)
+    }
+}
+
+impl From<f64> for BbValue {
+    fn from(v: f64) -> Self {
+        BbValue::Float(v)
+    }
+}
+
+impl From<&str> for BbValue {
+    fn from(v: &str) -> Self {
+        BbValue::Str(Arc::from(v))
+    }
+}
+
 impl BbValue {
     /// The type of this value.
     pub fn port_type(&self) -> PortType {

@@ -1,4 +1,6 @@
-//! Decorators: one child, one twist.
+//! Decorators: one child, one twist. A child that reports [`Status::Skipped`] is passed up as
+//! `Skipped` (and reset) by every decorator; `run_once` with `then_skip` is the one that makes
+//! a node skipped.
 
 use std::time::Duration;
 
@@ -24,6 +26,8 @@ pub enum DecoratorType {
     ForceFailure,
     /// `run_once`.
     RunOnce,
+    /// `keep_running_until_failure`.
+    KeepRunningUntilFailure,
     /// `delay`.
     Delay,
     /// `rate_limit`.
@@ -41,10 +45,27 @@ impl DecoratorType {
             "force_success" => DecoratorType::ForceSuccess,
             "force_failure" => DecoratorType::ForceFailure,
             "run_once" => DecoratorType::RunOnce,
+            "keep_running_until_failure" => DecoratorType::KeepRunningUntilFailure,
             "delay" => DecoratorType::Delay,
             "rate_limit" => DecoratorType::RateLimit,
             _ => return None,
         })
+    }
+
+    /// The mission name.
+    pub fn name(self) -> &'static str {
+        match self {
+            DecoratorType::Timeout => "timeout",
+            DecoratorType::Retry => "retry",
+            DecoratorType::Repeat => "repeat",
+            DecoratorType::Inverter => "inverter",
+            DecoratorType::ForceSuccess => "force_success",
+            DecoratorType::ForceFailure => "force_failure",
+            DecoratorType::RunOnce => "run_once",
+            DecoratorType::KeepRunningUntilFailure => "keep_running_until_failure",
+            DecoratorType::Delay => "delay",
+            DecoratorType::RateLimit => "rate_limit",
+        }
     }
 }
 
@@ -59,7 +80,7 @@ pub enum ResultMap {
     ForceFailure,
 }
 
-/// `inverter`, `force_success`, `force_failure`: Running passes through.
+/// `inverter`, `force_success`, `force_failure`: Running and Skipped pass through.
 pub struct MapResult<E = ()> {
     child: Vec<Slot<E>>,
     map: ResultMap,
@@ -81,7 +102,7 @@ fn one<E>(child: &mut [Slot<E>]) -> &mut Slot<E> {
 fn tick_once<E: 'static>(child: &mut [Slot<E>], ctx: &mut TickContext<'_, E>) -> Status {
     let c = one(child);
     let s = c.tick(ctx);
-    if s.is_done() {
+    if s.is_settled() {
         c.reset(ctx);
     }
     s
@@ -91,7 +112,7 @@ impl<E: 'static> Behavior<E> for MapResult<E> {
     fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         let s = tick_once(&mut self.child, ctx);
         match (self.map, s) {
-            (_, Status::Running | Status::Idle) => s,
+            (_, Status::Running | Status::Idle | Status::Skipped) => s,
             (ResultMap::Invert, Status::Success) => Status::Failure,
             (ResultMap::Invert, _) => Status::Success,
             (ResultMap::ForceSuccess, _) => Status::Success,
@@ -171,10 +192,10 @@ impl<E: 'static> Behavior<E> for Retry<E> {
                         return Status::Failure;
                     }
                 }
-                Status::Success => {
+                Status::Success | Status::Skipped => {
                     c.reset(ctx);
                     self.attempts = 0;
-                    return Status::Success;
+                    return s;
                 }
                 other => return other,
             }
@@ -222,10 +243,10 @@ impl<E: 'static> Behavior<E> for Repeat<E> {
                     _ => Status::Running,
                 }
             }
-            Status::Failure => {
+            s @ (Status::Failure | Status::Skipped) => {
                 c.reset(ctx);
                 self.done = 0;
-                Status::Failure
+                s
             }
             other => other,
         }
@@ -239,29 +260,65 @@ impl<E: 'static> Behavior<E> for Repeat<E> {
     }
 }
 
-/// Runs the child to completion once; afterwards returns that outcome without ticking it.
+/// Runs the child to completion once; afterwards returns that outcome without ticking it, or
+/// with `then_skip` reports [`Status::Skipped`] (its parent carries on as if it were not
+/// there). The memory lasts as long as the tree: neither a halt nor a parent's reset clears it.
 pub struct RunOnce<E = ()> {
     child: Vec<Slot<E>>,
     outcome: Option<Status>,
+    then_skip: bool,
 }
 
 impl<E: 'static> RunOnce<E> {
-    /// A run-once decorator.
+    /// A run-once decorator that repeats the first outcome.
     pub fn new(child: Slot<E>) -> Self {
-        RunOnce { child: vec![child], outcome: None }
+        RunOnce { child: vec![child], outcome: None, then_skip: false }
+    }
+
+    /// A run-once decorator that is skipped after its first completion.
+    pub fn then_skip(child: Slot<E>) -> Self {
+        RunOnce { child: vec![child], outcome: None, then_skip: true }
     }
 }
 
 impl<E: 'static> Behavior<E> for RunOnce<E> {
     fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if let Some(s) = self.outcome {
-            return s;
+            return if self.then_skip { Status::Skipped } else { s };
         }
         let s = tick_once(&mut self.child, ctx);
         if s.is_done() {
             self.outcome = Some(s);
         }
         s
+    }
+    fn halt(&mut self, ctx: &mut TickContext<'_, E>) {
+        one(&mut self.child).halt(ctx);
+    }
+    fn children(&self) -> &[Slot<E>] {
+        &self.child
+    }
+}
+
+/// `keep_running_until_failure`: restarts a succeeding child on the next tick and reports
+/// Running meanwhile; fails when the child fails. One run of the child per tick at most.
+pub struct KeepRunningUntilFailure<E = ()> {
+    child: Vec<Slot<E>>,
+}
+
+impl<E: 'static> KeepRunningUntilFailure<E> {
+    /// The decorator.
+    pub fn new(child: Slot<E>) -> Self {
+        KeepRunningUntilFailure { child: vec![child] }
+    }
+}
+
+impl<E: 'static> Behavior<E> for KeepRunningUntilFailure<E> {
+    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
+        match tick_once(&mut self.child, ctx) {
+            Status::Success => Status::Running,
+            s => s,
+        }
     }
     fn halt(&mut self, ctx: &mut TickContext<'_, E>) {
         one(&mut self.child).halt(ctx);

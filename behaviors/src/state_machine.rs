@@ -119,10 +119,12 @@ impl<E: 'static> Behavior<E> for StateMachine<E> {
             let current = self.current;
             let Some(run) = self.run_slot(current) else { return Status::Running };
             let outcome = run.tick(ctx);
-            if !outcome.is_done() {
+            if !outcome.is_settled() {
                 return Status::Running;
             }
             run.reset(ctx);
+            // A skipped subtree did what it had to (nothing): its state's success.
+            let outcome = if outcome == Status::Skipped { Status::Success } else { outcome };
             let wanted = if outcome == Status::Success { Trigger::Success } else { Trigger::Failure };
             let target = self.states[current].transitions.iter().find(|t| t.trigger == wanted).map(|t| t.target);
             match target {

@@ -16,12 +16,24 @@ pub enum Status {
     Success,
     /// Done, failed.
     Failure,
+    /// Not executed, on purpose (BT.CPP's `SKIPPED`): `run_once` with `then_skip: true` after
+    /// its first completion. Parents carry on as if the node were not there: a sequence or
+    /// fallback moves to the next child, a parallel leaves it out of its thresholds, a
+    /// decorator passes it up, a state machine takes it as its subtree's success; a control
+    /// node whose children were all skipped reports `Skipped` itself.
+    Skipped,
 }
 
 impl Status {
     /// Success or Failure.
     pub fn is_done(self) -> bool {
         matches!(self, Status::Success | Status::Failure)
+    }
+
+    /// Success, Failure or Skipped: the node will not report anything more for this run.
+    #[inline]
+    pub fn is_settled(self) -> bool {
+        matches!(self, Status::Success | Status::Failure | Status::Skipped)
     }
 
     /// Lower-case name.
@@ -31,6 +43,7 @@ impl Status {
             Status::Running => "running",
             Status::Success => "success",
             Status::Failure => "failure",
+            Status::Skipped => "skipped",
         }
     }
 }

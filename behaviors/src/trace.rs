@@ -83,6 +83,7 @@ pub fn render_tree(root: &Slot) -> String {
             Status::Running => "▶",
             Status::Success => "✔",
             Status::Failure => "✘",
+            Status::Skipped => "↷",
         };
         s.push_str(&format!("{}{} {} [{}]\n", "  ".repeat(depth), mark, slot.info().type_name, slot.status()));
     });

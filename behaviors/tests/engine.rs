@@ -128,22 +128,28 @@ fn parallel_thresholds() {
     let (a, _) = leaf("a", &[S]);
     let (b, _) = leaf("b", &[R, S]);
     let (c, lc) = leaf("c", &[R]);
-    let (statuses, _) = run(slot("par", Box::new(Parallel::new(vec![a, b, c], 2, 1))), 2);
+    let (statuses, _) = run(slot("par", Box::new(Parallel::new(vec![a, b, c], 2, 1).unwrap())), 2);
     assert_eq!(statuses, vec![R, S]);
     assert_eq!(lc.lock().unwrap().halts, 1);
 
     // Fails at the first failure with failure_threshold 1.
     let (a, _) = leaf("a", &[R]);
     let (b, _) = leaf("b", &[R, F]);
-    let (statuses, _) = run(slot("par", Box::new(Parallel::new(vec![a, b], 2, 1))), 2);
+    let (statuses, _) = run(slot("par", Box::new(Parallel::new(vec![a, b], 2, 1).unwrap())), 2);
     assert_eq!(statuses, vec![R, F]);
 
     // Fails as soon as success became impossible: needs 3, one failed.
     let (a, _) = leaf("a", &[R]);
     let (b, _) = leaf("b", &[F]);
     let (c, _) = leaf("c", &[R]);
-    let (statuses, _) = run(slot("par", Box::new(Parallel::new(vec![a, b, c], 3, 3))), 1);
+    let (statuses, _) = run(slot("par", Box::new(Parallel::new(vec![a, b, c], 3, 3).unwrap())), 1);
     assert_eq!(statuses, vec![F]);
+
+    // Thresholds it cannot meet are refused, not clamped.
+    let kids = || vec![leaf("a", &[S]).0, leaf("b", &[S]).0];
+    let e = Parallel::new(kids(), 3, 1).err().unwrap();
+    assert_eq!((e.name, e.value, e.children), ("success_threshold", 3, 2));
+    assert_eq!(Parallel::new(kids(), 1, 0).err().unwrap().name, "failure_threshold");
 }
 
 #[test]

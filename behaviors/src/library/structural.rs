@@ -8,9 +8,15 @@ use crate::registry::{Category, NodeRegistry, NodeTypeSpec, PortSpec};
 /// Registers the structural node types.
 pub fn register_structural<E>(r: &mut NodeRegistry<E>) {
     use Category::{Control, Decorator};
-    use PortType::{Float, Int, String as Str};
+    use PortType::{Bool, Float, Int, String as Str};
     let s = NodeTypeSpec::structural;
     r.register(s("sequence", Control, "Ticks `children` in order and resumes at the running one; fails on the first failure, succeeds when all succeed.", vec![]));
+    r.register(s(
+        "sequence_with_memory",
+        Control,
+        "Like `sequence`, but after a failure or a halt the next run resumes at the child that failed or was running instead of the first; only finishing with success starts it over.",
+        vec![],
+    ));
     r.register(s(
         "fallback",
         Control,
@@ -22,11 +28,23 @@ pub fn register_structural<E>(r: &mut NodeRegistry<E>) {
     r.register(s(
         "parallel",
         Control,
-        "Ticks all `children` every tick; succeeds when `success_threshold` succeeded, fails when `failure_threshold` failed (or success became impossible), then halts the rest.",
+        "Ticks its unfinished `children` in order every tick and checks the thresholds after each: succeeds once `success_threshold` succeeded, fails once `failure_threshold` failed or success can no longer be reached; then ticks no further child and halts the running ones. Skipped children count towards neither threshold. Thresholds outside 1..=children are load errors.",
         vec![
             PortSpec::optional("success_threshold", Int, "Successes needed (default: all children)."),
             PortSpec::input("failure_threshold", Int, "Failures that fail the node.").with_default(json!(1)),
         ],
+    ));
+    r.register(s(
+        "if_then_else",
+        Control,
+        "Two or three `children`: ticks the first (the condition) until it finishes, then runs the second on success or the third on failure (fails without one) to its end; the condition is not re-checked meanwhile.",
+        vec![],
+    ));
+    r.register(s(
+        "while_do_else",
+        Control,
+        "Two or three `children`: re-ticks the first (the condition) every tick; runs the second while it succeeds and the third while it fails (fails without one). When the condition changes, the running branch is halted before the other is ticked, in the same tick.",
+        vec![],
     ));
     r.register(s(
         "timeout",
@@ -47,7 +65,16 @@ pub fn register_structural<E>(r: &mut NodeRegistry<E>) {
     r.register(s(
         "run_once",
         Decorator,
-        "Runs its `child` to completion once; afterwards reports that outcome without ticking it.",
+        "Runs its `child` to completion once; afterwards reports that outcome without ticking it, or with `then_skip` reports `skipped`, so a parent sequence moves on as if it were not there.",
+        vec![
+            PortSpec::input("then_skip", Bool, "After the first completion report `skipped` instead of the outcome.")
+                .with_default(json!(false)),
+        ],
+    ));
+    r.register(s(
+        "keep_running_until_failure",
+        Decorator,
+        "Restarts its succeeding `child` on the next tick and reports Running meanwhile; fails when the child fails.",
         vec![],
     ));
     r.register(s(

@@ -5,9 +5,11 @@ use std::sync::Arc;
 
 use crate::blackboard::{BbValue, Binding, Blackboard};
 use crate::control::ControlType;
-use crate::control::{Ordered, Parallel, Reactive};
+use crate::control::{IfThenElse, Ordered, Parallel, Reactive, WhileDoElse};
 use crate::decorators::DecoratorType;
-use crate::decorators::{Delay, MapResult, RateLimit, Repeat, ResultMap, Retry, RunOnce, Timeout};
+use crate::decorators::{
+    Delay, KeepRunningUntilFailure, MapResult, RateLimit, Repeat, ResultMap, Retry, RunOnce, Timeout,
+};
 use crate::executor::TreeExecutor;
 use crate::node::{Behavior, NodeInfo, Slot};
 use crate::registry::{NodeRegistry, PortBindings};
@@ -76,13 +78,19 @@ fn build<E: 'static>(
             let kids = children.iter().map(|c| build(c, registry, bb, opts, next_id)).collect::<Result<Vec<_>, _>>()?;
             match ty {
                 ControlType::Sequence => Box::new(Ordered::sequence(kids)),
+                ControlType::SequenceWithMemory => Box::new(Ordered::sequence_with_memory(kids)),
                 ControlType::Fallback => Box::new(Ordered::fallback(kids)),
                 ControlType::ReactiveSequence => Box::new(Reactive::sequence(kids)),
                 ControlType::ReactiveFallback => Box::new(Reactive::fallback(kids)),
-                ControlType::Parallel => Box::new(Parallel::new(kids, *success_threshold, *failure_threshold)),
+                ControlType::Parallel => Box::new(
+                    Parallel::new(kids, *success_threshold, *failure_threshold)
+                        .map_err(|e| BuildError::Node { path: ir.path.clone(), message: e.to_string() })?,
+                ),
+                ControlType::IfThenElse => Box::new(IfThenElse::new(kids)),
+                ControlType::WhileDoElse => Box::new(WhileDoElse::new(kids)),
             }
         }
-        IrKind::Decorator { ty, child, duration, count, hz } => {
+        IrKind::Decorator { ty, child, duration, count, hz, then_skip } => {
             let c = build(child, registry, bb, opts, next_id)?;
             match ty {
                 DecoratorType::Timeout => Box::new(Timeout::new(c, *duration)),
@@ -92,7 +100,9 @@ fn build<E: 'static>(
                 DecoratorType::Inverter => Box::new(MapResult::new(c, ResultMap::Invert)),
                 DecoratorType::ForceSuccess => Box::new(MapResult::new(c, ResultMap::ForceSuccess)),
                 DecoratorType::ForceFailure => Box::new(MapResult::new(c, ResultMap::ForceFailure)),
+                DecoratorType::RunOnce if *then_skip => Box::new(RunOnce::then_skip(c)),
                 DecoratorType::RunOnce => Box::new(RunOnce::new(c)),
+                DecoratorType::KeepRunningUntilFailure => Box::new(KeepRunningUntilFailure::new(c)),
                 DecoratorType::RateLimit => Box::new(RateLimit::new(c, *hz)),
             }
         }

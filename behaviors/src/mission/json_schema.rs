@@ -70,9 +70,18 @@ fn node_body_schema(spec: &NodeTypeSpec) -> Value {
     }
     match spec.category {
         Category::Control => {
-            props.insert("children".into(), json!({"type": "array", "items": tree, "minItems": 1}));
+            let mut list = json!({"type": "array", "items": tree, "minItems": 1});
+            if let Some((fewest, most)) = crate::control::ControlType::from_name(spec.name).map(|t| t.child_count())
+                && let Value::Object(o) = &mut list
+            {
+                o.insert("minItems".into(), json!(fewest));
+                if most != usize::MAX {
+                    o.insert("maxItems".into(), json!(most));
+                }
+            }
+            props.insert("children".into(), list.clone());
             json!({"anyOf": [
-                {"type": "array", "items": tree, "minItems": 1},
+                list,
                 {"type": "object", "properties": props, "required": ["children"], "additionalProperties": false}
             ]})
         }

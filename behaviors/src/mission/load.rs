@@ -102,6 +102,29 @@ pub fn load_mission<E: 'static>(path: &Path, nodes: &NodeRegistry<E>) -> LoadedM
 
 /// Loads and validates a mission file against a node registry, with options.
 pub fn load_mission_with<E: 'static>(path: &Path, nodes: &NodeRegistry<E>, options: &LoadOptions) -> LoadedMission {
+    match limits::read_text(path, limits::MAX_SOURCE_BYTES) {
+        Ok(text) => load_mission_str(&text, path, nodes, options),
+        Err(e) => {
+            let mut out = LoadedMission::default();
+            out.files.push(path.to_path_buf());
+            out.sources.push(String::new());
+            let (line, column) = e.position().unwrap_or((1, 1));
+            let loc = Loc { line, column, offset: None, len: 0 };
+            out.diagnostics.push(Diagnostic::new(path, loc, "", Stage::Parse, format!("cannot read the mission: {e}")));
+            out
+        }
+    }
+}
+
+/// Loads and validates a mission held in a string. `path` names it in diagnostics and places
+/// it: its includes, plan files and world are looked up from `path`'s folder (and
+/// `options.allowed_dirs`) as for a mission read from `path`, which need not exist.
+pub fn load_mission_str<E: 'static>(
+    text: &str,
+    path: &Path,
+    nodes: &NodeRegistry<E>,
+    options: &LoadOptions,
+) -> LoadedMission {
     let registry = nodes.catalog();
     let mut out = LoadedMission::default();
     let roots: Vec<PathBuf> = std::iter::once(path.parent().map(Path::to_path_buf).unwrap_or_default())
@@ -109,16 +132,23 @@ pub fn load_mission_with<E: 'static>(path: &Path, nodes: &NodeRegistry<E>, optio
         .collect();
     let file: FileId = 0;
     out.files.push(path.to_path_buf());
-    let text = match limits::read_text(path, limits::MAX_SOURCE_BYTES) {
-        Ok(t) => t,
-        Err(e) => {
-            out.sources.push(String::new());
-            let (line, column) = e.position().unwrap_or((1, 1));
-            let loc = Loc { line, column, offset: None, len: 0 };
-            out.diagnostics.push(Diagnostic::new(path, loc, "", Stage::Parse, format!("cannot read the mission: {e}")));
-            return out;
-        }
-    };
+    if text.len() as u64 > limits::MAX_SOURCE_BYTES {
+        out.sources.push(String::new());
+        let message = format!(
+            "the mission is {} bytes, more than the {} a mission may have",
+            text.len(),
+            limits::MAX_SOURCE_BYTES
+        );
+        out.diagnostics.push(Diagnostic::new(
+            path,
+            Loc { line: 1, column: 1, offset: None, len: 0 },
+            "",
+            Stage::Parse,
+            message,
+        ));
+        return out;
+    }
+    let text = text.to_string();
     out.sources.push(text.clone());
     let root = match parse(&text) {
         Ok(n) => n,

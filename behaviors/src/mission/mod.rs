@@ -8,11 +8,14 @@ pub mod json_schema;
 pub mod limits;
 pub mod load;
 pub mod schema;
+pub mod tree;
 pub mod yaml;
 
 pub use build::{BuildError, BuildOptions, build_executor, build_tree};
 pub use diagnostic::{Diagnostic, Rendered, Stage};
 pub use load::{
-    CompiledRole, LoadOptions, LoadedMission, PROVIDED_ENTRIES, load_mission, load_mission_with, skills_of,
+    CompiledRole, LoadOptions, LoadedMission, PROVIDED_ENTRIES, load_mission, load_mission_str, load_mission_with,
+    skills_of,
 };
 pub use schema::MissionFile;
+pub use tree::{TreeNode, load_tree_str};

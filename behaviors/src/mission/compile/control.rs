@@ -55,8 +55,23 @@ impl<'a> Compiler<'a> {
             );
             return None;
         }
-        let mut children = Vec::new();
+        let (fewest, most) = ty.child_count();
         let mut ok = params_ok;
+        if items.len() < fewest || items.len() > most {
+            self.err(
+                file,
+                children_node.loc,
+                &path,
+                Stage::Schema,
+                format!(
+                    "`{}` takes {fewest} or {most} children (a condition, a branch run when it succeeds and an optional one run when it fails), found {}",
+                    spec.name,
+                    items.len()
+                ),
+            );
+            ok = false;
+        }
+        let mut children = Vec::new();
         for (i, item) in items.iter().enumerate() {
             let child_path = format!("{path}[{i}]");
             match self.compile(item, file, &child_path) {
@@ -124,6 +139,7 @@ impl<'a> Compiler<'a> {
         let mut duration = Duration::ZERO;
         let mut count = None;
         let mut hz = 0.0;
+        let mut then_skip = false;
         let required = |c: &mut Self, name: &str| -> Option<BbValue> {
             let v = c.literal_port(spec, body, name, file, &path);
             if v.is_none() && body.get(name).is_none() {
@@ -183,10 +199,14 @@ impl<'a> Compiler<'a> {
                 }
                 _ => ok = false,
             },
+            DecoratorType::RunOnce => match self.literal_port(spec, body, "then_skip", file, &path) {
+                Some(BbValue::Bool(b)) => then_skip = b,
+                _ => ok &= body.get("then_skip").is_none(),
+            },
             DecoratorType::Inverter
             | DecoratorType::ForceSuccess
             | DecoratorType::ForceFailure
-            | DecoratorType::RunOnce => {}
+            | DecoratorType::KeepRunningUntilFailure => {}
         }
         let child = child?;
         ok.then(|| Ir {
@@ -194,7 +214,7 @@ impl<'a> Compiler<'a> {
             path,
             loc: key.loc,
             file,
-            kind: IrKind::Decorator { ty, child: Box::new(child), duration, count, hz },
+            kind: IrKind::Decorator { ty, child: Box::new(child), duration, count, hz, then_skip },
         })
     }
 }

@@ -69,6 +69,8 @@ pub enum IrKind {
         count: Option<u32>,
         /// Rate for rate_limit.
         hz: f64,
+        /// run_once: report Skipped after the first completion.
+        then_skip: bool,
     },
     /// A state machine.
     StateMachine {

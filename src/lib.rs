@@ -1,0 +1,45 @@
+//! `spomp` as a library: the command-line tool's entry points, so that a lab's own binary is one
+//! `main` that adds its node types to the registry and runs the same CLI.
+//!
+//! ```no_run
+//! use std::process::ExitCode;
+//!
+//! fn main() -> ExitCode {
+//!     let mut registry = spomp_robot::registry();
+//!     // registry.try_register(my_node_type()) …
+//!     spomp::cli::main_with(registry)
+//! }
+//! ```
+//!
+//! `validate`, `sim`, `run`, `nodes` and `schema` then see the added node types (the JSON Schema and
+//! the node reference include them). See `examples/custom-node/`.
+
+/// `println!` that stops quietly when stdout is closed (e.g. piped into `head`) instead of
+/// panicking.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout().lock(), $($arg)*);
+    }};
+}
+
+mod args;
+pub mod cli;
+mod commands;
+mod farm_cmd;
+mod log_cmd;
+mod plan_cmd;
+mod run_cmd;
+mod sim_cmd;
+mod sim_plots;
+mod terrain_cmd;
+mod world_cmd;
+
+pub use spomp_behaviors::NodeRegistry;
+pub use spomp_robot::RobotRuntime;
+
+/// The node registry the CLI loads missions with: the engine's node types and the robot
+/// layer's domain nodes; add a lab's own types to it and hand it to [`cli::main_with`].
+pub fn registry() -> NodeRegistry<RobotRuntime> {
+    spomp_robot::registry()
+}
