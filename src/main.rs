@@ -20,6 +20,7 @@ mod args;
 mod commands;
 mod log_cmd;
 mod plan_cmd;
+mod replay_cmd;
 mod sim_cmd;
 mod sim_plots;
 mod terrain_cmd;
@@ -63,6 +64,10 @@ enum Command {
     /// Run a mission in the built-in simulator: summary table, `summary.json`, `run.mcap` and
     /// plots per trial under the output folder.
     Sim(sim_cmd::SimArgs),
+    /// Replay one robot of a log: a fresh robot fed the recorded inputs, its commands, node
+    /// transitions and team messages compared with the recorded ones (exit 0 identical, 1 at the
+    /// first divergence, 2 when the log cannot be replayed).
+    Replay(replay_cmd::ReplayArgs),
     /// Print the JSON Schema of the mission language (for editors' YAML language servers).
     Schema,
     /// List the node types with their ports.
@@ -292,6 +297,7 @@ fn main() -> ExitCode {
         Command::Log { action: LogCommand::Check { log, json } } => log_cmd::check(&log, json),
         Command::Log { action: LogCommand::Recover { log, out, json } } => log_cmd::recover(&log, &out, json),
         Command::Sim(args) => sim_cmd::sim(&args),
+        Command::Replay(args) => replay_cmd::replay(&args),
         Command::Schema => commands::schema(),
         Command::Nodes { json, markdown, name } => commands::nodes(json, markdown, name.as_deref()),
         Command::World { action } => run_world(action),

@@ -15,8 +15,10 @@ use spomp_behaviors::mission::{LoadOptions, LoadedMission, load_mission_with};
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
 use spomp_core::{Odometry, PanoramaFrame, PanoramaGeometry, Point2, ReachabilityScan, RobotId, RobotKind, Time};
-use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
-use spomp_sim::run::{RobotSnapshot, RunResult, RunSummary, SimEvent, SimObserver, SimOptions, Simulation};
+use spomp_mcap::{Recorder, RecorderOptions, SafeFile, SeamCallRef, TickOutput};
+use spomp_sim::run::{
+    RobotSnapshot, RunResult, RunSummary, SeamInput, SimEvent, SimObserver, SimOptions, Simulation, tier_bits,
+};
 use spomp_sim::{Blackout, Faults, KillFault};
 
 use crate::sim_plots;
@@ -55,6 +57,11 @@ pub struct SimArgs {
     /// Do not write run.mcap.
     #[arg(long)]
     pub no_mcap: bool,
+    /// Also record what `spomp replay` needs in run.mcap: the run's setup (mission files, seeds,
+    /// operating area) and every call on each robot's seam (`/R/seam`: full-resolution
+    /// panoramas, team-state bytes per link, ticks). See docs/replay.md for the size it costs.
+    #[arg(long, conflicts_with = "no_mcap")]
+    pub replayable: bool,
     /// Kill a robot: ROBOT@SECONDS (repeatable).
     #[arg(long, value_parser = crate::args::kill)]
     pub kill: Vec<(String, f64)>,
@@ -327,16 +334,25 @@ fn run_trial(
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
     let options = SimOptions { seed, time_limit_s: args.time_limit_s, faults: faults.clone(), ..SimOptions::default() };
+    let run_info = if args.replayable {
+        let area = spomp_sim::run::operating_area(mission, &world);
+        let level = options.map_compression.level;
+        Some(spomp_mcap::replay::run_info(loaded, "sim", seed, &area, options.map_publish_period_s, level)?)
+    } else {
+        None
+    };
     let sim = Simulation::new(loaded, &spomp_robot::registry(), Arc::new(world), options)
         .with_context(|| format!("setting up `{}` (seed {seed})", mission.mission))?;
     let mcap_path = trial_dir.join("run.mcap");
     let recorder = if args.no_mcap {
         None
     } else {
-        Some(
-            Recorder::create(&mcap_path, RecorderOptions::default())
-                .with_context(|| format!("creating {}", mcap_path.display()))?,
-        )
+        let mut rec = Recorder::create(&mcap_path, RecorderOptions::default())
+            .with_context(|| format!("creating {}", mcap_path.display()))?;
+        if let Some(info) = &run_info {
+            rec.run_info(info).with_context(|| format!("writing the run's setup to {}", mcap_path.display()))?;
+        }
+        Some(rec)
     };
     let panos_dir = args.save_panos.then(|| trial_dir.join("panoramas"));
     if let Some(d) = &panos_dir {
@@ -351,6 +367,7 @@ fn run_trial(
         bar: bar.clone(),
         trace: args.trace,
         last_second: -1,
+        replayable: args.replayable,
     };
     let result = sim.run_until(&mut observer, &mut || interrupted.load(Ordering::Relaxed));
     if let Some(e) = observer.error.take() {
@@ -398,6 +415,8 @@ struct RunObserver {
     bar: ProgressBar,
     trace: bool,
     last_second: i64,
+    /// Record every seam call (`--replayable`).
+    replayable: bool,
 }
 
 impl RunObserver {
@@ -490,6 +509,25 @@ impl SimObserver for RunObserver {
 
     fn on_event(&mut self, now: Time, event: &SimEvent) {
         self.record(|r| r.json("/team/events", now, event));
+    }
+
+    fn on_seam(&mut self, robot: &RobotId, now: Time, call: SeamInput<'_>) {
+        if !self.replayable {
+            return;
+        }
+        let call = match call {
+            SeamInput::Odometry(o) => SeamCallRef::Odometry(o),
+            SeamInput::Panorama(p) => SeamCallRef::Panorama(p),
+            SeamInput::ExternalPose(e) => SeamCallRef::ExternalPose(e),
+            SeamInput::CameraTiles(t) => SeamCallRef::CameraTiles(t),
+            SeamInput::TeamIn { from, bytes } => SeamCallRef::TeamIn { from, bytes },
+            SeamInput::TeamOut { to, tiers, budget_bytes, sent } => {
+                SeamCallRef::TeamOut { to, tiers: tier_bits(tiers), budget_bytes: budget_bytes as u64, sent }
+            }
+            SeamInput::Tick { command, flight } => SeamCallRef::Tick(TickOutput { command, flight }),
+            SeamInput::Halt => SeamCallRef::Halt,
+        };
+        self.record(|r| r.seam(robot.as_str(), now, call));
     }
 
     fn on_problem(&mut self, robot: &RobotId, now: Time, message: &str) {
