@@ -406,3 +406,106 @@ pub fn read_replay_log(bytes: &[u8]) -> Result<ReplayLog, ReadError> {
     let end_ns = messages.iter().map(|m| m.log_time).max().unwrap_or(0);
     Ok(ReplayLog { info, messages, truncated: !check.closed, end_ns })
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use std::sync::Arc;
+
+    use spomp_core::{DepthPanorama, PanoramaGeometry, Point2, Pose2, SemanticPanorama};
+
+    use super::*;
+    use crate::RecorderOptions;
+
+    fn info() -> RunInfo {
+        RunInfo {
+            spomp_version: "0.1.0".into(),
+            source: "sim".into(),
+            run_seed: u64::MAX,
+            robot_seeds: [("ugv1".to_string(), 0x9E37_79B9_7F4A_7C16)].into_iter().collect(),
+            files: vec![("m.yaml".into(), "mission: m\n".into()), ("sub/x.yaml".into(), "é ✓ = text\n".into())],
+            map_publish_period_s: 0.1 + 0.2,
+            map_compression: "fast".into(),
+            area: AreaRecord {
+                classes: ClassTable::default_table(),
+                grid: GridSpec::new(Point2::new(-0.1, 1e-300), 0.5, 3, 2),
+                prior_map: None,
+            },
+        }
+    }
+
+    fn record(calls: &[(Time, SeamCallRef<'_>)]) -> Vec<u8> {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        let mut rec = Recorder::new(&mut buf, RecorderOptions::default()).unwrap();
+        rec.run_info(&info()).unwrap();
+        for (t, c) in calls {
+            rec.seam("ugv1", *t, *c).unwrap();
+        }
+        rec.finish().unwrap();
+        buf.into_inner()
+    }
+
+    #[test]
+    fn seam_calls_and_run_info_read_back_bit_for_bit() {
+        let g = PanoramaGeometry { rows: 2, cols: 3, v_fov_rad: 1.0 };
+        let frame = PanoramaFrame {
+            seq: 7,
+            stamp: Time::from_nanos(1_000_000_001),
+            odom_pose: Pose2::new(1.0 / 3.0, -0.0, f64::MIN_POSITIVE),
+            sensor_height_m: 0.4,
+            depth: Arc::new(DepthPanorama {
+                geometry: g,
+                range_m: vec![f32::NAN, 0.1, f32::INFINITY, -0.0, 1e-45, 3.0],
+            }),
+            semantic: Arc::new(SemanticPanorama { geometry: g, class: vec![0, 1, 2, 3, 4, 255] }),
+        };
+        let odom = Odometry { stamp: Time::from_nanos(5), pose: Pose2::new(0.1, 0.2, 0.3), twist: Twist2::default() };
+        let peer = RobotId::new("uav1");
+        let tick = TickOutput { command: Some(Twist2 { v: 1.5, omega: -1e-17 }), flight: None };
+        let calls = [
+            (Time::from_nanos(5), SeamCallRef::Odometry(&odom)),
+            (Time::from_nanos(6), SeamCallRef::Panorama(&frame)),
+            (Time::from_nanos(7), SeamCallRef::TeamIn { from: &peer, bytes: &[1, 2, 3] }),
+            (Time::from_nanos(7), SeamCallRef::TeamOut { to: &peer, tiers: 0b101, budget_bytes: 9, sent: None }),
+            (Time::from_nanos(8), SeamCallRef::Tick(tick)),
+            (Time::from_nanos(9), SeamCallRef::Halt),
+        ];
+        let log = read_replay_log(&record(&calls)).unwrap();
+        assert!(!log.truncated);
+        assert_eq!(log.info, Some(info()));
+        let read: Vec<SeamCall> = log
+            .messages
+            .iter()
+            .map(|m| SeamCall::from_msg(&m.topic, &crate::decode_cdr(&m.topic, &m.data).unwrap()).unwrap())
+            .collect();
+        assert_eq!(read.len(), calls.len());
+        assert_eq!(read[0], SeamCall::Odometry(odom));
+        let SeamCall::Panorama(p) = &read[1] else { panic!("{:?}", read[1]) };
+        let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&p.depth.range_m), bits(&frame.depth.range_m), "ranges bit for bit, NaN included");
+        assert_eq!(
+            (p.odom_pose.y.to_bits(), p.semantic.class.clone()),
+            ((-0.0f64).to_bits(), frame.semantic.class.to_vec())
+        );
+        assert_eq!(read[2], SeamCall::TeamIn { from: peer.clone(), bytes: vec![1, 2, 3] });
+        assert_eq!(read[3], SeamCall::TeamOut { to: peer, out: TeamOut { tiers: 0b101, budget_bytes: 9, sent: None } });
+        assert_eq!(read[4], SeamCall::Tick(tick));
+        assert_eq!(read[5], SeamCall::Halt);
+    }
+
+    #[test]
+    fn an_unclosed_log_reads_as_truncated_and_unknown_calls_are_errors() {
+        let odom = Odometry::default();
+        let bytes = record(&[(Time::from_nanos(2_000_000_000), SeamCallRef::Odometry(&odom))]);
+        // Without its footer and magic: not closed, the data whole.
+        let log = read_replay_log(&bytes[..bytes.len() - 20]).unwrap();
+        assert!(log.truncated);
+        assert_eq!(log.end_ns, 2_000_000_000);
+        assert!(log.info.is_some());
+        let bad = SeamCallMsg { stamp_ns: 0, call: "teleport".into(), peer: String::new(), data: vec![] };
+        assert!(SeamCall::from_msg("/x/seam", &bad).is_err());
+        let short = SeamCallMsg { stamp_ns: 0, call: "odometry".into(), peer: String::new(), data: vec![1, 2] };
+        assert!(SeamCall::from_msg("/x/seam", &short).is_err());
+    }
+}

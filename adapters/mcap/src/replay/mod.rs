@@ -415,3 +415,52 @@ fn running_leaves(robot: &Robot) -> String {
     });
     running.join("; ")
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+
+    #[test]
+    fn sets_go_into_the_robots_navigation_overrides() {
+        let mut nav = Some(serde_json::json!({ "terrain": { "slope_threshold": 0.3 } }));
+        apply_set(&mut nav, "navigation.terrain.inflation_m", "0.9").unwrap();
+        apply_set(&mut nav, "navigation.global_planner.learning", "false").unwrap();
+        apply_set(&mut nav, "navigation.profile", "simulation").unwrap();
+        assert_eq!(
+            nav.unwrap(),
+            serde_json::json!({
+                "terrain": { "slope_threshold": 0.3, "inflation_m": 0.9 },
+                "global_planner": { "learning": false },
+                "profile": "simulation"
+            })
+        );
+        let mut none = None;
+        assert!(apply_set(&mut none, "priority", "3").is_err());
+        assert!(apply_set(&mut none, "navigation..x", "3").is_err());
+        let mut scalar = Some(serde_json::json!({ "profile": "simulation" }));
+        assert!(apply_set(&mut scalar, "navigation.profile.x", "1").is_err());
+    }
+
+    #[test]
+    fn tier_bits_round_trip() {
+        for bits in 0..8u8 {
+            let set = tiers_from_bits(bits);
+            for (k, t) in [Tier::Coordination, Tier::Scans, Tier::Maps].into_iter().enumerate() {
+                assert_eq!(set.contains(t), bits & (1 << k) != 0);
+            }
+        }
+    }
+
+    #[test]
+    fn a_log_without_run_setup_is_refused_with_a_hint() {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        let rec = crate::Recorder::new(&mut buf, crate::RecorderOptions::default()).unwrap();
+        rec.finish().unwrap();
+        let e = replay(&buf.into_inner(), &ReplayOptions { robot: "ugv1".into(), ..Default::default() }, &mut |_| {})
+            .err()
+            .unwrap();
+        assert!(e.to_string().contains("--replayable"), "{e}");
+    }
+}
