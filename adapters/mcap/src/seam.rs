@@ -340,7 +340,8 @@ impl<W: Write + Seek> Recorder<W> {
     }
 }
 
-/// What a log holds for replay.
+/// What a log holds for replay, all of it in memory (tests and tools; [`open_replay_log`]
+/// streams instead).
 #[derive(Clone, Debug)]
 pub struct ReplayLog {
     /// The run's setup; `None` when the log has none (recorded without it).
@@ -353,38 +354,41 @@ pub struct ReplayLog {
     pub end_ns: u64,
 }
 
-/// Reads a log for replay: metadata, attachments and messages of its readable part (a
+/// Reads a whole log for replay: metadata, attachments and messages of its readable part (a
 /// truncated log reads up to its last whole chunk).
 pub fn read_replay_log(bytes: &[u8]) -> Result<ReplayLog, ReadError> {
+    let log = open_replay_log(bytes)?;
+    let mut messages = Vec::new();
+    log.stream(&|_| true, &mut |m| {
+        messages.push(m);
+        true
+    })?;
+    Ok(ReplayLog { info: log.info, messages, truncated: log.truncated, end_ns: log.end_ns })
+}
+
+/// A log opened for replay: its setup read, its messages streamed on demand.
+pub struct OpenLog {
+    /// The readable part of the file, closed so that a linear reader reads it to the end.
+    prefix: Vec<u8>,
+    /// The run's setup; `None` when the log has none (recorded without it).
+    pub info: Option<RunInfo>,
+    /// The file was not closed properly (a crash or a cut): only its readable part is read.
+    pub truncated: bool,
+    /// Log time of the last readable message, nanoseconds.
+    pub end_ns: u64,
+}
+
+/// Opens a log for replay: reads the run's setup and where the readable data ends, without
+/// decompressing a chunk.
+pub fn open_replay_log(bytes: &[u8]) -> Result<OpenLog, ReadError> {
     let check = crate::read::check_log(bytes)?;
     let prefix = crate::read::readable_prefix(bytes, check.readable_bytes as usize);
     let mut metadata = None;
     let mut area = None;
-    let mut messages = Vec::new();
-    let mut channels: BTreeMap<u16, (String, String, String, String)> = BTreeMap::new();
-    let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
-    let mut handle = |rec: mcap::records::Record<'_>| -> Result<(), ReadError> {
+    let mut end_ns = 0;
+    for rec in mcap::read::LinearReader::new(&prefix)? {
         use mcap::records::Record;
-        match rec {
-            Record::Schema { header, .. } => {
-                schemas.insert(header.id, (header.name, header.encoding));
-            }
-            Record::Channel(c) => {
-                let (name, enc) = schemas.get(&c.schema_id).cloned().unwrap_or_default();
-                channels.insert(c.id, (c.topic, name, enc, c.message_encoding));
-            }
-            Record::Message { header, data } => {
-                if let Some((topic, schema, schema_encoding, encoding)) = channels.get(&header.channel_id) {
-                    messages.push(crate::LogMessage {
-                        topic: topic.clone(),
-                        schema: schema.clone(),
-                        schema_encoding: schema_encoding.clone(),
-                        encoding: encoding.clone(),
-                        log_time: header.log_time,
-                        data: data.into_owned(),
-                    });
-                }
-            }
+        match rec? {
             Record::Metadata(m) if m.name == RUN_METADATA => metadata = Some(m.metadata),
             Record::Attachment { header, data, .. } if header.name == AREA_ATTACHMENT => {
                 area =
@@ -392,19 +396,62 @@ pub fn read_replay_log(bytes: &[u8]) -> Result<ReplayLog, ReadError> {
                         ReadError::Corrupt(format!("attachment `{AREA_ATTACHMENT}` does not decode"))
                     })?);
             }
+            Record::Chunk { header, .. } => end_ns = end_ns.max(header.message_end_time),
+            Record::Message { header, .. } => end_ns = end_ns.max(header.log_time),
             _ => {}
         }
-        Ok(())
-    };
-    for rec in mcap::read::ChunkFlattener::new(&prefix)? {
-        handle(rec?)?;
     }
     let info = match (metadata, area) {
         (Some(m), Some(a)) => Some(RunInfo::from_metadata(&m, a)?),
         _ => None,
     };
-    let end_ns = messages.iter().map(|m| m.log_time).max().unwrap_or(0);
-    Ok(ReplayLog { info, messages, truncated: !check.closed, end_ns })
+    Ok(OpenLog { prefix, info, truncated: !check.closed, end_ns })
+}
+
+impl OpenLog {
+    /// Calls `f` with every message whose topic `keep` accepts, in file order, until `f`
+    /// returns false.
+    pub fn stream(
+        &self,
+        keep: &dyn Fn(&str) -> bool,
+        f: &mut dyn FnMut(crate::LogMessage) -> bool,
+    ) -> Result<(), ReadError> {
+        use mcap::records::Record;
+        let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
+        let mut channels: BTreeMap<u16, (String, String, String, String)> = BTreeMap::new();
+        for rec in mcap::read::ChunkFlattener::new(&self.prefix)? {
+            match rec? {
+                Record::Schema { header, .. } => {
+                    schemas.insert(header.id, (header.name, header.encoding));
+                }
+                Record::Channel(c) => {
+                    let (name, enc) = schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                    channels.insert(c.id, (c.topic, name, enc, c.message_encoding));
+                }
+                Record::Message { header, data } => {
+                    let Some((topic, schema, schema_encoding, encoding)) = channels.get(&header.channel_id) else {
+                        continue;
+                    };
+                    if !keep(topic) {
+                        continue;
+                    }
+                    let m = crate::LogMessage {
+                        topic: topic.clone(),
+                        schema: schema.clone(),
+                        schema_encoding: schema_encoding.clone(),
+                        encoding: encoding.clone(),
+                        log_time: header.log_time,
+                        data: data.into_owned(),
+                    };
+                    if !f(m) {
+                        break;
+                    }
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]

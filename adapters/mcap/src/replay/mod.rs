@@ -18,7 +18,7 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::Instant;
 
-use crate::{LogMessage, ReadError, RunInfo, SeamCall, SeamCallMsg, TickOutput, decode_cdr, read_replay_log};
+use crate::{LogMessage, ReadError, RunInfo, SeamCall, SeamCallMsg, TickOutput, decode_cdr, open_replay_log};
 use serde::Serialize;
 use spomp_behaviors::TreeObserver;
 use spomp_behaviors::trace::{Recorder, TransitionRecord};
@@ -130,7 +130,7 @@ pub fn replay(
     trace: &mut dyn FnMut(&TransitionRecord),
 ) -> Result<ReplayReport, ReplayError> {
     let wall = Instant::now();
-    let log = read_replay_log(bytes)?;
+    let log = open_replay_log(bytes)?;
     let info = log.info.as_ref().ok_or_else(|| {
         ReplayError::Log(
             "the log holds no run setup (metadata `spomp.run`): record it with `spomp sim --replayable`".into(),
@@ -139,11 +139,9 @@ pub fn replay(
     let id = options.robot.as_str();
     let seam_topic = format!("/{id}/seam");
     let bt_topic = format!("/{id}/bt");
-    if !log.messages.iter().any(|m| m.topic == seam_topic) {
+    if !info.robot_seeds.contains_key(id) {
         let robots: Vec<&String> = info.robot_seeds.keys().collect();
-        return Err(ReplayError::Log(format!(
-            "the log holds no seam calls of `{id}` ({seam_topic}); robots in the run: {robots:?}"
-        )));
+        return Err(ReplayError::Log(format!("no robot `{id}` in the log; robots in the run: {robots:?}")));
     }
     let mut robot = build_robot(info, id, &options.sets)?;
     let until_ns = options.until_s.map(|s| Time::from_secs_f64(s).nanos);
@@ -168,27 +166,22 @@ pub fn replay(
             speed: 0.0,
         },
     };
-    for m in &log.messages {
-        if m.topic == bt_topic {
-            state.recorded.push_back(recorded_transition(m)?);
-            continue;
+    let mut error = None;
+    let keep = |t: &str| t == seam_topic || t == bt_topic;
+    log.stream(&keep, &mut |m| match state.step(&mut robot, &m, &bt_topic, until_ns, trace) {
+        Ok(go_on) => go_on,
+        Err(e) => {
+            error = Some(e);
+            false
         }
-        if m.topic != seam_topic {
-            continue;
-        }
-        let msg: SeamCallMsg = decode_cdr(&m.topic, &m.data)?;
-        if until_ns.is_some_and(|u| msg.stamp_ns > u) {
-            break;
-        }
-        let call = SeamCall::from_msg(&m.topic, &msg)?;
-        let now = Time::from_nanos(msg.stamp_ns);
-        state.report.calls += 1;
-        state.report.replayed_to_s = now.as_secs_f64();
-        if let Some(d) = state.apply(&mut robot, now, call, trace) {
-            state.report.identical = false;
-            state.report.divergence = Some(d);
-            break;
-        }
+    })?;
+    if let Some(e) = error {
+        return Err(e);
+    }
+    if state.report.calls == 0 {
+        return Err(ReplayError::Log(format!(
+            "the log holds no seam calls of `{id}` ({seam_topic}): record it with `spomp sim --replayable`"
+        )));
     }
     let mut report = state.report;
     report.wall_s = wall.elapsed().as_secs_f64();
@@ -277,6 +270,35 @@ struct State {
 }
 
 impl State {
+    /// One message of the robot's channels; false once the replay is to stop.
+    fn step(
+        &mut self,
+        robot: &mut Robot,
+        m: &LogMessage,
+        bt_topic: &str,
+        until_ns: Option<i64>,
+        trace: &mut dyn FnMut(&TransitionRecord),
+    ) -> Result<bool, ReplayError> {
+        if m.topic == bt_topic {
+            self.recorded.push_back(recorded_transition(m)?);
+            return Ok(true);
+        }
+        let msg: SeamCallMsg = decode_cdr(&m.topic, &m.data)?;
+        if until_ns.is_some_and(|u| msg.stamp_ns > u) {
+            return Ok(false);
+        }
+        let call = SeamCall::from_msg(&m.topic, &msg)?;
+        let now = Time::from_nanos(msg.stamp_ns);
+        self.report.calls += 1;
+        self.report.replayed_to_s = now.as_secs_f64();
+        if let Some(d) = self.apply(robot, now, call, trace) {
+            self.report.identical = false;
+            self.report.divergence = Some(d);
+            return Ok(false);
+        }
+        Ok(true)
+    }
+
     /// Makes one call; a divergence if what the robot produced differs from the log.
     fn apply(
         &mut self,
