@@ -114,6 +114,10 @@ const DISK_LIMIT_BYTES: f64 = 20e9;
 /// plots, CSV and summary of a trial (1.1 MB measured).
 const MCAP_BYTES_PER_ROBOT_S: f64 = 4e3;
 const TRIAL_FIXED_BYTES: f64 = 2e6;
+/// What `--replayable` adds per robot per simulated second (measured: 58 kB on 600 s of
+/// `visit-all-vehicle-clusters.yaml`, 5 robots, seed 3; tripled for margin: panoramas of other
+/// worlds compress less).
+const REPLAYABLE_BYTES_PER_ROBOT_S: f64 = 175e3;
 
 /// A usage error: printed, exit 2.
 fn usage(message: String) -> Result<ExitCode> {
@@ -148,7 +152,7 @@ pub fn sim(args: &SimArgs) -> Result<ExitCode> {
         ));
     }
     let time_limit = args.time_limit_s.unwrap_or(mission.time_limit_s);
-    let estimate = disk_estimate(trials, mission.team.len(), time_limit, !args.no_mcap);
+    let estimate = disk_estimate(trials, mission.team.len(), time_limit, !args.no_mcap, args.replayable);
     if estimate > DISK_LIMIT_BYTES && !args.force {
         return usage(format!(
             "{trials} trials of {time_limit:.0} s with {} robots would write about {:.0} GB (limit {:.0} GB); \
@@ -250,8 +254,9 @@ fn stop_on_signals() -> Result<Arc<AtomicBool>> {
 }
 
 /// Bytes a run's outputs are expected to take.
-fn disk_estimate(trials: u32, robots: usize, time_limit_s: f64, mcap: bool) -> f64 {
-    let per_trial = TRIAL_FIXED_BYTES + if mcap { MCAP_BYTES_PER_ROBOT_S * robots as f64 * time_limit_s } else { 0.0 };
+fn disk_estimate(trials: u32, robots: usize, time_limit_s: f64, mcap: bool, replayable: bool) -> f64 {
+    let per_robot_s = MCAP_BYTES_PER_ROBOT_S + if replayable { REPLAYABLE_BYTES_PER_ROBOT_S } else { 0.0 };
+    let per_trial = TRIAL_FIXED_BYTES + if mcap { per_robot_s * robots as f64 * time_limit_s } else { 0.0 };
     f64::from(trials) * per_trial
 }
 
