@@ -405,10 +405,11 @@ impl State {
 }
 
 fn describe_tick(t: &TickOutput) -> String {
+    // `{:?}`: the shortest text that reads back as the same float.
     match (t.command, t.flight) {
-        (Some(c), _) => format!("cmd_vel v={} m/s omega={} rad/s", c.v, c.omega),
+        (Some(c), _) => format!("cmd_vel v={:?} m/s omega={:?} rad/s", c.v, c.omega),
         (None, Some(f)) => {
-            format!("flight to ({}, {}) at {} m, {} m/s", f.target.x, f.target.y, f.altitude_m, f.speed_mps)
+            format!("flight to ({:?}, {:?}) at {:?} m, {:?} m/s", f.target.x, f.target.y, f.altitude_m, f.speed_mps)
         }
         (None, None) => "stop".into(),
     }
