@@ -11,7 +11,7 @@ use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
 use spomp_core::{Point2, Pose2};
 use spomp_robot::RobotRuntime;
 
-use crate::{args, commands, log_cmd, plan_cmd, run_cmd, sim_cmd, terrain_cmd, world_cmd};
+use crate::{args, commands, log_cmd, plan_cmd, replay_cmd, run_cmd, sim_cmd, terrain_cmd, world_cmd};
 
 /// Mission framework for air–ground robot teams.
 #[derive(Parser, Debug)]
@@ -54,6 +54,10 @@ enum Command {
     /// Run one robot of a mission over ROS 2: on a real robot, or driving a robot of
     /// `spomp sim --ros2`.
     Run(run_cmd::RunArgs),
+    /// Replay one robot of a log: a fresh robot fed the recorded inputs, its commands, node
+    /// transitions and team messages compared with the recorded ones (exit 0 identical, 1 at the
+    /// first divergence, 2 when the log cannot be replayed).
+    Replay(replay_cmd::ReplayArgs),
     /// Print the JSON Schema of the mission language (for editors' YAML language servers).
     Schema,
     /// List the node types with their ports.
@@ -302,6 +306,7 @@ where
         Command::Log { action: LogCommand::Recover { log, out, json } } => log_cmd::recover(&log, &out, json),
         Command::Sim(args) => sim_cmd::sim(&args, registry),
         Command::Run(args) => run_cmd::run(&args, registry),
+        Command::Replay(args) => replay_cmd::replay(&args, registry),
         Command::Schema => commands::schema(registry),
         Command::Nodes { json, markdown, name } => commands::nodes(json, markdown, name.as_deref(), registry),
         Command::World { action } => run_world(action),

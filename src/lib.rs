@@ -29,6 +29,7 @@ mod commands;
 mod farm_cmd;
 mod log_cmd;
 mod plan_cmd;
+mod replay_cmd;
 mod run_cmd;
 mod sim_cmd;
 mod sim_plots;

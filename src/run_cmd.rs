@@ -7,13 +7,13 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use anyhow::{Context, Result, bail};
+use spomp_behaviors::NodeRegistry;
 use spomp_behaviors::mission::{LoadOptions, load_mission_with};
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::{
     FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, Time, Twist2,
 };
 use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
-use spomp_behaviors::NodeRegistry;
 use spomp_robot::{Robot, RobotRuntime};
 use spomp_ros2::{RobotNode, RunObserver, RunSettings};
 

@@ -16,9 +16,11 @@ use spomp_behaviors::mission::{LoadOptions, LoadedMission, load_mission_with};
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
 use spomp_core::{Odometry, PanoramaFrame, PanoramaGeometry, Point2, ReachabilityScan, RobotId, RobotKind, Time};
-use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
+use spomp_mcap::{Recorder, RecorderOptions, SafeFile, SeamCallRef, TickOutput};
 use spomp_robot::RobotRuntime;
-use spomp_sim::run::{RobotSnapshot, RunResult, RunSummary, SimEvent, SimObserver, SimOptions, Simulation};
+use spomp_sim::run::{
+    RobotSnapshot, RunResult, RunSummary, SeamInput, SimEvent, SimObserver, SimOptions, Simulation, tier_bits,
+};
 use spomp_sim::{Blackout, Faults, KillFault};
 
 use crate::sim_plots;
@@ -57,6 +59,11 @@ pub struct SimArgs {
     /// Do not write run.mcap.
     #[arg(long)]
     pub no_mcap: bool,
+    /// Also record what `spomp replay` needs in run.mcap: the run's setup (mission files, seeds,
+    /// operating area) and every call on each robot's seam (`/R/seam`: full-resolution
+    /// panoramas, team-state bytes per link, ticks). See docs/replay.md for the size it costs.
+    #[arg(long, conflicts_with = "no_mcap")]
+    pub replayable: bool,
     /// Kill a robot: ROBOT@SECONDS (repeatable).
     #[arg(long, value_parser = crate::args::kill)]
     pub kill: Vec<(String, f64)>,
@@ -129,6 +136,10 @@ const DISK_LIMIT_BYTES: f64 = 20e9;
 /// plots, CSV and summary of a trial (1.1 MB measured).
 const MCAP_BYTES_PER_ROBOT_S: f64 = 4e3;
 const TRIAL_FIXED_BYTES: f64 = 2e6;
+/// What `--replayable` adds per robot per simulated second (measured: 58 kB on 600 s of
+/// `visit-all-vehicle-clusters.yaml`, 5 robots, seed 3; tripled for margin: panoramas of other
+/// worlds compress less).
+const REPLAYABLE_BYTES_PER_ROBOT_S: f64 = 175e3;
 
 /// A usage error: printed, exit 2.
 fn usage(message: String) -> Result<ExitCode> {
@@ -183,7 +194,7 @@ pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         ));
     }
     let time_limit = args.time_limit_s.unwrap_or(mission.time_limit_s);
-    let estimate = disk_estimate(trials, mission.team.len(), time_limit, !args.no_mcap);
+    let estimate = disk_estimate(trials, mission.team.len(), time_limit, !args.no_mcap, args.replayable);
     if estimate > DISK_LIMIT_BYTES && !args.force {
         return usage(format!(
             "{trials} trials of {time_limit:.0} s with {} robots would write about {:.0} GB (limit {:.0} GB); \
@@ -285,8 +296,9 @@ fn stop_on_signals() -> Result<Arc<AtomicBool>> {
 }
 
 /// Bytes a run's outputs are expected to take.
-fn disk_estimate(trials: u32, robots: usize, time_limit_s: f64, mcap: bool) -> f64 {
-    let per_trial = TRIAL_FIXED_BYTES + if mcap { MCAP_BYTES_PER_ROBOT_S * robots as f64 * time_limit_s } else { 0.0 };
+fn disk_estimate(trials: u32, robots: usize, time_limit_s: f64, mcap: bool, replayable: bool) -> f64 {
+    let per_robot_s = MCAP_BYTES_PER_ROBOT_S + if replayable { REPLAYABLE_BYTES_PER_ROBOT_S } else { 0.0 };
+    let per_trial = TRIAL_FIXED_BYTES + if mcap { per_robot_s * robots as f64 * time_limit_s } else { 0.0 };
     f64::from(trials) * per_trial
 }
 
@@ -376,6 +388,13 @@ fn run_trial(
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
     let options = SimOptions { seed, time_limit_s: args.time_limit_s, faults: faults.clone(), ..SimOptions::default() };
+    let run_info = if args.replayable {
+        let area = spomp_sim::run::operating_area(mission, &world);
+        let level = options.map_compression.level;
+        Some(spomp_mcap::replay::run_info(loaded, "sim", seed, &area, options.map_publish_period_s, level)?)
+    } else {
+        None
+    };
     let mut sim = Simulation::new(loaded, registry, Arc::new(world), options)
         .with_context(|| format!("setting up `{}` (seed {seed})", mission.mission))?;
     if args.ros2 {
@@ -395,10 +414,12 @@ fn run_trial(
     let recorder = if args.no_mcap {
         None
     } else {
-        Some(
-            Recorder::create(&mcap_path, RecorderOptions::default())
-                .with_context(|| format!("creating {}", mcap_path.display()))?,
-        )
+        let mut rec = Recorder::create(&mcap_path, RecorderOptions::default())
+            .with_context(|| format!("creating {}", mcap_path.display()))?;
+        if let Some(info) = &run_info {
+            rec.run_info(info).with_context(|| format!("writing the run's setup to {}", mcap_path.display()))?;
+        }
+        Some(rec)
     };
     let panos_dir = args.save_panos.then(|| trial_dir.join("panoramas"));
     if let Some(d) = &panos_dir {
@@ -413,6 +434,7 @@ fn run_trial(
         bar: bar.clone(),
         trace: args.trace,
         last_second: -1,
+        replayable: args.replayable,
     };
     let result = sim.run_until(&mut observer, &mut || interrupted.load(Ordering::Relaxed));
     if let Some(e) = observer.error.take() {
@@ -460,6 +482,8 @@ struct RunObserver {
     bar: ProgressBar,
     trace: bool,
     last_second: i64,
+    /// Record every seam call (`--replayable`).
+    replayable: bool,
 }
 
 impl RunObserver {
@@ -552,6 +576,25 @@ impl SimObserver for RunObserver {
 
     fn on_event(&mut self, now: Time, event: &SimEvent) {
         self.record(|r| r.json("/team/events", now, event));
+    }
+
+    fn on_seam(&mut self, robot: &RobotId, now: Time, call: SeamInput<'_>) {
+        if !self.replayable {
+            return;
+        }
+        let call = match call {
+            SeamInput::Odometry(o) => SeamCallRef::Odometry(o),
+            SeamInput::Panorama(p) => SeamCallRef::Panorama(p),
+            SeamInput::ExternalPose(e) => SeamCallRef::ExternalPose(e),
+            SeamInput::CameraTiles(t) => SeamCallRef::CameraTiles(t),
+            SeamInput::TeamIn { from, bytes } => SeamCallRef::TeamIn { from, bytes },
+            SeamInput::TeamOut { to, tiers, budget_bytes, sent } => {
+                SeamCallRef::TeamOut { to, tiers: tier_bits(tiers), budget_bytes: budget_bytes as u64, sent }
+            }
+            SeamInput::Tick { command, flight } => SeamCallRef::Tick(TickOutput { command, flight }),
+            SeamInput::Halt => SeamCallRef::Halt,
+        };
+        self.record(|r| r.seam(robot.as_str(), now, call));
     }
 
     fn on_problem(&mut self, robot: &RobotId, now: Time, message: &str) {

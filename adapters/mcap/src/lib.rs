@@ -10,11 +10,21 @@
 //! `/R/panorama/semantic` (Image mono8 class labels), `/R/reachability` (LaserScan),
 //! `/R/path` (Path), `/R/bt` (Log: node transitions), `/team/state` (String: JSON team-state
 //! changes), `/mission/status` (String: JSON).
+//!
+//! For replay (see [`read_replay_log`]): `/R/seam` (`spomp_msgs/msg/SeamCall`: every call made on
+//! the robot's seam, in order, lossless) and the run's setup in the metadata record
+//! [`RUN_METADATA`] and the attachment [`AREA_ATTACHMENT`].
 
 mod read;
 mod record;
+pub mod replay;
 mod safe;
+mod seam;
 
 pub use read::{LogCheck, LogMessage, McapLog, ReadError, check_log, decode_cdr, recover_log};
 pub use record::{RecordError, Recorder, RecorderOptions, encode_cdr};
 pub use safe::SafeFile;
+pub use seam::{
+    AREA_ATTACHMENT, AreaRecord, OpenLog, RUN_METADATA, ReplayLog, RunInfo, SeamCall, SeamCallMsg, SeamCallRef,
+    TeamOut, TickOutput, open_replay_log, read_replay_log,
+};

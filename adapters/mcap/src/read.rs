@@ -139,7 +139,7 @@ pub fn recover_log<W: std::io::Write + std::io::Seek>(bytes: &[u8], out: W) -> R
 
 /// The data section up to `data_end`, closed with a provisional end so that a linear reader
 /// reads it to the end.
-fn readable_prefix(bytes: &[u8], data_end: usize) -> Vec<u8> {
+pub(crate) fn readable_prefix(bytes: &[u8], data_end: usize) -> Vec<u8> {
     let mut v = Vec::with_capacity(data_end + crate::safe::PROVISIONAL_END_LEN);
     v.extend_from_slice(&bytes[..data_end]);
     v.extend_from_slice(&crate::safe::provisional_end());

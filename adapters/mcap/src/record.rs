@@ -349,6 +349,24 @@ impl<W: Write + Seek> Recorder<W> {
         self.log(topic, time, &ros::StringMsg { data })
     }
 
+    /// Writes a metadata record (outside chunks).
+    pub(crate) fn write_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<(), RecordError> {
+        self.writer.write_metadata(&mcap::records::Metadata { name: name.to_string(), metadata })?;
+        Ok(())
+    }
+
+    /// Writes an attachment (outside chunks).
+    pub(crate) fn write_attachment(&mut self, name: &str, media_type: &str, data: Vec<u8>) -> Result<(), RecordError> {
+        self.writer.attach(&mcap::Attachment {
+            log_time: 0,
+            create_time: 0,
+            name: name.to_string(),
+            media_type: media_type.to_string(),
+            data: std::borrow::Cow::Owned(data),
+        })?;
+        Ok(())
+    }
+
     /// Writes the summary and index; the file is complete after this.
     pub fn finish(mut self) -> Result<(), RecordError> {
         self.writer.finish()?;

@@ -15,6 +15,7 @@
 //! the [`RunSummary`].
 
 mod external;
+mod seam;
 mod setup;
 mod summary;
 
@@ -36,6 +37,7 @@ use spomp_robot::{PoseInput, Robot, RobotRuntime, RobotSetup};
 use spomp_teamstate::{GoalOrigin, Tier, TierSet};
 
 pub use external::{DrivenTeamMessage, ExternalDrivers};
+pub use seam::{SeamInput, tier_bits};
 pub use setup::{faults_for_mission, operating_area, radio_for_mission, world_for_mission};
 pub use summary::{
     ClusterSummary, ErrorStats, GoalSummary, NavigationInForce, Outcome, ProblemCount, RobotSummary, RunSummary,
@@ -176,6 +178,8 @@ pub trait SimObserver {
     fn on_event(&mut self, _now: Time, _event: &SimEvent) {}
     /// A problem a node or skill reported.
     fn on_problem(&mut self, _robot: &RobotId, _now: Time, _message: &str) {}
+    /// A call the simulator made on a robot's seam, in the order made (what a replay needs).
+    fn on_seam(&mut self, _robot: &RobotId, _now: Time, _call: SeamInput<'_>) {}
     /// How often `on_state` is called, seconds.
     fn record_period_s(&self) -> f64 {
         0.1
@@ -583,7 +587,7 @@ impl Simulation {
         self.move_bodies(dt);
         self.sense(observer);
         if now >= self.next_sync {
-            self.sync_radio();
+            self.sync_radio(observer);
             self.next_sync = Time::from_nanos(now.nanos + (self.options.sync_period_s * 1e9).round() as i64);
         }
         self.tick_trees(observer);
@@ -618,6 +622,7 @@ impl Simulation {
                 r.killed_s = Some(now.as_secs_f64());
                 r.command = Twist2::ZERO;
                 r.robot.halt(now, None);
+                observer.on_seam(&r.id, now, SeamInput::Halt);
                 observer.on_event(now, &SimEvent::RobotKilled { robot: r.id.to_string() });
             }
         }
@@ -702,15 +707,19 @@ impl Simulation {
                         }
                         continue;
                     }
+                    observer.on_seam(&r.id, now, SeamInput::Odometry(&odom));
                     r.robot.on_odometry(odom);
                     if let Some(src) = truth_source.as_mut() {
-                        r.robot.on_external_pose(src.estimate(now, truth));
+                        let estimate = src.estimate(now, truth);
+                        observer.on_seam(&r.id, now, SeamInput::ExternalPose(&estimate));
+                        r.robot.on_external_pose(estimate);
                     }
                     if let Some(frame) =
                         sensor.poll_among(now, world, truth, ugv.base_elevation_m(), odom.pose, &self.others)
                     {
                         let frame = Arc::new(frame);
                         observer.on_panorama(&r.id, &frame);
+                        observer.on_seam(&r.id, now, SeamInput::Panorama(&frame));
                         r.robot.on_panorama(frame);
                         if let Some(est) = r.robot.pose() {
                             let error = est.pose.position().distance(truth.position());
@@ -737,26 +746,25 @@ impl Simulation {
                         continue;
                     }
                     let pose = uav.pose();
-                    r.robot.on_external_pose(PoseEstimate { stamp: now, pose, covariance: [0.0; 9], confidence: 1.0 });
+                    let estimate = PoseEstimate { stamp: now, pose, covariance: [0.0; 9], confidence: 1.0 };
+                    observer.on_seam(&r.id, now, SeamInput::ExternalPose(&estimate));
+                    r.robot.on_external_pose(estimate);
                     let tiles = camera.reveal(world, pose);
+                    observer.on_seam(&r.id, now, SeamInput::CameraTiles(&tiles));
                     r.robot.on_camera_tiles(&tiles, now);
                 }
                 Body::Fixed { pose } => {
                     if alive {
-                        let pose = *pose;
-                        r.robot.on_external_pose(PoseEstimate {
-                            stamp: now,
-                            pose,
-                            covariance: [0.0; 9],
-                            confidence: 1.0,
-                        });
+                        let estimate = PoseEstimate { stamp: now, pose: *pose, covariance: [0.0; 9], confidence: 1.0 };
+                        observer.on_seam(&r.id, now, SeamInput::ExternalPose(&estimate));
+                        r.robot.on_external_pose(estimate);
                     }
                 }
             }
         }
     }
 
-    fn sync_radio(&mut self) {
+    fn sync_radio(&mut self, observer: &mut dyn SimObserver) {
         let nodes: Vec<RadioNode> =
             self.robots.iter().map(|r| RadioNode { position: r.truth().position(), alive: r.alive() }).collect();
         let mut links = std::mem::take(&mut self.links);
@@ -809,11 +817,11 @@ impl Simulation {
                     });
                     out
                 } else {
-                    self.robots[a]
-                        .robot
-                        .team_message_for(&to, tiers, usize::try_from(budget).unwrap_or(usize::MAX))
-                        .into_iter()
-                        .collect()
+                    let budget_bytes = usize::try_from(budget).unwrap_or(usize::MAX);
+                    let sent = self.robots[a].robot.team_message_for(&to, tiers, budget_bytes);
+                    let call = SeamInput::TeamOut { to: &to, tiers, budget_bytes, sent: sent.as_deref() };
+                    observer.on_seam(&from, self.now, call);
+                    sent.into_iter().collect()
                 };
                 for bytes in messages {
                     if let Some(c) = credit.get_mut(k) {
@@ -821,7 +829,10 @@ impl Simulation {
                     }
                     match self.drivers.as_mut().filter(|_| self.robots[b].external) {
                         Some(d) => d.deliver_team_message(&to, &from, &bytes),
-                        None => self.robots[b].robot.on_team_message(&from, &bytes),
+                        None => {
+                            observer.on_seam(&to, self.now, SeamInput::TeamIn { from: &from, bytes: &bytes });
+                            self.robots[b].robot.on_team_message(&from, &bytes);
+                        }
                     }
                 }
             }
@@ -865,6 +876,9 @@ impl Simulation {
                     observer.on_transitions(&r.id, &recorder.records);
                     recorder.records.clear();
                 }
+                // After the transitions: a log cut after a tick's call holds all of that tick.
+                let tick = SeamInput::Tick { command: r.robot.command(), flight: r.robot.flight() };
+                observer.on_seam(&r.id, now, tick);
                 let path_len = r.robot.planned_path().map_or(0, <[Point2]>::len);
                 if path_len != r.last_path_len {
                     r.last_path_len = path_len;

@@ -1,0 +1,558 @@
+//! What a replay needs: every call an adapter made on one robot's seam (`spomp_robot::Robot`),
+//! in order, losslessly, and the run's setup in the log's metadata.
+//!
+//! Per robot `R`, one channel `/R/seam` (schema `spomp_msgs/msg/SeamCall`): each message is one
+//! call — `odometry`, `panorama`, `external_pose`, `camera_tiles`, `team_in` (bytes from a peer,
+//! as received), `team_out` (a sync request to a peer: tiers, budget, and the bytes the robot
+//! returned), `tick` (`maintain` + `tick`, with the command or flight command it produced) or
+//! `halt`. The argument travels as little-endian CDR of the spomp-core type in the `data`
+//! field (floats bit for bit, the panorama at full resolution). Calls are written in the order
+//! they were made: a reader replays them in file order.
+//!
+//! The run's setup is an MCAP metadata record named [`RUN_METADATA`] (spomp version, run seed,
+//! each robot's seed, the mission's text and its includes, the map publishing settings) and an
+//! attachment named [`AREA_ATTACHMENT`] (the operating area: class table, map grid, prior map).
+
+use std::collections::BTreeMap;
+use std::io::{Seek, Write};
+
+use byteorder::LittleEndian;
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+use spomp_core::ros::RosMessage;
+use spomp_core::{
+    AerialMap, ClassTable, FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, PoseEstimate, RobotId, Time,
+    Twist2,
+};
+
+use crate::read::ReadError;
+use crate::record::{RecordError, Recorder};
+
+/// Name of the metadata record holding the run's setup.
+pub const RUN_METADATA: &str = "spomp.run";
+/// Name of the attachment holding the operating area.
+pub const AREA_ATTACHMENT: &str = "spomp/operating_area.cdr";
+/// Media type of CDR-encoded spomp attachments.
+const CDR_MEDIA_TYPE: &str = "application/x-spomp-cdr";
+
+/// One message on `/R/seam` as it is on the wire.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SeamCallMsg {
+    /// Time of the call, nanoseconds.
+    pub stamp_ns: i64,
+    /// Which call ([`SeamCall::name`]).
+    pub call: String,
+    /// The peer of a team message (`team_in`: the sender, `team_out`: the receiver), else empty.
+    pub peer: String,
+    /// The call's argument: little-endian CDR of its spomp-core type, without encapsulation.
+    #[serde(with = "bytes")]
+    pub data: Vec<u8>,
+}
+
+impl RosMessage for SeamCallMsg {
+    const TYPE_NAME: &'static str = "spomp_msgs/msg/SeamCall";
+    const DEFINITION: &'static str = "int64 stamp_ns\nstring call\nstring peer\nuint8[] data\n";
+}
+
+/// Byte sequences as one CDR `uint8[]` (length + bytes), not byte by byte.
+mod bytes {
+    use serde::{Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &[u8], s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_bytes(v)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<u8>, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = Vec<u8>;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("bytes")
+            }
+            fn visit_bytes<E: serde::de::Error>(self, v: &[u8]) -> Result<Vec<u8>, E> {
+                Ok(v.to_vec())
+            }
+            fn visit_byte_buf<E: serde::de::Error>(self, v: Vec<u8>) -> Result<Vec<u8>, E> {
+                Ok(v)
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<u8>, A::Error> {
+                let mut out = Vec::new();
+                while let Some(b) = seq.next_element()? {
+                    out.push(b);
+                }
+                Ok(out)
+            }
+        }
+        d.deserialize_byte_buf(V)
+    }
+}
+
+/// The outputs of one tick.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TickOutput {
+    /// The velocity command after the tick (UGVs); `None`: stop.
+    pub command: Option<Twist2>,
+    /// The flight command after the tick (UAVs); `None`: hover.
+    pub flight: Option<FlightCommand>,
+}
+
+/// A sync request to a peer and what the robot answered.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TeamOut {
+    /// The tiers the link allowed, as bits (bit k = tier k).
+    pub tiers: u8,
+    /// The byte budget.
+    pub budget_bytes: u64,
+    /// The bytes the robot returned; `None`: nothing to send.
+    pub sent: Option<Vec<u8>>,
+}
+
+/// One call on a robot's seam, owned (as read back).
+#[derive(Clone, Debug, PartialEq)]
+pub enum SeamCall {
+    /// `Robot::on_odometry`.
+    Odometry(Odometry),
+    /// `Robot::on_panorama`.
+    Panorama(Box<PanoramaFrame>),
+    /// `Robot::on_external_pose`.
+    ExternalPose(PoseEstimate),
+    /// `Robot::on_camera_tiles`.
+    CameraTiles(Vec<MapTile>),
+    /// `Robot::on_team_message`.
+    TeamIn {
+        /// The sender.
+        from: RobotId,
+        /// The bytes as received.
+        bytes: Vec<u8>,
+    },
+    /// `Robot::team_message_for`.
+    TeamOut {
+        /// The receiver.
+        to: RobotId,
+        /// Request and answer.
+        out: TeamOut,
+    },
+    /// `Robot::maintain` then `Robot::tick`, and the commands read back.
+    Tick(TickOutput),
+    /// `Robot::halt`.
+    Halt,
+}
+
+/// One call on a robot's seam, borrowed (for recording).
+#[derive(Clone, Copy, Debug)]
+pub enum SeamCallRef<'a> {
+    /// `Robot::on_odometry`.
+    Odometry(&'a Odometry),
+    /// `Robot::on_panorama`.
+    Panorama(&'a PanoramaFrame),
+    /// `Robot::on_external_pose`.
+    ExternalPose(&'a PoseEstimate),
+    /// `Robot::on_camera_tiles`.
+    CameraTiles(&'a [MapTile]),
+    /// `Robot::on_team_message`.
+    TeamIn {
+        /// The sender.
+        from: &'a RobotId,
+        /// The bytes as received.
+        bytes: &'a [u8],
+    },
+    /// `Robot::team_message_for`.
+    TeamOut {
+        /// The receiver.
+        to: &'a RobotId,
+        /// Tier bits (bit k = tier k).
+        tiers: u8,
+        /// Byte budget.
+        budget_bytes: u64,
+        /// The answer.
+        sent: Option<&'a [u8]>,
+    },
+    /// `Robot::maintain` + `Robot::tick`.
+    Tick(TickOutput),
+    /// `Robot::halt`.
+    Halt,
+}
+
+impl SeamCallRef<'_> {
+    /// The call's name on the wire.
+    pub fn name(&self) -> &'static str {
+        match self {
+            SeamCallRef::Odometry(_) => "odometry",
+            SeamCallRef::Panorama(_) => "panorama",
+            SeamCallRef::ExternalPose(_) => "external_pose",
+            SeamCallRef::CameraTiles(_) => "camera_tiles",
+            SeamCallRef::TeamIn { .. } => "team_in",
+            SeamCallRef::TeamOut { .. } => "team_out",
+            SeamCallRef::Tick(_) => "tick",
+            SeamCallRef::Halt => "halt",
+        }
+    }
+
+    /// The wire message of this call at `now`.
+    pub fn to_msg(&self, now: Time) -> Result<SeamCallMsg, RecordError> {
+        let (peer, data) = match *self {
+            SeamCallRef::Odometry(o) => (String::new(), cdr(o)?),
+            SeamCallRef::Panorama(p) => (String::new(), cdr(p)?),
+            SeamCallRef::ExternalPose(e) => (String::new(), cdr(e)?),
+            SeamCallRef::CameraTiles(t) => (String::new(), cdr(&t)?),
+            SeamCallRef::TeamIn { from, bytes } => (from.to_string(), bytes.to_vec()),
+            SeamCallRef::TeamOut { to, tiers, budget_bytes, sent } => {
+                let out = TeamOut { tiers, budget_bytes, sent: sent.map(<[u8]>::to_vec) };
+                (to.to_string(), cdr(&out)?)
+            }
+            SeamCallRef::Tick(t) => (String::new(), cdr(&t)?),
+            SeamCallRef::Halt => (String::new(), Vec::new()),
+        };
+        Ok(SeamCallMsg { stamp_ns: now.nanos, call: self.name().to_string(), peer, data })
+    }
+}
+
+impl SeamCall {
+    /// Decodes a wire message of `topic`.
+    pub fn from_msg(topic: &str, msg: &SeamCallMsg) -> Result<SeamCall, ReadError> {
+        let bad = |message: String| ReadError::Decode { topic: topic.to_string(), message };
+        let data = &msg.data[..];
+        let decode = |what: &str| bad(format!("`{}` call: {what} does not decode", msg.call));
+        Ok(match msg.call.as_str() {
+            "odometry" => SeamCall::Odometry(uncdr(data).ok_or_else(|| decode("odometry"))?),
+            "panorama" => SeamCall::Panorama(Box::new(uncdr(data).ok_or_else(|| decode("panorama"))?)),
+            "external_pose" => SeamCall::ExternalPose(uncdr(data).ok_or_else(|| decode("pose"))?),
+            "camera_tiles" => SeamCall::CameraTiles(uncdr(data).ok_or_else(|| decode("tiles"))?),
+            "team_in" => SeamCall::TeamIn { from: RobotId::new(&msg.peer), bytes: msg.data.clone() },
+            "team_out" => {
+                SeamCall::TeamOut { to: RobotId::new(&msg.peer), out: uncdr(data).ok_or_else(|| decode("request"))? }
+            }
+            "tick" => SeamCall::Tick(uncdr(data).ok_or_else(|| decode("tick output"))?),
+            "halt" => SeamCall::Halt,
+            other => return Err(bad(format!("unknown seam call `{other}`"))),
+        })
+    }
+}
+
+fn cdr<T: Serialize>(v: &T) -> Result<Vec<u8>, RecordError> {
+    cdr_encoding::to_vec::<T, LittleEndian>(v)
+        .map_err(|e| RecordError::Encode { type_name: std::any::type_name::<T>(), message: e.to_string() })
+}
+
+fn uncdr<T: DeserializeOwned>(data: &[u8]) -> Option<T> {
+    cdr_encoding::from_bytes::<T, LittleEndian>(data).ok().map(|(v, _)| v)
+}
+
+/// Where the robots operate, as the log stores it (the robot layer's `OperatingArea`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AreaRecord {
+    /// The class table.
+    pub classes: ClassTable,
+    /// The team map's grid.
+    pub grid: GridSpec,
+    /// The map the robots start with, if any.
+    pub prior_map: Option<AerialMap>,
+}
+
+/// The run's setup, as a replay needs it to build a fresh robot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunInfo {
+    /// `spomp --version` of the recording.
+    pub spomp_version: String,
+    /// What recorded it (`sim`, `run`).
+    pub source: String,
+    /// The run's seed.
+    pub run_seed: u64,
+    /// Each robot's seed (of its random stream), by id.
+    pub robot_seeds: BTreeMap<String, u64>,
+    /// The mission file and its includes: (path relative to the mission's folder, or absolute
+    /// when outside it; text). The mission comes first.
+    pub files: Vec<(String, String)>,
+    /// How often the mapping robot publishes its map, seconds.
+    pub map_publish_period_s: f64,
+    /// PNG effort of the published map (`fast`, `default`, `best`).
+    pub map_compression: String,
+    /// The operating area.
+    pub area: AreaRecord,
+}
+
+impl RunInfo {
+    fn to_metadata(&self) -> BTreeMap<String, String> {
+        let mut m = BTreeMap::new();
+        m.insert("spomp_version".into(), self.spomp_version.clone());
+        m.insert("source".into(), self.source.clone());
+        m.insert("seed".into(), self.run_seed.to_string());
+        m.insert("map_publish_period_s".into(), self.map_publish_period_s.to_string());
+        m.insert("map_compression".into(), self.map_compression.clone());
+        m.insert("files".into(), self.files.len().to_string());
+        for (k, (path, text)) in self.files.iter().enumerate() {
+            m.insert(format!("file.{k}.path"), path.clone());
+            m.insert(format!("file.{k}.text"), text.clone());
+        }
+        for (id, seed) in &self.robot_seeds {
+            m.insert(format!("robot_seed.{id}"), seed.to_string());
+        }
+        m
+    }
+
+    fn from_metadata(m: &BTreeMap<String, String>, area: AreaRecord) -> Result<RunInfo, ReadError> {
+        let get = |k: &str| m.get(k).ok_or_else(|| ReadError::Corrupt(format!("run metadata lacks `{k}`")));
+        let num = |k: &str| -> Result<u64, ReadError> {
+            get(k)?.parse().map_err(|_| ReadError::Corrupt(format!("run metadata `{k}` is not a number")))
+        };
+        let n = num("files")? as usize;
+        let mut files = Vec::with_capacity(n.min(1024));
+        for k in 0..n {
+            files.push((get(&format!("file.{k}.path"))?.clone(), get(&format!("file.{k}.text"))?.clone()));
+        }
+        let mut robot_seeds = BTreeMap::new();
+        for (k, v) in m {
+            if let Some(id) = k.strip_prefix("robot_seed.") {
+                let seed = v.parse().map_err(|_| ReadError::Corrupt(format!("run metadata `{k}` is not a number")))?;
+                robot_seeds.insert(id.to_string(), seed);
+            }
+        }
+        Ok(RunInfo {
+            spomp_version: get("spomp_version")?.clone(),
+            source: get("source")?.clone(),
+            run_seed: num("seed")?,
+            robot_seeds,
+            files,
+            map_publish_period_s: get("map_publish_period_s")?
+                .parse()
+                .map_err(|_| ReadError::Corrupt("run metadata `map_publish_period_s` is not a number".into()))?,
+            map_compression: get("map_compression")?.clone(),
+            area,
+        })
+    }
+}
+
+impl<W: Write + Seek> Recorder<W> {
+    /// Writes the run's setup (metadata and the operating area), and closes the chunk so that
+    /// it is on disk before the first message.
+    pub fn run_info(&mut self, info: &RunInfo) -> Result<(), RecordError> {
+        self.end_chunk()?;
+        let area = cdr(&info.area)?;
+        self.write_metadata(RUN_METADATA, info.to_metadata())?;
+        self.write_attachment(AREA_ATTACHMENT, CDR_MEDIA_TYPE, area)?;
+        self.end_chunk()
+    }
+
+    /// One call on robot `robot`'s seam at `now` (`/R/seam`).
+    pub fn seam(&mut self, robot: &str, now: Time, call: SeamCallRef<'_>) -> Result<(), RecordError> {
+        let msg = call.to_msg(now)?;
+        self.log(&format!("/{robot}/seam"), now, &msg)
+    }
+}
+
+/// What a log holds for replay, all of it in memory (tests and tools; [`open_replay_log`]
+/// streams instead).
+#[derive(Clone, Debug)]
+pub struct ReplayLog {
+    /// The run's setup; `None` when the log has none (recorded without it).
+    pub info: Option<RunInfo>,
+    /// Every message of the readable part, in file order.
+    pub messages: Vec<crate::LogMessage>,
+    /// The file was not closed properly (a crash or a cut): only its readable part is here.
+    pub truncated: bool,
+    /// Log time of the last readable message, nanoseconds.
+    pub end_ns: u64,
+}
+
+/// Reads a whole log for replay: metadata, attachments and messages of its readable part (a
+/// truncated log reads up to its last whole chunk).
+pub fn read_replay_log(bytes: &[u8]) -> Result<ReplayLog, ReadError> {
+    let log = open_replay_log(bytes)?;
+    let mut messages = Vec::new();
+    log.stream(&|_| true, &mut |m| {
+        messages.push(m);
+        true
+    })?;
+    Ok(ReplayLog { info: log.info, messages, truncated: log.truncated, end_ns: log.end_ns })
+}
+
+/// A log opened for replay: its setup read, its messages streamed on demand.
+pub struct OpenLog {
+    /// The readable part of the file, closed so that a linear reader reads it to the end.
+    prefix: Vec<u8>,
+    /// The run's setup; `None` when the log has none (recorded without it).
+    pub info: Option<RunInfo>,
+    /// The file was not closed properly (a crash or a cut): only its readable part is read.
+    pub truncated: bool,
+    /// Log time of the last readable message, nanoseconds.
+    pub end_ns: u64,
+}
+
+/// Opens a log for replay: reads the run's setup and where the readable data ends, without
+/// decompressing a chunk.
+pub fn open_replay_log(bytes: &[u8]) -> Result<OpenLog, ReadError> {
+    let check = crate::read::check_log(bytes)?;
+    let prefix = crate::read::readable_prefix(bytes, check.readable_bytes as usize);
+    let mut metadata = None;
+    let mut area = None;
+    let mut end_ns = 0;
+    for rec in mcap::read::LinearReader::new(&prefix)? {
+        use mcap::records::Record;
+        match rec? {
+            Record::Metadata(m) if m.name == RUN_METADATA => metadata = Some(m.metadata),
+            Record::Attachment { header, data, .. } if header.name == AREA_ATTACHMENT => {
+                area =
+                    Some(uncdr::<AreaRecord>(&data).ok_or_else(|| {
+                        ReadError::Corrupt(format!("attachment `{AREA_ATTACHMENT}` does not decode"))
+                    })?);
+            }
+            Record::Chunk { header, .. } => end_ns = end_ns.max(header.message_end_time),
+            Record::Message { header, .. } => end_ns = end_ns.max(header.log_time),
+            _ => {}
+        }
+    }
+    let info = match (metadata, area) {
+        (Some(m), Some(a)) => Some(RunInfo::from_metadata(&m, a)?),
+        _ => None,
+    };
+    Ok(OpenLog { prefix, info, truncated: !check.closed, end_ns })
+}
+
+impl OpenLog {
+    /// Calls `f` with every message whose topic `keep` accepts, in file order, until `f`
+    /// returns false.
+    pub fn stream(
+        &self,
+        keep: &dyn Fn(&str) -> bool,
+        f: &mut dyn FnMut(crate::LogMessage) -> bool,
+    ) -> Result<(), ReadError> {
+        use mcap::records::Record;
+        let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
+        let mut channels: BTreeMap<u16, (String, String, String, String)> = BTreeMap::new();
+        for rec in mcap::read::ChunkFlattener::new(&self.prefix)? {
+            match rec? {
+                Record::Schema { header, .. } => {
+                    schemas.insert(header.id, (header.name, header.encoding));
+                }
+                Record::Channel(c) => {
+                    let (name, enc) = schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                    channels.insert(c.id, (c.topic, name, enc, c.message_encoding));
+                }
+                Record::Message { header, data } => {
+                    let Some((topic, schema, schema_encoding, encoding)) = channels.get(&header.channel_id) else {
+                        continue;
+                    };
+                    if !keep(topic) {
+                        continue;
+                    }
+                    let m = crate::LogMessage {
+                        topic: topic.clone(),
+                        schema: schema.clone(),
+                        schema_encoding: schema_encoding.clone(),
+                        encoding: encoding.clone(),
+                        log_time: header.log_time,
+                        data: data.into_owned(),
+                    };
+                    if !f(m) {
+                        break;
+                    }
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use std::sync::Arc;
+
+    use spomp_core::{DepthPanorama, PanoramaGeometry, Point2, Pose2, SemanticPanorama};
+
+    use super::*;
+    use crate::RecorderOptions;
+
+    fn info() -> RunInfo {
+        RunInfo {
+            spomp_version: "0.1.0".into(),
+            source: "sim".into(),
+            run_seed: u64::MAX,
+            robot_seeds: [("ugv1".to_string(), 0x9E37_79B9_7F4A_7C16)].into_iter().collect(),
+            files: vec![("m.yaml".into(), "mission: m\n".into()), ("sub/x.yaml".into(), "é ✓ = text\n".into())],
+            map_publish_period_s: 0.1 + 0.2,
+            map_compression: "fast".into(),
+            area: AreaRecord {
+                classes: ClassTable::default_table(),
+                grid: GridSpec::new(Point2::new(-0.1, 1e-300), 0.5, 3, 2),
+                prior_map: None,
+            },
+        }
+    }
+
+    fn record(calls: &[(Time, SeamCallRef<'_>)]) -> Vec<u8> {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        let mut rec = Recorder::new(&mut buf, RecorderOptions::default()).unwrap();
+        rec.run_info(&info()).unwrap();
+        for (t, c) in calls {
+            rec.seam("ugv1", *t, *c).unwrap();
+        }
+        rec.finish().unwrap();
+        buf.into_inner()
+    }
+
+    #[test]
+    fn seam_calls_and_run_info_read_back_bit_for_bit() {
+        let g = PanoramaGeometry { rows: 2, cols: 3, v_fov_rad: 1.0 };
+        let frame = PanoramaFrame {
+            seq: 7,
+            stamp: Time::from_nanos(1_000_000_001),
+            odom_pose: Pose2::new(1.0 / 3.0, -0.0, f64::MIN_POSITIVE),
+            sensor_height_m: 0.4,
+            depth: Arc::new(DepthPanorama {
+                geometry: g,
+                range_m: vec![f32::NAN, 0.1, f32::INFINITY, -0.0, 1e-45, 3.0],
+            }),
+            semantic: Arc::new(SemanticPanorama { geometry: g, class: vec![0, 1, 2, 3, 4, 255] }),
+        };
+        let odom = Odometry { stamp: Time::from_nanos(5), pose: Pose2::new(0.1, 0.2, 0.3), twist: Twist2::default() };
+        let peer = RobotId::new("uav1");
+        let tick = TickOutput { command: Some(Twist2 { v: 1.5, omega: -1e-17 }), flight: None };
+        let calls = [
+            (Time::from_nanos(5), SeamCallRef::Odometry(&odom)),
+            (Time::from_nanos(6), SeamCallRef::Panorama(&frame)),
+            (Time::from_nanos(7), SeamCallRef::TeamIn { from: &peer, bytes: &[1, 2, 3] }),
+            (Time::from_nanos(7), SeamCallRef::TeamOut { to: &peer, tiers: 0b101, budget_bytes: 9, sent: None }),
+            (Time::from_nanos(8), SeamCallRef::Tick(tick)),
+            (Time::from_nanos(9), SeamCallRef::Halt),
+        ];
+        let log = read_replay_log(&record(&calls)).unwrap();
+        assert!(!log.truncated);
+        assert_eq!(log.info, Some(info()));
+        let read: Vec<SeamCall> = log
+            .messages
+            .iter()
+            .map(|m| SeamCall::from_msg(&m.topic, &crate::decode_cdr(&m.topic, &m.data).unwrap()).unwrap())
+            .collect();
+        assert_eq!(read.len(), calls.len());
+        assert_eq!(read[0], SeamCall::Odometry(odom));
+        let SeamCall::Panorama(p) = &read[1] else { panic!("{:?}", read[1]) };
+        let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&p.depth.range_m), bits(&frame.depth.range_m), "ranges bit for bit, NaN included");
+        assert_eq!(
+            (p.odom_pose.y.to_bits(), p.semantic.class.clone()),
+            ((-0.0f64).to_bits(), frame.semantic.class.to_vec())
+        );
+        assert_eq!(read[2], SeamCall::TeamIn { from: peer.clone(), bytes: vec![1, 2, 3] });
+        assert_eq!(read[3], SeamCall::TeamOut { to: peer, out: TeamOut { tiers: 0b101, budget_bytes: 9, sent: None } });
+        assert_eq!(read[4], SeamCall::Tick(tick));
+        assert_eq!(read[5], SeamCall::Halt);
+    }
+
+    #[test]
+    fn an_unclosed_log_reads_as_truncated_and_unknown_calls_are_errors() {
+        let odom = Odometry::default();
+        let bytes = record(&[(Time::from_nanos(2_000_000_000), SeamCallRef::Odometry(&odom))]);
+        // Without its footer and magic: not closed, the data whole.
+        let log = read_replay_log(&bytes[..bytes.len() - 20]).unwrap();
+        assert!(log.truncated);
+        assert_eq!(log.end_ns, 2_000_000_000);
+        assert!(log.info.is_some());
+        let bad = SeamCallMsg { stamp_ns: 0, call: "teleport".into(), peer: String::new(), data: vec![] };
+        assert!(SeamCall::from_msg("/x/seam", &bad).is_err());
+        let short = SeamCallMsg { stamp_ns: 0, call: "odometry".into(), peer: String::new(), data: vec![1, 2] };
+        assert!(SeamCall::from_msg("/x/seam", &short).is_err());
+    }
+}
