@@ -13,8 +13,9 @@ use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::{
     FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, Time, Twist2,
 };
-use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
-use spomp_robot::{Robot, RobotRuntime};
+use spomp_mcap::{Recorder, RecorderOptions, SafeFile, SeamCallRef, TickOutput};
+use spomp_robot::seam::{SeamInput, tier_bits};
+use spomp_robot::{Robot, RobotRuntime, RobotSetup};
 use spomp_ros2::{RobotNode, RunObserver, RunSettings};
 
 /// Options of `spomp run`.
@@ -89,8 +90,22 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the operating area of `{}`", mission.mission))?;
     let area = spomp_sim::run::operating_area(mission, &world);
-    let robot = Robot::from_mission(&loaded, &args.robot, &area, seed, registry)
+    let setup = RobotSetup::from_mission(mission, &args.robot, &area, seed)
         .with_context(|| format!("setting up robot `{}`", args.robot))?;
+    // What a replay of the log needs to build this robot again.
+    let run_info = match &args.record {
+        Some(_) => Some(spomp_mcap::replay::run_info(
+            &loaded,
+            "run",
+            seed,
+            &area,
+            setup.config.map_publish_period_s,
+            setup.config.map_compression.level,
+        )?),
+        None => None,
+    };
+    let robot =
+        Robot::from_setup(&loaded, setup, registry).with_context(|| format!("setting up robot `{}`", args.robot))?;
     let peers: Vec<RobotId> = mission.team.iter().filter(|r| r.id != args.robot).map(|r| RobotId::new(&r.id)).collect();
     let mut node = RobotNode::new(robot, settings.clone(), peers).context("starting the ROS 2 node")?;
 
@@ -101,10 +116,15 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         signal_hook::flag::register(sig, stop.clone()).context("installing signal handlers")?;
     }
     let recorder = match &args.record {
-        Some(path) => Some(
-            Recorder::create(path, RecorderOptions { panorama_downsample: 1, ..RecorderOptions::default() })
-                .with_context(|| format!("creating {}", path.display()))?,
-        ),
+        Some(path) => {
+            let mut rec =
+                Recorder::create(path, RecorderOptions { panorama_downsample: 1, ..RecorderOptions::default() })
+                    .with_context(|| format!("creating {}", path.display()))?;
+            if let Some(info) = &run_info {
+                rec.run_info(info).with_context(|| format!("writing the run's setup to {}", path.display()))?;
+            }
+            Some(rec)
+        }
         None => None,
     };
     if !args.json {
@@ -195,16 +215,6 @@ impl RunObserver for RecordingObserver {
         self.record(|r| r.pose(robot, estimate.stamp, estimate.pose, 0.0));
     }
 
-    fn on_team_in(&mut self, robot: &str, now: Time, from: &str, bytes: &[u8]) {
-        let topic = format!("/{robot}/team/in");
-        self.record(|r| r.json(&topic, now, &serde_json::json!({ "from": from, "bytes": bytes.len() })));
-    }
-
-    fn on_team_out(&mut self, robot: &str, now: Time, to: &str, bytes: &[u8]) {
-        let topic = format!("/{robot}/team/out");
-        self.record(|r| r.json(&topic, now, &serde_json::json!({ "to": to, "bytes": bytes.len() })));
-    }
-
     fn on_command(&mut self, robot: &str, now: Time, cmd: Twist2) {
         self.record(|r| r.command(robot, now, cmd));
     }
@@ -233,6 +243,22 @@ impl RunObserver for RecordingObserver {
 
     fn on_path(&mut self, robot: &str, now: Time, path: &[Point2]) {
         self.record(|r| r.path(robot, now, path));
+    }
+
+    fn on_seam(&mut self, robot: &RobotId, now: Time, call: SeamInput<'_>) {
+        let call = match call {
+            SeamInput::Odometry(o) => SeamCallRef::Odometry(o),
+            SeamInput::Panorama(p) => SeamCallRef::Panorama(p),
+            SeamInput::ExternalPose(e) => SeamCallRef::ExternalPose(e),
+            SeamInput::CameraTiles(t) => SeamCallRef::CameraTiles(t),
+            SeamInput::TeamIn { from, bytes } => SeamCallRef::TeamIn { from, bytes },
+            SeamInput::TeamOut { to, tiers, budget_bytes, sent } => {
+                SeamCallRef::TeamOut { to, tiers: tier_bits(tiers), budget_bytes: budget_bytes as u64, sent }
+            }
+            SeamInput::Tick { command, flight } => SeamCallRef::Tick(TickOutput { command, flight }),
+            SeamInput::Halt => SeamCallRef::Halt,
+        };
+        self.record(|r| r.seam(robot.as_str(), now, call));
     }
 
     fn on_problem(&mut self, robot: &str, now: Time, message: &str) {

@@ -19,6 +19,7 @@ pub mod checks;
 pub mod nodes;
 mod robot;
 pub mod runtime;
+pub mod seam;
 pub mod settings;
 pub mod setup;
 

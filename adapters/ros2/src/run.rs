@@ -20,6 +20,7 @@ use spomp_core::{
     FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, RobotKind, Time, Twist2,
 };
 use spomp_robot::Robot;
+use spomp_robot::seam::SeamInput;
 use spomp_teamstate::TierSet;
 
 use crate::clock::{TimeBase, ros_nanos, wall_nanos};
@@ -56,6 +57,9 @@ pub trait RunObserver {
     fn on_path(&mut self, _robot: &str, _now: Time, _path: &[Point2]) {}
     /// A problem the robot met, or an input that was refused.
     fn on_problem(&mut self, _robot: &str, _now: Time, _message: &str) {}
+    /// Every call made on the robot's seam, in order, with what it answered: what a replay
+    /// feeds a fresh robot (`spomp run --record` logs them, as `spomp sim --replayable` does).
+    fn on_seam(&mut self, _robot: &RobotId, _now: Time, _call: SeamInput<'_>) {}
 }
 
 /// An observer that ignores everything.
@@ -245,6 +249,7 @@ impl RobotNode {
                 let t0 = Instant::now();
                 let frame = Arc::new(frame);
                 observer.on_panorama(&id, &frame);
+                observer.on_seam(self.robot.id(), now, SeamInput::Panorama(&frame));
                 self.robot.on_panorama(frame);
                 state.report.max_panorama_ms = state.report.max_panorama_ms.max(ms(t0.elapsed()));
                 state.panorama_processed = Some(state.panorama_rx.unwrap_or(t0));
@@ -252,6 +257,7 @@ impl RobotNode {
             }
             let stop_reason = state.stop_reason(now, &self.settings);
             if stop_reason == StopReason::EStop && !state.halted {
+                observer.on_seam(self.robot.id(), now, SeamInput::Halt);
                 self.robot.halt(now, Some(&mut transitions));
                 state.halted = true;
             }
@@ -266,6 +272,8 @@ impl RobotNode {
                     self.robot.maintain(now);
                     state.status = self.robot.tick(now, Some(&mut transitions));
                     state.report.ticks += 1;
+                    let (command, flight) = (self.robot.command(), self.robot.flight());
+                    observer.on_seam(self.robot.id(), now, SeamInput::Tick { command, flight });
                 }
                 state.report.max_tick_ms = state.report.max_tick_ms.max(ms(tick_start.elapsed()));
                 self.publish_command(&mut state, now, stop_reason, observer);
@@ -290,6 +298,7 @@ impl RobotNode {
         }
         // Shutdown: one last safe command, whatever the state.
         if let Some(now) = state.now() {
+            observer.on_seam(self.robot.id(), now, SeamInput::Halt);
             self.robot.halt(now, Some(&mut transitions));
             self.publish_transitions(&mut transitions, observer);
             self.publish_command(&mut state, now, StopReason::EStop, observer);
@@ -322,6 +331,7 @@ impl RobotNode {
                     state.odom_rx = Some((state.now().unwrap_or(odom.stamp), Instant::now()));
                     state.history.push(odom);
                     observer.on_odometry(&id, &odom);
+                    observer.on_seam(self.robot.id(), state.now().unwrap_or(odom.stamp), SeamInput::Odometry(&odom));
                     self.robot.on_odometry(odom);
                 }
                 Err(e) => state.refuse(&id, observer, &e.to_string()),
@@ -387,7 +397,9 @@ impl RobotNode {
             state.report.received.team += 1;
             let now = state.now().unwrap_or(Time::ZERO);
             observer.on_team_in(&id, now, &from, &msg.data);
-            self.robot.on_team_message(&RobotId::new(&from), &msg.data);
+            let from = RobotId::new(&from);
+            observer.on_seam(self.robot.id(), now, SeamInput::TeamIn { from: &from, bytes: &msg.data });
+            self.robot.on_team_message(&from, &msg.data);
         }
         got
     }
@@ -395,6 +407,7 @@ impl RobotNode {
     fn external_pose(&mut self, state: &mut LoopState, est: PoseEstimate, observer: &mut dyn RunObserver) {
         state.report.received.poses += 1;
         observer.on_external_pose(self.robot.id().as_str(), &est);
+        observer.on_seam(self.robot.id(), state.now().unwrap_or(est.stamp), SeamInput::ExternalPose(&est));
         self.robot.on_external_pose(est);
     }
 
@@ -510,7 +523,11 @@ impl RobotNode {
     fn send_team(&mut self, now: Time, observer: &mut dyn RunObserver) {
         let id = self.robot.id().to_string();
         for peer in &self.peers {
-            let Some(bytes) = self.robot.team_message_for(peer, TierSet::ALL, self.settings.team_budget_bytes) else {
+            let budget_bytes = self.settings.team_budget_bytes;
+            let sent = self.robot.team_message_for(peer, TierSet::ALL, budget_bytes);
+            let call = SeamInput::TeamOut { to: peer, tiers: TierSet::ALL, budget_bytes, sent: sent.as_deref() };
+            observer.on_seam(self.robot.id(), now, call);
+            let Some(bytes) = sent else {
                 continue;
             };
             observer.on_team_out(&id, now, peer.as_str(), &bytes);

@@ -223,7 +223,7 @@ fn build_robot(
     }
     setup.config.map_publish_period_s = info.map_publish_period_s;
     setup.config.map_compression = CompressionParams { level: setup::png_level(&info.map_compression)? };
-    let robot = Robot::from_setup(&loaded, setup, &registry).map_err(|e| ReplayError::Robot(e.to_string()))?;
+    let robot = Robot::from_setup(&loaded, setup, registry).map_err(|e| ReplayError::Robot(e.to_string()))?;
     drop(dir);
     Ok(robot)
 }
