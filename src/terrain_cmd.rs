@@ -6,9 +6,9 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use image::{DynamicImage, GrayImage, ImageBuffer, ImageReader, Luma, Rgb, RgbImage};
+use image::{DynamicImage, GrayImage, ImageBuffer, Luma, Rgb, RgbImage};
 use serde_json::json;
-use spomp_core::{DepthPanorama, PanoramaGeometry};
+use spomp_core::DepthPanorama;
 use spomp_local_planner::{TerrainAnalyzer, TerrainOutput, TerrainParams, TerrainStage};
 
 /// Options of `spomp terrain`.
@@ -31,23 +31,10 @@ pub struct TerrainArgs {
     pub json: bool,
 }
 
-/// Reads a 16-bit grayscale PNG of range counts into a depth panorama.
+/// Reads a 16-bit grayscale PNG of range counts into a depth panorama (the simulator's reader,
+/// which the `terrain_input` fuzz target exercises).
 pub fn read_depth_png(path: &Path, range_scale_m: f64, v_fov_rad: f64) -> Result<DepthPanorama> {
-    // Only a regular file: opening a FIFO would wait for a writer for ever.
-    if !std::fs::metadata(path).with_context(|| format!("{}: cannot open", path.display()))?.is_file() {
-        bail!("{}: not a regular file (expected a 16-bit grayscale PNG)", path.display());
-    }
-    let reader = ImageReader::open(path)
-        .with_context(|| format!("{}: cannot open", path.display()))?
-        .with_guessed_format()
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    let img = reader.decode().with_context(|| format!("{}: not a readable PNG image", path.display()))?;
-    let DynamicImage::ImageLuma16(gray) = img else {
-        bail!("{}: expected a 16-bit grayscale PNG of range counts, found {:?}", path.display(), img.color());
-    };
-    let geometry = PanoramaGeometry { rows: gray.height() as usize, cols: gray.width() as usize, v_fov_rad };
-    DepthPanorama::from_counts(geometry, gray.as_raw(), range_scale_m)
-        .with_context(|| format!("{}: pixel count does not match its size", path.display()))
+    Ok(spomp_sim::read_depth_png(path, range_scale_m, v_fov_rad)?)
 }
 
 fn load_params(a: &TerrainArgs) -> Result<TerrainParams> {

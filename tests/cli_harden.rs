@@ -4,7 +4,6 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
 
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command as StdCommand, Stdio};
 use std::time::{Duration, Instant};
@@ -153,18 +152,87 @@ fn files_outside_the_mission_folder_need_allow_dir() {
     assert_eq!(out.status.code(), Some(0), "{}", stdout_of(&out));
 }
 
+/// The pipe size `head_c_10` sets (the smallest Linux allows): an output longer than this cannot
+/// all be written before the reader goes away.
+const PIPE_CAPACITY: usize = 4096;
+
+/// `spomp ARGS | head -c 10` through a pipe shrunk to [`PIPE_CAPACITY`] (Python's `fcntl`, as
+/// std has no `F_SETPIPE_SZ`): reads 10 bytes, closes the pipe, and returns spomp's exit code, its
+/// stderr and whether it was still running (so blocked writing) when the pipe closed.
+fn head_c_10(args: &[&str]) -> (Option<i32>, String, bool) {
+    const SCRIPT: &str = r#"
+import fcntl, os, subprocess, sys
+r, w = os.pipe()
+fcntl.fcntl(w, 1031, int(sys.argv[1]))  # F_SETPIPE_SZ
+p = subprocess.Popen(sys.argv[2:], stdout=w, stderr=subprocess.PIPE)
+os.close(w)
+got = b""
+while len(got) < 10:
+    chunk = os.read(r, 10 - len(got))
+    if not chunk:
+        break
+    got += chunk
+running = p.poll() is None
+os.close(r)
+err = p.stderr.read().decode("utf-8", "replace")
+code = p.wait()
+print(code, int(running), len(got))
+sys.stderr.write(err)
+"#;
+    let out = StdCommand::new("python3")
+        .arg("-c")
+        .arg(SCRIPT)
+        .arg(PIPE_CAPACITY.to_string())
+        .arg(bin())
+        .args(args)
+        .output()
+        .unwrap();
+    let report = stdout_of(&out);
+    let fields: Vec<i64> = report.split_whitespace().map(|f| f.parse().unwrap()).collect();
+    assert_eq!(fields.len(), 3, "{report} {}", stderr_of(&out));
+    assert_eq!(fields[2], 10, "{args:?}: fewer than 10 bytes of output");
+    (i32::try_from(fields[0]).ok(), stderr_of(&out), fields[1] == 1)
+}
+
+/// Panics unless spomp ended on its own terms: no panic (exit 101), no signal (a negative code
+/// from Python, none from std), nothing "panicked" on stderr.
+fn assert_quiet_end(what: &str, code: Option<i32>, err: &str) {
+    assert!(code.is_some_and(|c| c >= 0), "{what}: killed by a signal ({code:?}); {err}");
+    assert_ne!(code, Some(101), "{what}: panicked: {err}");
+    assert!(!err.contains("panicked"), "{what}: {err}");
+}
+
 #[test]
 fn closed_stdout_ends_quietly() {
-    for args in [&["schema"][..], &["nodes", "--json"][..], &["nodes", "--markdown"][..]] {
-        let mut child =
-            StdCommand::new(bin()).args(args).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
-        let mut first = [0u8; 10];
-        child.stdout.as_mut().unwrap().read_exact(&mut first).unwrap();
-        drop(child.stdout.take()); // like `| head -c 10`
-        let out = child.wait_with_output().unwrap();
-        assert_eq!(out.status.code(), Some(0), "{args:?}: {}", stderr_of(&out));
-        assert!(!stderr_of(&out).contains("panicked"), "{args:?}: {}", stderr_of(&out));
+    let dir = tempfile::tempdir().unwrap();
+    let world = dir.path().join("world");
+    spomp().args(["world", "generate", "--seed", "1", "--size-m", "120,100", "--out"]).arg(&world).assert().code(0);
+    let world = world.to_str().unwrap().to_string();
+    let plan = ["plan", &world, "--random-pairs", "40", "--seed", "1", "--json"];
+    let commands: [&[&str]; 5] =
+        [&["schema"], &["nodes", "--json"], &["nodes", "--markdown"], &["world", "show", &world, "--json"], &plan];
+    let mut exercised_while_writing = Vec::new();
+    for args in commands {
+        let full = spomp().args(args).output().unwrap();
+        assert_eq!(full.status.code(), Some(0), "{args:?}: {}", stderr_of(&full));
+        // The reading end is closed before spomp starts: its first write fails, whatever the
+        // size of the output.
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let out = StdCommand::new(bin()).args(args).stdout(writer).stderr(Stdio::piped()).output().unwrap();
+        assert_quiet_end(&format!("{args:?} into a closed pipe"), out.status.code(), &stderr_of(&out));
+        // `| head -c 10`: the pipe closes while spomp is still writing when the output is larger
+        // than the pipe holds.
+        let (code, err, running) = head_c_10(args);
+        assert_quiet_end(&format!("{args:?} | head -c 10"), code, &err);
+        if full.stdout.len() > PIPE_CAPACITY + 10 {
+            assert!(running, "{args:?}: a {} byte output cannot have been written whole", full.stdout.len());
+            exercised_while_writing.push(args[0..2.min(args.len())].join(" "));
+        }
     }
+    // The schema (about 110 kB) and both node references were blocked in a write when `head`
+    // went away.
+    assert!(exercised_while_writing.len() >= 3, "only {exercised_while_writing:?} outlast the pipe");
 }
 
 #[test]
@@ -301,7 +369,14 @@ fn world_metadata_is_validated() {
     let w = broken_world(dir.path(), "origin:\n  x: 0.0", "origin:\n  x: .nan");
     let out = spomp().args(["world", "show"]).arg(&w).output().unwrap();
     assert_eq!(out.status.code(), Some(1));
-    assert!(stderr_of(&out).contains("origin.x must be a finite coordinate"), "{}", stderr_of(&out));
+    // NaN is refused where it is written: the file, line and column of the value.
+    let err = stderr_of(&out);
+    let line =
+        std::fs::read_to_string(w.join("world.yaml")).unwrap().lines().position(|l| l == "  x: .nan").unwrap() + 1;
+    assert!(
+        err.contains(&format!("world.yaml:{line}:6: bad world description: `.nan` is not a finite number")),
+        "{err}"
+    );
 }
 
 fn python_mcap_available() -> bool {

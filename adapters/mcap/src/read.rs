@@ -177,7 +177,14 @@ fn scan_data(bytes: &[u8]) -> Result<(LogCheck, usize), ReadError> {
                 break;
             }
             OP_FOOTER => break,
-            _ => {}
+            opcode => {
+                if let Err(field) = check_fields(opcode, body) {
+                    let why =
+                        format!("record (opcode {opcode:#04x}): its {field} declares more bytes than the record holds");
+                    check.bad_record = Some((at as u64, why));
+                    break;
+                }
+            }
         }
         at += 9 + body.len();
     }
@@ -234,11 +241,97 @@ fn check_records(mut data: &[u8], top_level: bool) -> Result<(), ReadError> {
         if top_level && opcode == CHUNK_OPCODE {
             check_chunk(body)?;
         }
+        check_fields(opcode, body).map_err(|field| {
+            let place = if top_level {
+                format!("file offset {}", offset + MAGIC_LEN)
+            } else {
+                format!("chunk offset {offset}")
+            };
+            corrupt(format!(
+                "record (opcode {opcode:#04x}) at {place}: its {field} declares more bytes than the record holds"
+            ))
+        })?;
         offset += 9 + body.len();
         data = &data[9 + body.len()..];
     }
     if !top_level && !data.is_empty() {
         return Err(corrupt(format!("{} stray bytes at the end of a chunk", data.len())));
+    }
+    Ok(())
+}
+
+/// A field of a record, as the reader decodes it.
+#[derive(Clone, Copy)]
+enum Field {
+    /// A fixed-size integer of this many bytes.
+    Fixed(usize),
+    /// A `u32`-length-prefixed string or byte array.
+    Bytes32,
+    /// A `u64`-length-prefixed byte array.
+    Bytes64,
+    /// A `u32`-byte-length-prefixed map of string to string.
+    StrMap,
+    /// A `u32`-byte-length-prefixed array of fixed-size entries.
+    Array32,
+}
+
+/// The fields of the records a data section holds whose lengths the reader trusts (header,
+/// schema, channel, attachment, metadata, message index), by opcode.
+fn fields_of(opcode: u8) -> &'static [(&'static str, Field)] {
+    use Field::*;
+    match opcode {
+        0x01 => &[("profile", Bytes32), ("library", Bytes32)],
+        0x03 => &[("id", Fixed(2)), ("name", Bytes32), ("encoding", Bytes32), ("data", Bytes32)],
+        0x04 => &[
+            ("id", Fixed(2)),
+            ("schema id", Fixed(2)),
+            ("topic", Bytes32),
+            ("message encoding", Bytes32),
+            ("metadata", StrMap),
+        ],
+        0x07 => &[("channel id", Fixed(2)), ("records", Array32)],
+        0x09 => &[
+            ("log time", Fixed(8)),
+            ("create time", Fixed(8)),
+            ("name", Bytes32),
+            ("media type", Bytes32),
+            ("data", Bytes64),
+        ],
+        0x0C => &[("name", Bytes32), ("metadata", StrMap)],
+        _ => &[],
+    }
+}
+
+/// Checks that every length-prefixed field of a record fits in the record, before the reader
+/// reserves a buffer of that length (a corrupt 4 GB string length in a 6 kB log made it
+/// allocate 4 GB). Returns the name of the first field that does not fit.
+fn check_fields(opcode: u8, body: &[u8]) -> Result<(), &'static str> {
+    let mut at = 0usize;
+    for &(name, field) in fields_of(opcode) {
+        let len = match field {
+            Field::Fixed(n) => Some(n),
+            Field::Bytes32 | Field::StrMap | Field::Array32 => {
+                read_u32(body, at).and_then(|l| usize::try_from(l).ok()?.checked_add(4))
+            }
+            Field::Bytes64 => read_u64(body, at).and_then(|l| usize::try_from(l).ok()?.checked_add(8)),
+        };
+        let Some(end) = len.and_then(|l| at.checked_add(l)).filter(|&end| end <= body.len()) else {
+            return Err(name);
+        };
+        if let Field::StrMap = field {
+            // Each entry: a key and a value, both length-prefixed strings inside the map.
+            let mut entry = at + 4;
+            while entry < end {
+                for _ in 0..2 {
+                    let fits = read_u32(&body[..end], entry)
+                        .and_then(|l| usize::try_from(l).ok()?.checked_add(4))
+                        .and_then(|l| entry.checked_add(l))
+                        .filter(|&e| e <= end);
+                    entry = fits.ok_or(name)?;
+                }
+            }
+        }
+        at = end;
     }
     Ok(())
 }

@@ -147,3 +147,21 @@ proptest::proptest! {
         }
     }
 }
+
+/// Found by the `mcap_log` fuzz target: a 6 kB log whose channel record declares a topic of
+/// 4 294 967 293 bytes made the reader reserve 4 GB before noticing the record is shorter. The
+/// field lengths are now checked against the record first: a clear error, no allocation.
+#[test]
+fn a_field_length_past_its_record_is_corrupt_not_a_huge_allocation() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/oom-channel-topic-4gb.mcap");
+    let bytes = std::fs::read(path).unwrap();
+    let err = McapLog::from_bytes(bytes.clone()).messages().unwrap_err().to_string();
+    assert!(err.contains("declares more bytes than the record holds"), "{err}");
+    // `log check` and `log recover` read only the data section, which here ends before the bad
+    // record: they read what is there.
+    let found = check_log(&bytes).unwrap();
+    assert!(found.bad_record.clone().is_none_or(|(_, why)| why.contains("declares more bytes")));
+    let mut out = std::io::Cursor::new(Vec::new());
+    let recovered = recover_log(&bytes, &mut out).unwrap();
+    assert_eq!(recovered.messages(), found.messages());
+}

@@ -13,12 +13,19 @@ pub enum SimError {
         /// What the operating system said.
         source: std::io::Error,
     },
-    /// `world.yaml` does not parse or has unknown keys.
-    #[error("{path}: bad world description: {message}")]
+    /// `world.yaml` does not parse, has unknown keys or a value out of range.
+    #[error("{}: bad world description: {message}", located(path, *line, *column))]
     BadYaml {
         /// The file.
         path: PathBuf,
-        /// The parser's message.
+        /// Line of the offending value, from 1 (0 when the place is not known).
+        line: u32,
+        /// Column of the offending value, from 1 (0 when the place is not known).
+        column: u32,
+        /// Field path of the offending value (`origin.x`, `meta.start_poses[2].yaw`); empty when
+        /// the problem is not one field's.
+        field: String,
+        /// What is wrong.
         message: String,
     },
     /// A layer file the world description needs is not there.
@@ -76,6 +83,11 @@ pub enum SimError {
         /// Why it was rejected.
         message: String,
     },
+}
+
+/// `path:line:column`, or just `path` when the place is not known.
+fn located(path: &std::path::Path, line: u32, column: u32) -> String {
+    if line == 0 { path.display().to_string() } else { format!("{}:{line}:{column}", path.display()) }
 }
 
 impl SimError {

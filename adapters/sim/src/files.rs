@@ -8,9 +8,12 @@ use std::path::{Path, PathBuf};
 use image::{ImageBuffer, Luma, Rgb, RgbImage};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use spomp_core::{AerialMap, ClassTable, GridSpec, Point2};
+use spomp_core::{AerialMap, ClassTable, DepthPanorama, GridSpec, PanoramaGeometry, Point2};
 
-use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, SourceError, number, read_text, resolve_inside};
+use spomp_behaviors::mission::limits::{
+    MAX_SOURCE_BYTES, SourceError, number, read_regular, read_text, resolve_inside,
+};
+use spomp_behaviors::mission::yaml::{self, Node};
 
 use crate::error::SimError;
 use crate::world::{World, WorldMeta};
@@ -137,54 +140,63 @@ pub const RESOLUTION_RANGE_M: (f64, f64) = (0.01, 100.0);
 /// origin, metres (1000 km).
 pub const MAX_COORDINATE_M: f64 = 1e6;
 
+/// A value of `world.yaml` that is out of range: its field path (`origin.x`) and what is wrong.
+type FieldError = (String, String);
+
 /// Checks the numbers of a world description before anything is allocated from them: finite,
 /// in range, the map-frame points of the metadata inside the coordinate limit.
-fn check_description(desc: &WorldFile) -> Result<(), String> {
+fn check_description(desc: &WorldFile) -> Result<(), FieldError> {
     let (lo, hi) = RESOLUTION_RANGE_M;
     if !(desc.resolution_m.is_finite() && (lo..=hi).contains(&desc.resolution_m)) {
-        return Err(format!(
-            "resolution_m must be between {lo} and {hi} metres per cell, got {}",
-            number(desc.resolution_m)
+        return Err((
+            "resolution_m".into(),
+            format!("resolution_m must be between {lo} and {hi} metres per cell, got {}", number(desc.resolution_m)),
         ));
     }
-    let coordinate = |what: &str, v: f64| -> Result<(), String> {
+    let coordinate = |what: String, v: f64| -> Result<(), FieldError> {
         if v.is_finite() && v.abs() <= MAX_COORDINATE_M {
             Ok(())
         } else {
-            Err(format!("{what} must be a finite coordinate within ±{} m, got {}", number(MAX_COORDINATE_M), number(v)))
+            let message =
+                format!("{what} must be a finite coordinate within ±{} m, got {}", number(MAX_COORDINATE_M), number(v));
+            Err((what, message))
         }
     };
-    coordinate("origin.x", desc.origin.x)?;
-    coordinate("origin.y", desc.origin.y)?;
+    coordinate("origin.x".into(), desc.origin.x)?;
+    coordinate("origin.y".into(), desc.origin.y)?;
     if let (Some(w), Some(h)) = (desc.width, desc.height) {
-        check_cells(w, h, desc.resolution_m)?;
+        check_cells(w, h, desc.resolution_m).map_err(|m| ("width".to_string(), m))?;
     }
-    if let Some(e) = &desc.layers.elevation
-        && !(e.scale_m.is_finite()
-            && e.scale_m > 0.0
-            && e.scale_m <= 1.0
-            && e.offset_m.is_finite()
-            && e.offset_m.abs() <= 1e4)
-    {
-        return Err(format!(
-            "layers.elevation needs 0 < scale_m ≤ 1 metre per count and |offset_m| ≤ 10000 m, got scale_m {} and offset_m {}",
-            number(e.scale_m),
-            number(e.offset_m)
-        ));
+    if let Some(e) = &desc.layers.elevation {
+        let scale_ok = e.scale_m.is_finite() && e.scale_m > 0.0 && e.scale_m <= 1.0;
+        let offset_ok = e.offset_m.is_finite() && e.offset_m.abs() <= 1e4;
+        if !(scale_ok && offset_ok) {
+            let field = if scale_ok { "layers.elevation.offset_m" } else { "layers.elevation.scale_m" };
+            return Err((
+                field.into(),
+                format!(
+                    "layers.elevation needs 0 < scale_m ≤ 1 metre per count and |offset_m| ≤ 10000 m, got scale_m {} and offset_m {}",
+                    number(e.scale_m),
+                    number(e.offset_m)
+                ),
+            ));
+        }
     }
     for (i, p) in desc.meta.vehicle_clusters.iter().enumerate() {
-        coordinate(&format!("meta.vehicle_clusters[{i}].x"), p.x)?;
-        coordinate(&format!("meta.vehicle_clusters[{i}].y"), p.y)?;
+        coordinate(format!("meta.vehicle_clusters[{i}].x"), p.x)?;
+        coordinate(format!("meta.vehicle_clusters[{i}].y"), p.y)?;
     }
     for (i, p) in desc.meta.roadblocks.iter().enumerate() {
-        coordinate(&format!("meta.roadblocks[{i}].x"), p.x)?;
-        coordinate(&format!("meta.roadblocks[{i}].y"), p.y)?;
+        coordinate(format!("meta.roadblocks[{i}].x"), p.x)?;
+        coordinate(format!("meta.roadblocks[{i}].y"), p.y)?;
     }
     for (i, p) in desc.meta.start_poses.iter().enumerate() {
-        coordinate(&format!("meta.start_poses[{i}].x"), p.x)?;
-        coordinate(&format!("meta.start_poses[{i}].y"), p.y)?;
+        coordinate(format!("meta.start_poses[{i}].x"), p.x)?;
+        coordinate(format!("meta.start_poses[{i}].y"), p.y)?;
         if !p.yaw.is_finite() {
-            return Err(format!("meta.start_poses[{i}].yaw must be finite, got {}", p.yaw));
+            let field = format!("meta.start_poses[{i}].yaw");
+            let message = format!("{field} must be finite, got {}", p.yaw);
+            return Err((field, message));
         }
     }
     Ok(())
@@ -207,12 +219,70 @@ fn check_cells(width: u32, height: u32, resolution_m: f64) -> Result<(), String>
     Ok(())
 }
 
+/// The node a field path (`meta.start_poses[2].yaw`) names, or the deepest node on the way
+/// there that exists (the mapping a defaulted key is missing from).
+fn node_at<'a>(root: &'a Node, field: &str) -> &'a Node {
+    let mut node = root;
+    for part in field.split('.') {
+        let (key, indices) = part.split_once('[').map_or((part, ""), |(k, rest)| (k, rest));
+        if !key.is_empty() {
+            match node.get(key) {
+                Some(n) => node = n,
+                None => return node,
+            }
+        }
+        for index in indices.split('[').filter(|s| !s.is_empty()) {
+            let item = index.trim_end_matches(']').parse::<usize>().ok().and_then(|i| node.as_seq()?.get(i));
+            match item {
+                Some(n) => node = n,
+                None => return node,
+            }
+        }
+    }
+    node
+}
+
+/// A located error of `world.yaml`: at the value of `field` (or the nearest node above it).
+fn field_error(path: &Path, root: &Node, field: &str, message: String) -> SimError {
+    let loc = node_at(root, field).loc;
+    let message = if message.starts_with(field) { message } else { format!("{field}: {message}") };
+    SimError::BadYaml { path: path.to_path_buf(), line: loc.line, column: loc.column, field: field.into(), message }
+}
+
+/// Parses `world.yaml` into a description; every error carries its line, column and field.
+fn parse_description(path: &Path, text: &str) -> Result<(Node, WorldFile), SimError> {
+    let root = yaml::parse(text).map_err(|e| SimError::BadYaml {
+        path: path.to_path_buf(),
+        line: e.loc.line,
+        column: e.loc.column,
+        field: String::new(),
+        message: e.message,
+    })?;
+    let desc: WorldFile = root.deserialize().map_err(|e| {
+        let field = e.path_string();
+        let loc = e.loc.unwrap_or_else(|| node_at(&root, &field).loc);
+        let message = if field.is_empty() { e.message } else { format!("{field}: {}", e.message) };
+        SimError::BadYaml { path: path.to_path_buf(), line: loc.line, column: loc.column, field, message }
+    })?;
+    check_description(&desc).map_err(|(field, message)| field_error(path, &root, &field, message))?;
+    Ok((root, desc))
+}
+
 fn source_err(path: &Path) -> impl FnOnce(SourceError) -> SimError + '_ {
     move |e| match e {
         SourceError::Io { message, kind, .. } => {
             SimError::Io { path: path.to_path_buf(), source: std::io::Error::new(kind, message) }
         }
-        other => SimError::BadYaml { path: path.to_path_buf(), message: other.to_string() },
+        other => {
+            let (line, column) = other.position().unwrap_or((0, 0));
+            SimError::BadYaml {
+                path: path.to_path_buf(),
+                line,
+                column,
+                field: String::new(),
+                message: other.to_string(),
+            }
+        }
     }
 }
 
@@ -227,11 +297,12 @@ fn image_err(path: &Path) -> impl FnOnce(image::ImageError) -> SimError + '_ {
     }
 }
 
-/// Re-checks a table through the core parser (which owns the rules).
-fn checked_table(table: ClassTable, path: &Path) -> Result<ClassTable, SimError> {
+/// Re-checks a table written inline in `world.yaml` through the core parser (which owns the
+/// rules); its errors point at the `class_table` key.
+fn checked_table(table: ClassTable, path: &Path, root: &Node) -> Result<ClassTable, SimError> {
     let text = serde_saphyr::to_string(&table)
-        .map_err(|e| SimError::BadYaml { path: path.to_path_buf(), message: e.to_string() })?;
-    Ok(ClassTable::from_yaml(&text)?)
+        .map_err(|e| field_error(path, root, "class_table", format!("class_table: {e}")))?;
+    ClassTable::from_yaml(&text).map_err(|e| field_error(path, root, "class_table", format!("class_table: {e}")))
 }
 
 fn open_layer(dir: &Path, file: &str, layer: &'static str) -> Result<(PathBuf, image::DynamicImage), SimError> {
@@ -269,12 +340,10 @@ impl World {
         let dir = dir.as_ref();
         let yaml_path = dir.join(WORLD_FILE);
         let text = read_text(&yaml_path, MAX_SOURCE_BYTES).map_err(source_err(&yaml_path))?;
-        let desc: WorldFile = serde_saphyr::from_str(&text)
-            .map_err(|e| SimError::BadYaml { path: yaml_path.clone(), message: e.to_string() })?;
-        check_description(&desc).map_err(|message| SimError::BadYaml { path: yaml_path.clone(), message })?;
+        let (root, desc) = parse_description(&yaml_path, &text)?;
         let classes = match &desc.class_table {
             None => ClassTable::default_table(),
-            Some(ClassTableSource::Inline(t)) => checked_table(t.clone(), &yaml_path)?,
+            Some(ClassTableSource::Inline(t)) => checked_table(t.clone(), &yaml_path, &root)?,
             Some(ClassTableSource::Path(p)) => {
                 let path = resolve_inside(&[dir.to_path_buf()], dir, p).map_err(source_err(&yaml_path))?;
                 let text = read_text(&path, MAX_SOURCE_BYTES).map_err(source_err(&path))?;
@@ -284,8 +353,15 @@ impl World {
 
         let (class_path, class_img) = open_layer(dir, &desc.layers.class, "class")?;
         let (width, height) = (desc.width.unwrap_or(class_img.width()), desc.height.unwrap_or(class_img.height()));
-        check_cells(width, height, desc.resolution_m)
-            .map_err(|message| SimError::BadYaml { path: yaml_path.clone(), message })?;
+        check_cells(width, height, desc.resolution_m).map_err(|message| {
+            // The size comes from `width`/`height` when given, else from the class layer.
+            let field = match (desc.width, desc.height) {
+                (Some(_), _) => "width",
+                (None, Some(_)) => "height",
+                (None, None) => "layers.class",
+            };
+            field_error(&yaml_path, &root, field, message)
+        })?;
         let class_img = class_img.to_rgb8();
         let spec = GridSpec::new(desc.origin, desc.resolution_m, width, height);
         check_size("class", &class_path, &spec, class_img.width(), class_img.height())?;
@@ -305,12 +381,6 @@ impl World {
 
         match &desc.layers.elevation {
             Some(layer) => {
-                if !(layer.scale_m.is_finite() && layer.scale_m > 0.0 && layer.offset_m.is_finite()) {
-                    return Err(SimError::BadYaml {
-                        path: yaml_path,
-                        message: "layers.elevation needs a positive scale_m and a finite offset_m".into(),
-                    });
-                }
                 let (path, img) = open_layer(dir, &layer.file, "elevation")?;
                 let image::DynamicImage::ImageLuma16(img) = img else {
                     return Err(SimError::BadImage {
@@ -400,10 +470,47 @@ impl World {
             meta: self.meta.clone(),
         };
         let yaml_path = dir.join(WORLD_FILE);
-        let text = serde_saphyr::to_string(&desc)
-            .map_err(|e| SimError::BadYaml { path: yaml_path.clone(), message: e.to_string() })?;
+        let text = serde_saphyr::to_string(&desc).map_err(|e| SimError::BadYaml {
+            path: yaml_path.clone(),
+            line: 0,
+            column: 0,
+            field: String::new(),
+            message: e.to_string(),
+        })?;
         std::fs::write(&yaml_path, text).map_err(io_err(&yaml_path))
     }
+}
+
+/// The largest depth-panorama PNG [`read_depth_png`] reads, bytes.
+pub const MAX_DEPTH_PNG_BYTES: u64 = 64 << 20;
+
+/// Reads a depth panorama saved as a 16-bit grayscale PNG of range counts (`spomp terrain`'s
+/// input, `--save-panos` output): a regular file of at most [`MAX_DEPTH_PNG_BYTES`], decoded by
+/// [`decode_depth_png`].
+pub fn read_depth_png(path: &Path, range_scale_m: f64, v_fov_rad: f64) -> Result<DepthPanorama, SimError> {
+    let bytes = read_regular(path, MAX_DEPTH_PNG_BYTES).map_err(source_err(path))?;
+    decode_depth_png(&bytes, range_scale_m, v_fov_rad).map_err(|e| match e {
+        SimError::BadImage { message, .. } => SimError::BadImage { path: path.to_path_buf(), message },
+        other => other,
+    })
+}
+
+/// Decodes the bytes of a 16-bit grayscale PNG of range counts into a depth panorama of
+/// `range_scale_m` metres per count and a vertical field of view of `v_fov_rad`. Errors (as
+/// [`SimError::BadImage`] with an empty path) when the bytes are no image, not 16-bit grayscale,
+/// or larger than the decoder's memory limit.
+pub fn decode_depth_png(bytes: &[u8], range_scale_m: f64, v_fov_rad: f64) -> Result<DepthPanorama, SimError> {
+    let bad = |message: String| SimError::BadImage { path: PathBuf::new(), message };
+    let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| bad(format!("cannot read: {e}")))?;
+    let img = reader.decode().map_err(|e| bad(format!("not a readable PNG image: {e}")))?;
+    let image::DynamicImage::ImageLuma16(gray) = img else {
+        return Err(bad(format!("expected a 16-bit grayscale PNG of range counts, found {:?}", img.color())));
+    };
+    let geometry = PanoramaGeometry { rows: gray.height() as usize, cols: gray.width() as usize, v_fov_rad };
+    DepthPanorama::from_counts(geometry, gray.as_raw(), range_scale_m)
+        .ok_or_else(|| bad("the pixel count does not match the image size".into()))
 }
 
 /// A top-down picture of a world, north up: the colour layer shaded by the relief (light from

@@ -270,3 +270,39 @@ fn clusters_are_reachable_and_sidewalks_only_up_ramps() {
     assert_eq!(raised(&reach_flat, &flat), 0);
     assert!(reach_flat.data.iter().filter(|&&r| r).count() > 100_000, "the roads are still open");
 }
+
+/// Every bad `world.yaml` in `tests/fixtures/bad-worlds/` (with a valid class layer beside it) is
+/// refused with the line and column of the offending value and its field, as its first two
+/// lines say: `# expect: LINE:COLUMN FIELD` and `# message: TEXT THE MESSAGE CONTAINS`.
+#[test]
+fn bad_world_files_are_refused_at_their_line_column_and_field() {
+    let fixtures = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/bad-worlds");
+    let mut files: Vec<PathBuf> =
+        std::fs::read_dir(&fixtures).expect("fixtures").map(|e| e.expect("entry").path()).collect();
+    files.sort();
+    assert!(files.len() >= 10, "{} fixtures", files.len());
+    let dir = scratch("bad-worlds");
+    for file in files {
+        let name = file.file_name().expect("name").to_string_lossy().into_owned();
+        let text = std::fs::read_to_string(&file).expect("fixture");
+        let mut lines = text.lines();
+        let expect = lines.next().and_then(|l| l.strip_prefix("# expect: ")).expect("# expect: line");
+        let message = lines.next().and_then(|l| l.strip_prefix("# message: ")).expect("# message: line");
+        let (place, field) = expect.split_once(' ').expect("LINE:COLUMN FIELD");
+        let (line, column) = place.split_once(':').expect("LINE:COLUMN");
+        let (line, column): (u32, u32) = (line.parse().expect("line"), column.parse().expect("column"));
+        write_tiny(&dir, &text);
+        let err = World::load(&dir).expect_err(&name);
+        let SimError::BadYaml { line: got_line, column: got_column, field: got_field, message: got, .. } = &err else {
+            panic!("{name}: {err:?}");
+        };
+        assert_eq!((*got_line, *got_column, got_field.as_str()), (line, column, field), "{name}: {err}");
+        assert!(got.contains(message), "{name}: `{got}` lacks `{message}`");
+        let shown = err.to_string();
+        assert!(shown.contains(&format!("world.yaml:{line}:{column}: bad world description: ")), "{name}: {shown}");
+        if let Some(last) = field.rsplit('.').next().filter(|s| !s.is_empty()) {
+            assert!(shown.contains(last), "{name}: the message does not name `{last}`: {shown}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -207,6 +207,11 @@ fn user_message(message: &str) -> String {
         let key = if key.starts_with(", set") || key.is_empty() { String::new() } else { format!(" `{key}`") };
         return format!("duplicate key{key}: a key may appear once in a mapping; remove or rename one of them");
     }
+    if let Some(rest) = message.strip_prefix("non-finite float ") {
+        // "`.nan` rejected by the configured policy"
+        let value = rest.split(" rejected").next().unwrap_or_default();
+        return format!("{value} is not a finite number; NaN and infinities are not accepted, write a finite number");
+    }
     if let Some(breach) = message.strip_prefix("budget breached: ") {
         // `Depth { depth: 65 }`: the limit's name, then the count that passed it.
         let name = breach.split([' ', '{']).next().unwrap_or_default();
