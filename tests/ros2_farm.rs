@@ -59,9 +59,10 @@ fn start_sim(mission: &str, domain: &str, out: &Path, extra: &[&str]) -> Reap {
     Reap(child)
 }
 
-fn start_run(mission: &str, domain: &str) -> Reap {
+fn start_run(mission: &str, domain: &str, extra: &[&str]) -> Reap {
     let child = spomp()
         .args(["run", mission, "--robot", "ugv1", "--use-sim-time", "--json", "--domain-id", domain])
+        .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -92,8 +93,10 @@ fn temp_dir(name: &str) -> PathBuf {
 fn a_ugv_driven_by_a_separate_spomp_run_process_reaches_its_goals() {
     let d = domain(0);
     let out = temp_dir("reach");
-    let mut sim = start_sim(MISSION, &d, &out, &["--rate", "4", "--no-mcap"]);
-    let mut run = start_run(MISSION, &d);
+    std::fs::create_dir_all(&out).expect("temp dir");
+    let robot_log = out.join("ugv1.mcap");
+    let mut sim = start_sim(MISSION, &d, &out.join("sim"), &["--rate", "4", "--no-mcap"]);
+    let mut run = start_run(MISSION, &d, &["--record", robot_log.to_str().expect("utf-8 path")]);
     let status = wait_with_timeout(&mut sim.0, Duration::from_secs(300));
     let (sim_out, sim_err) = output(&mut sim.0);
     // The robot process stops on SIGINT with a safe command and its figures.
@@ -119,6 +122,16 @@ fn a_ugv_driven_by_a_separate_spomp_run_process_reaches_its_goals() {
         "the basestation's messages reach the robot: {report:#}"
     );
     assert_eq!(report["malformed_inputs"], 0, "{report:#}");
+
+    // The robot's own log replays: a fresh robot fed the recorded inputs decides the same.
+    let replay =
+        spomp().args(["replay"]).arg(&robot_log).args(["--robot", "ugv1", "--json"]).output().expect("replay runs");
+    let text = String::from_utf8_lossy(&replay.stdout);
+    assert!(
+        replay.status.success(),
+        "the robot log does not replay identically:\n{text}\n{}",
+        String::from_utf8_lossy(&replay.stderr)
+    );
     let _ = std::fs::remove_dir_all(&out);
 }
 
@@ -127,7 +140,7 @@ fn killing_the_robot_process_stops_the_simulated_robot() {
     let d = domain(100);
     let out = temp_dir("kill");
     let mut sim = start_sim(FAR_MISSION, &d, &out, &["--rate", "2", "--time-limit-s", "60"]);
-    let mut run = start_run(FAR_MISSION, &d);
+    let mut run = start_run(FAR_MISSION, &d, &[]);
     // Let it drive for a while, then kill it without warning: no stop command gets out.
     std::thread::sleep(Duration::from_secs(12));
     run.0.kill().expect("kill spomp run");
@@ -136,9 +149,20 @@ fn killing_the_robot_process_stops_the_simulated_robot() {
     let (sim_out, sim_err) = output(&mut sim.0);
     assert!(status.code().is_some_and(|c| c <= 1), "spomp sim failed ({status}):\n{sim_out}\n{sim_err}");
 
-    let bytes = std::fs::read(out.join("trial-1/run.mcap")).expect("the farm records its run");
-    let log = spomp_mcap::McapLog::from_bytes(bytes);
-    let commands: Vec<(f64, f64)> = log
+    let commands = applied_commands(&out.join("trial-1/run.mcap"));
+    let last_moving = commands.iter().filter(|(_, c)| *c > 1e-6).map(|(t, _)| *t).fold(f64::NAN, f64::max);
+    assert!(last_moving.is_finite(), "the robot never moved: {} commands", commands.len());
+    let end = commands.last().map_or(0.0, |(t, _)| *t);
+    // Killed about 24 s of simulated time after the start (12 s wall at 2×): the farm's
+    // watchdog must have stopped it well before the 60 s limit and kept it stopped.
+    assert!(last_moving < end - 15.0, "still commanded at {last_moving:.1} s of {end:.1} s");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// Velocity commands the farm applied to ugv1: (simulated time s, |v| + |ω|).
+fn applied_commands(log: &Path) -> Vec<(f64, f64)> {
+    let bytes = std::fs::read(log).expect("the farm records its run");
+    spomp_mcap::McapLog::from_bytes(bytes)
         .messages()
         .expect("log reads")
         .into_iter()
@@ -147,12 +171,52 @@ fn killing_the_robot_process_stops_the_simulated_robot() {
             let t: ros::Twist = spomp_mcap::decode_cdr(&m.topic, &m.data).expect("twist");
             (m.log_time as f64 * 1e-9, t.linear.x.abs() + t.angular.z.abs())
         })
-        .collect();
-    let last_moving = commands.iter().filter(|(_, c)| *c > 1e-6).map(|(t, _)| *t).fold(f64::NAN, f64::max);
-    assert!(last_moving.is_finite(), "the robot never moved: {} commands", commands.len());
-    let end = commands.last().map_or(0.0, |(t, _)| *t);
-    // Killed about 24 s of simulated time after the start (12 s wall at 2×): the farm's
-    // watchdog must have stopped it well before the 60 s limit and kept it stopped.
-    assert!(last_moving < end - 15.0, "still commanded at {last_moving:.1} s of {end:.1} s");
+        .collect()
+}
+
+#[test]
+fn the_e_stop_halts_the_robot_until_released() {
+    use spomp_ros2::dds::{DdsNode, DdsSettings, state_qos};
+    let d = domain(200);
+    let out = temp_dir("estop");
+    let mut sim = start_sim(FAR_MISSION, &d, &out, &["--rate", "2", "--time-limit-s", "70"]);
+    let mut run = start_run(FAR_MISSION, &d, &[]);
+    let settings = DdsSettings {
+        domain_id: d.parse().expect("domain id"),
+        interfaces: vec![std::net::IpAddr::from([127, 0, 0, 1])],
+    };
+    let mut operator = DdsNode::new(&settings, "/", "operator").expect("operator node");
+    let estop = operator.publisher::<ros::BoolMsg>("/ugv1/estop", &state_qos(1)).expect("e-stop publisher");
+    let press = |engaged: bool, for_s: u64| {
+        let until = Instant::now() + Duration::from_secs(for_s);
+        while Instant::now() < until {
+            let _ = estop.publish(ros::BoolMsg { data: engaged });
+            std::thread::sleep(Duration::from_millis(200));
+        }
+    };
+    press(false, 10); // driving
+    press(true, 8); // e-stop: 16 s of simulated time
+    press(false, 2); // released
+    let status = wait_with_timeout(&mut sim.0, Duration::from_secs(240)).expect("the farm run ends");
+    let (sim_out, sim_err) = output(&mut sim.0);
+    assert!(status.code().is_some_and(|c| c <= 1), "spomp sim failed ({status}):\n{sim_out}\n{sim_err}");
+    let _ = Command::new("kill").args(["-INT", &run.0.id().to_string()]).status();
+    let _ = wait_with_timeout(&mut run.0, Duration::from_secs(20));
+
+    let commands = applied_commands(&out.join("trial-1/run.mcap"));
+    // The longest stretch of zero commands between two moving ones: the e-stop.
+    let (mut longest, mut zero_since, mut moved) = (0.0_f64, None, false);
+    for &(t, c) in &commands {
+        if c > 1e-6 {
+            if let (true, Some(z)) = (moved, zero_since) {
+                longest = longest.max(t - z);
+            }
+            moved = true;
+            zero_since = None;
+        } else if moved && zero_since.is_none() {
+            zero_since = Some(t);
+        }
+    }
+    assert!(longest >= 10.0, "no stop of 10 s or more between two moving stretches (longest {longest:.1} s)");
     let _ = std::fs::remove_dir_all(&out);
 }

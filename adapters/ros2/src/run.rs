@@ -258,7 +258,8 @@ impl RobotNode {
             let stop_reason = state.stop_reason(now, &self.settings);
             if stop_reason == StopReason::EStop && !state.halted {
                 observer.on_seam(self.robot.id(), now, SeamInput::Halt);
-                self.robot.halt(now, Some(&mut transitions));
+                // Unobserved, like every halt a replay makes: the e-stop is logged on /rosout.
+                self.robot.halt(now, None);
                 state.halted = true;
             }
             if now >= state.next_tick {
@@ -272,6 +273,9 @@ impl RobotNode {
                     self.robot.maintain(now);
                     state.status = self.robot.tick(now, Some(&mut transitions));
                     state.report.ticks += 1;
+                    // Transitions before the tick's seam record, as the simulator logs them: a
+                    // replay compares them when it reaches the tick.
+                    self.publish_transitions(&mut transitions, observer);
                     let (command, flight) = (self.robot.command(), self.robot.flight());
                     observer.on_seam(self.robot.id(), now, SeamInput::Tick { command, flight });
                 }
@@ -299,8 +303,7 @@ impl RobotNode {
         // Shutdown: one last safe command, whatever the state.
         if let Some(now) = state.now() {
             observer.on_seam(self.robot.id(), now, SeamInput::Halt);
-            self.robot.halt(now, Some(&mut transitions));
-            self.publish_transitions(&mut transitions, observer);
+            self.robot.halt(now, None);
             self.publish_command(&mut state, now, StopReason::EStop, observer);
             state.report.robot_time_s = now.as_secs_f64();
         }

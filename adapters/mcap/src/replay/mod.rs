@@ -487,9 +487,14 @@ mod tests {
         let mut buf = std::io::Cursor::new(Vec::new());
         let rec = crate::Recorder::new(&mut buf, crate::RecorderOptions::default()).unwrap();
         rec.finish().unwrap();
-        let e = replay(&buf.into_inner(), &ReplayOptions { robot: "ugv1".into(), ..Default::default() }, &mut |_| {})
-            .err()
-            .unwrap();
+        let e = replay(
+            &buf.into_inner(),
+            &ReplayOptions { robot: "ugv1".into(), ..Default::default() },
+            &spomp_robot::registry(),
+            &mut |_| {},
+        )
+        .err()
+        .unwrap();
         assert!(e.to_string().contains("--replayable"), "{e}");
     }
 }
