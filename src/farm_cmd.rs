@@ -48,13 +48,8 @@ impl FarmDrivers {
             .iter()
             .map(|id| (id.clone(), mission.team.iter().find(|r| &r.id == id).and_then(|r| r.ros2.clone())))
             .collect();
-        let first = robots.first().and_then(|(_, s)| s.as_ref());
-        let mut dds = DdsSettings {
-            domain_id: first.map_or(0, |s| s.domain_id),
-            interfaces: first.map(|s| s.interfaces.iter().filter_map(|a| a.parse().ok()).collect()).unwrap_or_default(),
-        }
-        .with_ros_environment()
-        .map_err(anyhow::Error::msg)?;
+        let first = robots.first().and_then(|(_, s)| s.clone()).unwrap_or_default();
+        let mut dds = DdsSettings::for_robot(&first).map_err(anyhow::Error::msg)?;
         if let Some(d) = options.domain_id {
             dds.domain_id = d;
         }
@@ -150,8 +145,8 @@ impl ExternalDrivers for FarmDrivers {
         self.link.deliver_team(to.as_str(), from.as_str(), bytes);
     }
 
-    fn goals(&self, robot: &RobotId) -> Vec<GoalView> {
-        self.link.goals(robot.as_str()).to_vec()
+    fn goals(&self, robot: &RobotId) -> &[GoalView] {
+        self.link.goals(robot.as_str())
     }
 
     fn tree_done(&self, robot: &RobotId) -> bool {

@@ -13,8 +13,8 @@ use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::{
     FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, Time, Twist2,
 };
-use spomp_mcap::{Recorder, RecorderOptions, SafeFile, SeamCallRef, TickOutput};
-use spomp_robot::seam::{SeamInput, tier_bits};
+use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
+use spomp_robot::seam::SeamInput;
 use spomp_robot::{Robot, RobotRuntime, RobotSetup};
 use spomp_ros2::{RobotNode, RunObserver, RunSettings};
 
@@ -246,19 +246,7 @@ impl RunObserver for RecordingObserver {
     }
 
     fn on_seam(&mut self, robot: &RobotId, now: Time, call: SeamInput<'_>) {
-        let call = match call {
-            SeamInput::Odometry(o) => SeamCallRef::Odometry(o),
-            SeamInput::Panorama(p) => SeamCallRef::Panorama(p),
-            SeamInput::ExternalPose(e) => SeamCallRef::ExternalPose(e),
-            SeamInput::CameraTiles(t) => SeamCallRef::CameraTiles(t),
-            SeamInput::TeamIn { from, bytes } => SeamCallRef::TeamIn { from, bytes },
-            SeamInput::TeamOut { to, tiers, budget_bytes, sent } => {
-                SeamCallRef::TeamOut { to, tiers: tier_bits(tiers), budget_bytes: budget_bytes as u64, sent }
-            }
-            SeamInput::Tick { command, flight } => SeamCallRef::Tick(TickOutput { command, flight }),
-            SeamInput::Halt => SeamCallRef::Halt,
-        };
-        self.record(|r| r.seam(robot.as_str(), now, call));
+        self.record(|r| r.seam(robot.as_str(), now, call.into()));
     }
 
     fn on_problem(&mut self, robot: &str, now: Time, message: &str) {

@@ -16,11 +16,9 @@ use spomp_behaviors::mission::{LoadOptions, LoadedMission, load_mission_with};
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
 use spomp_core::{Odometry, PanoramaFrame, PanoramaGeometry, Point2, ReachabilityScan, RobotId, RobotKind, Time};
-use spomp_mcap::{Recorder, RecorderOptions, SafeFile, SeamCallRef, TickOutput};
+use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
 use spomp_robot::RobotRuntime;
-use spomp_sim::run::{
-    RobotSnapshot, RunResult, RunSummary, SeamInput, SimEvent, SimObserver, SimOptions, Simulation, tier_bits,
-};
+use spomp_sim::run::{RobotSnapshot, RunResult, RunSummary, SeamInput, SimEvent, SimObserver, SimOptions, Simulation};
 use spomp_sim::{Blackout, Faults, KillFault};
 
 use crate::sim_plots;
@@ -582,19 +580,7 @@ impl SimObserver for RunObserver {
         if !self.replayable {
             return;
         }
-        let call = match call {
-            SeamInput::Odometry(o) => SeamCallRef::Odometry(o),
-            SeamInput::Panorama(p) => SeamCallRef::Panorama(p),
-            SeamInput::ExternalPose(e) => SeamCallRef::ExternalPose(e),
-            SeamInput::CameraTiles(t) => SeamCallRef::CameraTiles(t),
-            SeamInput::TeamIn { from, bytes } => SeamCallRef::TeamIn { from, bytes },
-            SeamInput::TeamOut { to, tiers, budget_bytes, sent } => {
-                SeamCallRef::TeamOut { to, tiers: tier_bits(tiers), budget_bytes: budget_bytes as u64, sent }
-            }
-            SeamInput::Tick { command, flight } => SeamCallRef::Tick(TickOutput { command, flight }),
-            SeamInput::Halt => SeamCallRef::Halt,
-        };
-        self.record(|r| r.seam(robot.as_str(), now, call));
+        self.record(|r| r.seam(robot.as_str(), now, call.into()));
     }
 
     fn on_problem(&mut self, robot: &RobotId, now: Time, message: &str) {

@@ -517,6 +517,66 @@ pub struct BytesMsg {
     pub data: Vec<u8>,
 }
 
+/// Messages of spomp's own data, built once here for every adapter that speaks ROS 2 (the MCAP
+/// recorder and the ROS 2 adapter), so a log and a live robot carry the same bytes.
+impl Odometry {
+    /// `robot`'s odometry: pose in `<robot>/odom`, twist in `<robot>/base_link`.
+    pub fn from_odometry(robot: &str, odom: &crate::motion::Odometry, stamp: RosTime) -> Self {
+        let mut msg = Odometry {
+            header: Header { stamp, frame_id: format!("{robot}/odom") },
+            child_frame_id: format!("{robot}/base_link"),
+            ..Default::default()
+        };
+        msg.pose.pose = Pose::from_pose2(odom.pose, 0.0);
+        msg.twist.twist.linear.x = odom.twist.v;
+        msg.twist.twist.angular.z = odom.twist.omega;
+        msg
+    }
+}
+
+impl Twist {
+    /// A planar velocity command (`linear.x`, `angular.z`).
+    pub fn from_twist2(cmd: crate::motion::Twist2) -> Self {
+        let mut msg = Twist::default();
+        msg.linear.x = cmd.v;
+        msg.angular.z = cmd.omega;
+        msg
+    }
+}
+
+impl LaserScan {
+    /// A reachability scan in `<robot>/base_link`: bin i at angle −i·2π/N, range = safe distance,
+    /// intensity 1 where a known obstacle ends the bin.
+    pub fn from_reachability(scan: &crate::scan::ReachabilityScan, stamp: RosTime) -> Self {
+        let n = scan.bins().max(1);
+        let step = -(std::f64::consts::TAU / n as f64) as f32;
+        LaserScan {
+            header: Header { stamp, frame_id: format!("{}/base_link", scan.robot) },
+            angle_min: 0.0,
+            angle_max: step * (n as f32 - 1.0),
+            angle_increment: step,
+            time_increment: 0.0,
+            scan_time: 0.0,
+            range_min: 0.0,
+            range_max: scan.range_m.iter().copied().fold(0.0, f32::max),
+            ranges: scan.range_m.clone(),
+            intensities: scan.obstacle.iter().map(|&o| if o { 1.0 } else { 0.0 }).collect(),
+        }
+    }
+}
+
+impl Path {
+    /// A planned path in `map`.
+    pub fn from_points(points: &[crate::geometry::Point2], stamp: RosTime) -> Self {
+        let header = Header { stamp, frame_id: "map".into() };
+        let poses = points
+            .iter()
+            .map(|p| PoseStamped { header: header.clone(), pose: Pose::from_pose2(Pose2::new(p.x, p.y, 0.0), 0.0) })
+            .collect();
+        Path { header, poses }
+    }
+}
+
 // ROS 2 interface definitions as `ros2msg` schemas expect them: the type's own fields, then
 // each dependency after a separator line and `MSG: pkg/Type`. The fragments are macros because
 // `concat!` only takes literals.

@@ -189,22 +189,13 @@ impl<W: Write + Seek> Recorder<W> {
 
     /// Odometry (`/R/odom`).
     pub fn odometry(&mut self, robot: &str, odom: &spomp_core::Odometry) -> Result<(), RecordError> {
-        let mut msg = ros::Odometry {
-            header: ros::Header::new(odom.stamp, format!("{robot}/odom")),
-            child_frame_id: format!("{robot}/base_link"),
-            ..Default::default()
-        };
-        msg.pose.pose = ros::Pose::from_pose2(odom.pose, 0.0);
-        msg.twist.twist.linear.x = odom.twist.v;
-        msg.twist.twist.angular.z = odom.twist.omega;
+        let msg = ros::Odometry::from_odometry(robot, odom, odom.stamp.into());
         self.log(&format!("/{robot}/odom"), odom.stamp, &msg)
     }
 
     /// A velocity command (`/R/cmd_vel`).
     pub fn command(&mut self, robot: &str, time: Time, cmd: Twist2) -> Result<(), RecordError> {
-        let mut msg = ros::Twist::default();
-        msg.linear.x = cmd.v;
-        msg.angular.z = cmd.omega;
+        let msg = ros::Twist::from_twist2(cmd);
         self.log(&format!("/{robot}/cmd_vel"), time, &msg)
     }
 
@@ -295,34 +286,13 @@ impl<W: Write + Seek> Recorder<W> {
     /// A reachability scan (`/R/reachability`, LaserScan in the robot frame: bin i at angle
     /// −i·2π/N, intensity 1 where a known obstacle ends the bin).
     pub fn reachability(&mut self, scan: &ReachabilityScan) -> Result<(), RecordError> {
-        let n = scan.bins().max(1);
-        let step = -(std::f64::consts::TAU / n as f64) as f32;
-        let msg = ros::LaserScan {
-            header: ros::Header::new(scan.stamp, format!("{}/base_link", scan.robot)),
-            angle_min: 0.0,
-            angle_max: step * (n as f32 - 1.0),
-            angle_increment: step,
-            time_increment: 0.0,
-            scan_time: 0.0,
-            range_min: 0.0,
-            range_max: scan.range_m.iter().copied().fold(0.0, f32::max),
-            ranges: scan.range_m.clone(),
-            intensities: scan.obstacle.iter().map(|&o| if o { 1.0 } else { 0.0 }).collect(),
-        };
+        let msg = ros::LaserScan::from_reachability(scan, scan.stamp.into());
         self.log(&format!("/{}/reachability", scan.robot), scan.stamp, &msg)
     }
 
     /// A planned path (`/R/path`).
     pub fn path(&mut self, robot: &str, time: Time, points: &[spomp_core::Point2]) -> Result<(), RecordError> {
-        let header = ros::Header::new(time, "map");
-        let poses = points
-            .iter()
-            .map(|p| ros::PoseStamped {
-                header: header.clone(),
-                pose: ros::Pose::from_pose2(Pose2::new(p.x, p.y, 0.0), 0.0),
-            })
-            .collect();
-        self.log(&format!("/{robot}/path"), time, &ros::Path { header, poses })
+        self.log(&format!("/{robot}/path"), time, &ros::Path::from_points(points, time.into()))
     }
 
     /// Behaviour-node transitions (`/R/bt`, one Log each: name = node path, msg = `from -> to`).

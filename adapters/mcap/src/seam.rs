@@ -173,6 +173,25 @@ pub enum SeamCallRef<'a> {
     Halt,
 }
 
+impl<'a> From<spomp_robot::seam::SeamInput<'a>> for SeamCallRef<'a> {
+    /// A call as an adapter reports it ([`spomp_robot::seam::SeamInput`]), as the log stores it.
+    fn from(call: spomp_robot::seam::SeamInput<'a>) -> Self {
+        use spomp_robot::seam::{SeamInput, tier_bits};
+        match call {
+            SeamInput::Odometry(o) => SeamCallRef::Odometry(o),
+            SeamInput::Panorama(p) => SeamCallRef::Panorama(p),
+            SeamInput::ExternalPose(e) => SeamCallRef::ExternalPose(e),
+            SeamInput::CameraTiles(t) => SeamCallRef::CameraTiles(t),
+            SeamInput::TeamIn { from, bytes } => SeamCallRef::TeamIn { from, bytes },
+            SeamInput::TeamOut { to, tiers, budget_bytes, sent } => {
+                SeamCallRef::TeamOut { to, tiers: tier_bits(tiers), budget_bytes: budget_bytes as u64, sent }
+            }
+            SeamInput::Tick { command, flight } => SeamCallRef::Tick(TickOutput { command, flight }),
+            SeamInput::Halt => SeamCallRef::Halt,
+        }
+    }
+}
+
 impl SeamCallRef<'_> {
     /// The call's name on the wire.
     pub fn name(&self) -> &'static str {

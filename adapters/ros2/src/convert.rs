@@ -12,6 +12,8 @@ use spomp_core::{
     SemanticPanorama, Time, Twist2, UNKNOWN_CLASS,
 };
 
+use spomp_teamstate::GoalView;
+
 use crate::clock::TimeBase;
 
 /// Why a message could not be used.
@@ -66,23 +68,12 @@ pub fn odometry_from_ros(msg: &ros::Odometry, base: &TimeBase) -> Result<Odometr
 
 /// `nav_msgs/Odometry` from robot odometry.
 pub fn odometry_to_ros(robot: &str, odom: &Odometry, base: &TimeBase) -> ros::Odometry {
-    let mut msg = ros::Odometry {
-        header: ros::Header { stamp: base.to_ros(odom.stamp), frame_id: format!("{robot}/odom") },
-        child_frame_id: format!("{robot}/base_link"),
-        ..Default::default()
-    };
-    msg.pose.pose = ros::Pose::from_pose2(odom.pose, 0.0);
-    msg.twist.twist.linear.x = odom.twist.v;
-    msg.twist.twist.angular.z = odom.twist.omega;
-    msg
+    ros::Odometry::from_odometry(robot, odom, base.to_ros(odom.stamp))
 }
 
 /// A velocity command as `geometry_msgs/Twist`.
 pub fn twist_to_ros(cmd: Twist2) -> ros::Twist {
-    let mut msg = ros::Twist::default();
-    msg.linear.x = cmd.v;
-    msg.angular.z = cmd.omega;
-    msg
+    ros::Twist::from_twist2(cmd)
 }
 
 /// A velocity command from `geometry_msgs/Twist` (non-finite values are refused).
@@ -323,57 +314,25 @@ pub fn map_to_odom(robot: &str, estimate: Pose2, odom: Pose2, stamp: Time, base:
 
 /// A planned path as `nav_msgs/Path` in `map`.
 pub fn path_to_ros(points: &[Point2], stamp: Time, base: &TimeBase) -> ros::Path {
-    let header = ros::Header { stamp: base.to_ros(stamp), frame_id: "map".into() };
-    let poses = points
-        .iter()
-        .map(|p| ros::PoseStamped {
-            header: header.clone(),
-            pose: ros::Pose::from_pose2(Pose2::new(p.x, p.y, 0.0), 0.0),
-        })
-        .collect();
-    ros::Path { header, poses }
+    ros::Path::from_points(points, base.to_ros(stamp))
 }
 
 /// A reachability scan as `sensor_msgs/LaserScan` in `<id>/base_link` (bin i at angle −i·2π/N,
 /// intensity 1 where a known obstacle ends the bin) — the recorder's layout.
 pub fn scan_to_ros(scan: &ReachabilityScan, base: &TimeBase) -> ros::LaserScan {
-    let n = scan.bins().max(1);
-    let step = -(std::f64::consts::TAU / n as f64) as f32;
-    ros::LaserScan {
-        header: ros::Header { stamp: base.to_ros(scan.stamp), frame_id: format!("{}/base_link", scan.robot) },
-        angle_min: 0.0,
-        angle_max: step * (n as f32 - 1.0),
-        angle_increment: step,
-        time_increment: 0.0,
-        scan_time: 0.0,
-        range_min: 0.0,
-        range_max: scan.range_m.iter().copied().fold(0.0, f32::max),
-        ranges: scan.range_m.clone(),
-        intensities: scan.obstacle.iter().map(|&o| if o { 1.0 } else { 0.0 }).collect(),
-    }
-}
-
-/// One goal as the markers show it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct GoalMarker {
-    /// Goal id, as text.
-    pub id: String,
-    /// Map position.
-    pub position: Point2,
-    /// Who holds it, if anyone.
-    pub claimed_by: Option<String>,
-    /// Who visited it, if anyone.
-    pub visited_by: Option<String>,
+    ros::LaserScan::from_reachability(scan, base.to_ros(scan.stamp))
 }
 
 /// Goals and claims as `visualization_msgs/MarkerArray`: one cylinder per goal (grey open,
 /// orange claimed, green visited) and a text label with its id and holder. The first marker
 /// deletes all earlier ones, so goals that merged disappear.
-pub fn goals_to_ros(goals: &[GoalMarker], stamp: Time, base: &TimeBase) -> ros::MarkerArray {
+pub fn goals_to_ros(goals: &[GoalView], stamp: Time, base: &TimeBase) -> ros::MarkerArray {
     let header = ros::Header { stamp: base.to_ros(stamp), frame_id: "map".into() };
     let mut markers = vec![ros::Marker { header: header.clone(), ns: "goals".into(), action: 3, ..Default::default() }];
     for (k, g) in goals.iter().enumerate() {
-        let color = match (&g.visited_by, &g.claimed_by) {
+        let visited_by = g.visited.as_ref().map(|(_, r)| r);
+        let claimed_by = g.claimant.as_ref().map(|c| &c.robot);
+        let color = match (visited_by, claimed_by) {
             (Some(_), _) => ros::ColorRgba { r: 0.2, g: 0.8, b: 0.2, a: 0.9 },
             (None, Some(_)) => ros::ColorRgba { r: 1.0, g: 0.6, b: 0.0, a: 0.9 },
             (None, None) => ros::ColorRgba { r: 0.6, g: 0.6, b: 0.6, a: 0.9 },
@@ -389,11 +348,8 @@ pub fn goals_to_ros(goals: &[GoalMarker], stamp: Time, base: &TimeBase) -> ros::
             color,
             ..Default::default()
         });
-        let holder = g
-            .visited_by
-            .as_ref()
-            .map(|r| format!(" visited by {r}"))
-            .or_else(|| g.claimed_by.as_ref().map(|r| format!(" claimed by {r}")));
+        let holder =
+            visited_by.map(|r| format!(" visited by {r}")).or_else(|| claimed_by.map(|r| format!(" claimed by {r}")));
         let mut text_pose = pose;
         text_pose.position.z = 3.5;
         markers.push(ros::Marker {

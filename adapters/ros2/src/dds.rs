@@ -35,6 +35,17 @@ pub struct DdsSettings {
 }
 
 impl DdsSettings {
+    /// A robot's `ros2:` domain and interfaces, then the ROS 2 environment
+    /// ([`DdsSettings::with_ros_environment`]).
+    pub fn for_robot(spec: &spomp_behaviors::mission::schema::Ros2Spec) -> Result<Self, String> {
+        let interfaces = spec
+            .interfaces
+            .iter()
+            .map(|a| a.parse::<IpAddr>().map_err(|_| format!("ros2.interfaces: `{a}` is not an IP address")))
+            .collect::<Result<Vec<_>, _>>()?;
+        DdsSettings { domain_id: spec.domain_id, interfaces }.with_ros_environment()
+    }
+
     /// Applies the ROS 2 environment a launch file or shell sets: `ROS_DOMAIN_ID`, and
     /// `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` / `ROS_LOCALHOST_ONLY=1` (loopback only).
     pub fn with_ros_environment(mut self) -> Result<Self, String> {

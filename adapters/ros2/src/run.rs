@@ -24,7 +24,7 @@ use spomp_robot::seam::SeamInput;
 use spomp_teamstate::TierSet;
 
 use crate::clock::{TimeBase, ros_nanos, wall_nanos};
-use crate::convert::{self, GoalMarker};
+use crate::convert;
 use crate::dds::{DdsError, DdsNode, latched_qos, sensor_qos, state_qos};
 use crate::pairing::{OdometryHistory, PanoramaPairer};
 use crate::settings::RunSettings;
@@ -39,10 +39,6 @@ pub trait RunObserver {
     fn on_panorama(&mut self, _robot: &str, _frame: &PanoramaFrame) {}
     /// A pose input (GNSS, local position) as the robot received it.
     fn on_external_pose(&mut self, _robot: &str, _estimate: &PoseEstimate) {}
-    /// Team-state bytes received from a peer.
-    fn on_team_in(&mut self, _robot: &str, _now: Time, _from: &str, _bytes: &[u8]) {}
-    /// Team-state bytes sent to a peer.
-    fn on_team_out(&mut self, _robot: &str, _now: Time, _to: &str, _bytes: &[u8]) {}
     /// The velocity command published (UGV).
     fn on_command(&mut self, _robot: &str, _now: Time, _cmd: Twist2) {}
     /// The setpoint published (UAV).
@@ -233,7 +229,7 @@ impl RobotNode {
     pub fn run(&mut self, stop: &AtomicBool, until_s: Option<f64>, observer: &mut dyn RunObserver) -> RunReport {
         let mut state = LoopState::new(&self.settings, self.robot.tick_hz());
         let started = Instant::now();
-        let id = self.robot.id().to_string();
+        let id = self.robot.id().clone();
         let mut transitions = Recorder::default();
         while !stop.load(Ordering::SeqCst) {
             let got = self.take_inputs(&mut state, observer);
@@ -248,7 +244,7 @@ impl RobotNode {
             if let Some(frame) = state.pending_frame(&self.settings) {
                 let t0 = Instant::now();
                 let frame = Arc::new(frame);
-                observer.on_panorama(&id, &frame);
+                observer.on_panorama(id.as_str(), &frame);
                 observer.on_seam(self.robot.id(), now, SeamInput::Panorama(&frame));
                 self.robot.on_panorama(frame);
                 state.report.max_panorama_ms = state.report.max_panorama_ms.max(ms(t0.elapsed()));
@@ -283,7 +279,7 @@ impl RobotNode {
                 self.publish_command(&mut state, now, stop_reason, observer);
                 self.publish_transitions(&mut transitions, observer);
                 for p in self.robot.take_problems() {
-                    observer.on_problem(&id, now, &p);
+                    observer.on_problem(id.as_str(), now, &p);
                     state.last_problem = Some(p);
                 }
                 self.publish_state(&mut state, now, observer);
@@ -307,12 +303,12 @@ impl RobotNode {
             self.publish_command(&mut state, now, StopReason::EStop, observer);
             state.report.robot_time_s = now.as_secs_f64();
         }
-        state.finish(&id, started.elapsed(), self.robot.tick_hz())
+        state.finish(id.as_str(), started.elapsed(), self.robot.tick_hz())
     }
 
     /// Takes every pending input; true if anything arrived.
     fn take_inputs(&mut self, state: &mut LoopState, observer: &mut dyn RunObserver) -> bool {
-        let id = self.robot.id().to_string();
+        let id = self.robot.id().clone();
         let mut got = false;
         if let Some(clock) = &self.inputs.clock {
             while let Ok(Some((msg, _))) = clock.take() {
@@ -333,11 +329,11 @@ impl RobotNode {
                     state.report.received.odometry += 1;
                     state.odom_rx = Some((state.now().unwrap_or(odom.stamp), Instant::now()));
                     state.history.push(odom);
-                    observer.on_odometry(&id, &odom);
+                    observer.on_odometry(id.as_str(), &odom);
                     observer.on_seam(self.robot.id(), state.now().unwrap_or(odom.stamp), SeamInput::Odometry(&odom));
                     self.robot.on_odometry(odom);
                 }
-                Err(e) => state.refuse(&id, observer, &e.to_string()),
+                Err(e) => state.refuse(id.as_str(), observer, &e.to_string()),
             }
         }
         while let Some(msg) = take(&self.inputs.depth, &mut state.report.malformed_inputs) {
@@ -348,7 +344,7 @@ impl RobotNode {
                         state.set_pair(pair);
                     }
                 }
-                Err(e) => state.refuse(&id, observer, &e.to_string()),
+                Err(e) => state.refuse(id.as_str(), observer, &e.to_string()),
             }
         }
         while let Some(msg) = take(&self.inputs.semantic, &mut state.report.malformed_inputs) {
@@ -360,25 +356,29 @@ impl RobotNode {
                         state.set_pair(pair);
                     }
                 }
-                Err(e) => state.refuse(&id, observer, &e.to_string()),
+                Err(e) => state.refuse(id.as_str(), observer, &e.to_string()),
             }
         }
         while let Some(msg) = take(&self.inputs.gps, &mut state.report.malformed_inputs) {
             got = true;
             let Some(origin) = self.settings.gps_origin else {
-                state.refuse(&id, observer, "gps: a NavSatFix arrived but the mission gives no ros2.gps_origin");
+                state.refuse(
+                    id.as_str(),
+                    observer,
+                    "gps: a NavSatFix arrived but the mission gives no ros2.gps_origin",
+                );
                 continue;
             };
             match convert::navsat_to_estimate(&msg, origin, &base) {
                 Ok(est) => self.external_pose(state, est, observer),
-                Err(e) => state.refuse(&id, observer, &e.to_string()),
+                Err(e) => state.refuse(id.as_str(), observer, &e.to_string()),
             }
         }
         while let Some(msg) = take(&self.inputs.pose_in, &mut state.report.malformed_inputs) {
             got = true;
             match convert::pose_from_ros(&msg, &base) {
                 Ok(est) => self.external_pose(state, est, observer),
-                Err(e) => state.refuse(&id, observer, &e.to_string()),
+                Err(e) => state.refuse(id.as_str(), observer, &e.to_string()),
             }
         }
         while let Some(msg) = take(&self.inputs.estop, &mut state.report.malformed_inputs) {
@@ -386,7 +386,7 @@ impl RobotNode {
             if msg.data != state.estop {
                 let now = state.now().unwrap_or(Time::ZERO);
                 let what = if msg.data { "e-stop engaged: tree halted" } else { "e-stop released" };
-                observer.on_problem(&id, now, what);
+                observer.on_problem(id.as_str(), now, what);
                 self.log(now, if msg.data { 30 } else { 20 }, what.into());
             }
             state.estop = msg.data;
@@ -394,12 +394,11 @@ impl RobotNode {
         while let Some(msg) = take(&self.inputs.team_in, &mut state.report.malformed_inputs) {
             got = true;
             let Some(from) = msg.layout.dim.first().map(|d| d.label.clone()).filter(|f| !f.is_empty()) else {
-                state.refuse(&id, observer, "team/in: a message without its sender (layout.dim[0].label)");
+                state.refuse(id.as_str(), observer, "team/in: a message without its sender (layout.dim[0].label)");
                 continue;
             };
             state.report.received.team += 1;
             let now = state.now().unwrap_or(Time::ZERO);
-            observer.on_team_in(&id, now, &from, &msg.data);
             let from = RobotId::new(&from);
             observer.on_seam(self.robot.id(), now, SeamInput::TeamIn { from: &from, bytes: &msg.data });
             self.robot.on_team_message(&from, &msg.data);
@@ -421,7 +420,7 @@ impl RobotNode {
         reason: StopReason,
         observer: &mut dyn RunObserver,
     ) {
-        let id = self.robot.id().to_string();
+        let id = self.robot.id().clone();
         let safe = reason != StopReason::None;
         state.report.commands += 1;
         state.report.safety_stops += u64::from(safe);
@@ -444,12 +443,12 @@ impl RobotNode {
                 if let Some(m) = msg {
                     let _ = self.outputs.setpoint.publish(m);
                 }
-                observer.on_flight(&id, now, cmd.as_ref());
+                observer.on_flight(id.as_str(), now, cmd.as_ref());
             }
             _ => {
                 let cmd = if safe { Twist2::ZERO } else { self.robot.command().unwrap_or(Twist2::ZERO) };
                 let _ = self.outputs.cmd_vel.publish(convert::twist_to_ros(cmd));
-                observer.on_command(&id, now, cmd);
+                observer.on_command(id.as_str(), now, cmd);
             }
         }
         let published = Instant::now();
@@ -465,8 +464,8 @@ impl RobotNode {
         if transitions.records.is_empty() {
             return;
         }
-        let id = self.robot.id().to_string();
-        observer.on_transitions(&id, &transitions.records);
+        let id = self.robot.id().clone();
+        observer.on_transitions(id.as_str(), &transitions.records);
         for r in &transitions.records {
             let msg = ros::Log {
                 stamp: r.time.into(),
@@ -503,28 +502,28 @@ impl RobotNode {
 
     /// After a tick: estimate and transform, path.
     fn publish_state(&mut self, state: &mut LoopState, now: Time, observer: &mut dyn RunObserver) {
-        let id = self.robot.id().to_string();
+        let id = self.robot.id().clone();
         if let Some(est) = self.robot.pose()
             && state.last_estimate != Some(est.stamp)
         {
             state.last_estimate = Some(est.stamp);
-            observer.on_estimate(&id, &est);
+            observer.on_estimate(id.as_str(), &est);
             let _ = self.outputs.estimate.publish(convert::estimate_to_ros(&est, &state.base));
             if let Some(odom) = state.history.pose_at(est.stamp) {
-                let _ = self.outputs.tf.publish(convert::map_to_odom(&id, est.pose, odom, est.stamp, &state.base));
+                let _ =
+                    self.outputs.tf.publish(convert::map_to_odom(id.as_str(), est.pose, odom, est.stamp, &state.base));
             }
         }
         let path = self.robot.planned_path().unwrap_or(&[]);
         if path.len() != state.last_path_len || path.first() != state.last_path_start.as_ref() {
             state.last_path_len = path.len();
             state.last_path_start = path.first().copied();
-            observer.on_path(&id, now, path);
+            observer.on_path(id.as_str(), now, path);
             let _ = self.outputs.path.publish(convert::path_to_ros(path, now, &state.base));
         }
     }
 
     fn send_team(&mut self, now: Time, observer: &mut dyn RunObserver) {
-        let id = self.robot.id().to_string();
         for peer in &self.peers {
             let budget_bytes = self.settings.team_budget_bytes;
             let sent = self.robot.team_message_for(peer, TierSet::ALL, budget_bytes);
@@ -533,7 +532,6 @@ impl RobotNode {
             let Some(bytes) = sent else {
                 continue;
             };
-            observer.on_team_out(&id, now, peer.as_str(), &bytes);
             let msg = ros::BytesMsg {
                 layout: ros::MultiArrayLayout {
                     dim: vec![ros::MultiArrayDimension {
@@ -550,31 +548,20 @@ impl RobotNode {
     }
 
     fn publish_status(&mut self, state: &mut LoopState, now: Time, reason: StopReason, wall: Duration) {
-        let id = self.robot.id().to_string();
-        let goals: Vec<GoalMarker> = self
-            .robot
-            .team()
-            .goals()
-            .iter()
-            .map(|g| GoalMarker {
-                id: g.id.to_string(),
-                position: g.position,
-                claimed_by: g.claimant.as_ref().map(|c| c.robot.to_string()),
-                visited_by: g.visited.as_ref().map(|(_, r)| r.to_string()),
-            })
-            .collect();
-        let _ = self.outputs.goals.publish(convert::goals_to_ros(&goals, now, &state.base));
+        let id = self.robot.id().clone();
+        let goals = self.robot.team().goals();
+        let _ = self.outputs.goals.publish(convert::goals_to_ros(goals, now, &state.base));
         let status = MissionStatus {
-            robot: &id,
+            robot: id.as_str(),
             time_s: now.as_secs_f64(),
             tree: state.status.to_string(),
             stop: reason,
-            goals: self.robot.team().goals().to_vec(),
+            goals: goals.to_vec(),
         };
         if let Ok(data) = serde_json::to_string(&status) {
             let _ = self.outputs.status.publish(ros::StringMsg { data });
         }
-        let report = state.snapshot(&id, wall, self.robot.tick_hz());
+        let report = state.snapshot(id.as_str(), wall, self.robot.tick_hz());
         let level = match reason {
             StopReason::None if state.last_problem.is_none() => 0,
             StopReason::None | StopReason::EStop => 1,
@@ -598,7 +585,7 @@ impl RobotNode {
                 level,
                 name: format!("spomp/{id}"),
                 message,
-                hardware_id: id.clone(),
+                hardware_id: id.to_string(),
                 values,
             }],
         };

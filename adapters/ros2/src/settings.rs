@@ -1,7 +1,5 @@
 //! What `spomp run` needs to know beyond the robot itself: names, DDS, input formats, limits.
 
-use std::net::IpAddr;
-
 use spomp_behaviors::mission::schema::MissionFile;
 use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
 
@@ -60,16 +58,7 @@ impl RunSettings {
             )
         })?;
         let ros = spec.ros2.clone().unwrap_or_default();
-        let interfaces = ros
-            .interfaces
-            .iter()
-            .map(|a| {
-                a.parse::<IpAddr>()
-                    .map_err(|_| SettingsError::Invalid(format!("ros2.interfaces: `{a}` is not an IP address")))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        let mut dds = DdsSettings { domain_id: ros.domain_id, interfaces };
-        dds = dds.with_ros_environment().map_err(SettingsError::Invalid)?;
+        let mut dds = DdsSettings::for_robot(&ros).map_err(SettingsError::Invalid)?;
         if let Some(d) = domain_id {
             dds.domain_id = d;
         }

@@ -43,7 +43,7 @@ pub trait ExternalDrivers {
     /// Delivers a team-state message to a driven robot.
     fn deliver_team_message(&mut self, to: &RobotId, from: &RobotId, bytes: &[u8]);
     /// The goals as a driven robot last reported them.
-    fn goals(&self, robot: &RobotId) -> Vec<GoalView>;
+    fn goals(&self, robot: &RobotId) -> &[GoalView];
     /// Whether a driven robot reported its tree finished.
     fn tree_done(&self, robot: &RobotId) -> bool;
 }

@@ -920,12 +920,8 @@ impl Simulation {
         let now = self.now;
         let mut own_visits = Vec::new();
         for (ri, r) in self.robots.iter().enumerate() {
-            let reported;
-            let goals: &[spomp_teamstate::GoalView] = match self.drivers.as_ref().filter(|_| r.external) {
-                Some(d) => {
-                    reported = d.goals(&r.id);
-                    &reported
-                }
+            let goals = match self.drivers.as_ref().filter(|_| r.external) {
+                Some(d) => d.goals(&r.id),
                 None => r.robot.team().goals(),
             };
             for g in goals {
