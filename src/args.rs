@@ -97,6 +97,20 @@ pub fn window(text: &str) -> Result<(f64, f64), String> {
     }
 }
 
+/// `--skill-latency`: `typical`, or PERCEPTION_S,PLANNER_S (each 0 to 60 seconds).
+pub fn skill_latency(text: &str) -> Result<spomp_sim::run::SkillLatency, String> {
+    if text.trim() == "typical" {
+        return Ok(spomp_sim::run::SkillLatency::TYPICAL);
+    }
+    let bad = || format!("expected `typical` or PERCEPTION_S,PLANNER_S (0 to 60 s each), got `{text}`");
+    let (a, b) = text.split_once(',').ok_or_else(bad)?;
+    let parse = |v: &str| v.trim().parse::<f64>().ok().filter(|v| (0.0..=60.0).contains(v));
+    match (parse(a), parse(b)) {
+        (Some(perception_s), Some(planner_s)) => Ok(spomp_sim::run::SkillLatency { perception_s, planner_s }),
+        _ => Err(bad()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -114,6 +128,12 @@ mod tests {
         assert!(size("0,5").is_err());
         assert!(pose("1,2").is_err());
         assert_eq!(kill("ugv2@300").unwrap(), ("ugv2".to_string(), 300.0));
+        assert_eq!(skill_latency("typical").unwrap(), spomp_sim::run::SkillLatency::TYPICAL);
+        assert_eq!(skill_latency("0.1, 2").unwrap().planner_s, 2.0);
+        assert!(skill_latency("0.1").is_err());
+        assert!(skill_latency("-1,2").is_err());
+        assert!(skill_latency("NaN,2").is_err());
+        assert!(skill_latency("1,61").is_err());
         assert!(kill("ugv2").is_err());
         assert!(kill("@3").is_err());
         assert!(kill("ugv2@-1").is_err());

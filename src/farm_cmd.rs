@@ -6,7 +6,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use spomp_behaviors::mission::MissionFile;
-use spomp_core::{FlightCommand, Odometry, PanoramaFrame, PoseEstimate, RobotId, RobotKind, Time, Twist2};
+use spomp_core::{
+    FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, PoseEstimate, RobotId, RobotKind, Time, Twist2,
+};
 use spomp_ros2::{DdsSettings, FarmLink};
 use spomp_sim::run::{DrivenTeamMessage, ExternalDrivers};
 use spomp_teamstate::GoalView;
@@ -20,7 +22,7 @@ pub struct FarmOptions {
     pub domain_id: Option<u16>,
     /// Interfaces DDS may use (empty: every one).
     pub interfaces: Vec<IpAddr>,
-    /// Robots to drive (empty: every UGV).
+    /// Robots to drive (empty: every UGV and UAV).
     pub drive: Vec<String>,
     /// How long to wait for the `spomp run` processes before the clock starts, wall seconds.
     pub wait_s: f64,
@@ -40,7 +42,7 @@ impl FarmDrivers {
     /// A farm for `mission`: publishes the driven robots' sensors and `/clock`.
     pub fn new(mission: &MissionFile, options: &FarmOptions) -> Result<Self> {
         let driven: Vec<String> = if options.drive.is_empty() {
-            mission.team.iter().filter(|r| r.kind == RobotKind::Ugv).map(|r| r.id.clone()).collect()
+            mission.team.iter().filter(|r| r.kind != RobotKind::Basestation).map(|r| r.id.clone()).collect()
         } else {
             options.drive.clone()
         };
@@ -123,6 +125,10 @@ impl ExternalDrivers for FarmDrivers {
 
     fn pose(&mut self, robot: &RobotId, estimate: &PoseEstimate, z_m: f64) {
         self.link.publish_pose(robot.as_str(), estimate, z_m);
+    }
+
+    fn camera_tiles(&mut self, robot: &RobotId, now: Time, tiles: &[MapTile], grid: &GridSpec) {
+        self.link.publish_camera_tiles(robot.as_str(), now, tiles, grid);
     }
 
     fn command(&mut self, robot: &RobotId, now: Time) -> Option<Twist2> {

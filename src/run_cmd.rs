@@ -94,14 +94,18 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         .with_context(|| format!("setting up robot `{}`", args.robot))?;
     // What a replay of the log needs to build this robot again.
     let run_info = match &args.record {
-        Some(_) => Some(spomp_mcap::replay::run_info(
-            &loaded,
-            "run",
-            seed,
-            &area,
-            setup.config.map_publish_period_s,
-            setup.config.map_compression.level,
-        )?),
+        Some(_) => Some(
+            spomp_mcap::replay::run_info(
+                &loaded,
+                "run",
+                seed,
+                &area,
+                setup.config.map_publish_period_s,
+                setup.config.map_compression.level,
+            )
+            // The node runs the heavy skills on worker threads (spomp_ros2::workers).
+            .map(|info| spomp_mcap::RunInfo { background_skills: true, ..info })?,
+        ),
         None => None,
     };
     let robot =
@@ -246,7 +250,7 @@ impl RunObserver for RecordingObserver {
     }
 
     fn on_seam(&mut self, robot: &RobotId, now: Time, call: SeamInput<'_>) {
-        self.record(|r| r.seam(robot.as_str(), now, call.into()));
+        self.record(|r| r.seam(robot.as_str(), now, call));
     }
 
     fn on_problem(&mut self, robot: &str, now: Time, message: &str) {

@@ -62,6 +62,12 @@ pub struct SimArgs {
     /// panoramas, team-state bytes per link, ticks). See docs/replay.md for the size it costs.
     #[arg(long, conflicts_with = "no_mcap")]
     pub replayable: bool,
+    /// Run the robots' heavy skills (panorama processing, global-planner upkeep) in the
+    /// background as `spomp run` does, with this modelled compute time: `typical` (0.05 s per
+    /// panorama, 0.8 s per planner job) or PERCEPTION_S,PLANNER_S. Deterministic; the default
+    /// runs them inline, within the step.
+    #[arg(long, value_parser = crate::args::skill_latency)]
+    pub skill_latency: Option<spomp_sim::run::SkillLatency>,
     /// Kill a robot: ROBOT@SECONDS (repeatable).
     #[arg(long, value_parser = crate::args::kill)]
     pub kill: Vec<(String, f64)>,
@@ -94,7 +100,7 @@ pub struct SimArgs {
     /// With --ros2: only this local address carries DDS discovery (repeatable).
     #[arg(long = "interface", value_name = "IP", requires = "ros2")]
     pub interfaces: Vec<std::net::IpAddr>,
-    /// With --ros2: drive only this robot over ROS 2 (repeatable; default every UGV).
+    /// With --ros2: drive only this robot over ROS 2 (repeatable; default every UGV and UAV).
     #[arg(long, value_name = "ID", requires = "ros2")]
     pub drive: Vec<String>,
     /// With --ros2: wait this long for the `spomp run` processes before the clock starts,
@@ -176,10 +182,9 @@ pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
                     ids.join(", ")
                 ));
             }
-            Some(r) if r.kind != RobotKind::Ugv => {
+            Some(r) if r.kind == RobotKind::Basestation => {
                 return usage(format!(
-                    "--drive {robot}: only UGVs can be driven over ROS 2 (`{robot}` is a {})",
-                    r.kind
+                    "--drive {robot}: only UGVs and UAVs can be driven over ROS 2 (`{robot}` is a basestation)"
                 ));
             }
             Some(_) => {}
@@ -385,11 +390,18 @@ fn run_trial(
     std::fs::create_dir_all(trial_dir.join("plots")).with_context(|| format!("creating {}", trial_dir.display()))?;
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
-    let options = SimOptions { seed, time_limit_s: args.time_limit_s, faults: faults.clone(), ..SimOptions::default() };
+    let options = SimOptions {
+        seed,
+        time_limit_s: args.time_limit_s,
+        faults: faults.clone(),
+        skill_latency: args.skill_latency,
+        ..SimOptions::default()
+    };
     let run_info = if args.replayable {
         let area = spomp_sim::run::operating_area(mission, &world);
         let level = options.map_compression.level;
-        Some(spomp_mcap::replay::run_info(loaded, "sim", seed, &area, options.map_publish_period_s, level)?)
+        let info = spomp_mcap::replay::run_info(loaded, "sim", seed, &area, options.map_publish_period_s, level)?;
+        Some(spomp_mcap::RunInfo { background_skills: options.skill_latency.is_some(), ..info })
     } else {
         None
     };
@@ -580,7 +592,7 @@ impl SimObserver for RunObserver {
         if !self.replayable {
             return;
         }
-        self.record(|r| r.seam(robot.as_str(), now, call.into()));
+        self.record(|r| r.seam(robot.as_str(), now, call));
     }
 
     fn on_problem(&mut self, robot: &RobotId, now: Time, message: &str) {

@@ -19,11 +19,16 @@ fn root() -> &'static Path {
 
 /// Runs `mission` for `seconds` with `--replayable`; the trial's log.
 fn record(mission: &Path, seconds: &str, seed: &str, out: &Path) -> PathBuf {
+    record_with(mission, seconds, seed, out, &[])
+}
+
+fn record_with(mission: &Path, seconds: &str, seed: &str, out: &Path, extra: &[&str]) -> PathBuf {
     let o = spomp()
         .current_dir(root())
         .args(["sim", "--replayable", "--json", "--time-limit-s", seconds, "--seed", seed, "--out"])
         .arg(out)
         .arg(mission)
+        .args(extra)
         .output()
         .unwrap();
     assert!(matches!(o.status.code(), Some(0 | 1)), "{}", String::from_utf8_lossy(&o.stderr));
@@ -62,6 +67,25 @@ fn every_robot_of_a_simulated_mission_replays_identically() {
     // A robot the log does not hold, and no log at all: exit 2.
     spomp().args(["replay", "--robot", "ugv9"]).arg(&log).assert().code(2);
     spomp().args(["replay", "--robot", "ugv1", "no-such.mcap"]).assert().code(2);
+}
+
+#[test]
+fn a_run_with_the_heavy_skills_in_the_background_replays_identically() {
+    let out = tempfile::tempdir().unwrap();
+    // Work taken and handed back a modelled compute time later, as `spomp run`'s worker
+    // threads do: the replay repeats each hand-over where the log has it.
+    let mission = Path::new("missions/visit-all-vehicle-clusters.yaml");
+    let log = record_with(mission, "200", "2", out.path(), &["--skill-latency", "0.3,1.5"]);
+    for robot in ["uav1", "ugv1", "ugv3"] {
+        let (code, r) = replay(&log, robot, &[]);
+        assert_eq!(code, Some(0), "{robot}: {r}");
+        assert_eq!(r["identical"], true, "{r}");
+        if robot.starts_with("ugv") {
+            assert!(r["skill_jobs"].as_u64().unwrap() > 10, "{robot}: {r}");
+        }
+    }
+    // A bad latency is a usage error.
+    spomp().args(["sim", "--skill-latency", "fast"]).arg(root().join(mission)).assert().code(2);
 }
 
 /// The first log time at which `robot`'s outputs differ between two logs (tick commands, team

@@ -12,6 +12,7 @@ use spomp_core::ros;
 
 const MISSION: &str = "tests/missions/ros2/farm-one-ugv.yaml";
 const FAR_MISSION: &str = "tests/missions/ros2/farm-kill.yaml";
+const UAV_MISSION: &str = "tests/missions/ros2/farm-uav.yaml";
 
 fn spomp() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_spomp"));
@@ -24,7 +25,7 @@ fn spomp() -> Command {
 /// A domain id of this process and test (offsets below 100): parallel runs of the suite and
 /// the tests of one run do not hear each other.
 fn domain(offset: u32) -> String {
-    (10 + (std::process::id() % 100) * 2 + offset / 100).to_string()
+    (10 + (std::process::id() % 50) * 4 + offset / 100).to_string()
 }
 
 /// Kills the child when the test ends, however it ends.
@@ -60,8 +61,12 @@ fn start_sim(mission: &str, domain: &str, out: &Path, extra: &[&str]) -> Reap {
 }
 
 fn start_run(mission: &str, domain: &str, extra: &[&str]) -> Reap {
+    start_robot(mission, "ugv1", domain, extra)
+}
+
+fn start_robot(mission: &str, robot: &str, domain: &str, extra: &[&str]) -> Reap {
     let child = spomp()
-        .args(["run", mission, "--robot", "ugv1", "--use-sim-time", "--json", "--domain-id", domain])
+        .args(["run", mission, "--robot", robot, "--use-sim-time", "--json", "--domain-id", domain])
         .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -132,6 +137,11 @@ fn a_ugv_driven_by_a_separate_spomp_run_process_reaches_its_goals() {
         "the robot log does not replay identically:\n{text}\n{}",
         String::from_utf8_lossy(&replay.stderr)
     );
+    // Its heavy skills ran on worker threads, and the replay repeated that work where the
+    // robot took it and had it back.
+    let replayed: serde_json::Value = serde_json::from_str(&text).expect("replay --json is JSON");
+    assert!(replayed["skill_jobs"].as_u64().unwrap_or(0) > 0, "{replayed:#}");
+    assert!(report["skill_jobs"].as_u64().unwrap_or(0) > 0, "{report:#}");
     let _ = std::fs::remove_dir_all(&out);
 }
 
@@ -218,5 +228,41 @@ fn the_e_stop_halts_the_robot_until_released() {
         }
     }
     assert!(longest >= 10.0, "no stop of 10 s or more between two moving stretches (longest {longest:.1} s)");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn a_uav_driven_over_ros2_maps_the_city_for_the_team() {
+    let d = domain(300);
+    let out = temp_dir("uav");
+    std::fs::create_dir_all(&out).expect("temp dir");
+    let log = out.join("uav1.mcap");
+    let mut sim = start_sim(UAV_MISSION, &d, &out.join("sim"), &["--drive", "uav1", "--rate", "4", "--no-mcap"]);
+    let mut run = start_robot(UAV_MISSION, "uav1", &d, &["--record", log.to_str().expect("utf-8 path")]);
+    let status = wait_with_timeout(&mut sim.0, Duration::from_secs(300));
+    let (sim_out, sim_err) = output(&mut sim.0);
+    let _ = Command::new("kill").args(["-INT", &run.0.id().to_string()]).status();
+    let _ = wait_with_timeout(&mut run.0, Duration::from_secs(20));
+    let (run_out, run_err) = output(&mut run.0);
+    let status = status.expect("the farm run ends within 300 s");
+    assert!(status.success(), "spomp sim --ros2 failed ({status}):\n{sim_out}\n{sim_err}\n--- run:\n{run_err}");
+    // The only map the team has is the one the driven UAV built from the camera tiles the farm
+    // published: the simulator's UGV found the vehicle cluster in it and visited it.
+    let summary: serde_json::Value = serde_json::from_str(&sim_out).expect("sim prints its summary as JSON");
+    let trial = &summary["runs"][0];
+    assert_eq!(trial["outcome"], "complete", "{summary:#}");
+    assert!(trial["goals_visited"].as_u64().unwrap_or(0) >= 1, "{summary:#}");
+    let report: serde_json::Value = serde_json::from_str(&run_out).expect("run prints its figures as JSON");
+    assert!(report["received"]["camera_tiles"].as_u64().unwrap_or(0) > 100, "{report:#}");
+    assert!(report["received"]["poses"].as_u64().unwrap_or(0) > 100, "{report:#}");
+    assert_eq!(report["malformed_inputs"], 0, "{report:#}");
+    // The UAV's log replays: the tiles and positions it was given make the same flight.
+    let replay = spomp().args(["replay"]).arg(&log).args(["--robot", "uav1"]).output().expect("replay runs");
+    assert!(
+        replay.status.success(),
+        "the UAV's log does not replay identically:\n{}\n{}",
+        String::from_utf8_lossy(&replay.stdout),
+        String::from_utf8_lossy(&replay.stderr)
+    );
     let _ = std::fs::remove_dir_all(&out);
 }

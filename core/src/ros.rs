@@ -517,6 +517,174 @@ pub struct BytesMsg {
     pub data: Vec<u8>,
 }
 
+/// `std_msgs/Float32MultiArray`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Float32MultiArray {
+    /// Layout.
+    pub layout: MultiArrayLayout,
+    /// Values.
+    pub data: Vec<f32>,
+}
+
+/// `grid_map_msgs/GridMapInfo`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct GridMapInfo {
+    /// Cell size, metres.
+    pub resolution: f64,
+    /// Extent along x, metres.
+    pub length_x: f64,
+    /// Extent along y, metres.
+    pub length_y: f64,
+    /// The grid's centre in the header's frame.
+    pub pose: Pose,
+}
+
+/// `grid_map_msgs/GridMap` (ANYbotics grid_map, the ROS 2 layout): named layers over one grid,
+/// each a column-major matrix whose index (0, 0) is the cell at the largest x and y. spomp's
+/// aerial-map tiles travel as one: layers `class`, `color` (RGB packed into a float's bits, as
+/// grid_map packs it) and `elevation` (NaN: unknown).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct GridMap {
+    /// Stamp and frame.
+    pub header: Header,
+    /// Size, resolution, placement.
+    pub info: GridMapInfo,
+    /// Layer names.
+    pub layers: Vec<String>,
+    /// Layers a cell must have a value in to be valid.
+    pub basic_layers: Vec<String>,
+    /// One matrix per layer, in the order of `layers`.
+    pub data: Vec<Float32MultiArray>,
+    /// Circular-buffer start (always 0 here).
+    pub outer_start_index: u16,
+    /// Circular-buffer start (always 0 here).
+    pub inner_start_index: u16,
+}
+
+/// Why a grid map cannot be read as an aerial-map tile.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("grid map: {0}")]
+pub struct GridMapError(pub String);
+
+impl GridMap {
+    /// The layer names of a tile.
+    pub const TILE_LAYERS: [&'static str; 3] = ["class", "color", "elevation"];
+
+    /// `tile` of the map over `spec`, in `frame` at `stamp`.
+    pub fn from_tile(tile: &crate::aerial::MapTile, spec: &crate::grid::GridSpec, frame: &str, stamp: RosTime) -> Self {
+        let (nx, ny) = (tile.width as usize, tile.height as usize);
+        let res = spec.resolution_m;
+        let centre_x = spec.origin.x + (f64::from(tile.col0) + nx as f64 / 2.0) * res;
+        let centre_y = spec.origin.y + (f64::from(tile.row0) + ny as f64 / 2.0) * res;
+        let mut layers = [vec![0f32; nx * ny], vec![0f32; nx * ny], vec![0f32; nx * ny]];
+        for row in 0..ny {
+            for col in 0..nx {
+                let k = row * nx + col;
+                // grid_map index (i, j): i runs down x, j down y; stored column-major.
+                let at = (ny - 1 - row) * nx + (nx - 1 - col);
+                let [r, g, b] = tile.rgb.get(k).copied().unwrap_or_default();
+                layers[0][at] = f32::from(tile.class.get(k).copied().unwrap_or(crate::classes::UNKNOWN_CLASS));
+                layers[1][at] = f32::from_bits(u32::from(r) << 16 | u32::from(g) << 8 | u32::from(b));
+                layers[2][at] = tile.elevation.get(k).copied().unwrap_or(f32::NAN);
+            }
+        }
+        let layout = MultiArrayLayout {
+            dim: vec![
+                MultiArrayDimension { label: "column_index".into(), size: ny as u32, stride: (nx * ny) as u32 },
+                MultiArrayDimension { label: "row_index".into(), size: nx as u32, stride: nx as u32 },
+            ],
+            data_offset: 0,
+        };
+        GridMap {
+            header: Header { stamp, frame_id: frame.to_string() },
+            info: GridMapInfo {
+                resolution: res,
+                length_x: nx as f64 * res,
+                length_y: ny as f64 * res,
+                pose: Pose::from_pose2(crate::geometry::Pose2::new(centre_x, centre_y, 0.0), 0.0),
+            },
+            layers: Self::TILE_LAYERS.iter().map(|l| (*l).to_string()).collect(),
+            basic_layers: vec!["class".into()],
+            data: layers.into_iter().map(|data| Float32MultiArray { layout: layout.clone(), data }).collect(),
+            outer_start_index: 0,
+            inner_start_index: 0,
+        }
+    }
+
+    /// The tile of the map over `spec` this grid map carries: it must be aligned with the
+    /// map's cells, at its resolution, unrotated, inside it, with the three tile layers.
+    pub fn to_tile(&self, spec: &crate::grid::GridSpec) -> Result<crate::aerial::MapTile, GridMapError> {
+        let bad = |m: String| GridMapError(m);
+        let res = spec.resolution_m;
+        let info = &self.info;
+        if !(info.resolution.is_finite() && (info.resolution - res).abs() <= res * 1e-6) {
+            return Err(bad(format!("resolution {} m, the map's is {res} m", info.resolution)));
+        }
+        let q = &info.pose.orientation;
+        if !(q.x.abs() < 1e-6 && q.y.abs() < 1e-6 && q.z.abs() < 1e-6) {
+            return Err(bad("a rotated grid cannot be applied to the aerial map".into()));
+        }
+        if self.outer_start_index != 0 || self.inner_start_index != 0 {
+            return Err(bad("circular-buffer start indices are not supported".into()));
+        }
+        let cells = |len: f64| -> Result<usize, GridMapError> {
+            let n = len / res;
+            if n.is_finite() && n >= 1.0 && (n - n.round()).abs() < 1e-6 && n <= 1e6 {
+                Ok(n.round() as usize)
+            } else {
+                Err(bad(format!("length {len} m is not a whole number of {res} m cells")))
+            }
+        };
+        let (nx, ny) = (cells(info.length_x)?, cells(info.length_y)?);
+        let p = &info.pose.position;
+        let first = |centre: f64, origin: f64, n: usize| -> Result<u32, GridMapError> {
+            let c = (centre - origin) / res - n as f64 / 2.0;
+            if c.is_finite() && (c - c.round()).abs() < 1e-3 && c.round() >= 0.0 {
+                Ok(c.round() as u32)
+            } else {
+                Err(bad(format!("not aligned with the map's cells (first cell at {c:.3})")))
+            }
+        };
+        let (col0, row0) = (first(p.x, spec.origin.x, nx)?, first(p.y, spec.origin.y, ny)?);
+        if u64::from(col0) + nx as u64 > u64::from(spec.width) || u64::from(row0) + ny as u64 > u64::from(spec.height) {
+            return Err(bad("the grid reaches outside the map".into()));
+        }
+        let layer = |name: &str| -> Result<&[f32], GridMapError> {
+            let k = self.layers.iter().position(|l| l == name).ok_or_else(|| bad(format!("no `{name}` layer")))?;
+            let data = self.data.get(k).map(|d| d.data.as_slice()).unwrap_or_default();
+            if data.len() == nx * ny {
+                Ok(data)
+            } else {
+                Err(bad(format!("layer `{name}` has {} values, not {}", data.len(), nx * ny)))
+            }
+        };
+        let (class, color, elevation) = (layer("class")?, layer("color")?, layer("elevation")?);
+        let n = nx * ny;
+        let mut tile = crate::aerial::MapTile {
+            col0,
+            row0,
+            width: nx as u32,
+            height: ny as u32,
+            class: Vec::with_capacity(n),
+            rgb: Vec::with_capacity(n),
+            elevation: Vec::with_capacity(n),
+        };
+        for row in 0..ny {
+            for col in 0..nx {
+                let at = (ny - 1 - row) * nx + (nx - 1 - col);
+                let c = class[at];
+                let class =
+                    if c.is_finite() && (0.0..=255.0).contains(&c) { c as u8 } else { crate::classes::UNKNOWN_CLASS };
+                let bits = color[at].to_bits();
+                tile.class.push(class);
+                tile.rgb.push([(bits >> 16) as u8, (bits >> 8) as u8, bits as u8]);
+                tile.elevation.push(elevation[at]);
+            }
+        }
+        Ok(tile)
+    }
+}
+
 /// Messages of spomp's own data, built once here for every adapter that speaks ROS 2 (the MCAP
 /// recorder and the ROS 2 adapter), so a log and a live robot carry the same bytes.
 impl Odometry {
@@ -762,6 +930,23 @@ impl RosMessage for Clock {
     const DEFINITION: &'static str = concat!("builtin_interfaces/Time clock\n", time_dep!());
 }
 
+impl RosMessage for GridMap {
+    const TYPE_NAME: &'static str = "grid_map_msgs/msg/GridMap";
+    const DEFINITION: &'static str = concat!(
+        "std_msgs/Header header\ngrid_map_msgs/GridMapInfo info\nstring[] layers\nstring[] basic_layers\n",
+        "std_msgs/Float32MultiArray[] data\nuint16 outer_start_index\nuint16 inner_start_index\n",
+        header_deps!(),
+        dependency!(
+            "grid_map_msgs/GridMapInfo",
+            "float64 resolution\nfloat64 length_x\nfloat64 length_y\ngeometry_msgs/Pose pose\n"
+        ),
+        pose_deps!(),
+        dependency!("std_msgs/Float32MultiArray", "MultiArrayLayout layout\nfloat32[] data\n"),
+        dependency!("std_msgs/MultiArrayLayout", "MultiArrayDimension[] dim\nuint32 data_offset\n"),
+        dependency!("std_msgs/MultiArrayDimension", "string label\nuint32 size\nuint32 stride\n")
+    );
+}
+
 impl RosMessage for BytesMsg {
     const TYPE_NAME: &'static str = "std_msgs/msg/UInt8MultiArray";
     const DEFINITION: &'static str = concat!(
@@ -784,6 +969,7 @@ mod tests {
     #[test]
     fn definitions_name_every_dependency_once() {
         for def in [
+            GridMap::DEFINITION,
             PoseStamped::DEFINITION,
             Odometry::DEFINITION,
             Path::DEFINITION,
@@ -812,5 +998,48 @@ mod tests {
     fn yaw_quaternion_is_unit() {
         let q = Quaternion::from_yaw(1.2);
         assert!((q.z * q.z + q.w * q.w - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_map_tile_travels_as_a_grid_map_and_back_cell_for_cell() {
+        use crate::aerial::MapTile;
+        use crate::geometry::Point2;
+        use crate::grid::GridSpec;
+        let spec = GridSpec::new(Point2::new(-10.0, 5.0), 0.5, 40, 30);
+        let (w, h) = (3u32, 2u32);
+        let n = (w * h) as usize;
+        let tile = MapTile {
+            col0: 7,
+            row0: 4,
+            width: w,
+            height: h,
+            class: (0..n as u8).collect(),
+            rgb: (0..n as u8).map(|k| [k, 255 - k, k.wrapping_mul(37)]).collect(),
+            elevation: (0..n).map(|k| if k == 2 { f32::NAN } else { k as f32 * 0.25 }).collect(),
+        };
+        let msg = GridMap::from_tile(&tile, &spec, "map", RosTime::default());
+        // The centre of the tile: cells 7..10 and 4..6 of 0.5 m from (-10, 5).
+        assert_eq!((msg.info.pose.position.x, msg.info.pose.position.y), (-10.0 + 8.5 * 0.5, 5.0 + 5.0 * 0.5));
+        // grid_map's index (0, 0) is the cell at the largest x and y: the tile's last cell.
+        assert_eq!(msg.data[0].data[0], f32::from(tile.class[n - 1]));
+        let back = msg.to_tile(&spec).unwrap();
+        assert_eq!((back.col0, back.row0, back.width, back.height), (7, 4, w, h));
+        assert_eq!((back.class.clone(), back.rgb.clone()), (tile.class.clone(), tile.rgb.clone()));
+        let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&back.elevation), bits(&tile.elevation));
+
+        // A grid map the aerial map cannot take is refused with the reason.
+        let mut shifted = msg.clone();
+        shifted.info.pose.position.x += 0.2;
+        assert!(shifted.to_tile(&spec).unwrap_err().0.contains("aligned"));
+        let mut coarse = msg.clone();
+        coarse.info.resolution = 1.0;
+        assert!(coarse.to_tile(&spec).unwrap_err().0.contains("resolution"));
+        let mut outside = msg.clone();
+        outside.info.pose.position.x += 100.0;
+        assert!(outside.to_tile(&spec).is_err());
+        let mut short = msg;
+        short.data[2].data.pop();
+        assert!(short.to_tile(&spec).unwrap_err().0.contains("elevation"));
     }
 }

@@ -5,7 +5,10 @@
 //! 1. pushes what arrived: odometry, panoramas, an external pose (GPS, a surveyed position,
 //!    simulator truth where the mission asks), camera tiles (the UAV), team-state messages with
 //!    the peer they came from;
-//! 2. calls [`Robot::maintain`] and [`Robot::tick`] at the robot's tick rate;
+//! 2. calls [`Robot::maintain`] and [`Robot::tick`] at the robot's tick rate — and, when the
+//!    heavy skills run in the background ([`Robot::set_background_skills`]), hands the work
+//!    [`Robot::take_work`] gives to another thread and each result back with
+//!    [`Robot::finish_work`] between ticks;
 //! 3. pulls what the robot wants done: [`Robot::command`] (UGV velocity) or [`Robot::flight`]
 //!    (UAV target) — `None` is stop / hover, so a command never outlives the node that issued
 //!    it — the team-state message for each peer it can reach ([`Robot::team_message_for`]),
@@ -21,7 +24,7 @@ use spomp_core::{
 };
 use spomp_teamstate::{TeamState, TierSet};
 
-use crate::runtime::{NavStack, RobotRuntime, RuntimeError};
+use crate::runtime::{FinishedWork, NavStack, RobotRuntime, RuntimeError, SkillWork};
 use crate::setup::{OperatingArea, PoseInput, RobotSetup, SetupError};
 
 /// Why a robot could not be built.
@@ -165,6 +168,26 @@ impl Robot {
     /// Halts the tree (mission end, robot killed): running nodes stop and clean up.
     pub fn halt(&mut self, now: Time, observer: Option<&mut dyn TreeObserver>) {
         self.tree.halt(now, &mut self.runtime, observer);
+    }
+
+    // --- heavy skills off the tick thread -----------------------------------------------------------
+
+    /// Runs the heavy skills (panorama processing, the global planner's upkeep) as work the
+    /// adapter takes with [`Self::take_work`] and runs elsewhere, instead of inside
+    /// [`Self::on_panorama`] and [`Self::maintain`]. Set before the first input.
+    pub fn set_background_skills(&mut self, on: bool) {
+        self.runtime.set_background_skills(on);
+    }
+
+    /// The work due now (background skills; none otherwise): run each, then give it back with
+    /// [`Self::finish_work`]. See `spomp_robot::runtime::SkillWork`.
+    pub fn take_work(&mut self, now: Time) -> Vec<SkillWork> {
+        self.runtime.take_work(now)
+    }
+
+    /// A finished work, back from wherever it ran.
+    pub fn finish_work(&mut self, work: FinishedWork) {
+        self.runtime.finish_work(work);
     }
 
     // --- outputs ----------------------------------------------------------------------------------

@@ -44,6 +44,10 @@ pub enum SeamInput<'a> {
     },
     /// `halt` (the robot was killed).
     Halt,
+    /// `take_work`, and the numbers of the work it gave.
+    TakeWork(&'a [u64]),
+    /// `finish_work` with the result of work number `id`.
+    FinishWork(u64),
 }
 
 /// A tier set as bits (bit k = tier k), the way logs store it.

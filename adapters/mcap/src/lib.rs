@@ -25,6 +25,6 @@ pub use read::{LogCheck, LogMessage, McapLog, ReadError, check_log, decode_cdr, 
 pub use record::{RecordError, Recorder, RecorderOptions, encode_cdr};
 pub use safe::SafeFile;
 pub use seam::{
-    AREA_ATTACHMENT, AreaRecord, OpenLog, RUN_METADATA, ReplayLog, RunInfo, SeamCall, SeamCallMsg, SeamCallRef,
-    TeamOut, TickOutput, open_replay_log, read_replay_log,
+    AREA_ATTACHMENT, AreaRecord, OpenLog, RUN_METADATA, ReplayLog, RunInfo, SeamCall, SeamCallMsg, TeamOut, TickOutput,
+    call_name, call_to_msg, open_replay_log, read_replay_log,
 };

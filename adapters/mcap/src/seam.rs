@@ -25,6 +25,8 @@ use spomp_core::{
     Twist2,
 };
 
+use spomp_robot::seam::{SeamInput, tier_bits};
+
 use crate::read::ReadError;
 use crate::record::{RecordError, Recorder};
 
@@ -136,94 +138,47 @@ pub enum SeamCall {
     Tick(TickOutput),
     /// `Robot::halt`.
     Halt,
+    /// `Robot::take_work`, and the numbers of the work it gave.
+    TakeWork(Vec<u64>),
+    /// `Robot::finish_work` with work number `id`'s result.
+    FinishWork(u64),
 }
 
-/// One call on a robot's seam, borrowed (for recording).
-#[derive(Clone, Copy, Debug)]
-pub enum SeamCallRef<'a> {
-    /// `Robot::on_odometry`.
-    Odometry(&'a Odometry),
-    /// `Robot::on_panorama`.
-    Panorama(&'a PanoramaFrame),
-    /// `Robot::on_external_pose`.
-    ExternalPose(&'a PoseEstimate),
-    /// `Robot::on_camera_tiles`.
-    CameraTiles(&'a [MapTile]),
-    /// `Robot::on_team_message`.
-    TeamIn {
-        /// The sender.
-        from: &'a RobotId,
-        /// The bytes as received.
-        bytes: &'a [u8],
-    },
-    /// `Robot::team_message_for`.
-    TeamOut {
-        /// The receiver.
-        to: &'a RobotId,
-        /// Tier bits (bit k = tier k).
-        tiers: u8,
-        /// Byte budget.
-        budget_bytes: u64,
-        /// The answer.
-        sent: Option<&'a [u8]>,
-    },
-    /// `Robot::maintain` + `Robot::tick`.
-    Tick(TickOutput),
-    /// `Robot::halt`.
-    Halt,
+/// The wire name of a call on a robot's seam.
+pub fn call_name(call: &SeamInput<'_>) -> &'static str {
+    match call {
+        SeamInput::Odometry(_) => "odometry",
+        SeamInput::Panorama(_) => "panorama",
+        SeamInput::ExternalPose(_) => "external_pose",
+        SeamInput::CameraTiles(_) => "camera_tiles",
+        SeamInput::TeamIn { .. } => "team_in",
+        SeamInput::TeamOut { .. } => "team_out",
+        SeamInput::Tick { .. } => "tick",
+        SeamInput::Halt => "halt",
+        SeamInput::TakeWork(_) => "take_work",
+        SeamInput::FinishWork(_) => "finish_work",
+    }
 }
 
-impl<'a> From<spomp_robot::seam::SeamInput<'a>> for SeamCallRef<'a> {
-    /// A call as an adapter reports it ([`spomp_robot::seam::SeamInput`]), as the log stores it.
-    fn from(call: spomp_robot::seam::SeamInput<'a>) -> Self {
-        use spomp_robot::seam::{SeamInput, tier_bits};
-        match call {
-            SeamInput::Odometry(o) => SeamCallRef::Odometry(o),
-            SeamInput::Panorama(p) => SeamCallRef::Panorama(p),
-            SeamInput::ExternalPose(e) => SeamCallRef::ExternalPose(e),
-            SeamInput::CameraTiles(t) => SeamCallRef::CameraTiles(t),
-            SeamInput::TeamIn { from, bytes } => SeamCallRef::TeamIn { from, bytes },
-            SeamInput::TeamOut { to, tiers, budget_bytes, sent } => {
-                SeamCallRef::TeamOut { to, tiers: tier_bits(tiers), budget_bytes: budget_bytes as u64, sent }
-            }
-            SeamInput::Tick { command, flight } => SeamCallRef::Tick(TickOutput { command, flight }),
-            SeamInput::Halt => SeamCallRef::Halt,
+/// The wire message of a call on a robot's seam at `now`.
+pub fn call_to_msg(call: &SeamInput<'_>, now: Time) -> Result<SeamCallMsg, RecordError> {
+    let (peer, data) = match *call {
+        SeamInput::Odometry(o) => (String::new(), cdr(o)?),
+        SeamInput::Panorama(p) => (String::new(), cdr(p)?),
+        SeamInput::ExternalPose(e) => (String::new(), cdr(e)?),
+        SeamInput::CameraTiles(t) => (String::new(), cdr(&t)?),
+        SeamInput::TeamIn { from, bytes } => (from.to_string(), bytes.to_vec()),
+        SeamInput::TeamOut { to, tiers, budget_bytes, sent } => {
+            let out =
+                TeamOut { tiers: tier_bits(tiers), budget_bytes: budget_bytes as u64, sent: sent.map(<[u8]>::to_vec) };
+            (to.to_string(), cdr(&out)?)
         }
-    }
-}
-
-impl SeamCallRef<'_> {
-    /// The call's name on the wire.
-    pub fn name(&self) -> &'static str {
-        match self {
-            SeamCallRef::Odometry(_) => "odometry",
-            SeamCallRef::Panorama(_) => "panorama",
-            SeamCallRef::ExternalPose(_) => "external_pose",
-            SeamCallRef::CameraTiles(_) => "camera_tiles",
-            SeamCallRef::TeamIn { .. } => "team_in",
-            SeamCallRef::TeamOut { .. } => "team_out",
-            SeamCallRef::Tick(_) => "tick",
-            SeamCallRef::Halt => "halt",
-        }
-    }
-
-    /// The wire message of this call at `now`.
-    pub fn to_msg(&self, now: Time) -> Result<SeamCallMsg, RecordError> {
-        let (peer, data) = match *self {
-            SeamCallRef::Odometry(o) => (String::new(), cdr(o)?),
-            SeamCallRef::Panorama(p) => (String::new(), cdr(p)?),
-            SeamCallRef::ExternalPose(e) => (String::new(), cdr(e)?),
-            SeamCallRef::CameraTiles(t) => (String::new(), cdr(&t)?),
-            SeamCallRef::TeamIn { from, bytes } => (from.to_string(), bytes.to_vec()),
-            SeamCallRef::TeamOut { to, tiers, budget_bytes, sent } => {
-                let out = TeamOut { tiers, budget_bytes, sent: sent.map(<[u8]>::to_vec) };
-                (to.to_string(), cdr(&out)?)
-            }
-            SeamCallRef::Tick(t) => (String::new(), cdr(&t)?),
-            SeamCallRef::Halt => (String::new(), Vec::new()),
-        };
-        Ok(SeamCallMsg { stamp_ns: now.nanos, call: self.name().to_string(), peer, data })
-    }
+        SeamInput::Tick { command, flight } => (String::new(), cdr(&TickOutput { command, flight })?),
+        SeamInput::Halt => (String::new(), Vec::new()),
+        SeamInput::TakeWork(ids) => (String::new(), cdr(&ids)?),
+        SeamInput::FinishWork(id) => (String::new(), cdr(&id)?),
+    };
+    Ok(SeamCallMsg { stamp_ns: now.nanos, call: call_name(call).to_string(), peer, data })
 }
 
 impl SeamCall {
@@ -243,6 +198,8 @@ impl SeamCall {
             }
             "tick" => SeamCall::Tick(uncdr(data).ok_or_else(|| decode("tick output"))?),
             "halt" => SeamCall::Halt,
+            "take_work" => SeamCall::TakeWork(uncdr(data).ok_or_else(|| decode("work numbers"))?),
+            "finish_work" => SeamCall::FinishWork(uncdr(data).ok_or_else(|| decode("work number"))?),
             other => return Err(bad(format!("unknown seam call `{other}`"))),
         })
     }
@@ -288,6 +245,9 @@ pub struct RunInfo {
     pub map_compression: String,
     /// The operating area.
     pub area: AreaRecord,
+    /// The robots ran their heavy skills in the background (`spomp run`): their seam calls
+    /// include `take_work` and `finish_work`, and a replay sets its robot up the same way.
+    pub background_skills: bool,
 }
 
 impl RunInfo {
@@ -299,6 +259,7 @@ impl RunInfo {
         m.insert("map_publish_period_s".into(), self.map_publish_period_s.to_string());
         m.insert("map_compression".into(), self.map_compression.clone());
         m.insert("files".into(), self.files.len().to_string());
+        m.insert("background_skills".into(), self.background_skills.to_string());
         for (k, (path, text)) in self.files.iter().enumerate() {
             m.insert(format!("file.{k}.path"), path.clone());
             m.insert(format!("file.{k}.text"), text.clone());
@@ -337,6 +298,8 @@ impl RunInfo {
                 .map_err(|_| ReadError::Corrupt("run metadata `map_publish_period_s` is not a number".into()))?,
             map_compression: get("map_compression")?.clone(),
             area,
+            // Logs from before background skills existed ran every skill inline.
+            background_skills: m.get("background_skills").is_some_and(|v| v == "true"),
         })
     }
 }
@@ -353,8 +316,8 @@ impl<W: Write + Seek> Recorder<W> {
     }
 
     /// One call on robot `robot`'s seam at `now` (`/R/seam`).
-    pub fn seam(&mut self, robot: &str, now: Time, call: SeamCallRef<'_>) -> Result<(), RecordError> {
-        let msg = call.to_msg(now)?;
+    pub fn seam(&mut self, robot: &str, now: Time, call: SeamInput<'_>) -> Result<(), RecordError> {
+        let msg = call_to_msg(&call, now)?;
         self.log(&format!("/{robot}/seam"), now, &msg)
     }
 }
@@ -480,6 +443,7 @@ mod tests {
     use std::sync::Arc;
 
     use spomp_core::{DepthPanorama, PanoramaGeometry, Point2, Pose2, SemanticPanorama};
+    use spomp_teamstate::{Tier, TierSet};
 
     use super::*;
     use crate::RecorderOptions;
@@ -498,10 +462,11 @@ mod tests {
                 grid: GridSpec::new(Point2::new(-0.1, 1e-300), 0.5, 3, 2),
                 prior_map: None,
             },
+            background_skills: true,
         }
     }
 
-    fn record(calls: &[(Time, SeamCallRef<'_>)]) -> Vec<u8> {
+    fn record(calls: &[(Time, SeamInput<'_>)]) -> Vec<u8> {
         let mut buf = std::io::Cursor::new(Vec::new());
         let mut rec = Recorder::new(&mut buf, RecorderOptions::default()).unwrap();
         rec.run_info(&info()).unwrap();
@@ -529,13 +494,16 @@ mod tests {
         let odom = Odometry { stamp: Time::from_nanos(5), pose: Pose2::new(0.1, 0.2, 0.3), twist: Twist2::default() };
         let peer = RobotId::new("uav1");
         let tick = TickOutput { command: Some(Twist2 { v: 1.5, omega: -1e-17 }), flight: None };
+        let tiers = TierSet::only(Tier::Coordination).with(Tier::Maps);
         let calls = [
-            (Time::from_nanos(5), SeamCallRef::Odometry(&odom)),
-            (Time::from_nanos(6), SeamCallRef::Panorama(&frame)),
-            (Time::from_nanos(7), SeamCallRef::TeamIn { from: &peer, bytes: &[1, 2, 3] }),
-            (Time::from_nanos(7), SeamCallRef::TeamOut { to: &peer, tiers: 0b101, budget_bytes: 9, sent: None }),
-            (Time::from_nanos(8), SeamCallRef::Tick(tick)),
-            (Time::from_nanos(9), SeamCallRef::Halt),
+            (Time::from_nanos(5), SeamInput::Odometry(&odom)),
+            (Time::from_nanos(6), SeamInput::Panorama(&frame)),
+            (Time::from_nanos(7), SeamInput::TeamIn { from: &peer, bytes: &[1, 2, 3] }),
+            (Time::from_nanos(7), SeamInput::TeamOut { to: &peer, tiers, budget_bytes: 9, sent: None }),
+            (Time::from_nanos(8), SeamInput::Tick { command: tick.command, flight: tick.flight }),
+            (Time::from_nanos(9), SeamInput::Halt),
+            (Time::from_nanos(9), SeamInput::TakeWork(&[7, 8])),
+            (Time::from_nanos(10), SeamInput::FinishWork(8)),
         ];
         let log = read_replay_log(&record(&calls)).unwrap();
         assert!(!log.truncated);
@@ -558,12 +526,14 @@ mod tests {
         assert_eq!(read[3], SeamCall::TeamOut { to: peer, out: TeamOut { tiers: 0b101, budget_bytes: 9, sent: None } });
         assert_eq!(read[4], SeamCall::Tick(tick));
         assert_eq!(read[5], SeamCall::Halt);
+        assert_eq!(read[6], SeamCall::TakeWork(vec![7, 8]));
+        assert_eq!(read[7], SeamCall::FinishWork(8));
     }
 
     #[test]
     fn an_unclosed_log_reads_as_truncated_and_unknown_calls_are_errors() {
         let odom = Odometry::default();
-        let bytes = record(&[(Time::from_nanos(2_000_000_000), SeamCallRef::Odometry(&odom))]);
+        let bytes = record(&[(Time::from_nanos(2_000_000_000), SeamInput::Odometry(&odom))]);
         // Without its footer and magic: not closed, the data whole.
         let log = read_replay_log(&bytes[..bytes.len() - 20]).unwrap();
         assert!(log.truncated);

@@ -8,7 +8,7 @@ use std::collections::VecDeque;
 use ros2_client::{Publisher, Subscription};
 use spomp_behaviors::mission::schema::Ros2Spec;
 use spomp_core::ros;
-use spomp_core::{FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, Time, Twist2};
+use spomp_core::{FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, Point2, PoseEstimate, Time, Twist2};
 use spomp_teamstate::GoalView;
 
 use crate::clock::TimeBase;
@@ -35,6 +35,7 @@ struct FarmRobot {
     depth: Publisher<ros::Image>,
     semantic: Publisher<ros::Image>,
     pose_in: Publisher<ros::PoseStamped>,
+    tiles: Publisher<ros::GridMap>,
     team_in: Publisher<ros::BytesMsg>,
     cmd_vel: Subscription<ros::Twist>,
     setpoint: Subscription<ros::PoseStamped>,
@@ -76,6 +77,7 @@ impl FarmLink {
                 depth: node.publisher(t.get("panorama/depth"), &state_qos(2))?,
                 semantic: node.publisher(t.get("panorama/semantic"), &state_qos(2))?,
                 pose_in: node.publisher(t.get("pose_in"), &state_qos(5))?,
+                tiles: node.publisher(t.get("camera/tiles"), &state_qos(64))?,
                 team_in: node.publisher(t.get("team/in"), &state_qos(64))?,
                 cmd_vel: node.subscription(t.get("cmd_vel"), &sensor_qos(1))?,
                 setpoint: node.subscription(t.get("setpoint"), &sensor_qos(1))?,
@@ -129,6 +131,16 @@ impl FarmLink {
     pub fn publish_pose(&self, id: &str, est: &PoseEstimate, z_m: f64) {
         if let Some(r) = self.robot(id) {
             let _ = r.pose_in.publish(convert::pose_to_ros(est.pose, z_m, est.stamp, &TimeBase::SIMULATED));
+        }
+    }
+
+    /// Publishes what a UAV's camera mapped: each tile as a `grid_map_msgs/GridMap` in `map`.
+    pub fn publish_camera_tiles(&self, id: &str, now: Time, tiles: &[MapTile], grid: &GridSpec) {
+        if let Some(r) = self.robot(id) {
+            let stamp = TimeBase::SIMULATED.to_ros(now);
+            for tile in tiles {
+                let _ = r.tiles.publish(ros::GridMap::from_tile(tile, grid, "map", stamp));
+            }
         }
     }
 

@@ -21,6 +21,7 @@ pub mod pairing;
 pub mod run;
 pub mod settings;
 pub mod topics;
+pub mod workers;
 
 pub use clock::TimeBase;
 pub use dds::{DdsError, DdsSettings};

@@ -2,7 +2,10 @@
 //!
 //! One thread owns the [`Robot`]. Each pass of its loop takes what arrived (odometry, images,
 //! a position, team-state bytes, the e-stop, `/clock`), feeds it to the robot, ticks the robot
-//! when its period is due, and publishes what the robot wants done. Commands are published at
+//! when its period is due, and publishes what the robot wants done. The heavy skills
+//! (localization and terrain analysis of each panorama, the global planner's graph and training)
+//! run on worker threads ([`crate::workers`]): the loop hands them the work the robot gives and
+//! the results back between ticks, so a graph rebuild never delays a tick. Commands are published at
 //! the tick rate and are the safe ones whenever something is wrong: zero velocity (a UAV holds
 //! its position) while odometry or panoramas are stale, while the e-stop is engaged, and once at
 //! shutdown.
@@ -20,6 +23,7 @@ use spomp_core::{
     FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, RobotKind, Time, Twist2,
 };
 use spomp_robot::Robot;
+use spomp_robot::runtime::WorkKind;
 use spomp_robot::seam::SeamInput;
 use spomp_teamstate::TierSet;
 
@@ -29,6 +33,7 @@ use crate::dds::{DdsError, DdsNode, latched_qos, sensor_qos, state_qos};
 use crate::pairing::{OdometryHistory, PanoramaPairer};
 use crate::settings::RunSettings;
 use crate::topics::{CLOCK_TOPIC, ROSOUT_TOPIC, TF_TOPIC};
+use crate::workers::{SkillWorkers, WorkOutcome};
 
 /// What a run produced, for the CLI's recorder (`--record`) and tests. Every method has an
 /// empty default.
@@ -72,10 +77,15 @@ pub enum StopReason {
     OdometryStale,
     /// No panorama yet, or the newest is older than the limit.
     PanoramaStale,
+    /// No position yet (a UAV's GNSS fix or local pose), or it is older than the odometry
+    /// limit.
+    PositionStale,
     /// The e-stop is engaged.
     EStop,
     /// `/clock` stopped advancing (use_sim_time).
     ClockStalled,
+    /// A skill failed on its worker thread: the robot cannot go on.
+    SkillFailed,
 }
 
 /// Figures of a run (also published on `/diagnostics`).
@@ -97,8 +107,14 @@ pub struct RunReport {
     pub target_tick_hz: f64,
     /// Longest tick (maintain + tree), milliseconds.
     pub max_tick_ms: f64,
-    /// Longest panorama processing (localization, terrain analysis), milliseconds.
+    /// Longest panorama processing (localization, terrain analysis, on its worker thread),
+    /// milliseconds.
     pub max_panorama_ms: f64,
+    /// Longest global-planner upkeep (graph growth, training, on its worker thread),
+    /// milliseconds.
+    pub max_planner_ms: f64,
+    /// Heavy-skill jobs run on the worker threads.
+    pub skill_jobs: u64,
     /// Odometry receipt → next command published, milliseconds: median.
     pub odometry_to_command_p50_ms: f64,
     /// Same, 99th percentile.
@@ -111,7 +127,8 @@ pub struct RunReport {
     pub received: InputCounts,
     /// Inputs refused (malformed), all kinds.
     pub malformed_inputs: u64,
-    /// Inputs dropped (superseded before use, or no odometry at their stamp).
+    /// Inputs dropped (superseded before use — a panorama that arrived while the previous one
+    /// was still being processed, say — or no odometry at their stamp).
     pub dropped_inputs: u64,
     /// Commands published.
     pub commands: u64,
@@ -130,6 +147,8 @@ pub struct InputCounts {
     pub panoramas: u64,
     /// Pose inputs.
     pub poses: u64,
+    /// Aerial-map tiles from the camera (UAVs).
+    pub camera_tiles: u64,
     /// Team-state messages.
     pub team: u64,
     /// `/clock` messages.
@@ -142,6 +161,9 @@ pub enum RunError {
     /// DDS.
     #[error(transparent)]
     Dds(#[from] DdsError),
+    /// The skill worker threads.
+    #[error("cannot start the skill worker threads: {0}")]
+    Workers(#[from] std::io::Error),
 }
 
 struct Inputs {
@@ -150,6 +172,7 @@ struct Inputs {
     semantic: Subscription<ros::Image>,
     gps: Subscription<ros::NavSatFix>,
     pose_in: Subscription<ros::PoseStamped>,
+    tiles: Subscription<ros::GridMap>,
     estop: Subscription<ros::BoolMsg>,
     team_in: Subscription<ros::BytesMsg>,
     clock: Option<Subscription<ros::Clock>>,
@@ -172,6 +195,7 @@ struct Outputs {
 /// One robot on ROS 2.
 pub struct RobotNode {
     robot: Robot,
+    workers: SkillWorkers,
     settings: RunSettings,
     peers: Vec<RobotId>,
     // Entities before the node: they are dropped first.
@@ -190,7 +214,9 @@ const STATUS_PERIOD_S: f64 = 1.0;
 impl RobotNode {
     /// Creates the ROS 2 node of `robot` with `settings`; `peers` are the other robots of the
     /// team (team-state messages go to each of them).
-    pub fn new(robot: Robot, settings: RunSettings, peers: Vec<RobotId>) -> Result<Self, RunError> {
+    pub fn new(mut robot: Robot, settings: RunSettings, peers: Vec<RobotId>) -> Result<Self, RunError> {
+        robot.set_background_skills(true);
+        let workers = SkillWorkers::start(robot.id().as_str())?;
         let mut node = DdsNode::new(&settings.dds, settings.topics.namespace(), "spomp")?;
         let t = &settings.topics;
         let inputs = Inputs {
@@ -199,6 +225,8 @@ impl RobotNode {
             semantic: node.subscription(t.get("panorama/semantic"), &sensor_qos(2))?,
             gps: node.subscription(t.get("gps"), &sensor_qos(5))?,
             pose_in: node.subscription(t.get("pose_in"), &sensor_qos(5))?,
+            // Every tile matters to the map: reliable, with room for a burst.
+            tiles: node.subscription(t.get("camera/tiles"), &state_qos(256))?,
             estop: node.subscription(t.get("estop"), &sensor_qos(5))?,
             team_in: node.subscription(t.get("team/in"), &sensor_qos(64))?,
             clock: if settings.use_sim_time { Some(node.subscription(CLOCK_TOPIC, &sensor_qos(1))?) } else { None },
@@ -216,7 +244,7 @@ impl RobotNode {
             team_out: node.publisher(t.get("team/out"), &state_qos(64))?,
             status: node.publisher(&settings.topics.status(), &latched_qos(1))?,
         };
-        Ok(RobotNode { robot, settings, peers, inputs, outputs, _node: node })
+        Ok(RobotNode { robot, workers, settings, peers, inputs, outputs, _node: node })
     }
 
     /// The robot.
@@ -228,6 +256,7 @@ impl RobotNode {
     /// publishes a safety stop before returning.
     pub fn run(&mut self, stop: &AtomicBool, until_s: Option<f64>, observer: &mut dyn RunObserver) -> RunReport {
         let mut state = LoopState::new(&self.settings, self.robot.tick_hz());
+        state.flies = self.robot.kind() == RobotKind::Uav;
         let started = Instant::now();
         let id = self.robot.id().clone();
         let mut transitions = Recorder::default();
@@ -242,15 +271,13 @@ impl RobotNode {
                 break;
             }
             if let Some(frame) = state.pending_frame(&self.settings) {
-                let t0 = Instant::now();
                 let frame = Arc::new(frame);
                 observer.on_panorama(id.as_str(), &frame);
                 observer.on_seam(self.robot.id(), now, SeamInput::Panorama(&frame));
                 self.robot.on_panorama(frame);
-                state.report.max_panorama_ms = state.report.max_panorama_ms.max(ms(t0.elapsed()));
-                state.panorama_processed = Some(state.panorama_rx.unwrap_or(t0));
-                self.publish_perception(&mut state, observer);
+                state.frame_rx = state.panorama_rx;
             }
+            self.exchange_work(&mut state, now, observer);
             let stop_reason = state.stop_reason(now, &self.settings);
             if stop_reason == StopReason::EStop && !state.halted {
                 observer.on_seam(self.robot.id(), now, SeamInput::Halt);
@@ -304,6 +331,49 @@ impl RobotNode {
             state.report.robot_time_s = now.as_secs_f64();
         }
         state.finish(id.as_str(), started.elapsed(), self.robot.tick_hz())
+    }
+
+    /// Hands finished skill work back to the robot (publishing a new scan), then the work the
+    /// robot has due to the worker threads; both are seam calls a replay repeats.
+    fn exchange_work(&mut self, state: &mut LoopState, now: Time, observer: &mut dyn RunObserver) {
+        while let Some(outcome) = self.workers.try_finished() {
+            match outcome {
+                WorkOutcome::Done { work, took } => {
+                    let (id, kind) = (work.id(), work.kind());
+                    observer.on_seam(self.robot.id(), now, SeamInput::FinishWork(id));
+                    self.robot.finish_work(work);
+                    state.report.skill_jobs += 1;
+                    match kind {
+                        WorkKind::Perception => {
+                            state.report.max_panorama_ms = state.report.max_panorama_ms.max(ms(took));
+                            state.panorama_processed = state.work_rx.remove(&id).or(Some(Instant::now()));
+                            self.publish_perception(state, observer);
+                        }
+                        WorkKind::Planner => state.report.max_planner_ms = state.report.max_planner_ms.max(ms(took)),
+                    }
+                }
+                WorkOutcome::Panicked { kind, message } => {
+                    let what = format!("{} failed on its worker thread: {message}; the robot stops", kind.name());
+                    observer.on_problem(self.robot.id().as_str(), now, &what);
+                    self.log(now, 50, what.clone());
+                    state.last_problem = Some(what);
+                    state.skill_failed = true;
+                }
+            }
+        }
+        state.superseded_panoramas = self.robot.runtime().superseded_panoramas();
+        let work = self.robot.take_work(now);
+        if work.is_empty() {
+            return;
+        }
+        let ids: Vec<u64> = work.iter().map(|w| w.id()).collect();
+        observer.on_seam(self.robot.id(), now, SeamInput::TakeWork(&ids));
+        for w in work {
+            if w.kind() == WorkKind::Perception {
+                state.work_rx.insert(w.id(), state.frame_rx.take().unwrap_or_else(Instant::now));
+            }
+            self.workers.submit(w);
+        }
     }
 
     /// Takes every pending input; true if anything arrived.
@@ -381,6 +451,24 @@ impl RobotNode {
                 Err(e) => state.refuse(id.as_str(), observer, &e.to_string()),
             }
         }
+        let mut tiles = Vec::new();
+        while let Some(msg) = take(&self.inputs.tiles, &mut state.report.malformed_inputs) {
+            got = true;
+            let Some(grid) = self.robot.runtime().map().map(|m| m.map().spec) else {
+                state.refuse(id.as_str(), observer, "camera/tiles: a tile arrived but this robot keeps no aerial map");
+                continue;
+            };
+            match msg.to_tile(&grid) {
+                Ok(tile) => tiles.push(tile),
+                Err(e) => state.refuse(id.as_str(), observer, &format!("camera/tiles: {}", e.0)),
+            }
+        }
+        if !tiles.is_empty() {
+            state.report.received.camera_tiles += tiles.len() as u64;
+            let now = state.now().unwrap_or(Time::ZERO);
+            observer.on_seam(self.robot.id(), now, SeamInput::CameraTiles(&tiles));
+            self.robot.on_camera_tiles(&tiles, now);
+        }
         while let Some(msg) = take(&self.inputs.estop, &mut state.report.malformed_inputs) {
             got = true;
             if msg.data != state.estop {
@@ -408,6 +496,7 @@ impl RobotNode {
 
     fn external_pose(&mut self, state: &mut LoopState, est: PoseEstimate, observer: &mut dyn RunObserver) {
         state.report.received.poses += 1;
+        state.position_rx = state.now();
         observer.on_external_pose(self.robot.id().as_str(), &est);
         observer.on_seam(self.robot.id(), state.now().unwrap_or(est.stamp), SeamInput::ExternalPose(&est));
         self.robot.on_external_pose(est);
@@ -648,7 +737,18 @@ struct LoopState {
     /// Robot time of the newest panorama's stamp.
     panorama_stamp: Option<Time>,
     panorama_rx: Option<Instant>,
+    /// Receipt of the newest panorama handed to the robot, until work takes it.
+    frame_rx: Option<Instant>,
+    /// Receipt of the panorama each perception job processes, by work number.
+    work_rx: std::collections::HashMap<u64, Instant>,
     panorama_processed: Option<Instant>,
+    skill_failed: bool,
+    /// Robot time of the newest position input.
+    position_rx: Option<Time>,
+    /// A UAV: it needs a fresh position, not odometry and panoramas.
+    flies: bool,
+    /// Panoramas the robot replaced before processing (copied from it after each pass).
+    superseded_panoramas: u64,
     estop: bool,
     halted: bool,
     last_altitude_m: Option<f64>,
@@ -697,7 +797,13 @@ impl LoopState {
             odom_rx: None,
             panorama_stamp: None,
             panorama_rx: None,
+            frame_rx: None,
+            work_rx: std::collections::HashMap::new(),
             panorama_processed: None,
+            skill_failed: false,
+            position_rx: None,
+            flies: false,
+            superseded_panoramas: 0,
             estop: false,
             halted: false,
             last_altitude_m: None,
@@ -756,10 +862,19 @@ impl LoopState {
         if self.estop {
             return StopReason::EStop;
         }
+        if self.skill_failed {
+            return StopReason::SkillFailed;
+        }
         if self.use_sim_time && self.clock_rx.is_none_or(|rx| rx.elapsed() > CLOCK_STALL) {
             return StopReason::ClockStalled;
         }
         let age = |t: Time| (now.nanos - t.nanos) as f64 * 1e-9;
+        if self.flies {
+            return match self.position_rx {
+                Some(t) if age(t) <= settings.odometry_timeout_s => StopReason::None,
+                _ => StopReason::PositionStale,
+            };
+        }
         match self.odom_rx {
             Some((t, _)) if age(t) <= settings.odometry_timeout_s => {}
             _ => return StopReason::OdometryStale,
@@ -776,7 +891,7 @@ impl LoopState {
         r.wall_s = wall.as_secs_f64();
         r.target_tick_hz = tick_hz;
         r.tick_rate_hz = if r.wall_s > 0.0 { r.ticks as f64 / r.wall_s } else { 0.0 };
-        r.dropped_inputs += self.pairer.dropped();
+        r.dropped_inputs += self.pairer.dropped() + self.superseded_panoramas;
         r.tree_status = self.status.to_string();
         r.robot_time_s = self.now().map_or(0.0, |t| t.as_secs_f64());
         (r.odometry_to_command_p50_ms, r.odometry_to_command_p99_ms) = percentiles(&self.odom_latency);

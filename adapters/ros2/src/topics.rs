@@ -12,6 +12,7 @@ pub const DEFAULT_TOPICS: &[(&str, &str)] = &[
     ("panorama/semantic", "panorama/semantic"),
     ("gps", "gps/fix"),
     ("pose_in", "pose_in"),
+    ("camera/tiles", "camera/tiles"),
     ("cmd_vel", "cmd_vel"),
     ("setpoint", "setpoint_position/local"),
     ("pose_estimate", "pose_estimate"),

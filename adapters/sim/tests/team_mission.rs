@@ -18,7 +18,7 @@ use common::{load, simulation, write_mission};
 
 use spomp_behaviors::mission::LoadedMission;
 use spomp_core::{GoalId, RobotId, Time};
-use spomp_sim::run::{NoObserver, Outcome, RunSummary, SimOptions, Simulation};
+use spomp_sim::run::{NoObserver, Outcome, RunSummary, SimOptions, Simulation, SkillLatency};
 use spomp_sim::{Faults, KillFault};
 
 /// Trial seed of every scenario (the city is fixed by the mission's `generate.seed`).
@@ -241,4 +241,19 @@ fn a_dead_robots_claim_expires_and_another_ugv_visits_its_goal() {
     assert!(visited_s > kill_s + LEASE_S, "visited at {visited_s:.0} s, before the kill + lease");
     // The two survivors finish the mission.
     assert_complete_without_revisits(&summary, "kill");
+}
+
+/// The heavy skills in the background, as `spomp run` runs them, with `spomp run`'s typical
+/// compute times: the team still visits every cluster, and the run repeats bit for bit (the
+/// hand-overs are simulated-time events, not thread timing).
+#[test]
+fn with_the_heavy_skills_in_the_background_the_mission_completes_and_repeats() {
+    let loaded = load(&mission_path());
+    let background = SimOptions { skill_latency: Some(SkillLatency::TYPICAL), ..options() };
+    let first = simulation(&loaded, background.clone()).run(&mut NoObserver).summary;
+    eprintln!("background skills: {:?} at {:.0} s; {}", first.outcome, first.end_s, visit_times(&first));
+    assert_complete_without_revisits(&first, "background skills");
+    let again = simulation(&loaded, background).run(&mut NoObserver).summary;
+    assert_eq!(visit_times(&first), visit_times(&again), "a background-skills run repeats exactly");
+    assert_eq!(first.end_s, again.end_s);
 }

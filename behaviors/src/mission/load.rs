@@ -790,6 +790,7 @@ pub const ROS2_TOPIC_ROLES: &[&str] = &[
     "panorama/semantic",
     "gps",
     "pose_in",
+    "camera/tiles",
     "cmd_vel",
     "setpoint",
     "pose_estimate",

@@ -4,7 +4,7 @@
 
 use rand_chacha::ChaCha8Rng;
 use spomp_core::{AerialMap, ClassTable, Odometry, PanoramaFrame, Pose2, PoseEstimate, Time};
-use spomp_localization::{CrossViewLocalizer, LocalizationError, LocalizationParams, PosePrior};
+use spomp_localization::{CrossViewLocalizer, LocalizationError, LocalizationParams, OdometryComposer, PosePrior};
 
 use super::RuntimeError;
 
@@ -52,6 +52,14 @@ pub enum Localization {
     External,
     /// The cross-view localizer.
     CrossView(Box<CrossView>),
+    /// The cross-view localizer is away in a measurement update on another thread; odometry
+    /// is composed onto its last estimate until it is back.
+    InUpdate {
+        /// The last estimate and the odometry pose it holds at.
+        composer: OdometryComposer,
+        /// Measurement updates run before it left.
+        updates: u64,
+    },
 }
 
 /// State of the cross-view localizer inside a runtime.
@@ -93,18 +101,75 @@ impl Localization {
     pub fn mode_name(&self) -> &'static str {
         match self {
             Localization::External => "external",
-            Localization::CrossView(_) => "cross_view",
+            Localization::CrossView(_) | Localization::InUpdate { .. } => "cross_view",
         }
     }
 
     /// The pose at this odometry reading: the last filtered pose composed with the odometry
     /// since. `None` for externally localized robots.
     pub fn pose_at(&mut self, odom: &Odometry, rng: &mut ChaCha8Rng) -> Option<PoseEstimate> {
-        let Localization::CrossView(cv) = self else { return None };
-        cv.ensure_initialized(odom.pose, odom.stamp, rng).ok()?;
-        Some(cv.filter.pose_at_odometry(odom))
+        match self {
+            Localization::External => None,
+            Localization::CrossView(cv) => {
+                cv.ensure_initialized(odom.pose, odom.stamp, rng).ok()?;
+                Some(cv.filter.pose_at_odometry(odom))
+            }
+            Localization::InUpdate { composer, .. } => Some(composer.pose_at_odometry(odom)),
+        }
     }
 
+    /// One panorama (see [`CrossView::on_panorama`]); `None` for externally localized robots
+    /// and while the localizer is away.
+    pub fn on_panorama(
+        &mut self,
+        frame: &PanoramaFrame,
+        map: Option<(&AerialMap, u64)>,
+        classes: &ClassTable,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Option<PoseEstimate>, LocalizationError> {
+        match self {
+            Localization::CrossView(cv) => cv.on_panorama(frame, map, classes, rng).map(Some),
+            Localization::External | Localization::InUpdate { .. } => Ok(None),
+        }
+    }
+
+    /// Takes the cross-view localizer out for a measurement update on `frame` elsewhere,
+    /// initialised first (from the prior, at the frame's odometry pose, if nothing did yet);
+    /// odometry keeps being composed onto its last estimate meanwhile. `None` when there is
+    /// no localizer here.
+    pub(crate) fn take_for_update(
+        &mut self,
+        frame: &PanoramaFrame,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Option<Box<CrossView>>, LocalizationError> {
+        let Localization::CrossView(cv) = self else { return Ok(None) };
+        cv.ensure_initialized(frame.odom_pose, frame.stamp, rng)?;
+        let stand_in = Localization::InUpdate { composer: cv.filter.composer(), updates: cv.updates };
+        Ok(match std::mem::replace(self, stand_in) {
+            Localization::CrossView(cv) => Some(cv),
+            other => {
+                *self = other;
+                None
+            }
+        })
+    }
+
+    /// Puts back a localizer taken with [`Self::take_for_update`].
+    pub(crate) fn put_back(&mut self, cv: Box<CrossView>) {
+        *self = Localization::CrossView(cv);
+    }
+
+    /// Measurement updates run so far (0 for external localization).
+    pub fn updates(&self) -> u64 {
+        match self {
+            Localization::External => 0,
+            Localization::CrossView(cv) => cv.updates,
+            Localization::InUpdate { updates, .. } => *updates,
+        }
+    }
+}
+
+impl CrossView {
     /// One panorama: prediction from the odometry since the last one, and the measurement
     /// update against `map` (version `map_version`) when there is one and the update schedule
     /// calls for it (odometry only until the map arrives).
@@ -114,42 +179,32 @@ impl Localization {
         map: Option<(&AerialMap, u64)>,
         classes: &ClassTable,
         rng: &mut ChaCha8Rng,
-    ) -> Result<Option<PoseEstimate>, LocalizationError> {
-        let Localization::CrossView(cv) = self else { return Ok(None) };
-        cv.ensure_initialized(frame.odom_pose, frame.stamp, rng)?;
+    ) -> Result<PoseEstimate, LocalizationError> {
+        self.ensure_initialized(frame.odom_pose, frame.stamp, rng)?;
+        let schedule = self.schedule;
         let due = |(odom, stamp, version): (Pose2, Time, u64), map_version: u64| {
             let moved = odom.between(frame.odom_pose);
-            moved.x.hypot(moved.y) >= cv.schedule.min_travel_m
-                || moved.yaw.abs() >= cv.schedule.min_turn_rad
-                || frame.stamp.secs_since(stamp) >= cv.schedule.max_interval_s
+            moved.x.hypot(moved.y) >= schedule.min_travel_m
+                || moved.yaw.abs() >= schedule.min_turn_rad
+                || frame.stamp.secs_since(stamp) >= schedule.max_interval_s
                 || version != map_version
         };
         match map {
-            Some((map, version)) if cv.last_update.is_none_or(|last| due(last, version)) => {
-                cv.filter.process_frame(frame, map, classes, rng)?;
-                cv.last_update = Some((frame.odom_pose, frame.stamp, version));
-                cv.updates += 1;
+            Some((map, version)) if self.last_update.is_none_or(|last| due(last, version)) => {
+                self.filter.process_frame(frame, map, classes, rng)?;
+                self.last_update = Some((frame.odom_pose, frame.stamp, version));
+                self.updates += 1;
             }
             _ => {
-                if let Some(last) = cv.last_odom {
-                    cv.filter.predict(last.between(frame.odom_pose), rng)?;
+                if let Some(last) = self.last_odom {
+                    self.filter.predict(last.between(frame.odom_pose), rng)?;
                 }
             }
         }
-        cv.last_odom = Some(frame.odom_pose);
-        Ok(Some(cv.filter.pose_at(frame.odom_pose)))
+        self.last_odom = Some(frame.odom_pose);
+        Ok(self.filter.pose_at(frame.odom_pose))
     }
 
-    /// Measurement updates run so far (0 for external localization).
-    pub fn updates(&self) -> u64 {
-        match self {
-            Localization::External => 0,
-            Localization::CrossView(cv) => cv.updates,
-        }
-    }
-}
-
-impl CrossView {
     fn ensure_initialized(
         &mut self,
         odom_pose: Pose2,

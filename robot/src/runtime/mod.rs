@@ -7,11 +7,12 @@
 
 mod localization;
 mod navigation;
+mod work;
 
 use std::collections::HashMap;
 use std::sync::Arc;
 
-use rand::SeedableRng;
+use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use spomp_core::{
     AerialMap, ClassTable, FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, Point2, Pose2, PoseEstimate,
@@ -22,6 +23,9 @@ use spomp_teamstate::{GoalOrigin, IdentifyOutcome, TeamState, TeamStateError, Te
 
 pub use localization::{Localization, LocalizationSetup, UpdateSchedule};
 pub use navigation::{NavParams, NavStack};
+pub use work::{FinishedWork, SkillWork, WorkKind};
+
+use work::{FinishedParts, PerceptionJob, PerceptionResult};
 
 /// How to set up one robot's runtime (from the mission and the adapter).
 #[derive(Clone, Debug)]
@@ -145,6 +149,16 @@ pub struct RobotRuntime {
     map_compression: CompressionParams,
     next_map_publish: Time,
     published_map_version: u64,
+    /// Heavy skills as work the adapter runs elsewhere ([`Self::take_work`]), not inline.
+    background_skills: bool,
+    /// The newest panorama not yet taken as work (background skills).
+    pending_panorama: Option<Arc<PanoramaFrame>>,
+    /// A perception job is out.
+    perception_out: bool,
+    /// Number of the next work taken.
+    next_work_id: u64,
+    /// Panoramas replaced by a newer one before any work took them.
+    superseded_panoramas: u64,
 }
 
 /// What one goal-detection pass did.
@@ -193,6 +207,11 @@ impl RobotRuntime {
             map_compression: CompressionParams::default(),
             next_map_publish: Time::ZERO,
             published_map_version: 0,
+            background_skills: false,
+            pending_panorama: None,
+            perception_out: false,
+            next_work_id: 0,
+            superseded_panoramas: 0,
         })
     }
 
@@ -275,14 +294,53 @@ impl RobotRuntime {
 
     /// A new panorama: brings the map copy up to date, runs the localizer's measurement update,
     /// then terrain analysis (reachability scan shared on the team state and fed to the global
-    /// planner).
+    /// planner). With background skills it is only kept, as the newest, for [`Self::take_work`].
     pub fn on_panorama(&mut self, frame: Arc<PanoramaFrame>) {
         self.panorama = Some(frame.clone());
+        if self.background_skills {
+            if self.pending_panorama.replace(frame).is_some() {
+                self.superseded_panoramas += 1;
+            }
+            return;
+        }
+        let mut job = self.begin_perception(frame);
+        let result = job.run(&mut self.rng);
+        self.finish_perception(job, result);
+    }
+
+    /// Prepares a panorama's processing: the map copy brought up to date, the localizer and the
+    /// terrain analyzer lent to the job.
+    fn begin_perception(&mut self, frame: Arc<PanoramaFrame>) -> PerceptionJob {
         if let Err(e) = self.refresh_map() {
             self.problems.push(format!("a received map version is unusable: {e}"));
         }
-        let map = self.map.as_ref().map(|m| (m.map(), m.version()));
-        match self.localization.on_panorama(&frame, map, &self.classes, &mut self.rng) {
+        let localizer = match self.localization.take_for_update(&frame, &mut self.rng) {
+            Ok(cv) => cv,
+            Err(e) => {
+                self.problems.push(format!("localization: {e}"));
+                None
+            }
+        };
+        let terrain = self.nav.as_deref_mut().map(|nav| nav.begin_analysis(&frame));
+        PerceptionJob {
+            map: self.map.as_ref().map(|m| (m.shared(), m.version())),
+            classes: self.classes.clone(),
+            localizer,
+            terrain,
+            robot: self.id.clone(),
+            pose_before: self.pose,
+            frame,
+        }
+    }
+
+    /// Takes a panorama's processing back: the localizer and analyzer return, the estimate
+    /// becomes the pose, the analysis goes to the navigation stack.
+    fn finish_perception(&mut self, job: PerceptionJob, result: PerceptionResult) {
+        let PerceptionJob { frame, localizer, terrain, map, .. } = job;
+        if let Some(cv) = localizer {
+            self.localization.put_back(cv);
+        }
+        match result.estimate {
             Ok(Some(estimate)) => {
                 self.pose = Some(estimate);
                 self.publish_pose(estimate);
@@ -290,13 +348,75 @@ impl RobotRuntime {
             Ok(None) => {}
             Err(e) => self.problems.push(format!("localization: {e}")),
         }
-        if let (Some(nav), Some(pose)) = (self.nav.as_deref_mut(), self.pose) {
-            let map = self.map.as_ref();
-            match nav.on_panorama(&self.id, &frame, pose, map, &mut self.team, &mut self.rng) {
-                Ok(()) => {}
-                Err(e) => self.problems.push(format!("navigation: {e}")),
+        let Some(nav) = self.nav.as_deref_mut() else { return };
+        if let Some(Ok(terrain)) = terrain {
+            nav.end_analysis(terrain);
+        }
+        let (Some(analysis), Some(pose)) = (result.analysis, result.scan_pose) else { return };
+        let applied = analysis.and_then(|a| nav.apply_analysis(&frame, pose, a, map.is_some(), &mut self.team));
+        if let Err(e) = applied {
+            self.problems.push(format!("navigation: {e}"));
+        }
+    }
+
+    /// Runs the heavy skills as work taken with [`Self::take_work`] instead of inline (an
+    /// adapter with a worker thread: `spomp run`). Set before the first input.
+    pub fn set_background_skills(&mut self, on: bool) {
+        self.background_skills = on;
+    }
+
+    /// Whether the heavy skills run as work taken with [`Self::take_work`].
+    pub fn background_skills(&self) -> bool {
+        self.background_skills
+    }
+
+    /// The work due now (background skills): the newest panorama's processing unless one is
+    /// out, the global planner's upkeep when due unless it is out. Each is numbered; give each
+    /// result back with [`Self::finish_work`].
+    pub fn take_work(&mut self, now: Time) -> Vec<SkillWork> {
+        let mut out = Vec::new();
+        if !self.background_skills {
+            return out;
+        }
+        if !self.perception_out
+            && let Some(frame) = self.pending_panorama.take()
+        {
+            let job = self.begin_perception(frame);
+            let rng = ChaCha8Rng::seed_from_u64(self.rng.next_u64());
+            self.perception_out = true;
+            out.push(SkillWork::perception(self.next_work_id, job, rng));
+            self.next_work_id += 1;
+        }
+        if let Some(nav) = self.nav.as_deref_mut()
+            && nav.planner_work_due(now, self.map.as_ref())
+        {
+            let rng = ChaCha8Rng::seed_from_u64(self.rng.next_u64());
+            out.push(SkillWork::planner(self.next_work_id, nav.begin_planner_work(now, self.map.as_ref(), rng)));
+            self.next_work_id += 1;
+        }
+        out
+    }
+
+    /// A finished work back from wherever it ran.
+    pub fn finish_work(&mut self, work: FinishedWork) {
+        match work.into_parts() {
+            FinishedParts::Perception(job, result) => {
+                self.perception_out = false;
+                self.finish_perception(*job, *result);
+            }
+            FinishedParts::Planner(done) => {
+                if let Some(nav) = self.nav.as_deref_mut()
+                    && let Err(e) = nav.finish_planner_work(*done)
+                {
+                    self.problems.push(format!("navigation: {e}"));
+                }
             }
         }
+    }
+
+    /// Panoramas replaced by a newer one before their processing began (background skills).
+    pub fn superseded_panoramas(&self) -> u64 {
+        self.superseded_panoramas
     }
 
     /// Tiles of the aerial map from the robot's own camera (the UAV): applied to its map, which
@@ -334,9 +454,10 @@ impl RobotRuntime {
     /// versions and team scans and retrains on its schedule. Call once per control period.
     pub fn maintain(&mut self, now: Time) {
         self.team.advance_clock(now);
-        if let Some(nav) = self.nav.as_deref_mut()
-            && let Err(e) = nav.maintain(now, self.map.as_ref(), &self.team, &mut self.rng)
-        {
+        let Some(nav) = self.nav.as_deref_mut() else { return };
+        if self.background_skills {
+            nav.maintain_light(self.map.as_ref(), &self.team);
+        } else if let Err(e) = nav.maintain(now, self.map.as_ref(), &self.team, &mut self.rng) {
             self.problems.push(format!("navigation: {e}"));
         }
     }

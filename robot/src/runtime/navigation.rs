@@ -8,10 +8,12 @@ use std::sync::Arc;
 
 use rand_chacha::ChaCha8Rng;
 use spomp_core::{
-    ClassTable, DepthPanorama, PanoramaFrame, Point2, Pose2, PoseEstimate, ReachabilityScan, RobotId, Time,
+    AerialMap, ClassTable, DepthPanorama, PanoramaFrame, Point2, Pose2, PoseEstimate, ReachabilityScan, RobotId, Time,
 };
-use spomp_global_planner::{GlobalPath, GlobalPlanner, GlobalPlannerParams, NodeId, PlanError, ScanSharer};
-use spomp_local_planner::{Dwa, LocalPlannerParams, SafeRegion, TerrainAnalyzer};
+use spomp_global_planner::{
+    GlobalPath, GlobalPlanner, GlobalPlannerParams, NodeId, PlanError, ScanSharer, TrainOutcome,
+};
+use spomp_local_planner::{Dwa, LocalPlannerParams, SafeRegion, TerrainAnalyzer, TerrainParams};
 use spomp_mapping::Orthomap;
 use spomp_teamstate::TeamState;
 
@@ -88,6 +90,86 @@ pub struct NavStack {
     stuck_spots: Vec<Point2>,
     map_version_seen: Option<u64>,
     team_scan_cursor: usize,
+    /// A [`PlannerJob`] holds a copy of the planner.
+    planner_in_flight: bool,
+    /// Scans given to the planner since its copy left (own: true), for the copy when it is back.
+    scans_since_planner_left: Vec<(Arc<ReachabilityScan>, bool)>,
+    /// No training-only planner job before this time (the last one found too few labels).
+    retry_training_at: Option<Time>,
+}
+
+/// Terrain analysis of one panorama, as a job: see [`NavStack::begin_analysis`].
+pub(crate) enum TerrainJob {
+    /// Run the analyzer.
+    Analyze {
+        /// The stack's analyzer, lent.
+        analyzer: Box<TerrainAnalyzer>,
+        /// The terrain parameters (for the safe region).
+        params: TerrainParams,
+    },
+    /// The depth image was analysed last time: this is that analysis.
+    Reuse {
+        /// The safe region.
+        region: SafeRegion,
+        /// The scan (stamp and pose replaced).
+        scan: ReachabilityScan,
+    },
+}
+
+impl TerrainJob {
+    /// The safe region and the scan of `frame`, stamped with the frame's time and `pose`.
+    pub(crate) fn run(
+        &mut self,
+        robot: &RobotId,
+        frame: &PanoramaFrame,
+        pose: Pose2,
+    ) -> Result<(SafeRegion, ReachabilityScan), String> {
+        match self {
+            TerrainJob::Analyze { analyzer, params } => {
+                let output = analyzer.analyze(&frame.depth).map_err(|e| e.to_string())?;
+                let region = SafeRegion::from_terrain(output, params).map_err(|e| e.to_string())?;
+                Ok((region, output.to_scan(robot.clone(), frame.stamp, pose)))
+            }
+            TerrainJob::Reuse { region, scan } => {
+                Ok((region.clone(), ReachabilityScan { stamp: frame.stamp, pose, ..scan.clone() }))
+            }
+        }
+    }
+}
+
+/// The global planner's heavy upkeep on a copy of it: [`NavStack::begin_planner_work`].
+pub(crate) struct PlannerJob {
+    planner: Box<GlobalPlanner>,
+    new_map: Option<(Arc<AerialMap>, u64)>,
+    now: Time,
+    rng: ChaCha8Rng,
+}
+
+/// A finished [`PlannerJob`].
+pub(crate) struct PlannerDone {
+    planner: Box<GlobalPlanner>,
+    map_version: Option<u64>,
+    /// Whether a training round ran; the error that stopped the job.
+    result: Result<bool, String>,
+    now: Time,
+}
+
+impl PlannerJob {
+    /// Grows the graph on the new map version, then trains if due.
+    pub(crate) fn run(mut self) -> PlannerDone {
+        let map_version = self.new_map.as_ref().map(|(_, v)| *v);
+        let mut result = Ok(false);
+        if let Some((map, _)) = &self.new_map
+            && let Err(e) = self.planner.update_map(map)
+        {
+            result = Err(e.to_string());
+        }
+        if result.is_ok() {
+            let outcome = self.planner.train(self.now, &mut self.rng);
+            result = Ok(matches!(outcome, TrainOutcome::Trained { .. }));
+        }
+        PlannerDone { planner: self.planner, map_version, result, now: self.now }
+    }
 }
 
 impl NavStack {
@@ -115,50 +197,64 @@ impl NavStack {
             stuck_spots: Vec::new(),
             map_version_seen: None,
             team_scan_cursor: 0,
+            planner_in_flight: false,
+            scans_since_planner_left: Vec::new(),
+            retry_training_at: None,
         })
     }
 
-    /// Terrain analysis of a new panorama taken at `pose`: updates the safe region, gives the
-    /// scan to the global planner as the robot's own experience, and shares it on the team
-    /// state when the sharing filter lets it through.
-    pub fn on_panorama(
-        &mut self,
-        robot: &RobotId,
-        frame: &PanoramaFrame,
-        pose: PoseEstimate,
-        map: Option<&Orthomap>,
-        team: &mut TeamState,
-        _rng: &mut ChaCha8Rng,
-    ) -> Result<(), String> {
+    /// Prepares terrain analysis of `frame`: the analyzer (made for the frame's geometry if it
+    /// has none for it) leaves the stack for the job, or, when the depth image is the one
+    /// analysed last (a sensor that re-sends its last frame, the simulator's still robot), the
+    /// job reuses that analysis and only the stamp and pose are new.
+    pub(crate) fn begin_analysis(&mut self, frame: &PanoramaFrame) -> Result<TerrainJob, String> {
         let geometry = frame.depth.geometry;
         if self.terrain.as_ref().is_none_or(|t| t.geometry() != geometry) {
             self.terrain =
                 Some(TerrainAnalyzer::new(geometry, self.params.local.terrain.clone()).map_err(|e| e.to_string())?);
         }
-        // The same depth image (a sensor that re-sends its last frame, the simulator's still
-        // robot) gives the same analysis: reuse it, only the stamp and pose are new.
-        let reused = match (&self.analyzed_depth, &self.view, &self.latest_scan) {
-            (Some(last), Some(view), Some(scan)) if Arc::ptr_eq(last, &frame.depth) => Some((
-                view.region.clone(),
-                ReachabilityScan { stamp: frame.stamp, pose: pose.pose, ..(**scan).clone() },
-            )),
-            _ => None,
-        };
-        let (region, scan) = match reused {
-            Some(r) => r,
-            None => {
-                let Some(terrain) = self.terrain.as_mut() else { return Ok(()) };
-                let output = terrain.analyze(&frame.depth).map_err(|e| e.to_string())?;
-                let region = SafeRegion::from_terrain(output, &self.params.local.terrain).map_err(|e| e.to_string())?;
-                (region, output.to_scan(robot.clone(), frame.stamp, pose.pose))
+        if let (Some(last), Some(view), Some(scan)) = (&self.analyzed_depth, &self.view, &self.latest_scan)
+            && Arc::ptr_eq(last, &frame.depth)
+        {
+            return Ok(TerrainJob::Reuse { region: view.region.clone(), scan: (**scan).clone() });
+        }
+        match self.terrain.take() {
+            Some(analyzer) => {
+                Ok(TerrainJob::Analyze { analyzer: Box::new(analyzer), params: self.params.local.terrain.clone() })
             }
-        };
+            None => Err("terrain analysis has no analyzer".into()),
+        }
+    }
+
+    /// Takes back what [`Self::begin_analysis`] lent the job.
+    pub(crate) fn end_analysis(&mut self, job: TerrainJob) {
+        if let TerrainJob::Analyze { analyzer, .. } = job
+            && self.terrain.is_none()
+        {
+            self.terrain = Some(*analyzer);
+        }
+    }
+
+    /// The result of terrain analysis of `frame` taken at `pose`: updates the safe region,
+    /// gives the scan to the global planner as the robot's own experience (when it has a map),
+    /// and shares it on the team state when the sharing filter lets it through.
+    pub(crate) fn apply_analysis(
+        &mut self,
+        frame: &PanoramaFrame,
+        pose: PoseEstimate,
+        (region, scan): (SafeRegion, ReachabilityScan),
+        has_map: bool,
+        team: &mut TeamState,
+    ) -> Result<(), String> {
         self.analyzed_depth = Some(frame.depth.clone());
         self.record_trail(pose.pose.position());
         let scan = Arc::new(scan);
         self.view = Some(LocalView { region, pose, odom_pose: frame.odom_pose, stamp: frame.stamp });
-        if map.is_some() {
+        if has_map {
             self.global.add_scan(&scan, true).map_err(|e| e.to_string())?;
+            if self.planner_in_flight {
+                self.scans_since_planner_left.push((scan.clone(), true));
+            }
         }
         if self.sharer.should_share(&scan) {
             team.add_scan((*scan).clone()).map_err(|e| e.to_string())?;
@@ -182,15 +278,77 @@ impl NavStack {
             self.global.update_map(map.map()).map_err(|e| e.to_string())?;
             self.map_version_seen = Some(map.version());
         }
+        self.take_team_scans(team);
+        self.global.train(now, rng);
+        Ok(())
+    }
+
+    /// [`Self::maintain`] with the heavy part (growing the graph, training) left to
+    /// [`Self::begin_planner_work`]: only the team's new scans are taken in here.
+    pub(crate) fn maintain_light(&mut self, map: Option<&Orthomap>, team: &TeamState) {
+        if map.is_some() {
+            self.take_team_scans(team);
+        }
+    }
+
+    /// Scans other robots shared since the last call, into the planner. A malformed scan from
+    /// a peer is skipped; it must not stop the robot.
+    fn take_team_scans(&mut self, team: &TeamState) {
         let (scans, cursor) = team.scans_since(self.team_scan_cursor);
         let own = team.self_id().clone();
         for scan in scans.iter().filter(|s| s.robot != own) {
-            // A malformed scan from a peer is skipped; it must not stop the robot.
             let _ = self.global.add_scan(scan, false);
+            if self.planner_in_flight {
+                self.scans_since_planner_left.push((Arc::new((**scan).clone()), false));
+            }
         }
         self.team_scan_cursor = cursor;
-        self.global.train(now, rng);
-        Ok(())
+    }
+
+    /// Whether the global planner has heavy upkeep due ([`Self::begin_planner_work`]): a new
+    /// map version to grow the graph on, or a training round; never while a job is out.
+    pub(crate) fn planner_work_due(&self, now: Time, map: Option<&Orthomap>) -> bool {
+        let Some(map) = map else { return false };
+        !self.planner_in_flight
+            && (self.map_version_seen != Some(map.version())
+                || (self.map_version_seen.is_some()
+                    && self.global.training_due(now)
+                    && self.retry_training_at.is_none_or(|t| now >= t)))
+    }
+
+    /// The global planner's heavy upkeep as a job for another thread (call when
+    /// [`Self::planner_work_due`]): the graph grown on a new map version, a training round when
+    /// due. The job works on a copy; the planner here keeps answering the driving nodes until
+    /// [`Self::finish_planner_work`] swaps the copy in.
+    pub(crate) fn begin_planner_work(&mut self, now: Time, map: Option<&Orthomap>, rng: ChaCha8Rng) -> PlannerJob {
+        let new_map = map.filter(|m| self.map_version_seen != Some(m.version())).map(|m| (m.shared(), m.version()));
+        self.planner_in_flight = true;
+        PlannerJob { planner: Box::new(self.global.clone()), new_map, now, rng }
+    }
+
+    /// Swaps in the planner a [`PlannerJob`] brought up to date, after giving it the scans
+    /// taken in here since it left.
+    pub(crate) fn finish_planner_work(&mut self, done: PlannerDone) -> Result<(), String> {
+        self.planner_in_flight = false;
+        let PlannerDone { mut planner, map_version, result, now } = done;
+        match result {
+            Ok(trained) => {
+                for (scan, own) in self.scans_since_planner_left.drain(..) {
+                    let _ = planner.add_scan(&scan, own);
+                }
+                self.global = *planner;
+                if let Some(v) = map_version {
+                    self.map_version_seen = Some(v);
+                }
+                // Too few labels yet: a copy of the planner every tick would be waste.
+                self.retry_training_at = (!trained).then(|| Time::from_secs_f64(now.as_secs_f64() + 1.0));
+                Ok(())
+            }
+            Err(e) => {
+                self.scans_since_planner_left.clear();
+                Err(e)
+            }
+        }
     }
 
     /// Whether the global planner has a graph yet (an aerial map arrived).

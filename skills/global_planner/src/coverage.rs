@@ -17,7 +17,7 @@ fn bucket_of(dist_sq: f32) -> usize {
 pub(crate) const NO_NODE: u32 = u32::MAX;
 
 /// Cell offsets of rays from the origin to the rim of a disc, stored flat.
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 struct RayTable {
     radius_cells: i32,
     offsets: Vec<(i32, i32)>,
@@ -91,7 +91,7 @@ pub(crate) struct CoverageInput<'a> {
 }
 
 /// Scratch state of the coverage, reused across stages and map updates.
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub(crate) struct Coverage {
     rays: RayTable,
     edt: SquaredEdt,

@@ -86,7 +86,7 @@ impl EdgeExperience {
 
 /// Per-cell votes from scans: +1 inside a safe region, −1 just beyond a known obstacle; each scan
 /// votes at most once per cell.
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub(crate) struct Votes {
     votes: Vec<i8>,
     last_scan: Vec<u32>,

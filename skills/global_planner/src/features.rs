@@ -18,7 +18,7 @@ pub(crate) enum ClassChange {
 }
 
 /// Feature rasters derived from the aerial map.
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub(crate) struct Features {
     /// Table class index → slot in the distance vector (`u8::MAX`: not a table class).
     slot_of_class: Vec<u8>,

@@ -35,7 +35,7 @@ fn walk_cells(p: (i32, i32), q: (i32, i32), mut visit: impl FnMut((i32, i32))) {
 }
 
 /// Scratch buffers for routing, reused across edges.
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub(crate) struct EdgeRouter {
     /// Distance in cells (Chebyshev) from each map cell to the nearest cell beside a step,
     /// capped at [`CLEARANCE_CELLS`] (see [`EdgeRouter::prepare`]).

@@ -9,7 +9,7 @@ use spomp_core::{AerialMap, ClassTable, PanoramaFrame, Pose2, PoseEstimate, Time
 
 use crate::error::LocalizationError;
 use crate::field::{MatchField, UNKNOWN_COST_LEVEL, check_map, fingerprint, shared_field};
-use crate::motion::OdometryMotion;
+use crate::motion::{MotionNoise, OdometryMotion};
 use crate::observation::LocalObservation;
 use crate::params::{LocalizationParams, PosePrior};
 use crate::scoring::{PoseScore, Scorer};
@@ -309,7 +309,7 @@ impl CrossViewLocalizer {
         if self.particles.is_empty() {
             return Err(LocalizationError::NotInitialized);
         }
-        let motion = OdometryMotion::new(odom_delta, &self.params);
+        let motion = OdometryMotion::new(odom_delta, (&self.params).into());
         if !motion.is_still() {
             for p in &mut self.particles {
                 *p = Particle::from_pose(motion.sample(p.pose(), rng));
@@ -678,14 +678,49 @@ impl CrossViewLocalizer {
     /// times the latest agreement of the observation with the aerial map (1 until there was
     /// evidence after a prior, 0 after a global initialisation).
     fn confidence(&self, covariance: &[f64; 9]) -> f64 {
-        let spread = max_xy_std(covariance);
-        let c = (-spread / self.params.confidence_spread_scale_m).exp() * self.match_factor;
-        if c.is_finite() { c.clamp(0.0, 1.0) } else { 0.0 }
+        confidence(covariance, self.params.confidence_spread_scale_m, self.match_factor)
     }
 
     /// The map-frame pose at odometry pose `odom_now`: the latest filtered pose composed with
     /// the odometry travelled since the last panorama (the paper's scheme: odometry between
     /// panoramas). The covariance grows with that odometry per the motion model.
+    pub fn pose_at(&self, odom_now: Pose2) -> PoseEstimate {
+        self.composer().pose_at(odom_now)
+    }
+
+    /// [`Self::pose_at`] for an odometry message, stamped with its time.
+    pub fn pose_at_odometry(&self, odom: &spomp_core::Odometry) -> PoseEstimate {
+        self.composer().pose_at_odometry(odom)
+    }
+
+    /// What [`Self::pose_at`] needs, copied out: it keeps answering while the filter itself is
+    /// away in a measurement update on another thread.
+    pub fn composer(&self) -> OdometryComposer {
+        OdometryComposer {
+            estimate: self.estimate,
+            stamp: self.stamp,
+            anchor_odom: self.anchor_odom,
+            noise: (&self.params).into(),
+            confidence_spread_scale_m: self.params.confidence_spread_scale_m,
+            match_factor: self.match_factor,
+        }
+    }
+}
+
+/// The latest filtered pose and the odometry pose it holds at, with the motion noise: composes
+/// later odometry onto it ([`CrossViewLocalizer::composer`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OdometryComposer {
+    estimate: PoseEstimate,
+    stamp: Time,
+    anchor_odom: Option<Pose2>,
+    noise: MotionNoise,
+    confidence_spread_scale_m: f64,
+    match_factor: f64,
+}
+
+impl OdometryComposer {
+    /// See [`CrossViewLocalizer::pose_at`].
     pub fn pose_at(&self, odom_now: Pose2) -> PoseEstimate {
         let Some(anchor) = self.anchor_odom else {
             return self.estimate;
@@ -695,14 +730,14 @@ impl CrossViewLocalizer {
         }
         let delta = anchor.between(odom_now);
         let pose = self.estimate.pose.compose(delta);
-        let (sigma_trans, sigma_rot) = OdometryMotion::new(delta, &self.params).spread();
+        let (sigma_trans, sigma_rot) = OdometryMotion::new(delta, self.noise).spread();
         let mut covariance = self.estimate.covariance;
         // Heading uncertainty swings the travelled distance sideways.
         let lever = self.estimate.covariance[8] * (delta.x * delta.x + delta.y * delta.y);
         covariance[0] += sigma_trans * sigma_trans + lever;
         covariance[4] += sigma_trans * sigma_trans + lever;
         covariance[8] += sigma_rot * sigma_rot;
-        let confidence = self.confidence(&covariance);
+        let confidence = confidence(&covariance, self.confidence_spread_scale_m, self.match_factor);
         PoseEstimate { stamp: self.stamp, pose, covariance, confidence }
     }
 
@@ -710,6 +745,14 @@ impl CrossViewLocalizer {
     pub fn pose_at_odometry(&self, odom: &spomp_core::Odometry) -> PoseEstimate {
         PoseEstimate { stamp: odom.stamp, ..self.pose_at(odom.pose) }
     }
+}
+
+/// Confidence in 0 … 1: exp(−σ / scale) for the spread σ of position along the widest axis,
+/// times the agreement of the observation with the aerial map.
+fn confidence(covariance: &[f64; 9], spread_scale_m: f64, match_factor: f64) -> f64 {
+    let spread = max_xy_std(covariance);
+    let c = (-spread / spread_scale_m).exp() * match_factor;
+    if c.is_finite() { c.clamp(0.0, 1.0) } else { 0.0 }
 }
 
 /// Fox's KLD-sampling bound: the number of samples from a posterior occupying `k` histogram

@@ -27,5 +27,5 @@ mod scoring;
 
 pub use error::LocalizationError;
 pub use field::MAX_WEIGHTED_CLASSES;
-pub use filter::{CrossViewLocalizer, Particle, UpdateReport};
+pub use filter::{CrossViewLocalizer, OdometryComposer, Particle, UpdateReport};
 pub use params::{LocalizationParams, PosePrior};

@@ -20,12 +20,33 @@ pub(crate) struct OdometryMotion {
     sigma_rot2: f64,
 }
 
+/// The odometry noise coefficients of [`LocalizationParams`] (Thrun's α₁…α₄), all the motion
+/// model needs: small enough to copy wherever odometry is composed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct MotionNoise {
+    rot_per_rad: f64,
+    rot_per_m: f64,
+    trans_per_m: f64,
+    trans_per_rad: f64,
+}
+
+impl From<&LocalizationParams> for MotionNoise {
+    fn from(params: &LocalizationParams) -> Self {
+        MotionNoise {
+            rot_per_rad: params.rot_noise_rad_per_rad,
+            rot_per_m: params.rot_noise_rad_per_m,
+            trans_per_m: params.trans_noise_m_per_m,
+            trans_per_rad: params.trans_noise_m_per_rad,
+        }
+    }
+}
+
 /// Below this distance the direction of travel is undefined: all rotation goes to `rot2`.
 const MIN_TRANSLATION_M: f64 = 1e-6;
 
 impl OdometryMotion {
     /// Decomposes an odometry delta (the new pose in the old pose's frame).
-    pub fn new(delta: Pose2, params: &LocalizationParams) -> Self {
+    pub fn new(delta: Pose2, noise: MotionNoise) -> Self {
         let mut trans = delta.x.hypot(delta.y);
         let mut rot1 = if trans < MIN_TRANSLATION_M { 0.0 } else { delta.y.atan2(delta.x) };
         // Driving backwards is a translation of negative length, not a half turn each way.
@@ -34,12 +55,7 @@ impl OdometryMotion {
             trans = -trans;
         }
         let rot2 = normalize_angle(delta.yaw - rot1);
-        let (a1, a2, a3, a4) = (
-            params.rot_noise_rad_per_rad,
-            params.rot_noise_rad_per_m,
-            params.trans_noise_m_per_m,
-            params.trans_noise_m_per_rad,
-        );
+        let (a1, a2, a3, a4) = (noise.rot_per_rad, noise.rot_per_m, noise.trans_per_m, noise.trans_per_rad);
         OdometryMotion {
             rot1,
             trans,
@@ -100,7 +116,7 @@ mod tests {
             Pose2::new(0.0, 0.0, 1.0),
             Pose2::new(0.0, -1.0, 0.3),
         ] {
-            let m = OdometryMotion::new(delta, &noiseless());
+            let m = OdometryMotion::new(delta, (&noiseless()).into());
             let got = m.sample(start, &mut rng);
             let want = start.compose(delta);
             assert!((got.x - want.x).abs() < 1e-12 && (got.y - want.y).abs() < 1e-12, "{delta:?}");
@@ -113,7 +129,7 @@ mod tests {
         let params = LocalizationParams::default();
         let mut rng = ChaCha8Rng::seed_from_u64(2);
         let delta = Pose2::new(2.0, 0.0, 0.0);
-        let m = OdometryMotion::new(delta, &params);
+        let m = OdometryMotion::new(delta, (&params).into());
         let n = 20_000;
         let samples: Vec<Pose2> = (0..n).map(|_| m.sample(Pose2::default(), &mut rng)).collect();
         let mean_x = samples.iter().map(|p| p.x).sum::<f64>() / n as f64;
@@ -124,6 +140,6 @@ mod tests {
         let (s_trans, s_rot) = m.spread();
         assert!((s_trans - 0.1).abs() < 1e-12);
         assert!((s_rot - (0.02f64).hypot(0.02)).abs() < 1e-12);
-        assert!(OdometryMotion::new(Pose2::default(), &params).is_still());
+        assert!(OdometryMotion::new(Pose2::default(), (&params).into()).is_still());
     }
 }

@@ -11,6 +11,7 @@
 //! serialised with postcard into one blob for `spomp-teamstate`.
 
 use std::io::Cursor;
+use std::sync::Arc;
 
 use image::codecs::png::{CompressionType, FilterType, PngDecoder, PngEncoder};
 use image::{ExtendedColorType, ImageDecoder, ImageEncoder};
@@ -238,7 +239,8 @@ fn write_tile_exact(map: &mut AerialMap, tile: &MapTile) {
 /// bounding box of what changed since the last transmission.
 #[derive(Clone, Debug)]
 pub struct Orthomap {
-    map: AerialMap,
+    /// Shared with snapshots taken for work off the tick thread; written copy-on-write.
+    map: Arc<AerialMap>,
     /// Changed cells since `take_dirty_region`: (col_min, row_min, col_max, row_max).
     dirty: Option<(u32, u32, u32, u32)>,
 }
@@ -246,18 +248,24 @@ pub struct Orthomap {
 impl Orthomap {
     /// An all-unknown map over `spec`.
     pub fn new(spec: GridSpec) -> Self {
-        Orthomap { map: AerialMap::unknown(spec), dirty: None }
+        Orthomap { map: Arc::new(AerialMap::unknown(spec)), dirty: None }
     }
 
     /// Wraps an existing map (e.g. one received from a peer).
     pub fn from_map(map: AerialMap) -> Result<Self, MappingError> {
         check_map(&map)?;
-        Ok(Orthomap { map, dirty: None })
+        Ok(Orthomap { map: Arc::new(map), dirty: None })
     }
 
     /// The map.
     pub fn map(&self) -> &AerialMap {
         &self.map
+    }
+
+    /// The map as it is now, shared: a snapshot for work on another thread costs no copy, and
+    /// the next change to this map copies it instead.
+    pub fn shared(&self) -> Arc<AerialMap> {
+        Arc::clone(&self.map)
     }
 
     /// The map version (grows with every change).
@@ -271,7 +279,7 @@ impl Orthomap {
         if !tile.is_consistent() {
             return Err(MappingError::InconsistentMap("tile layers do not match its size".into()));
         }
-        let changed = self.map.apply_tile(tile);
+        let changed = Arc::make_mut(&mut self.map).apply_tile(tile);
         if changed > 0 && tile.col0 < self.map.spec.width && tile.row0 < self.map.spec.height {
             let c1 = (tile.col0 as u64 + tile.width as u64).min(self.map.spec.width as u64) as u32 - 1;
             let r1 = (tile.row0 as u64 + tile.height as u64).min(self.map.spec.height as u64) as u32 - 1;

@@ -14,7 +14,7 @@
 
 mod setup;
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -24,6 +24,7 @@ use spomp_behaviors::TreeObserver;
 use spomp_behaviors::trace::{Recorder, TransitionRecord};
 use spomp_core::{RobotId, Time};
 use spomp_mapping::CompressionParams;
+use spomp_robot::runtime::FinishedWork;
 use spomp_robot::{OperatingArea, Robot, RobotSetup};
 use spomp_teamstate::{Tier, TierSet};
 
@@ -109,6 +110,8 @@ pub struct ReplayReport {
     pub transitions: u64,
     /// Team-state messages compared.
     pub team_messages: u64,
+    /// Heavy-skill jobs replayed (`take_work` … `finish_work`: logs of `spomp run`).
+    pub skill_jobs: u64,
     /// Wall-clock seconds the replay took (building the robot included).
     pub wall_s: f64,
     /// Simulated seconds replayed per wall-clock second.
@@ -150,6 +153,7 @@ pub fn replay(
     let mut state = State {
         id: id.to_string(),
         recorded: VecDeque::new(),
+        finished: BTreeMap::new(),
         report: ReplayReport {
             robot: id.to_string(),
             source: info.source.clone(),
@@ -164,6 +168,7 @@ pub fn replay(
             ticks: 0,
             transitions: 0,
             team_messages: 0,
+            skill_jobs: 0,
             wall_s: 0.0,
             speed: 0.0,
         },
@@ -223,7 +228,8 @@ fn build_robot(
     }
     setup.config.map_publish_period_s = info.map_publish_period_s;
     setup.config.map_compression = CompressionParams { level: setup::png_level(&info.map_compression)? };
-    let robot = Robot::from_setup(&loaded, setup, registry).map_err(|e| ReplayError::Robot(e.to_string()))?;
+    let mut robot = Robot::from_setup(&loaded, setup, registry).map_err(|e| ReplayError::Robot(e.to_string()))?;
+    robot.set_background_skills(info.background_skills);
     drop(dir);
     Ok(robot)
 }
@@ -273,6 +279,8 @@ struct State {
     id: String,
     recorded: VecDeque<Recorded>,
     report: ReplayReport,
+    /// Work the robot gave (`take_work`), done at once, waiting for its recorded `finish_work`.
+    finished: BTreeMap<u64, FinishedWork>,
 }
 
 impl State {
@@ -360,6 +368,38 @@ impl State {
                 }
             }
             SeamCall::Halt => robot.halt(now, None),
+            SeamCall::TakeWork(recorded) => {
+                let work = robot.take_work(now);
+                let replayed: Vec<u64> = work.iter().map(|w| w.id()).collect();
+                if replayed != recorded {
+                    return Some(Divergence {
+                        time_s: now.as_secs_f64(),
+                        channel: channel("take_work"),
+                        recorded: format!("work {recorded:?}"),
+                        replayed: format!("work {replayed:?}"),
+                        node_path: String::new(),
+                    });
+                }
+                // Done now; applied when the log says the robot had it back.
+                for w in work {
+                    self.finished.insert(w.id(), w.run());
+                }
+            }
+            SeamCall::FinishWork(id) => match self.finished.remove(&id) {
+                Some(done) => {
+                    robot.finish_work(done);
+                    self.report.skill_jobs += 1;
+                }
+                None => {
+                    return Some(Divergence {
+                        time_s: now.as_secs_f64(),
+                        channel: channel("finish_work"),
+                        recorded: format!("work {id} finished"),
+                        replayed: "no such work taken".into(),
+                        node_path: String::new(),
+                    });
+                }
+            },
         }
         None
     }

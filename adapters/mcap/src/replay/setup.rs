@@ -124,6 +124,7 @@ pub fn run_info(
         map_publish_period_s,
         map_compression: png_level_name(map_compression).to_string(),
         area: area_record(area),
+        background_skills: false,
     })
 }
 

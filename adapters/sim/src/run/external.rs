@@ -7,7 +7,7 @@
 //! robots send over the same radio model as everyone else's, and learns their goals, claims and
 //! visits from the status they report.
 
-use spomp_core::{FlightCommand, Odometry, PanoramaFrame, PoseEstimate, RobotId, Time, Twist2};
+use spomp_core::{FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, PoseEstimate, RobotId, Time, Twist2};
 use spomp_teamstate::GoalView;
 
 /// A team-state message a driven robot sent.
@@ -34,6 +34,8 @@ pub trait ExternalDrivers {
     fn panorama(&mut self, robot: &RobotId, frame: &PanoramaFrame);
     /// A map-frame pose for a driven robot (ground truth or GPS where the mission asks).
     fn pose(&mut self, robot: &RobotId, estimate: &PoseEstimate, z_m: f64);
+    /// What a driven UAV's camera mapped this step: tiles of the map over `grid`.
+    fn camera_tiles(&mut self, robot: &RobotId, now: Time, tiles: &[MapTile], grid: &GridSpec);
     /// The driven UGV's velocity command now; `None` (nothing fresh) stops it.
     fn command(&mut self, robot: &RobotId, now: Time) -> Option<Twist2>;
     /// The driven UAV's flight command now; `None` hovers.

@@ -33,6 +33,7 @@ use spomp_core::{
     RobotKind, Time, Twist2,
 };
 use spomp_mapping::{CompressionParams, PngLevel};
+use spomp_robot::runtime::{FinishedWork, WorkKind};
 use spomp_robot::{PoseInput, Robot, RobotRuntime, RobotSetup};
 use spomp_teamstate::{GoalOrigin, Tier, TierSet};
 
@@ -76,6 +77,34 @@ pub struct SimOptions {
     pub uav: UavParams,
     /// Odometry noise.
     pub odometry_noise: OdometryNoiseParams,
+    /// Run the robots' heavy skills as background work that takes this long, as `spomp run`
+    /// does on its worker threads; `None`: inline, within the step (the default).
+    pub skill_latency: Option<SkillLatency>,
+}
+
+/// Modelled compute time of the heavy skills when they run in the background
+/// ([`SimOptions::skill_latency`]): each job is taken between steps, done at once, and handed
+/// back to its robot at the first step this long after — deterministic, unlike threads, so a
+/// run repeats bit for bit and its log replays.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct SkillLatency {
+    /// A panorama's localization and terrain analysis, seconds.
+    pub perception_s: f64,
+    /// The global planner's graph growth and training, seconds.
+    pub planner_s: f64,
+}
+
+impl SkillLatency {
+    /// Figures of the order `spomp run` measures on a 2-core machine (a panorama in tens of
+    /// milliseconds, a graph rebuild in most of a second).
+    pub const TYPICAL: SkillLatency = SkillLatency { perception_s: 0.05, planner_s: 0.8 };
+
+    fn of(&self, kind: WorkKind) -> f64 {
+        match kind {
+            WorkKind::Perception => self.perception_s,
+            WorkKind::Planner => self.planner_s,
+        }
+    }
 }
 
 impl Default for SimOptions {
@@ -93,6 +122,7 @@ impl Default for SimOptions {
             ugv: UgvParams::default(),
             uav: UavParams::default(),
             odometry_noise: OdometryNoiseParams::default(),
+            skill_latency: None,
         }
     }
 }
@@ -209,6 +239,20 @@ enum Body {
     },
 }
 
+/// Reports a UGV's newest reachability scan and terrain obstacles once each.
+fn observe_scan(id: &RobotId, robot: &Robot, last_scan_stamp: &mut Option<Time>, observer: &mut dyn SimObserver) {
+    if let Some(nav) = robot.nav()
+        && let Some(scan) = nav.latest_scan.as_ref()
+        && *last_scan_stamp != Some(scan.stamp)
+    {
+        *last_scan_stamp = Some(scan.stamp);
+        observer.on_scan(scan);
+        if let Some(t) = nav.terrain.as_ref() {
+            observer.on_terrain(id, scan.stamp, t.geometry(), t.output().obstacle());
+        }
+    }
+}
+
 struct SimRobot {
     id: RobotId,
     kind: RobotKind,
@@ -234,6 +278,8 @@ struct SimRobot {
     trajectory: Vec<Point2>,
     /// Driven from outside (see [`ExternalDrivers`]): its own `robot` is not ticked.
     external: bool,
+    /// Background work done and waiting for the step it is due back (skill latency).
+    work_out: Vec<(Time, FinishedWork)>,
 }
 
 impl SimRobot {
@@ -368,7 +414,8 @@ impl Simulation {
             setup.config.map_compression = options.map_compression.clone();
             let start = setup.config.start;
             let id = setup.config.id.clone();
-            let robot = Robot::from_setup(loaded, setup, registry).map_err(|e| robot_error(&e))?;
+            let mut robot = Robot::from_setup(loaded, setup, registry).map_err(|e| robot_error(&e))?;
+            robot.set_background_skills(options.skill_latency.is_some());
             let pose_input = robot.pose_input();
             let seed = options.seed.wrapping_mul(31).wrapping_add(i as u64 * 7919 + 17);
             let body = match spec.kind {
@@ -428,6 +475,7 @@ impl Simulation {
                 node_paths,
                 claim_time_s: BTreeMap::new(),
                 held: None,
+                work_out: Vec::new(),
                 localization_errors: Vec::new(),
                 localization_error_series: Vec::new(),
                 last_path_len: 0,
@@ -467,17 +515,17 @@ impl Simulation {
         })
     }
 
-    /// Hands the robots `drivers` drives over to it (see [`ExternalDrivers`]). Only UGVs can be
-    /// driven from outside: a UAV's map building needs the camera tiles only the simulator
-    /// renders. Returns the ids now driven.
+    /// Hands the robots `drivers` drives over to it (see [`ExternalDrivers`]): UGVs (odometry,
+    /// panoramas out; velocity in) and UAVs (position and camera tiles out; setpoints in); a
+    /// basestation has nothing to drive. Returns the ids now driven.
     pub fn drive_externally(&mut self, drivers: Box<dyn ExternalDrivers>) -> Result<Vec<RobotId>, SimError> {
         let mut driven = Vec::new();
         for r in &mut self.robots {
             if drivers.drives(&r.id) {
-                if r.kind != RobotKind::Ugv {
+                if r.kind == RobotKind::Basestation {
                     return Err(SimError::invalid(
                         "driven robot",
-                        format!("robot `{}` is a {}: only UGVs can be driven from outside the simulator", r.id, r.kind),
+                        format!("robot `{}` is a basestation: only UGVs and UAVs can be driven from outside", r.id),
                     ));
                 }
                 r.external = true;
@@ -586,6 +634,7 @@ impl Simulation {
         self.apply_kills(observer);
         self.move_bodies(dt);
         self.sense(observer);
+        self.exchange_work(observer);
         if now >= self.next_sync {
             self.sync_radio(observer);
             self.next_sync = Time::from_nanos(now.nanos + (self.options.sync_period_s * 1e9).round() as i64);
@@ -659,7 +708,11 @@ impl Simulation {
                     if !alive {
                         continue;
                     }
-                    match r.robot.flight() {
+                    let flight = match self.drivers.as_mut() {
+                        Some(d) if r.external => d.flight(&r.id, self.now),
+                        _ => r.robot.flight(),
+                    };
+                    match flight {
                         Some(cmd) => {
                             if *flying_to != Some(cmd.target) {
                                 uav.go_to(cmd.target);
@@ -672,6 +725,42 @@ impl Simulation {
                     }
                 }
                 Body::Fixed { .. } => {}
+            }
+        }
+    }
+
+    /// Background skills ([`SimOptions::skill_latency`]): work due back is handed to its robot,
+    /// then the work each robot has due now is taken and done, to come back after the latency.
+    fn exchange_work(&mut self, observer: &mut dyn SimObserver) {
+        let Some(latency) = self.options.skill_latency else { return };
+        let now = self.now;
+        for r in &mut self.robots {
+            if !r.alive() || r.external {
+                continue;
+            }
+            let mut k = 0;
+            while k < r.work_out.len() {
+                if r.work_out[k].0 > now {
+                    k += 1;
+                    continue;
+                }
+                let (_, work) = r.work_out.remove(k);
+                observer.on_seam(&r.id, now, SeamInput::FinishWork(work.id()));
+                let perception = work.kind() == WorkKind::Perception;
+                r.robot.finish_work(work);
+                if perception && let Body::Ugv { last_scan_stamp, .. } = &mut r.body {
+                    observe_scan(&r.id, &r.robot, last_scan_stamp, observer);
+                }
+            }
+            let work = r.robot.take_work(now);
+            if work.is_empty() {
+                continue;
+            }
+            let ids: Vec<u64> = work.iter().map(|w| w.id()).collect();
+            observer.on_seam(&r.id, now, SeamInput::TakeWork(&ids));
+            for w in work {
+                let due = Time::from_nanos(now.nanos + Time::from_secs_f64(latency.of(w.kind())).nanos);
+                r.work_out.push((due, w.run()));
             }
         }
     }
@@ -729,16 +818,7 @@ impl Simulation {
                                 r.localization_error_series.push((t, error));
                             }
                         }
-                        if let Some(nav) = r.robot.nav()
-                            && let Some(scan) = nav.latest_scan.as_ref()
-                            && *last_scan_stamp != Some(scan.stamp)
-                        {
-                            *last_scan_stamp = Some(scan.stamp);
-                            observer.on_scan(scan);
-                            if let Some(t) = nav.terrain.as_ref() {
-                                observer.on_terrain(&r.id, scan.stamp, t.geometry(), t.output().obstacle());
-                            }
-                        }
+                        observe_scan(&r.id, &r.robot, last_scan_stamp, observer);
                     }
                 }
                 Body::Uav { uav, camera, .. } => {
@@ -747,6 +827,16 @@ impl Simulation {
                     }
                     let pose = uav.pose();
                     let estimate = PoseEstimate { stamp: now, pose, covariance: [0.0; 9], confidence: 1.0 };
+                    if let Some(d) = self.drivers.as_mut().filter(|_| r.external) {
+                        // Its position (GNSS) and what its camera mapped go to the process
+                        // that drives it.
+                        d.pose(&r.id, &estimate, uav.altitude_m());
+                        let tiles = camera.reveal(world, pose);
+                        if !tiles.is_empty() {
+                            d.camera_tiles(&r.id, now, &tiles, world.spec());
+                        }
+                        continue;
+                    }
                     observer.on_seam(&r.id, now, SeamInput::ExternalPose(&estimate));
                     r.robot.on_external_pose(estimate);
                     let tiles = camera.reveal(world, pose);

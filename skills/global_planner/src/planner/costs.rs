@@ -134,18 +134,23 @@ impl GlobalPlanner {
         self.min_cost_per_m = if rate.is_finite() { rate.max(0.0) } else { 0.0 };
     }
 
+    /// Whether a training round is due at `now` (learning on, and the training period passed
+    /// since the last round): a caller can then hand the planner to work off its tick thread.
+    pub fn training_due(&self, now: Time) -> bool {
+        self.params.learning.enabled
+            && self.last_train.is_none_or(|last| now.secs_since(last) >= self.params.learning.train_period_s)
+    }
+
     /// Runs a training round if learning is on, at least the training period passed since the
     /// last round and enough cells are labelled; then refreshes every edge's cost.
     pub fn train(&mut self, now: Time, rng: &mut impl Rng) -> TrainOutcome {
-        let l = &self.params.learning;
-        if !l.enabled {
+        if !self.params.learning.enabled {
             return TrainOutcome::Disabled;
         }
-        if let Some(last) = self.last_train
-            && now.secs_since(last) < l.train_period_s
-        {
+        if !self.training_due(now) {
             return TrainOutcome::TooSoon;
         }
+        let l = &self.params.learning;
         let Some(map) = &self.map else {
             return TrainOutcome::NotEnoughLabels { labels: 0 };
         };

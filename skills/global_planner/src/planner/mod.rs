@@ -193,7 +193,7 @@ pub enum TrainOutcome {
 }
 
 /// The global ground planner of one robot.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub struct GlobalPlanner {
     params: GlobalPlannerParams,
     classes: ClassTable,
