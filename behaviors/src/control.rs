@@ -223,9 +223,20 @@ pub struct ThresholdError {
     /// `success_threshold` or `failure_threshold`.
     pub name: &'static str,
     /// The value given.
-    pub value: usize,
+    pub value: i64,
     /// The number of children.
     pub children: usize,
+}
+
+impl ThresholdError {
+    /// The one range rule of both thresholds, used by [`Parallel::new`] and by the mission
+    /// loader: `value` as a count when it lies in 1..=`children`.
+    pub fn check(name: &'static str, value: i64, children: usize) -> Result<usize, ThresholdError> {
+        match usize::try_from(value) {
+            Ok(count) if (1..=children).contains(&count) => Ok(count),
+            _ => Err(ThresholdError { name, value, children }),
+        }
+    }
 }
 
 /// Ticks its unfinished children in order each tick; succeeds once `success_threshold`
@@ -251,9 +262,7 @@ impl<E: 'static> Parallel<E> {
     ) -> Result<Self, ThresholdError> {
         let n = children.len();
         for (name, value) in [("success_threshold", success_threshold), ("failure_threshold", failure_threshold)] {
-            if value < 1 || value > n {
-                return Err(ThresholdError { name, value, children: n });
-            }
+            ThresholdError::check(name, i64::try_from(value).unwrap_or(i64::MAX), n)?;
         }
         Ok(Parallel { children, success_threshold, failure_threshold, succeeded: 0, failed: 0, skipped: 0 })
     }
