@@ -1,6 +1,10 @@
 //! Ticking a 1000-node tree: the engine's per-node overhead (DESIGN.md §8: ≤ 20 ns per node
 //! tick on one core). The tree is built from a mission through the real loader, so the figure
 //! includes port bindings and the blackboard. `SPOMP_BENCH_CLOCK=cpu` reports thread CPU time.
+//!
+//! Instruction counts, stable under load: `SPOMP_TICKS=N` ticks the tree N times without
+//! criterion; run it under `valgrind --tool=callgrind` for two N and divide the difference of
+//! the totals by the extra ticks times the node count (`behaviors/README.md` has the figures).
 
 use std::hint::black_box;
 use std::io::Write;
@@ -61,6 +65,19 @@ fn bench_tick<M: Measurement>(c: &mut Criterion<M>) {
     group.finish();
 }
 
+/// Ticks the bench tree `ticks` times (for callgrind), no criterion.
+fn tick_only(ticks: i64) {
+    let (mut ex, nodes) = executor(83, 10);
+    let mut last = None;
+    for t in 1..=ticks {
+        last = Some(black_box(ex.tick(Time::from_millis(t), &mut (), None)));
+    }
+    println!("{nodes} nodes ticked {ticks} times, root {last:?}");
+}
+
 fn main() {
-    spomp_bench_clock::run_with_requested_clock(bench_tick, bench_tick);
+    match std::env::var("SPOMP_TICKS").ok().and_then(|n| n.parse().ok()) {
+        Some(ticks) => tick_only(ticks),
+        None => spomp_bench_clock::run_with_requested_clock(bench_tick, bench_tick),
+    }
 }

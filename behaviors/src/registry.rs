@@ -1,6 +1,7 @@
 //! Node types: their ports declared once, registration by name, and the manifest that the docs
 //! and the JSON schema are generated from.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -22,11 +23,15 @@ pub enum PortDirection {
     InOut,
 }
 
+/// A name or description: borrowed for the built-in node types, owned for types a lab
+/// registers from its own configuration.
+pub type Text = Cow<'static, str>;
+
 /// One declared port.
 #[derive(Clone, Debug, Serialize)]
 pub struct PortSpec {
     /// Name as written in the mission.
-    pub name: &'static str,
+    pub name: Text,
     /// Direction.
     pub direction: PortDirection,
     /// Type.
@@ -38,28 +43,32 @@ pub struct PortSpec {
     /// May be left unconnected with no default.
     pub optional: bool,
     /// What it means (units in the name).
-    pub description: &'static str,
+    pub description: Text,
 }
 
 impl PortSpec {
+    fn new(name: Text, direction: PortDirection, ty: PortType, optional: bool, description: Text) -> Self {
+        PortSpec { name, direction, ty, default: None, optional, description }
+    }
+
     /// A required input.
-    pub const fn input(name: &'static str, ty: PortType, description: &'static str) -> Self {
-        PortSpec { name, direction: PortDirection::Input, ty, default: None, optional: false, description }
+    pub fn input(name: impl Into<Text>, ty: PortType, description: impl Into<Text>) -> Self {
+        Self::new(name.into(), PortDirection::Input, ty, false, description.into())
     }
 
     /// An optional input with no default.
-    pub const fn optional(name: &'static str, ty: PortType, description: &'static str) -> Self {
-        PortSpec { name, direction: PortDirection::Input, ty, default: None, optional: true, description }
+    pub fn optional(name: impl Into<Text>, ty: PortType, description: impl Into<Text>) -> Self {
+        Self::new(name.into(), PortDirection::Input, ty, true, description.into())
     }
 
     /// An output (optional to connect).
-    pub const fn output(name: &'static str, ty: PortType, description: &'static str) -> Self {
-        PortSpec { name, direction: PortDirection::Output, ty, default: None, optional: true, description }
+    pub fn output(name: impl Into<Text>, ty: PortType, description: impl Into<Text>) -> Self {
+        Self::new(name.into(), PortDirection::Output, ty, true, description.into())
     }
 
     /// An input/output.
-    pub const fn in_out(name: &'static str, ty: PortType, description: &'static str) -> Self {
-        PortSpec { name, direction: PortDirection::InOut, ty, default: None, optional: false, description }
+    pub fn in_out(name: impl Into<Text>, ty: PortType, description: impl Into<Text>) -> Self {
+        Self::new(name.into(), PortDirection::InOut, ty, false, description.into())
     }
 
     /// Sets a default (making the port optional).
@@ -101,13 +110,13 @@ pub enum Category {
 /// The ports of a node instance, bound and ready for its factory.
 #[derive(Debug, Clone, Default)]
 pub struct PortBindings {
-    bindings: BTreeMap<&'static str, Binding>,
+    bindings: BTreeMap<Text, Binding>,
 }
 
 impl PortBindings {
     /// Adds a binding.
-    pub fn insert(&mut self, name: &'static str, b: Binding) {
-        self.bindings.insert(name, b);
+    pub fn insert(&mut self, name: impl Into<Text>, b: Binding) {
+        self.bindings.insert(name.into(), b);
     }
 
     /// The binding of a port (Unset if the mission left an optional port open).
@@ -134,11 +143,11 @@ pub type LeafFactory<E> = Arc<dyn Fn(&PortBindings) -> Result<Box<dyn Behavior<E
 #[derive(Clone, Serialize)]
 pub struct NodeTypeSpec {
     /// Name used as the key in missions.
-    pub name: &'static str,
+    pub name: Text,
     /// Kind.
     pub category: Category,
     /// One paragraph for the catalogue.
-    pub description: &'static str,
+    pub description: Text,
     /// Declared ports.
     pub ports: Vec<PortSpec>,
     /// Robot kinds that can run it (empty = any).
@@ -156,11 +165,12 @@ impl std::fmt::Debug for NodeTypeSpec {
 
 impl NodeTypeSpec {
     /// A leaf type (action or condition) with its factory; register it with
-    /// [`NodeRegistry::register`].
+    /// [`NodeRegistry::try_register`]. The name and description may be built at run time (a
+    /// lab that registers node types from its configuration); the factory is any closure.
     pub fn leaf<E, F>(
-        name: &'static str,
+        name: impl Into<Text>,
         category: Category,
-        description: &'static str,
+        description: impl Into<Text>,
         ports: Vec<PortSpec>,
         factory: F,
     ) -> LeafType<E>
@@ -171,8 +181,20 @@ impl NodeTypeSpec {
     }
 
     /// A built-in structural type (control, decorator, state machine, subtree).
-    pub fn structural(name: &'static str, category: Category, description: &'static str, ports: Vec<PortSpec>) -> Self {
-        NodeTypeSpec { name, category, description, ports, robot_kinds: Vec::new(), skills: Vec::new() }
+    pub fn structural(
+        name: impl Into<Text>,
+        category: Category,
+        description: impl Into<Text>,
+        ports: Vec<PortSpec>,
+    ) -> Self {
+        NodeTypeSpec {
+            name: name.into(),
+            category,
+            description: description.into(),
+            ports,
+            robot_kinds: Vec::new(),
+            skills: Vec::new(),
+        }
     }
 
     /// Restricts the robot kinds.
@@ -239,7 +261,7 @@ impl<E> From<LeafType<E>> for Registration<E> {
 /// robot type the trees will run on.
 #[derive(Clone, Default)]
 pub struct NodeCatalog {
-    types: BTreeMap<&'static str, NodeTypeSpec>,
+    types: BTreeMap<Text, NodeTypeSpec>,
     robot_checks: Option<Arc<dyn RobotChecks>>,
 }
 
@@ -275,7 +297,7 @@ pub trait RobotChecks: Send + Sync {
 /// [`NodeCatalog`], which is all the mission language needs.
 pub struct NodeRegistry<E> {
     catalog: NodeCatalog,
-    factories: BTreeMap<&'static str, LeafFactory<E>>,
+    factories: BTreeMap<Text, LeafFactory<E>>,
 }
 
 impl<E> Clone for NodeRegistry<E> {
@@ -306,7 +328,7 @@ impl<E> std::ops::Deref for NodeRegistry<E> {
 /// A second registration under a name already taken.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("node type `{0}` is registered twice")]
-pub struct DuplicateNodeType(pub &'static str);
+pub struct DuplicateNodeType(pub Text);
 
 impl<E> NodeRegistry<E> {
     /// An empty registry.
@@ -321,13 +343,13 @@ impl<E> NodeRegistry<E> {
             Registration::Structural(spec) => (spec, None),
             Registration::Leaf(LeafType { spec, factory }) => (spec, Some(factory)),
         };
-        if self.catalog.types.contains_key(spec.name) {
+        if self.catalog.types.contains_key(&spec.name) {
             return Err(DuplicateNodeType(spec.name));
         }
         if let Some(f) = factory {
-            self.factories.insert(spec.name, f);
+            self.factories.insert(spec.name.clone(), f);
         }
-        self.catalog.types.insert(spec.name, spec);
+        self.catalog.types.insert(spec.name.clone(), spec);
         Ok(())
     }
 
@@ -371,8 +393,8 @@ impl NodeCatalog {
     }
 
     /// All names.
-    pub fn names(&self) -> Vec<&'static str> {
-        self.types.keys().copied().collect()
+    pub fn names(&self) -> Vec<&str> {
+        self.types.keys().map(|name| &**name).collect()
     }
 
     /// The robot layer's checks, when a robot layer is registered.

@@ -266,7 +266,7 @@ fn the_table_covers_every_control_node_and_decorator() {
     for spec in registry.iter().filter(|s| matches!(s.category, Category::Control | Category::Decorator)) {
         let used = SCENARIOS.iter().any(|s| s.tree.contains(&format!("{}:", spec.name)));
         // `delay`, `rate_limit`, `force_*` are timing and mapping decorators covered in engine.rs.
-        let elsewhere = ["delay", "rate_limit", "force_success", "force_failure"].contains(&spec.name);
+        let elsewhere = ["delay", "rate_limit", "force_success", "force_failure"].contains(&&*spec.name);
         assert!(used || elsewhere, "no scenario uses `{}`", spec.name);
     }
 }

@@ -145,7 +145,7 @@ impl MissionGen<'_> {
             }
             Category::Decorator => {
                 let child = if deeper { self.tree(u, depth + 1)? } else { "{ always_success: {} }".into() };
-                format!("{{ child: {child}{} }}", self.ports(u, spec.ports.iter().map(|p| p.name), true)?)
+                format!("{{ child: {child}{} }}", self.ports(u, spec.ports.iter().map(|p| &*p.name), true)?)
             }
             Category::StateMachine => {
                 let run = if deeper { self.tree(u, depth + 1)? } else { "{}".into() };
@@ -158,7 +158,7 @@ impl MissionGen<'_> {
             }
             Category::Subtree => quote(u.choose(&["s", "missing", ""])?),
             Category::Action | Category::Condition => {
-                format!("{{ {} }}", self.ports(u, spec.ports.iter().map(|p| p.name), false)?.trim_start_matches(", "))
+                format!("{{ {} }}", self.ports(u, spec.ports.iter().map(|p| &*p.name), false)?.trim_start_matches(", "))
             }
         };
         Ok(format!("{{ {}: {body} }}", spec.name))

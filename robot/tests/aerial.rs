@@ -336,7 +336,7 @@ fn follow_node(ports: &[(&'static str, BbValue)]) -> Result<Box<dyn spomp_behavi
     let registry = builtin_registry();
     let mut p = PortBindings::default();
     for (name, v) in ports {
-        p.insert(name, Binding::Literal(v.clone()));
+        p.insert(*name, Binding::Literal(v.clone()));
     }
     for (name, v) in [("altitude_m", 60.0), ("speed_mps", 5.0), ("arrive_radius_m", 2.0)] {
         if !ports.iter().any(|(n, _)| *n == name) {

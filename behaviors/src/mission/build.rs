@@ -138,13 +138,13 @@ fn build<E: 'static>(
             let mut bindings = PortBindings::default();
             for p in ports {
                 let b = match &p.binding {
-                    IrBinding::Literal(v) => Binding::Literal(resolve_file_port(p.spec.name, v, opts)),
+                    IrBinding::Literal(v) => Binding::Literal(resolve_file_port(&p.spec.name, v, opts)),
                     IrBinding::Ref(name) => Binding::Entry(bb.declare(name, p.spec.ty)),
                     IrBinding::Unset => Binding::Unset,
                 };
-                bindings.insert(p.spec.name, b);
+                bindings.insert(p.spec.name.clone(), b);
             }
-            let factory = registry.factory(spec.name).ok_or_else(|| BuildError::Node {
+            let factory = registry.factory(&spec.name).ok_or_else(|| BuildError::Node {
                 path: ir.path.clone(),
                 message: "node type has no factory".into(),
             })?;

@@ -63,15 +63,15 @@ fn node_body_schema(spec: &NodeTypeSpec) -> Value {
             }
             o.insert("description".into(), Value::String(desc));
         }
-        props.insert(p.name.into(), schema);
+        props.insert(p.name.to_string(), schema);
         if !p.optional && p.default.is_none() {
-            required.push(Value::String(p.name.into()));
+            required.push(Value::String(p.name.to_string()));
         }
     }
     match spec.category {
         Category::Control => {
             let mut list = json!({"type": "array", "items": tree, "minItems": 1});
-            if let Some((fewest, most)) = crate::control::ControlType::from_name(spec.name).map(|t| t.child_count())
+            if let Some((fewest, most)) = crate::control::ControlType::from_name(&spec.name).map(|t| t.child_count())
                 && let Value::Object(o) = &mut list
             {
                 o.insert("minItems".into(), json!(fewest));
@@ -118,9 +118,9 @@ pub fn mission_schema(registry: &NodeCatalog) -> Value {
             let mut props = Map::new();
             let mut body = node_body_schema(spec);
             if let Value::Object(o) = &mut body {
-                o.insert("description".into(), Value::String(spec.description.into()));
+                o.insert("description".into(), Value::String(spec.description.to_string()));
             }
-            props.insert(spec.name.into(), body);
+            props.insert(spec.name.to_string(), body);
             json!({"type": "object", "properties": props, "required": [spec.name], "additionalProperties": false})
         })
         .collect();

@@ -246,7 +246,7 @@ pub fn check_tree_literals(ir: &Ir, files: &[PathBuf], roots: &[PathBuf], diags:
             let file = files.get(ir.file).cloned().unwrap_or_default();
             for port in ports {
                 let IrBinding::Literal(value) = &port.binding else { continue };
-                let name = port.spec.name;
+                let name = &*port.spec.name;
                 let problem = match value {
                     BbValue::Float(v) if name.ends_with("_s") && !(v.is_finite() && *v <= MAX_DURATION_S) => {
                         Some(format!(

@@ -255,7 +255,50 @@ mod tests {
     fn registering_a_taken_name_is_an_error() {
         let mut r = engine_registry::<()>();
         let again = NodeTypeSpec::leaf("wait", Category::Action, "Another wait.", vec![], |_| Err("unused".into()));
-        assert_eq!(r.try_register(again).err(), Some(DuplicateNodeType("wait")));
+        assert_eq!(r.try_register(again).err(), Some(DuplicateNodeType("wait".into())));
         assert!(r.get("wait").is_some_and(|s| s.description.starts_with("Runs for")));
+    }
+
+    /// A lab that reads its node types from configuration: names, descriptions and ports are
+    /// strings built at run time, each factory captures its own entry.
+    #[test]
+    fn node_types_register_from_configuration() {
+        struct Constant(Status);
+        impl Behavior for Constant {
+            fn tick(&mut self, _prev: Status, _ctx: &mut TickContext<'_>) -> Status {
+                self.0
+            }
+        }
+        let config = "lab_ok: success\nlab_broken: failure\nwait: success\n";
+        let mut r = engine_registry::<()>();
+        let mut refused = Vec::new();
+        for line in config.lines() {
+            let Some((name, outcome)) = line.split_once(": ") else { continue };
+            let status = if outcome == "success" { Status::Success } else { Status::Failure };
+            let port = format!("{name}_note");
+            let spec = NodeTypeSpec::leaf(
+                name.to_string(),
+                Category::Condition,
+                format!("Reports {outcome} (from the lab's configuration)."),
+                vec![PortSpec::optional(port, PortType::String, format!("A note for {name}."))],
+                move |_| Ok(Box::new(Constant(status))),
+            );
+            if let Err(e) = r.try_register(spec) {
+                refused.push(e.to_string());
+            }
+        }
+        // A configured name that a built-in type holds is refused, the built-in kept.
+        assert_eq!(refused, ["node type `wait` is registered twice"]);
+        assert!(r.get("wait").is_some_and(|s| s.category == Category::Action));
+        let spec = r.get("lab_broken").unwrap();
+        assert_eq!(
+            (spec.description.as_ref(), spec.ports[0].name.as_ref()),
+            ("Reports failure (from the lab's configuration).", "lab_broken_note")
+        );
+        let mut ex = load_tree_str("fallback: [{lab_broken: {lab_broken_note: x}}, {lab_ok: {}}]", &r, &[]).unwrap();
+        assert_eq!(ex.tick(Time::ZERO, &mut (), None), Status::Success);
+        // Ports declared at run time are checked like the built-in ones.
+        let d = load_tree_str("lab_ok: {lab_broken_note: x}", &r, &[]).err().unwrap();
+        assert!(d[0].message.contains("expected one of: lab_ok_note"), "{}", d[0].message);
     }
 }

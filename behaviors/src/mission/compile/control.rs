@@ -4,6 +4,7 @@ use std::time::Duration;
 
 #[allow(clippy::wildcard_imports)]
 use super::*;
+use crate::control::ThresholdError;
 
 impl<'a> Compiler<'a> {
     pub(super) fn control(
@@ -14,7 +15,7 @@ impl<'a> Compiler<'a> {
         file: FileId,
         path: String,
     ) -> Option<Ir> {
-        let ty = ControlType::from_name(spec.name)?;
+        let ty = ControlType::from_name(&spec.name)?;
         // Short form: `sequence: [a, b]`.
         let (children_node, params_ok) = match &body.value {
             Value::Seq(_) => (Some(body), true),
@@ -82,42 +83,47 @@ impl<'a> Compiler<'a> {
         let n = items.len();
         let (mut success_threshold, mut failure_threshold) = (n, 1);
         if ty == ControlType::Parallel && matches!(body.value, Value::Map(_)) {
-            if let Some(BbValue::Int(s)) = self.literal_port(spec, body, "success_threshold", file, &path) {
-                if s < 1 || s as usize > n {
-                    let loc = body.get("success_threshold").map_or(key.loc, |v| v.loc);
-                    self.err(
-                        file,
-                        loc,
-                        &path,
-                        Stage::Schema,
-                        format!("success_threshold must be between 1 and the number of children ({n}), found {s}"),
-                    );
-                    ok = false;
-                }
-                success_threshold = s.max(1) as usize;
-            }
-            if let Some(BbValue::Int(f)) = self.literal_port(spec, body, "failure_threshold", file, &path) {
-                if f < 1 || f as usize > n {
-                    let loc = body.get("failure_threshold").map_or(key.loc, |v| v.loc);
-                    self.err(
-                        file,
-                        loc,
-                        &path,
-                        Stage::Schema,
-                        format!("failure_threshold must be between 1 and the number of children ({n}), found {f}"),
-                    );
-                    ok = false;
-                }
-                failure_threshold = f.max(1) as usize;
+            match self.parallel_thresholds(spec, key, body, file, &path, n) {
+                Some(thresholds) => (success_threshold, failure_threshold) = thresholds,
+                None => ok = false,
             }
         }
         ok.then(|| Ir {
-            type_name: spec.name.into(),
+            type_name: spec.name.to_string(),
             path,
             loc: key.loc,
             file,
             kind: IrKind::Control { ty, children, success_threshold, failure_threshold },
         })
+    }
+
+    /// `parallel`'s `success_threshold` (default: every child) and `failure_threshold` (default
+    /// 1), each checked against the number of children by the engine's own rule
+    /// ([`ThresholdError::check`]); a value out of range is an error located at it, and the
+    /// result `None`.
+    fn parallel_thresholds(
+        &mut self,
+        spec: &NodeTypeSpec,
+        key: &Key,
+        body: &Node,
+        file: FileId,
+        path: &str,
+        children: usize,
+    ) -> Option<(usize, usize)> {
+        let mut thresholds = [("success_threshold", children), ("failure_threshold", 1)];
+        let mut ok = true;
+        for (name, threshold) in &mut thresholds {
+            let Some(BbValue::Int(given)) = self.literal_port(spec, body, name, file, path) else { continue };
+            match ThresholdError::check(name, given, children) {
+                Ok(count) => *threshold = count,
+                Err(e) => {
+                    let loc = body.get(name).map_or(key.loc, |v| v.loc);
+                    self.err(file, loc, path, Stage::Schema, e.to_string());
+                    ok = false;
+                }
+            }
+        }
+        ok.then_some((thresholds[0].1, thresholds[1].1))
     }
 
     pub(super) fn decorator(
@@ -128,7 +134,7 @@ impl<'a> Compiler<'a> {
         file: FileId,
         path: String,
     ) -> Option<Ir> {
-        let ty = DecoratorType::from_name(spec.name)?;
+        let ty = DecoratorType::from_name(&spec.name)?;
         self.params(spec, key, body, file, &path, STRUCTURAL_KEYS_DECORATOR)?;
         let Some(child_node) = body.get("child") else {
             self.err(file, key.loc, &path, Stage::Schema, format!("`{}` needs `child:` (one node)", spec.name));
@@ -210,7 +216,7 @@ impl<'a> Compiler<'a> {
         }
         let child = child?;
         ok.then(|| Ir {
-            type_name: spec.name.into(),
+            type_name: spec.name.to_string(),
             path,
             loc: key.loc,
             file,

@@ -58,7 +58,7 @@ impl<'a> Compiler<'a> {
                         }
                         (None, _) => match BbValue::from_json(port.ty, &v.to_json()) {
                             Ok(val) => {
-                                if let Some(msg) = range_problem(port.name, &val) {
+                                if let Some(msg) = range_problem(&port.name, &val) {
                                     self.err(
                                         file,
                                         v.loc,
@@ -109,7 +109,7 @@ impl<'a> Compiler<'a> {
             };
             ports.push(IrPort { spec: port.clone(), binding, loc });
         }
-        ok.then(|| Ir { type_name: spec.name.into(), path, loc: key.loc, file, kind: IrKind::Leaf { ports } })
+        ok.then(|| Ir { type_name: spec.name.to_string(), path, loc: key.loc, file, kind: IrKind::Leaf { ports } })
     }
 }
 

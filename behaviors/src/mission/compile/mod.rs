@@ -206,7 +206,7 @@ impl<'a> Compiler<'a> {
             self.err(file, key.loc, path, Stage::Wiring, format!("unknown node type `{}`{hint}", key.name));
             return None;
         };
-        let display = body.get("name").and_then(Node::as_str).unwrap_or(spec.name);
+        let display = body.get("name").and_then(Node::as_str).unwrap_or(&spec.name);
         let my_path = if path.is_empty() { display.to_string() } else { format!("{path}/{display}") };
         match spec.category {
             Category::Control => self.control(spec, key, body, file, my_path),
@@ -231,7 +231,7 @@ impl<'a> Compiler<'a> {
             Value::Map(m) => {
                 for (k, _) in m {
                     if spec.port(&k.name).is_none() && !structural.contains(&k.name.as_str()) {
-                        let mut expected: Vec<&str> = spec.ports.iter().map(|p| p.name).collect();
+                        let mut expected: Vec<&str> = spec.ports.iter().map(|p| &*p.name).collect();
                         expected.extend(structural.iter().filter(|s| **s != "name"));
                         let list = if expected.is_empty() {
                             "it takes none".to_string()

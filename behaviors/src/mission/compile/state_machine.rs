@@ -197,7 +197,7 @@ impl<'a> Compiler<'a> {
             }
         }
         ok.then(|| Ir {
-            type_name: spec.name.into(),
+            type_name: spec.name.to_string(),
             path,
             loc: key.loc,
             file,

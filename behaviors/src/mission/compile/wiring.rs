@@ -4,6 +4,7 @@ use std::collections::{HashSet, VecDeque};
 
 #[allow(clippy::wildcard_imports)]
 use super::*;
+use crate::registry::Text;
 
 /// One use of a blackboard entry, in execution order.
 #[derive(Debug, Clone)]
@@ -15,7 +16,7 @@ struct Use {
     file: FileId,
     loc: Loc,
     path: String,
-    port: &'static str,
+    port: Text,
     node: String,
 }
 
@@ -32,7 +33,7 @@ fn collect_uses(ir: &Ir, out: &mut Vec<Use>) {
                         file: ir.file,
                         loc: p.loc,
                         path: ir.path.clone(),
-                        port: p.spec.name,
+                        port: p.spec.name.clone(),
                         node: ir.type_name.clone(),
                     });
                 }
