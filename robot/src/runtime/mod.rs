@@ -342,8 +342,13 @@ impl RobotRuntime {
         }
         match result.estimate {
             Ok(Some(estimate)) => {
-                self.pose = Some(estimate);
-                self.publish_pose(estimate);
+                // Work that ran in the background comes back after newer odometry: the pose is
+                // the new estimate carried forward by it, as between panoramas.
+                let newer = self.odometry.filter(|o| o.stamp > frame.stamp);
+                let now = newer.and_then(|o| self.localization.pose_at(&o, &mut self.rng));
+                let pose = now.unwrap_or(estimate);
+                self.pose = Some(pose);
+                self.publish_pose(pose);
             }
             Ok(None) => {}
             Err(e) => self.problems.push(format!("localization: {e}")),
