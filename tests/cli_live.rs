@@ -167,14 +167,19 @@ fn the_log_carries_what_a_person_watching_needs() {
     assert!(labels.len() >= 2, "{labels:?}");
     assert!(labels.iter().any(|l| l.contains("claimed by ugv")), "{labels:?}");
 
-    // Each UGV's active path: changes only, the latest a running leaf of its tree.
+    // Each UGV's active path: the running leaf of its tree (driving to its goal), written when
+    // it changes.
+    let mut changes = 0;
     for robot in ["ugv1", "ugv2"] {
         let paths: Vec<String> = on(&format!("/{robot}/active_path"))
             .iter()
             .map(|m| decode_cdr::<ros::StringMsg>(&m.topic, &m.data).unwrap().data)
             .collect();
-        assert!(paths.len() >= 2, "{robot}: {paths:?}");
         assert!(paths.windows(2).all(|w| w[0] != w[1]), "only changes: {paths:?}");
-        assert!(paths.iter().any(|p| p.contains('/')), "node paths from the root: {paths:?}");
+        let first = paths.first().unwrap_or_else(|| panic!("{robot} has an active path"));
+        assert!(first.starts_with("visitor/") && first.ends_with("/navigate_to"), "{robot}: {paths:?}");
+        assert!(!first.contains(" | "), "one leaf runs, not its ancestors: {first}");
+        changes += paths.len();
     }
+    assert!(changes > 2, "a robot's path changes as it claims and drives");
 }

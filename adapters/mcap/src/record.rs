@@ -450,14 +450,18 @@ impl<W: Write + Seek> Recorder<W> {
     }
 }
 
-/// The running paths none of whose descendants runs, in path order, joined by ` | `. Paths are
-/// `/`-separated from the root, so a node's descendants are the paths starting with its own
-/// and a `/`, which sort together from there.
+/// The running paths none of whose descendants runs, in path order, joined by ` | `. A node's
+/// path is its parent's followed by `/name`, `[index]` (a control node's child) or `.state`
+/// (a state machine's state), so its descendants are the paths that extend it with one of
+/// those separators — and all paths extending it sort together right after it.
 fn active_leaves(running: &BTreeSet<String>) -> String {
+    use std::ops::Bound::{Excluded, Unbounded};
     let mut leaves: Vec<&str> = Vec::new();
     for p in running {
-        let prefix = format!("{p}/");
-        let has_running_child = running.range(prefix.clone()..).next().is_some_and(|next| next.starts_with(&prefix));
+        let has_running_child = running
+            .range::<String, _>((Excluded(p), Unbounded))
+            .take_while(|q| q.starts_with(p.as_str()))
+            .any(|q| matches!(q.as_bytes().get(p.len()), Some(b'/' | b'[' | b'.')));
         if !has_running_child {
             leaves.push(p);
         }
@@ -476,9 +480,17 @@ mod tests {
     #[test]
     fn active_leaves_are_the_running_nodes_without_running_children() {
         assert_eq!(active_leaves(&set(&[])), "");
-        assert_eq!(active_leaves(&set(&["main", "main/seq", "main/seq/navigate"])), "main/seq/navigate");
-        // Parallel branches; a sibling whose name extends another's is not its child.
-        let running = set(&["main", "main/par", "main/par/a", "main/par/a-b", "main/par/a/x", "main/par/ab"]);
-        assert_eq!(active_leaves(&running), "main/par/a-b | main/par/a/x | main/par/ab");
+        // Paths as the mission compiler writes them: control children `[i]`, names `/`.
+        let running = set(&[
+            "visitor/repeat",
+            "visitor/repeat/fallback",
+            "visitor/repeat/fallback[0]/claim_and_visit/sequence",
+            "visitor/repeat/fallback[0]/claim_and_visit/sequence[1]/navigate_to",
+        ]);
+        assert_eq!(active_leaves(&running), "visitor/repeat/fallback[0]/claim_and_visit/sequence[1]/navigate_to");
+        // Parallel branches and a state machine's state; a sibling whose name extends another's
+        // is not its child.
+        let running = set(&["m/par", "m/par[0]/a", "m/par[0]/a-b", "m/par[1]/sm", "m/par[1]/sm.search/x"]);
+        assert_eq!(active_leaves(&running), "m/par[0]/a | m/par[0]/a-b | m/par[1]/sm.search/x");
     }
 }
