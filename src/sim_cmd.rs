@@ -139,10 +139,11 @@ const EXIT_INTERRUPTED: u8 = 130;
 /// Disk a run may be estimated to need before it asks for `--force`, bytes.
 const DISK_LIMIT_BYTES: f64 = 20e9;
 
-/// MCAP bytes per robot per simulated second with the default recording (measured: 1.3 kB on
-/// the first 200 s of `visit-all-vehicle-clusters.yaml`, 5 robots; tripled for margin), and the
-/// plots, CSV and summary of a trial (1.1 MB measured).
-const MCAP_BYTES_PER_ROBOT_S: f64 = 4e3;
+/// MCAP bytes per robot per simulated second with the default recording (measured: 1.9 kB on
+/// the first 300 s of `visit-all-vehicle-clusters.yaml`, 5 robots, a fifth of it `/tf`, `/map`,
+/// `/goals` and the active paths; tripled for margin), and the plots, CSV and summary of a trial
+/// (1.1 MB measured).
+const MCAP_BYTES_PER_ROBOT_S: f64 = 6e3;
 const TRIAL_FIXED_BYTES: f64 = 2e6;
 /// What `--replayable` adds per robot per simulated second (measured: 58 kB on 600 s of
 /// `visit-all-vehicle-clusters.yaml`, 5 robots, seed 3; tripled for margin: panoramas of other
