@@ -20,6 +20,8 @@ use crate::{LEGACY_SUBPROTOCOL, SUBPROTOCOL};
 const OP_MESSAGE_DATA: u8 = 0x01;
 /// Opcode of a binary time frame from the server.
 const OP_TIME: u8 = 0x02;
+/// Most subscriptions sent again after a refusal (see [`Viewer::retry_refused_subscription`]).
+const MAX_SUBSCRIBE_RETRIES: u32 = 100;
 
 /// Why the viewer failed.
 #[derive(Debug, thiserror::Error)]
@@ -85,6 +87,10 @@ pub struct Viewer {
     pub server_time_ns: Option<u64>,
     /// Bytes of every frame received (payloads as sent on the wire, without framing).
     pub bytes_received: u64,
+    /// The `status` messages the server sent (warnings and errors about this connection).
+    pub statuses: Vec<String>,
+    /// Subscriptions sent again after the server refused them.
+    retries: u32,
 }
 
 impl Viewer {
@@ -112,6 +118,8 @@ impl Viewer {
             subscriptions: BTreeMap::new(),
             server_time_ns: None,
             bytes_received: 0,
+            statuses: Vec::new(),
+            retries: 0,
         };
         let deadline = Instant::now() + timeout;
         while viewer.server_info.is_null() {
@@ -244,8 +252,36 @@ impl Viewer {
                     .unwrap_or_default();
                 self.channels.retain(|_, c| !ids.contains(&c.id));
             }
-            _ => {} // status, removeStatus, …: nothing a viewer of data needs
+            Some("status") => {
+                let message = text(&value, "message").unwrap_or_default();
+                self.retry_refused_subscription(&message)?;
+                self.statuses.push(message);
+            }
+            _ => {} // removeStatus, …: nothing a viewer of data needs
         }
+        Ok(())
+    }
+
+    /// The `foxglove` server (0.30) queues a channel's advertisement before it registers the
+    /// channel for the connection, so a subscription sent the moment the advertisement arrives
+    /// can be refused with "Unknown channel ID: N". The channel exists: subscribe again.
+    fn retry_refused_subscription(&mut self, status: &str) -> Result<(), ViewerError> {
+        let Some(channel_id) = status.strip_prefix("Unknown channel ID: ").and_then(|n| n.trim().parse::<u64>().ok())
+        else {
+            return Ok(());
+        };
+        let Some(topic) = self.channels.values().find(|c| c.id == channel_id).map(|c| c.topic.clone()) else {
+            return Ok(());
+        };
+        let Some(&id) = self.subscriptions.iter().find(|(_, t)| **t == topic).map(|(id, _)| id) else {
+            return Ok(());
+        };
+        if self.retries >= MAX_SUBSCRIBE_RETRIES {
+            return Err(ViewerError::Protocol(format!("the server keeps refusing the subscription to {topic}")));
+        }
+        self.retries += 1;
+        let text = json!({ "op": "subscribe", "subscriptions": [{ "id": id, "channelId": channel_id }] }).to_string();
+        self.socket.send(Message::text(text))?;
         Ok(())
     }
 
