@@ -10,7 +10,7 @@ use spomp_core::{
     FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, PoseEstimate, RobotId, RobotKind, Time, Twist2,
 };
 use spomp_ros2::{DdsSettings, FarmLink};
-use spomp_sim::run::{DrivenTeamMessage, ExternalDrivers};
+use spomp_sim::run::{DrivenTeamMessage, ExternalDrivers, RealTimePacer};
 use spomp_teamstate::GoalView;
 
 /// How the farm runs.
@@ -32,9 +32,9 @@ pub struct FarmOptions {
 pub struct FarmDrivers {
     link: FarmLink,
     driven: Vec<String>,
-    rate: f64,
-    /// Wall instant of simulated time zero (set once every robot reported).
-    start: Option<Instant>,
+    /// Real time × rate, from the first step after every robot reported.
+    pacer: RealTimePacer,
+    started: bool,
     wait_s: f64,
 }
 
@@ -65,7 +65,13 @@ impl FarmDrivers {
             dds.domain_id,
             options.rate
         );
-        Ok(FarmDrivers { link, driven, rate: options.rate, start: None, wait_s: options.wait_s })
+        Ok(FarmDrivers {
+            link,
+            driven,
+            pacer: RealTimePacer::new(options.rate),
+            started: false,
+            wait_s: options.wait_s,
+        })
     }
 
     /// Publishes `/clock` at zero until every driven robot reports its status (or the wait ends).
@@ -98,19 +104,11 @@ impl ExternalDrivers for FarmDrivers {
     }
 
     fn begin_step(&mut self, now: Time) {
-        let start = match self.start {
-            Some(s) => s,
-            None => {
-                self.wait_for_robots();
-                *self.start.insert(Instant::now())
-            }
-        };
-        // Real time × rate: wait until the wall clock catches up with the simulated one.
-        let due = start + Duration::from_secs_f64(now.as_secs_f64() / self.rate);
-        let wait = due.saturating_duration_since(Instant::now());
-        if !wait.is_zero() {
-            std::thread::sleep(wait);
+        if !self.started {
+            self.wait_for_robots();
+            self.started = true;
         }
+        self.pacer.wait_until(now);
         self.link.publish_clock(now);
         self.link.poll(now);
     }

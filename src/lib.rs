@@ -27,6 +27,7 @@ mod args;
 pub mod cli;
 mod commands;
 mod farm_cmd;
+mod live;
 mod log_cmd;
 mod plan_cmd;
 mod replay_cmd;

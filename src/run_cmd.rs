@@ -1,5 +1,6 @@
 //! `spomp run`: one robot of a mission, on a real robot (or a simulator farm) over ROS 2.
 
+use std::io::{Seek, Write};
 use std::net::IpAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -17,6 +18,8 @@ use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
 use spomp_robot::seam::SeamInput;
 use spomp_robot::{Robot, RobotRuntime, RobotSetup};
 use spomp_ros2::{RobotNode, RunObserver, RunSettings};
+
+use crate::live::{Discard, LiveTap};
 
 /// Options of `spomp run`.
 #[derive(Debug, Clone, clap::Args)]
@@ -52,6 +55,11 @@ pub struct RunArgs {
     /// Print the topic table and exit.
     #[arg(long)]
     pub topics: bool,
+    /// Serve the robot live over the Foxglove WebSocket protocol (open ws://ADDR in Foxglove;
+    /// see docs/live.md): the channels `--record` writes. ADDR: HOST:PORT, default
+    /// 127.0.0.1:8765; bind another address only when asked.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+    pub live: Option<std::net::SocketAddr>,
     /// A folder besides the mission's own that its includes, plan files and world may be in
     /// (repeatable).
     #[arg(long = "allow-dir", value_name = "DIR")]
@@ -119,18 +127,16 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
             .context("installing signal handlers")?;
         signal_hook::flag::register(sig, stop.clone()).context("installing signal handlers")?;
     }
-    let recorder = match &args.record {
-        Some(path) => {
-            let mut rec =
-                Recorder::create(path, RecorderOptions { panorama_downsample: 1, ..RecorderOptions::default() })
-                    .with_context(|| format!("creating {}", path.display()))?;
-            if let Some(info) = &run_info {
-                rec.run_info(info).with_context(|| format!("writing the run's setup to {}", path.display()))?;
-            }
-            Some(rec)
+    let live = match args.live {
+        Some(addr) => {
+            let server =
+                spomp_live::LiveServer::start(addr, &format!("spomp run {} --robot {}", mission.mission, args.robot))?;
+            eprintln!("live view: {} (Foxglove: Open connection → Foxglove WebSocket; docs/live.md)", server.url());
+            Some(LiveTap::new(server))
         }
         None => None,
     };
+    let options = RecorderOptions { panorama_downsample: 1, ..RecorderOptions::default() };
     if !args.json {
         eprintln!(
             "spomp run: robot {} on DDS domain {} ({}), {}; Ctrl-C stops it",
@@ -144,12 +150,27 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
             if settings.use_sim_time { "time from /clock" } else { "wall-clock time" },
         );
     }
-    let mut observer = RecordingObserver { recorder, error: None };
-    let report = node.run(&stop, args.until_s, &mut observer);
-    if let Some(rec) = observer.recorder.take() {
-        rec.finish().context("finishing the log")?;
-    }
-    if let Some(e) = observer.error {
+    let (report, error) = match (&args.record, live) {
+        (Some(path), live) => {
+            let mut rec = Recorder::create(path, options).with_context(|| format!("creating {}", path.display()))?;
+            if let Some(info) = &run_info {
+                rec.run_info(info).with_context(|| format!("writing the run's setup to {}", path.display()))?;
+            }
+            if let Some(tap) = live {
+                rec.set_tap(Box::new(tap));
+            }
+            drive(&mut node, &stop, args.until_s, Some(rec))?
+        }
+        (None, Some(tap)) => {
+            // Only the live view wants the messages: recorded into nothing, uncompressed.
+            let options = RecorderOptions { compress: false, ..options };
+            let mut rec = Recorder::new(Discard::default(), options).context("starting the live view's recorder")?;
+            rec.set_tap(Box::new(tap));
+            drive(&mut node, &stop, args.until_s, Some(rec))?
+        }
+        (None, None) => drive::<SafeFile>(&mut node, &stop, args.until_s, None)?,
+    };
+    if let Some(e) = error {
         return Err(e.context("recording"));
     }
     if args.json {
@@ -187,14 +208,30 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     Ok(ExitCode::SUCCESS)
 }
 
+/// Runs the node until it stops, recording into `recorder` if given; the report, and the error
+/// that stopped the recording if one did.
+fn drive<W: Write + Seek>(
+    node: &mut RobotNode,
+    stop: &AtomicBool,
+    until_s: Option<f64>,
+    recorder: Option<Recorder<W>>,
+) -> Result<(spomp_ros2::RunReport, Option<anyhow::Error>)> {
+    let mut observer = RecordingObserver { recorder, error: None };
+    let report = node.run(stop, until_s, &mut observer);
+    if let Some(rec) = observer.recorder.take() {
+        rec.finish().context("finishing the log")?;
+    }
+    Ok((report, observer.error))
+}
+
 /// Records a robot's inputs and outputs with the channels of `spomp sim`'s logs.
-struct RecordingObserver {
-    recorder: Option<Recorder<SafeFile>>,
+struct RecordingObserver<W: Write + Seek> {
+    recorder: Option<Recorder<W>>,
     error: Option<anyhow::Error>,
 }
 
-impl RecordingObserver {
-    fn record(&mut self, f: impl FnOnce(&mut Recorder<SafeFile>) -> Result<(), spomp_mcap::RecordError>) {
+impl<W: Write + Seek> RecordingObserver<W> {
+    fn record(&mut self, f: impl FnOnce(&mut Recorder<W>) -> Result<(), spomp_mcap::RecordError>) {
         if self.error.is_some() {
             return;
         }
@@ -206,7 +243,7 @@ impl RecordingObserver {
     }
 }
 
-impl RunObserver for RecordingObserver {
+impl<W: Write + Seek> RunObserver for RecordingObserver<W> {
     fn on_odometry(&mut self, robot: &str, odom: &Odometry) {
         self.record(|r| r.odometry(robot, odom));
     }

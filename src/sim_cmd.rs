@@ -1,6 +1,8 @@
 //! `spomp sim` and `spomp validate --dry-run`: run a mission in the built-in simulator, trials
 //! in parallel, each recorded to MCAP with a summary and plots.
 
+use std::io::{Seek, Write};
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -15,12 +17,16 @@ use spomp_behaviors::NodeRegistry;
 use spomp_behaviors::mission::{LoadOptions, LoadedMission, load_mission_with};
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
-use spomp_core::{Odometry, PanoramaFrame, PanoramaGeometry, Point2, ReachabilityScan, RobotId, RobotKind, Time};
+use spomp_core::ros::GoalMarkerInput;
+use spomp_core::{
+    AerialMap, Odometry, PanoramaFrame, PanoramaGeometry, Point2, ReachabilityScan, RobotId, RobotKind, Time,
+};
 use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
 use spomp_robot::RobotRuntime;
 use spomp_sim::run::{RobotSnapshot, RunResult, RunSummary, SeamInput, SimEvent, SimObserver, SimOptions, Simulation};
 use spomp_sim::{Blackout, Faults, KillFault};
 
+use crate::live::{Discard, LiveTap};
 use crate::sim_plots;
 
 /// Options of `spomp sim` (the command line's arguments).
@@ -91,9 +97,14 @@ pub struct SimArgs {
     /// commands from `spomp run --use-sim-time` processes instead of ticking their trees.
     #[arg(long)]
     pub ros2: bool,
-    /// With --ros2: simulated seconds per wall second.
-    #[arg(long, default_value_t = 1.0, value_parser = crate::args::rate, requires = "ros2")]
-    pub rate: f64,
+    /// Serve the run live over the Foxglove WebSocket protocol (open ws://ADDR in Foxglove; see
+    /// docs/live.md), paced at real time × --rate. ADDR: HOST:PORT, default 127.0.0.1:8765
+    /// (port 0: any free port). Give it after the mission. One trial.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765", value_parser = live_addr)]
+    pub live: Option<SocketAddr>,
+    /// With --ros2 or --live: simulated seconds per wall second (default 1).
+    #[arg(long, value_parser = crate::args::rate)]
+    pub rate: Option<f64>,
     /// With --ros2: the DDS domain (default: the driven robots' `ros2.domain_id`).
     #[arg(long, value_parser = clap::value_parser!(u16).range(0..=232), requires = "ros2")]
     pub domain_id: Option<u16>,
@@ -135,10 +146,11 @@ const EXIT_INTERRUPTED: u8 = 130;
 /// Disk a run may be estimated to need before it asks for `--force`, bytes.
 const DISK_LIMIT_BYTES: f64 = 20e9;
 
-/// MCAP bytes per robot per simulated second with the default recording (measured: 1.3 kB on
-/// the first 200 s of `visit-all-vehicle-clusters.yaml`, 5 robots; tripled for margin), and the
-/// plots, CSV and summary of a trial (1.1 MB measured).
-const MCAP_BYTES_PER_ROBOT_S: f64 = 4e3;
+/// MCAP bytes per robot per simulated second with the default recording (measured: 1.9 kB on
+/// the first 300 s of `visit-all-vehicle-clusters.yaml`, 5 robots, a fifth of it `/tf`, `/map`,
+/// `/goals` and the active paths; tripled for margin), and the plots, CSV and summary of a trial
+/// (1.1 MB measured).
+const MCAP_BYTES_PER_ROBOT_S: f64 = 6e3;
 const TRIAL_FIXED_BYTES: f64 = 2e6;
 /// What `--replayable` adds per robot per simulated second (measured: 58 kB on 600 s of
 /// `visit-all-vehicle-clusters.yaml`, 5 robots, seed 3; tripled for margin: panoramas of other
@@ -172,6 +184,14 @@ pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     }
     if args.ros2 && trials > 1 {
         return usage(format!("--ros2 runs one trial (the robots' processes drive one world); got {trials} trials"));
+    }
+    if args.live.is_some() && trials > 1 {
+        return usage(format!("--live shows one trial; got {trials} trials"));
+    }
+    if args.rate.is_some() && !args.ros2 && args.live.is_none() {
+        return usage(
+            "--rate paces a run for --ros2 or --live; without them the simulator runs as fast as it can".into(),
+        );
     }
     for robot in &args.drive {
         match mission.team.iter().find(|r| &r.id == robot) {
@@ -387,6 +407,21 @@ fn run_trial(
     let Loaded { mission: loaded, registry } = inputs;
     let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
     let trial_dir = output_path(out_dir, &format!("trial-{seed}"))?;
+    // Serving before the world is built, so a viewer can connect while the run is set up.
+    let live = match args.live {
+        Some(addr) => {
+            let server = spomp_live::LiveServer::start(addr, &format!("spomp sim {} (seed {seed})", mission.mission))?;
+            bar.suspend(|| {
+                eprintln!(
+                    "live view: {} (Foxglove: Open connection → Foxglove WebSocket; docs/live.md), {}× real time",
+                    server.url(),
+                    args.rate.unwrap_or(1.0)
+                );
+            });
+            Some(LiveTap::new(server))
+        }
+        None => None,
+    };
     std::fs::create_dir_all(trial_dir.join("plots")).with_context(|| format!("creating {}", trial_dir.display()))?;
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
@@ -411,7 +446,7 @@ fn run_trial(
         let farm = crate::farm_cmd::FarmDrivers::new(
             mission,
             &crate::farm_cmd::FarmOptions {
-                rate: args.rate,
+                rate: args.rate.unwrap_or(1.0),
                 domain_id: args.domain_id,
                 interfaces: args.interfaces.clone(),
                 drive: args.drive.clone(),
@@ -420,39 +455,50 @@ fn run_trial(
         )?;
         sim.drive_externally(Box::new(farm)).context("handing the robots to the farm")?;
     }
+    if args.live.is_some() && !args.ros2 {
+        // The farm paces a --ros2 run itself.
+        sim.pace(args.rate.unwrap_or(1.0));
+    }
     let mcap_path = trial_dir.join("run.mcap");
-    let recorder = if args.no_mcap {
-        None
-    } else {
-        let mut rec = Recorder::create(&mcap_path, RecorderOptions::default())
-            .with_context(|| format!("creating {}", mcap_path.display()))?;
-        if let Some(info) = &run_info {
-            rec.run_info(info).with_context(|| format!("writing the run's setup to {}", mcap_path.display()))?;
-        }
-        Some(rec)
-    };
     let panos_dir = args.save_panos.then(|| trial_dir.join("panoramas"));
     if let Some(d) = &panos_dir {
         std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
     }
-    let mut observer = RunObserver {
-        recorder,
-        error: None,
+    let settings = ObserverSettings {
         pano_every_ns: (args.pano_every_s * 1e9) as i64,
-        last_pano: Default::default(),
         panos_dir,
         bar: bar.clone(),
         trace: args.trace,
-        last_second: -1,
         replayable: args.replayable,
+        classes: sim.world().classes().clone(),
     };
-    let result = sim.run_until(&mut observer, &mut || interrupted.load(Ordering::Relaxed));
-    if let Some(e) = observer.error.take() {
-        return Err(e.context(format!("recording {}", mcap_path.display())));
-    }
-    if let Some(rec) = observer.recorder.take() {
-        rec.finish().with_context(|| format!("finishing {}", mcap_path.display()))?;
-    }
+    let stop = &mut || interrupted.load(Ordering::Relaxed);
+    let result = match (args.no_mcap, live) {
+        (true, None) => run_observed::<SafeFile>(sim, None, settings, stop)?.0,
+        (true, Some(tap)) => {
+            // Only the live view wants the messages: recorded into nothing, uncompressed.
+            let options = RecorderOptions { compress: false, ..RecorderOptions::default() };
+            let mut rec = Recorder::new(Discard::default(), options).context("starting the live view's recorder")?;
+            rec.set_tap(Box::new(tap));
+            run_observed(sim, Some(rec), settings, stop)?.0
+        }
+        (false, live) => {
+            let mut rec = Recorder::create(&mcap_path, RecorderOptions::default())
+                .with_context(|| format!("creating {}", mcap_path.display()))?;
+            if let Some(info) = &run_info {
+                rec.run_info(info).with_context(|| format!("writing the run's setup to {}", mcap_path.display()))?;
+            }
+            if let Some(tap) = live {
+                rec.set_tap(Box::new(tap));
+            }
+            let (result, rec) = run_observed(sim, Some(rec), settings, stop)
+                .with_context(|| format!("recording {}", mcap_path.display()))?;
+            if let Some(rec) = rec {
+                rec.finish().with_context(|| format!("finishing {}", mcap_path.display()))?;
+            }
+            result
+        }
+    };
     write_trial_outputs(&result, &trial_dir)?;
     Ok(result.summary)
 }
@@ -482,22 +528,62 @@ fn localization_error_csv(result: &RunResult) -> String {
     csv
 }
 
-/// Records a run to MCAP and drives the progress bar.
-struct RunObserver {
-    recorder: Option<Recorder<SafeFile>>,
-    error: Option<anyhow::Error>,
+/// How a run is observed (everything but the recorder).
+struct ObserverSettings {
     pano_every_ns: i64,
-    last_pano: std::collections::HashMap<RobotId, i64>,
     panos_dir: Option<PathBuf>,
     bar: ProgressBar,
     trace: bool,
-    last_second: i64,
     /// Record every seam call (`--replayable`).
     replayable: bool,
+    /// The world's class table (the map's traversability).
+    classes: spomp_core::ClassTable,
 }
 
-impl RunObserver {
-    fn record(&mut self, f: impl FnOnce(&mut Recorder<SafeFile>) -> Result<(), spomp_mcap::RecordError>) {
+/// Runs `sim` to its end (or until `stop`), recorded by `recorder` if any; returns the result
+/// and the recorder, to be finished.
+fn run_observed<W: Write + Seek>(
+    sim: Simulation,
+    recorder: Option<Recorder<W>>,
+    settings: ObserverSettings,
+    stop: &mut dyn FnMut() -> bool,
+) -> Result<(RunResult, Option<Recorder<W>>)> {
+    let mut observer = RunObserver {
+        recorder,
+        error: None,
+        settings,
+        last_pano: Default::default(),
+        last_second: -1,
+        goals: Vec::new(),
+    };
+    let result = sim.run_until(&mut observer, stop);
+    if let Some(e) = observer.error.take() {
+        return Err(e);
+    }
+    Ok((result, observer.recorder.take()))
+}
+
+/// A goal as the team-level events tell it, for the goal markers.
+struct GoalState {
+    id: String,
+    position: Point2,
+    claimed_by: Option<String>,
+    visited_by: Option<String>,
+}
+
+/// Records a run to MCAP (and through it the live view) and drives the progress bar.
+struct RunObserver<W: Write + Seek> {
+    recorder: Option<Recorder<W>>,
+    error: Option<anyhow::Error>,
+    settings: ObserverSettings,
+    last_pano: std::collections::HashMap<RobotId, i64>,
+    last_second: i64,
+    /// The goals in the order they were identified.
+    goals: Vec<GoalState>,
+}
+
+impl<W: Write + Seek> RunObserver<W> {
+    fn record(&mut self, f: impl FnOnce(&mut Recorder<W>) -> Result<(), spomp_mcap::RecordError>) {
         if self.error.is_some() {
             return;
         }
@@ -507,17 +593,55 @@ impl RunObserver {
             self.error = Some(e.into());
         }
     }
+
+    /// Follows a goal event; true if the goals changed.
+    fn follow_goals(&mut self, event: &SimEvent) -> bool {
+        fn find(goals: &[GoalState], id: &str) -> Option<usize> {
+            goals.iter().position(|g| g.id == id)
+        }
+        match event {
+            SimEvent::GoalIdentified { goal, position, .. } => {
+                if find(&self.goals, goal).is_some() {
+                    return false;
+                }
+                self.goals.push(GoalState {
+                    id: goal.clone(),
+                    position: Point2::new(position[0], position[1]),
+                    claimed_by: None,
+                    visited_by: None,
+                });
+            }
+            SimEvent::GoalClaimed { goal, by } => {
+                let Some(k) = find(&self.goals, goal) else { return false };
+                self.goals[k].claimed_by = Some(by.clone());
+            }
+            SimEvent::GoalReleased { goal, by } => {
+                let Some(k) = find(&self.goals, goal) else { return false };
+                if self.goals[k].claimed_by.as_ref() != Some(by) {
+                    return false;
+                }
+                self.goals[k].claimed_by = None;
+            }
+            SimEvent::GoalVisited { goal, by } => {
+                let Some(k) = find(&self.goals, goal) else { return false };
+                self.goals[k].visited_by = Some(by.clone());
+            }
+            SimEvent::RobotKilled { .. } | SimEvent::MissionEnded { .. } => return false,
+        }
+        true
+    }
 }
 
-impl SimObserver for RunObserver {
+impl<W: Write + Seek> SimObserver for RunObserver<W> {
     fn on_state(&mut self, robot: &RobotId, now: Time, state: &RobotSnapshot) {
         let second = now.nanos / 1_000_000_000;
         if second != self.last_second {
             self.last_second = second;
-            self.bar.set_position(second.max(0) as u64);
+            self.settings.bar.set_position(second.max(0) as u64);
         }
         self.record(|r| {
             r.pose(robot.as_str(), now, state.truth, state.z_m)?;
+            r.tf(robot.as_str(), now, state.truth, state.z_m)?;
             if let Some(est) = state.estimate {
                 r.log(
                     &format!("/{robot}/pose_estimate"),
@@ -540,16 +664,16 @@ impl SimObserver for RunObserver {
     }
 
     fn on_panorama(&mut self, robot: &RobotId, frame: &PanoramaFrame) {
-        if self.pano_every_ns <= 0 {
+        if self.settings.pano_every_ns <= 0 {
             return;
         }
         let last = self.last_pano.get(robot).copied();
-        if last.is_some_and(|t| frame.stamp.nanos - t < self.pano_every_ns) {
+        if last.is_some_and(|t| frame.stamp.nanos - t < self.settings.pano_every_ns) {
             return;
         }
         self.last_pano.insert(robot.clone(), frame.stamp.nanos);
         self.record(|r| r.panorama(robot.as_str(), frame.stamp, &frame.depth, Some(&frame.semantic)));
-        if let Some(dir) = &self.panos_dir {
+        if let Some(dir) = &self.settings.panos_dir {
             let saved = output_path(dir, &format!("{robot}-{:06}.png", frame.stamp.nanos / 1_000_000_000))
                 .and_then(|path| crate::world_cmd::save_depth_png(&frame.depth, DEFAULT_RANGE_SCALE_M, &path));
             if let Err(e) = saved {
@@ -560,7 +684,7 @@ impl SimObserver for RunObserver {
 
     fn on_terrain(&mut self, robot: &RobotId, stamp: Time, geometry: PanoramaGeometry, obstacle: &[bool]) {
         // Same rate as the panoramas: only for the frame just recorded.
-        if self.pano_every_ns > 0 && self.last_pano.get(robot) == Some(&stamp.nanos) {
+        if self.settings.pano_every_ns > 0 && self.last_pano.get(robot) == Some(&stamp.nanos) {
             self.record(|r| r.obstacle_panorama(robot.as_str(), stamp, geometry, obstacle));
         }
     }
@@ -574,9 +698,9 @@ impl SimObserver for RunObserver {
     }
 
     fn on_transitions(&mut self, robot: &RobotId, records: &[TransitionRecord]) {
-        if self.trace {
+        if self.settings.trace {
             for t in records {
-                self.bar.suspend(|| {
+                self.settings.bar.suspend(|| {
                     out!("{:>9.1}s {robot} {} {} -> {}", t.time.as_secs_f64(), t.path, t.from, t.to);
                 });
             }
@@ -586,10 +710,37 @@ impl SimObserver for RunObserver {
 
     fn on_event(&mut self, now: Time, event: &SimEvent) {
         self.record(|r| r.json("/team/events", now, event));
+        if self.follow_goals(event) {
+            let goals = std::mem::take(&mut self.goals);
+            self.record(|r| {
+                r.goals(
+                    now,
+                    goals.iter().map(|g| GoalMarkerInput {
+                        id: &g.id,
+                        position: g.position,
+                        claimed_by: g.claimed_by.as_deref(),
+                        visited_by: g.visited_by.as_deref(),
+                    }),
+                )
+            });
+            self.goals = goals;
+        }
+    }
+
+    fn on_map(&mut self, _robot: &RobotId, now: Time, map: &AerialMap) {
+        let classes = &self.settings.classes;
+        if self.error.is_some() {
+            return;
+        }
+        if let Some(rec) = self.recorder.as_mut()
+            && let Err(e) = rec.map(now, map, classes)
+        {
+            self.error = Some(e.into());
+        }
     }
 
     fn on_seam(&mut self, robot: &RobotId, now: Time, call: SeamInput<'_>) {
-        if !self.replayable {
+        if !self.settings.replayable {
             return;
         }
         self.record(|r| r.seam(robot.as_str(), now, call));
@@ -795,4 +946,12 @@ pub fn dry_run(
         "goals": s.goals.len(),
     });
     Ok((ok, value))
+}
+
+/// `--live ADDR`: HOST:PORT with an IP address (`127.0.0.1:8765`, `[::1]:8765`, `0.0.0.0:8765`
+/// to be reachable from other machines).
+fn live_addr(text: &str) -> Result<SocketAddr, String> {
+    text.trim().parse().map_err(|_| {
+        format!("expected HOST:PORT with an IP address, such as 127.0.0.1:8765 (give --live after the mission), got `{text}`")
+    })
 }

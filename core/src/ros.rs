@@ -441,6 +441,32 @@ pub struct MarkerArray {
     pub markers: Vec<Marker>,
 }
 
+/// `nav_msgs/MapMetaData`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MapMetaData {
+    /// When the map was loaded.
+    pub map_load_time: RosTime,
+    /// Edge length of a cell, metres.
+    pub resolution: f32,
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Map-frame pose of the corner of cell (0, 0).
+    pub origin: Pose,
+}
+
+/// `nav_msgs/OccupancyGrid`: the aerial map as traversability, for 3D views.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct OccupancyGrid {
+    /// Header (the map frame).
+    pub header: Header,
+    /// Placement and size.
+    pub info: MapMetaData,
+    /// Row-major from cell (0, 0), rows along +y: 0–100, −1 unknown.
+    pub data: Vec<i8>,
+}
+
 /// `diagnostic_msgs/KeyValue`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct KeyValue {
@@ -745,6 +771,118 @@ impl Path {
     }
 }
 
+impl OccupancyGrid {
+    /// The aerial map's traversability in `map`: each known cell's class rank scaled to 0–100
+    /// (rank 0 = 0, impassable = 100, [`crate::classes::IMPASSABLE_RANK`]), −1 where unmapped.
+    pub fn from_aerial_map(
+        map: &crate::aerial::AerialMap,
+        classes: &crate::classes::ClassTable,
+        stamp: RosTime,
+    ) -> Self {
+        let ranks = classes.rank_lut();
+        let scale = 100 / i16::from(crate::classes::IMPASSABLE_RANK.max(1));
+        let data = map
+            .class
+            .iter()
+            .map(|&c| {
+                if c == crate::classes::UNKNOWN_CLASS {
+                    -1
+                } else {
+                    (i16::from(ranks[usize::from(c)]) * scale).min(100) as i8
+                }
+            })
+            .collect();
+        let spec = map.spec;
+        OccupancyGrid {
+            header: Header { stamp, frame_id: "map".into() },
+            info: MapMetaData {
+                map_load_time: stamp,
+                resolution: spec.resolution_m as f32,
+                width: spec.width,
+                height: spec.height,
+                origin: Pose::from_pose2(Pose2::new(spec.origin.x, spec.origin.y, 0.0), 0.0),
+            },
+            data,
+        }
+    }
+}
+
+/// What a goal marker shows of one goal; the caller's goal type lends it (the team state's
+/// goal views, the simulator's goal events), so the markers are built in one place.
+#[derive(Clone, Copy)]
+pub struct GoalMarkerInput<'a> {
+    /// The goal's id, as the label shows it.
+    pub id: &'a dyn std::fmt::Display,
+    /// Map-frame position.
+    pub position: crate::geometry::Point2,
+    /// Who claims it.
+    pub claimed_by: Option<&'a str>,
+    /// Who visited it.
+    pub visited_by: Option<&'a str>,
+}
+
+impl MarkerArray {
+    /// Goals and claims in `map`: one cylinder per goal (grey open, orange claimed, green
+    /// visited) and a text label with its id and holder. The first marker deletes all earlier
+    /// ones, so goals that merged disappear.
+    pub fn goals<'a>(goals: impl IntoIterator<Item = GoalMarkerInput<'a>>, stamp: RosTime) -> Self {
+        let header = Header { stamp, frame_id: "map".into() };
+        let mut markers = vec![Marker { header: header.clone(), ns: "goals".into(), action: 3, ..Default::default() }];
+        for (k, g) in goals.into_iter().enumerate() {
+            let color = match (g.visited_by, g.claimed_by) {
+                (Some(_), _) => ColorRgba { r: 0.2, g: 0.8, b: 0.2, a: 0.9 },
+                (None, Some(_)) => ColorRgba { r: 1.0, g: 0.6, b: 0.0, a: 0.9 },
+                (None, None) => ColorRgba { r: 0.6, g: 0.6, b: 0.6, a: 0.9 },
+            };
+            let pose = Pose::from_pose2(Pose2::new(g.position.x, g.position.y, 0.0), 1.0);
+            markers.push(Marker {
+                header: header.clone(),
+                ns: "goals".into(),
+                id: k as i32,
+                r#type: 3,
+                pose,
+                scale: Vector3 { x: 3.0, y: 3.0, z: 2.0 },
+                color,
+                ..Default::default()
+            });
+            let holder = g
+                .visited_by
+                .map(|r| format!(" visited by {r}"))
+                .or_else(|| g.claimed_by.map(|r| format!(" claimed by {r}")));
+            let mut text_pose = pose;
+            text_pose.position.z = 3.5;
+            markers.push(Marker {
+                header: header.clone(),
+                ns: "goal_labels".into(),
+                id: k as i32,
+                r#type: 9,
+                pose: text_pose,
+                scale: Vector3 { x: 0.0, y: 0.0, z: 1.5 },
+                color: ColorRgba { r: 1.0, g: 1.0, b: 1.0, a: 1.0 },
+                text: format!("{}{}", g.id, holder.unwrap_or_default()),
+                ..Default::default()
+            });
+        }
+        MarkerArray { markers }
+    }
+}
+
+impl TfMessage {
+    /// `<robot>/base_link` in `map` at `pose`, `z` metres up.
+    pub fn base_in_map(robot: &str, pose: Pose2, z: f64, stamp: RosTime) -> Self {
+        TfMessage {
+            transforms: vec![TransformStamped {
+                header: Header { stamp, frame_id: "map".into() },
+                child_frame_id: format!("{robot}/base_link"),
+                transform: Transform {
+                    translation: Vector3 { x: pose.x, y: pose.y, z },
+                    rotation: Quaternion::from_yaw(pose.yaw),
+                },
+            }],
+        }
+    }
+}
+
 // ROS 2 interface definitions as `ros2msg` schemas expect them: the type's own fields, then
 // each dependency after a separator line and `MSG: pkg/Type`. The fragments are macros because
 // `concat!` only takes literals.
@@ -907,6 +1045,19 @@ impl RosMessage for MarkerArray {
     );
 }
 
+impl RosMessage for OccupancyGrid {
+    const TYPE_NAME: &'static str = "nav_msgs/msg/OccupancyGrid";
+    const DEFINITION: &'static str = concat!(
+        "std_msgs/Header header\nMapMetaData info\nint8[] data\n",
+        header_deps!(),
+        dependency!(
+            "nav_msgs/MapMetaData",
+            "builtin_interfaces/Time map_load_time\nfloat32 resolution\nuint32 width\nuint32 height\ngeometry_msgs/Pose origin\n"
+        ),
+        pose_deps!()
+    );
+}
+
 impl RosMessage for DiagnosticArray {
     const TYPE_NAME: &'static str = "diagnostic_msgs/msg/DiagnosticArray";
     const DEFINITION: &'static str = concat!(
@@ -978,6 +1129,7 @@ mod tests {
             TfMessage::DEFINITION,
             NavSatFix::DEFINITION,
             MarkerArray::DEFINITION,
+            OccupancyGrid::DEFINITION,
             DiagnosticArray::DEFINITION,
             Clock::DEFINITION,
             BytesMsg::DEFINITION,
@@ -992,6 +1144,63 @@ mod tests {
             Odometry::DEFINITION
                 .contains("MSG: geometry_msgs/TwistWithCovariance\nTwist twist\nfloat64[36] covariance\n")
         );
+    }
+
+    #[test]
+    fn the_aerial_map_becomes_a_traversability_grid_with_unknown_cells_minus_one() {
+        use crate::{AerialMap, ClassTable, GridSpec, Point2, UNKNOWN_CLASS};
+        let classes = ClassTable::default_table();
+        let rank_of = |name: &str| classes.by_name(name).map(|c| (c.index, c.rank)).unwrap_or_default();
+        let (road, road_rank) = rank_of("road");
+        let (building, building_rank) = rank_of("building");
+        let (grass, grass_rank) = rank_of("grass_sidewalk");
+        assert_eq!((road_rank, building_rank, grass_rank), (0, 5, 2), "the paper's ranks");
+        let mut map = AerialMap::unknown(GridSpec::new(Point2::new(-10.0, 5.0), 0.5, 2, 2));
+        map.class = vec![road, building, UNKNOWN_CLASS, grass];
+        let grid = OccupancyGrid::from_aerial_map(&map, &classes, RosTime { sec: 3, nanosec: 0 });
+        assert_eq!(grid.data, vec![0, 100, -1, 40]);
+        assert_eq!((grid.info.width, grid.info.height, grid.info.resolution), (2, 2, 0.5));
+        assert_eq!((grid.info.origin.position.x, grid.info.origin.position.y), (-10.0, 5.0));
+        assert_eq!(grid.header.frame_id, "map");
+        assert_eq!(grid.info.map_load_time.sec, 3);
+    }
+
+    #[test]
+    fn goal_markers_clear_the_old_set_then_show_each_goal_coloured_by_its_state() {
+        let (a, b, c) = ("uav1-1".to_string(), "uav1-2".to_string(), "uav1-3".to_string());
+        let goals = [
+            GoalMarkerInput { id: &a, position: crate::Point2::new(1.0, 2.0), claimed_by: None, visited_by: None },
+            GoalMarkerInput {
+                id: &b,
+                position: crate::Point2::new(3.0, 4.0),
+                claimed_by: Some("ugv1"),
+                visited_by: None,
+            },
+            GoalMarkerInput {
+                id: &c,
+                position: crate::Point2::new(5.0, 6.0),
+                claimed_by: Some("ugv1"),
+                visited_by: Some("ugv2"),
+            },
+        ];
+        let array = MarkerArray::goals(goals, RosTime::default());
+        assert_eq!(array.markers.len(), 1 + 2 * goals.len());
+        assert_eq!(array.markers[0].action, 3, "delete all first");
+        let cylinders: Vec<&Marker> = array.markers.iter().filter(|m| m.ns == "goals" && m.r#type == 3).collect();
+        let colours: Vec<(f32, f32, f32)> = cylinders.iter().map(|m| (m.color.r, m.color.g, m.color.b)).collect();
+        assert_eq!(colours, vec![(0.6, 0.6, 0.6), (1.0, 0.6, 0.0), (0.2, 0.8, 0.2)], "open, claimed, visited");
+        assert_eq!((cylinders[1].pose.position.x, cylinders[1].pose.position.y), (3.0, 4.0));
+        let labels: Vec<&str> = array.markers.iter().filter(|m| m.r#type == 9).map(|m| m.text.as_str()).collect();
+        assert_eq!(labels, vec!["uav1-1", "uav1-2 claimed by ugv1", "uav1-3 visited by ugv2"]);
+    }
+
+    #[test]
+    fn a_robot_body_transform_is_its_pose_in_map() {
+        let tf = TfMessage::base_in_map("ugv1", Pose2::new(1.0, -2.0, 0.5), 0.3, RosTime::default());
+        let t = &tf.transforms[0];
+        assert_eq!((t.header.frame_id.as_str(), t.child_frame_id.as_str()), ("map", "ugv1/base_link"));
+        assert_eq!((t.transform.translation.x, t.transform.translation.y, t.transform.translation.z), (1.0, -2.0, 0.3));
+        assert_eq!(t.transform.rotation, Quaternion::from_yaw(0.5));
     }
 
     #[test]

@@ -8,8 +8,12 @@
 //! Topics (per robot `R`): `/R/pose` (PoseStamped, map frame), `/R/odom` (Odometry),
 //! `/R/cmd_vel` (Twist), `/R/panorama/depth` (Image mono16, 1/512 m per count),
 //! `/R/panorama/semantic` (Image mono8 class labels), `/R/reachability` (LaserScan),
-//! `/R/path` (Path), `/R/bt` (Log: node transitions), `/team/state` (String: JSON team-state
-//! changes), `/mission/status` (String: JSON).
+//! `/R/path` (Path), `/R/bt` (Log: node transitions), `/R/active_path` (String: the running
+//! nodes without a running child, when that changes), `/team/state` (String: JSON team-state
+//! changes), `/mission/status` (String: JSON). What a person watching needs: `/tf` (TFMessage:
+//! `map` → `R/base_link`), `/map` (OccupancyGrid: the aerial map as it grows), `/goals`
+//! (MarkerArray: goals, claims, visits). A [`MessageTap`] receives every message as written
+//! (the live view).
 //!
 //! For replay (see [`read_replay_log`]): `/R/seam` (`spomp_msgs/msg/SeamCall`: every call made on
 //! the robot's seam, in order, lossless) and the run's setup in the metadata record
@@ -22,7 +26,7 @@ mod safe;
 mod seam;
 
 pub use read::{LogCheck, LogMessage, McapLog, ReadError, check_log, decode_cdr, recover_log};
-pub use record::{RecordError, Recorder, RecorderOptions, encode_cdr};
+pub use record::{MessageTap, MessageType, RecordError, Recorder, RecorderOptions, encode_cdr};
 pub use safe::SafeFile;
 pub use seam::{
     AREA_ATTACHMENT, AreaRecord, OpenLog, RUN_METADATA, ReplayLog, RunInfo, SeamCall, SeamCallMsg, TeamOut, TickOutput,

@@ -1,17 +1,17 @@
 //! Writing.
 
-use std::collections::BTreeMap;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::io::{Seek, Write};
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
 
 use byteorder::LittleEndian;
+use spomp_behaviors::Status;
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::{DEFAULT_RANGE_SCALE_M, range_to_count};
 use spomp_core::ros::{self, RosMessage};
-use spomp_core::{DepthPanorama, Pose2, ReachabilityScan, SemanticPanorama, Time, Twist2};
+use spomp_core::{AerialMap, ClassTable, DepthPanorama, Pose2, ReachabilityScan, SemanticPanorama, Time, Twist2};
 
 use crate::safe::{FLUSH_CHUNK, FLUSH_IGNORE, FLUSH_LAST, SafeFile};
 
@@ -50,6 +50,38 @@ pub fn encode_cdr<M: RosMessage>(msg: &M) -> Result<Vec<u8>, RecordError> {
     Ok(out)
 }
 
+/// Also receives every message a [`Recorder`] writes, encoded as in the log: what a live view
+/// (the Foxglove WebSocket server of `spomp sim --live`) publishes, so it carries the log's
+/// channels, built and encoded once.
+pub trait MessageTap: Send {
+    /// One message: its topic, its ROS 2 type and `ros2msg` definition, its log time
+    /// (nanoseconds) and its CDR bytes (with the encapsulation header). `latched`: the message
+    /// stays true until the next one on its topic (the map, the goals, a robot's active path),
+    /// so a viewer that subscribes later should be given the last one.
+    fn message(&mut self, topic: &str, message_type: &MessageType, log_time_ns: u64, cdr: &[u8], latched: bool);
+}
+
+/// A ROS 2 message type as a channel's schema names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MessageType {
+    /// `package/msg/Type`.
+    pub name: &'static str,
+    /// The `ros2msg` definition.
+    pub definition: &'static str,
+}
+
+impl MessageType {
+    /// The type of `M`.
+    pub fn of<M: RosMessage>() -> Self {
+        MessageType { name: M::TYPE_NAME, definition: M::DEFINITION }
+    }
+}
+
+/// Topics whose messages hold until the next one (see [`MessageTap::message`]).
+const MAP_TOPIC: &str = "/map";
+const GOALS_TOPIC: &str = "/goals";
+const TF_TOPIC: &str = "/tf";
+
 /// Recording options.
 #[derive(Debug, Clone)]
 pub struct RecorderOptions {
@@ -84,6 +116,12 @@ pub struct Recorder<W: Write + Seek> {
     chunk_start: Option<u64>,
     /// What a flush of the sink means (see [`SafeFile`]).
     flush_mode: Arc<AtomicU8>,
+    /// Where every message also goes (a live view).
+    tap: Option<Box<dyn MessageTap>>,
+    /// Each robot's running behaviour nodes by path, from its transitions.
+    running: HashMap<String, BTreeSet<String>>,
+    /// Each robot's active path as last written.
+    active_paths: HashMap<String, String>,
 }
 
 impl Recorder<SafeFile> {
@@ -126,6 +164,9 @@ impl<W: Write + Seek> Recorder<W> {
             chunk_bytes: 0,
             chunk_start: None,
             flush_mode,
+            tap: None,
+            running: HashMap::new(),
+            active_paths: HashMap::new(),
         })
     }
 
@@ -137,6 +178,11 @@ impl<W: Write + Seek> Recorder<W> {
         self.chunk_bytes = 0;
         self.chunk_start = None;
         Ok(result?)
+    }
+
+    /// Sends every message written from now on to `tap` as well.
+    pub fn set_tap(&mut self, tap: Box<dyn MessageTap>) {
+        self.tap = Some(tap);
     }
 
     /// Messages written so far.
@@ -163,9 +209,22 @@ impl<W: Write + Seek> Recorder<W> {
 
     /// Writes one message on a topic at a time.
     pub fn log<M: RosMessage>(&mut self, topic: &str, time: Time, msg: &M) -> Result<(), RecordError> {
+        self.log_message(topic, time, msg, false)
+    }
+
+    fn log_message<M: RosMessage>(
+        &mut self,
+        topic: &str,
+        time: Time,
+        msg: &M,
+        latched: bool,
+    ) -> Result<(), RecordError> {
         let channel_id = self.channel::<M>(topic)?;
         let data = encode_cdr(msg)?;
         let t = time.nanos.max(0) as u64;
+        if let Some(tap) = self.tap.as_mut() {
+            tap.message(topic, &MessageType::of::<M>(), t, &data, latched);
+        }
         self.sequence = self.sequence.wrapping_add(1);
         self.writer.write_to_known_channel(
             &mcap::records::MessageHeader { channel_id, sequence: self.sequence, log_time: t, publish_time: t },
@@ -310,7 +369,52 @@ impl<W: Write + Seek> Recorder<W> {
             };
             self.log(&topic, r.time, &msg)?;
         }
-        Ok(())
+        self.active_path(robot, records)
+    }
+
+    /// A robot's body in the map frame on `/tf` (`map` → `<robot>/base_link`), so 3D views place
+    /// its scans, markers and model.
+    pub fn tf(&mut self, robot: &str, time: Time, pose: Pose2, z: f64) -> Result<(), RecordError> {
+        self.log(TF_TOPIC, time, &ros::TfMessage::base_in_map(robot, pose, z, time.into()))
+    }
+
+    /// The aerial map as it grows (`/map`, OccupancyGrid in `map`: class rank as cost 0–100,
+    /// −1 unmapped), one message per published version.
+    pub fn map(&mut self, time: Time, map: &AerialMap, classes: &ClassTable) -> Result<(), RecordError> {
+        let grid = ros::OccupancyGrid::from_aerial_map(map, classes, time.into());
+        self.log_message(MAP_TOPIC, time, &grid, true)
+    }
+
+    /// The goals, their claims and visits (`/goals`, MarkerArray in `map`: the whole set each
+    /// time, replacing the previous one).
+    pub fn goals<'a>(
+        &mut self,
+        time: Time,
+        goals: impl IntoIterator<Item = ros::GoalMarkerInput<'a>>,
+    ) -> Result<(), RecordError> {
+        let markers = ros::MarkerArray::goals(goals, time.into());
+        self.log_message(GOALS_TOPIC, time, &markers, true)
+    }
+
+    /// Keeps track of which nodes run from a robot's transitions and writes its active path
+    /// (`/R/active_path`, String: the path of each running node none of whose children runs,
+    /// joined by ` | ` when parallel branches run; empty when nothing runs) when it changes.
+    fn active_path(&mut self, robot: &str, records: &[TransitionRecord]) -> Result<(), RecordError> {
+        let Some(last) = records.last() else { return Ok(()) };
+        let running = self.running.entry(robot.to_string()).or_default();
+        for r in records {
+            if r.to == Status::Running {
+                running.insert(r.path.clone());
+            } else {
+                running.remove(&r.path);
+            }
+        }
+        let path = active_leaves(running);
+        if self.active_paths.get(robot) == Some(&path) {
+            return Ok(());
+        }
+        self.active_paths.insert(robot.to_string(), path.clone());
+        self.log_message(&format!("/{robot}/active_path"), last.time, &ros::StringMsg { data: path }, true)
     }
 
     /// A JSON document on a `std_msgs/String` topic (team-state changes, mission status).
@@ -343,5 +447,50 @@ impl<W: Write + Seek> Recorder<W> {
         self.flush_mode.store(FLUSH_LAST, Ordering::Relaxed);
         self.writer.into_inner().flush()?;
         Ok(())
+    }
+}
+
+/// The running paths none of whose descendants runs, in path order, joined by ` | `. A node's
+/// path is its parent's followed by `/name`, `[index]` (a control node's child) or `.state`
+/// (a state machine's state), so its descendants are the paths that extend it with one of
+/// those separators — and all paths extending it sort together right after it.
+fn active_leaves(running: &BTreeSet<String>) -> String {
+    use std::ops::Bound::{Excluded, Unbounded};
+    let mut leaves: Vec<&str> = Vec::new();
+    for p in running {
+        let has_running_child = running
+            .range::<String, _>((Excluded(p), Unbounded))
+            .take_while(|q| q.starts_with(p.as_str()))
+            .any(|q| matches!(q.as_bytes().get(p.len()), Some(b'/' | b'[' | b'.')));
+        if !has_running_child {
+            leaves.push(p);
+        }
+    }
+    leaves.join(" | ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn set(paths: &[&str]) -> BTreeSet<String> {
+        paths.iter().map(|p| p.to_string()).collect()
+    }
+
+    #[test]
+    fn active_leaves_are_the_running_nodes_without_running_children() {
+        assert_eq!(active_leaves(&set(&[])), "");
+        // Paths as the mission compiler writes them: control children `[i]`, names `/`.
+        let running = set(&[
+            "visitor/repeat",
+            "visitor/repeat/fallback",
+            "visitor/repeat/fallback[0]/claim_and_visit/sequence",
+            "visitor/repeat/fallback[0]/claim_and_visit/sequence[1]/navigate_to",
+        ]);
+        assert_eq!(active_leaves(&running), "visitor/repeat/fallback[0]/claim_and_visit/sequence[1]/navigate_to");
+        // Parallel branches and a state machine's state; a sibling whose name extends another's
+        // is not its child.
+        let running = set(&["m/par", "m/par[0]/a", "m/par[0]/a-b", "m/par[1]/sm", "m/par[1]/sm.search/x"]);
+        assert_eq!(active_leaves(&running), "m/par[0]/a | m/par[0]/a-b | m/par[1]/sm.search/x");
     }
 }

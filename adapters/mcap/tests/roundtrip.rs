@@ -43,7 +43,9 @@ fn sample_log() -> Vec<u8> {
     };
     rec.transitions("ugv1", &[tr]).unwrap();
     rec.json("/team/state", Time::from_millis(600), &serde_json::json!({"goal": 1, "status": "claimed"})).unwrap();
-    assert_eq!(rec.message_count(), 15);
+    // 5 poses, 5 commands, 2 panorama images, a scan, a transition and the active path it
+    // changed, a JSON document.
+    assert_eq!(rec.message_count(), 16);
     rec.finish().unwrap();
     buf.into_inner()
 }
@@ -52,7 +54,7 @@ fn sample_log() -> Vec<u8> {
 fn messages_round_trip_with_ros2_schemas() {
     let log = McapLog::from_bytes(sample_log());
     let msgs = log.messages().unwrap();
-    assert_eq!(msgs.len(), 15);
+    assert_eq!(msgs.len(), 16);
     assert!(msgs.iter().all(|m| m.schema_encoding == "ros2msg" && m.encoding == "cdr"));
     let pose = msgs.iter().find(|m| m.topic == "/ugv1/pose" && m.log_time == 300_000_000).unwrap();
     assert_eq!(pose.schema, "geometry_msgs/msg/PoseStamped");
@@ -77,6 +79,10 @@ fn messages_round_trip_with_ros2_schemas() {
     let l: Log = decode_cdr(&bt.topic, &bt.data).unwrap();
     assert_eq!(l.name, "ugv1/visitor/sequence");
     assert!(l.msg.starts_with("idle -> running"));
+    let path = msgs.iter().find(|m| m.topic == "/ugv1/active_path").unwrap();
+    assert_eq!((path.schema.as_str(), path.log_time), ("std_msgs/msg/String", 300_000_000));
+    let p: spomp_core::ros::StringMsg = decode_cdr(&path.topic, &path.data).unwrap();
+    assert_eq!(p.data, "visitor/sequence");
 }
 
 #[test]

@@ -327,44 +327,13 @@ pub fn scan_to_ros(scan: &ReachabilityScan, base: &TimeBase) -> ros::LaserScan {
 /// orange claimed, green visited) and a text label with its id and holder. The first marker
 /// deletes all earlier ones, so goals that merged disappear.
 pub fn goals_to_ros(goals: &[GoalView], stamp: Time, base: &TimeBase) -> ros::MarkerArray {
-    let header = ros::Header { stamp: base.to_ros(stamp), frame_id: "map".into() };
-    let mut markers = vec![ros::Marker { header: header.clone(), ns: "goals".into(), action: 3, ..Default::default() }];
-    for (k, g) in goals.iter().enumerate() {
-        let visited_by = g.visited.as_ref().map(|(_, r)| r);
-        let claimed_by = g.claimant.as_ref().map(|c| &c.robot);
-        let color = match (visited_by, claimed_by) {
-            (Some(_), _) => ros::ColorRgba { r: 0.2, g: 0.8, b: 0.2, a: 0.9 },
-            (None, Some(_)) => ros::ColorRgba { r: 1.0, g: 0.6, b: 0.0, a: 0.9 },
-            (None, None) => ros::ColorRgba { r: 0.6, g: 0.6, b: 0.6, a: 0.9 },
-        };
-        let pose = ros::Pose::from_pose2(Pose2::new(g.position.x, g.position.y, 0.0), 1.0);
-        markers.push(ros::Marker {
-            header: header.clone(),
-            ns: "goals".into(),
-            id: k as i32,
-            r#type: 3,
-            pose,
-            scale: ros::Vector3 { x: 3.0, y: 3.0, z: 2.0 },
-            color,
-            ..Default::default()
-        });
-        let holder =
-            visited_by.map(|r| format!(" visited by {r}")).or_else(|| claimed_by.map(|r| format!(" claimed by {r}")));
-        let mut text_pose = pose;
-        text_pose.position.z = 3.5;
-        markers.push(ros::Marker {
-            header: header.clone(),
-            ns: "goal_labels".into(),
-            id: k as i32,
-            r#type: 9,
-            pose: text_pose,
-            scale: ros::Vector3 { x: 0.0, y: 0.0, z: 1.5 },
-            color: ros::ColorRgba { r: 1.0, g: 1.0, b: 1.0, a: 1.0 },
-            text: format!("{}{}", g.id, holder.unwrap_or_default()),
-            ..Default::default()
-        });
-    }
-    ros::MarkerArray { markers }
+    let goals = goals.iter().map(|g| ros::GoalMarkerInput {
+        id: &g.id,
+        position: g.position,
+        claimed_by: g.claimant.as_ref().map(|c| c.robot.as_str()),
+        visited_by: g.visited.as_ref().map(|(_, r)| r.as_str()),
+    });
+    ros::MarkerArray::goals(goals, base.to_ros(stamp))
 }
 
 /// Wraps a depth and a semantic panorama of one instant into a frame.

@@ -15,6 +15,7 @@
 //! the [`RunSummary`].
 
 mod external;
+mod pace;
 mod seam;
 mod setup;
 mod summary;
@@ -29,8 +30,8 @@ use spomp_behaviors::mission::schema::CompleteWhen;
 use spomp_behaviors::mission::{LoadedMission, MissionFile};
 use spomp_behaviors::trace::{Recorder, TransitionRecord};
 use spomp_core::{
-    GoalId, Odometry, PanoramaFrame, PanoramaGeometry, Point2, Pose2, PoseEstimate, ReachabilityScan, RobotId,
-    RobotKind, Time, Twist2,
+    AerialMap, GoalId, Odometry, PanoramaFrame, PanoramaGeometry, Point2, Pose2, PoseEstimate, ReachabilityScan,
+    RobotId, RobotKind, Time, Twist2,
 };
 use spomp_mapping::{CompressionParams, PngLevel};
 use spomp_robot::runtime::{FinishedWork, WorkKind};
@@ -38,6 +39,7 @@ use spomp_robot::{PoseInput, Robot, RobotRuntime, RobotSetup};
 use spomp_teamstate::{GoalOrigin, Tier, TierSet};
 
 pub use external::{DrivenTeamMessage, ExternalDrivers};
+pub use pace::RealTimePacer;
 pub use seam::{SeamInput, tier_bits};
 pub use setup::{faults_for_mission, operating_area, radio_for_mission, world_for_mission};
 pub use summary::{
@@ -210,6 +212,11 @@ pub trait SimObserver {
     fn on_problem(&mut self, _robot: &RobotId, _now: Time, _message: &str) {}
     /// A call the simulator made on a robot's seam, in the order made (what a replay needs).
     fn on_seam(&mut self, _robot: &RobotId, _now: Time, _call: SeamInput<'_>) {}
+    /// The aerial map as it grows: a robot's copy of the map when it publishes a new version
+    /// to the team (the mapping UAV, every `map_publish_period_s` while the map changes), and
+    /// once at the start when the robots begin with a prior map. Checked once a simulated
+    /// second.
+    fn on_map(&mut self, _robot: &RobotId, _now: Time, _map: &AerialMap) {}
     /// How often `on_state` is called, seconds.
     fn record_period_s(&self) -> f64 {
         0.1
@@ -280,6 +287,8 @@ struct SimRobot {
     external: bool,
     /// Background work done and waiting for the step it is due back (skill latency).
     work_out: Vec<(Time, FinishedWork)>,
+    /// The last map version this robot published that observers were shown.
+    map_shown: Option<u64>,
 }
 
 impl SimRobot {
@@ -353,6 +362,10 @@ pub struct Simulation {
     drivers: Option<Box<dyn ExternalDrivers>>,
     /// Messages driven robots sent, waiting for the next radio period.
     driven_outbox: Vec<DrivenTeamMessage>,
+    /// Holds each step back to real time × a rate (see [`Simulation::pace`]).
+    pacer: Option<RealTimePacer>,
+    /// Observers were shown a map (a prior one, or a published version).
+    map_shown: bool,
 }
 
 /// Claim bookkeeping for the "time heading to a goal" metric: events when the held goal
@@ -481,6 +494,7 @@ impl Simulation {
                 last_path_len: 0,
                 trajectory: vec![start.position()],
                 external: false,
+                map_shown: None,
             });
         }
         let time_limit_s = options.time_limit_s.unwrap_or(mission.time_limit_s);
@@ -512,6 +526,8 @@ impl Simulation {
             others: Vec::new(),
             drivers: None,
             driven_outbox: Vec::new(),
+            pacer: None,
+            map_shown: false,
         })
     }
 
@@ -534,6 +550,12 @@ impl Simulation {
         }
         self.drivers = Some(drivers);
         Ok(driven)
+    }
+
+    /// Runs at real time × `rate` from now on (simulated seconds per wall second) instead of as
+    /// fast as possible: for someone watching the run live. The results do not change.
+    pub fn pace(&mut self, rate: f64) {
+        self.pacer = Some(RealTimePacer::new(rate));
     }
 
     /// Simulated time now.
@@ -627,6 +649,9 @@ impl Simulation {
         self.now = Time::from_nanos(self.now.nanos + self.dt_ns);
         let now = self.now;
         let dt = self.options.dt_s;
+        if let Some(p) = self.pacer.as_mut() {
+            p.wait_until(now);
+        }
         if let Some(d) = self.drivers.as_mut() {
             d.begin_step(now);
             self.driven_outbox.extend(d.take_team_messages());
@@ -660,7 +685,27 @@ impl Simulation {
                 r.trajectory.push(r.truth().position());
             }
             self.track_goals(observer);
+            self.show_maps(observer);
             self.check_end(observer);
+        }
+    }
+
+    /// Shows observers each map version a robot published since the last call, and a prior map
+    /// once at the start.
+    fn show_maps(&mut self, observer: &mut dyn SimObserver) {
+        let now = self.now;
+        for r in &mut self.robots {
+            let published = r.robot.team().latest_map(&r.id).map(|v| v.version);
+            let fresh = published.is_some() && published != r.map_shown;
+            let prior = !self.map_shown && published.is_none();
+            if !(fresh || prior) {
+                continue;
+            }
+            if let Some(map) = r.robot.runtime().map().filter(|m| fresh || m.map().known_cells() > 0) {
+                observer.on_map(&r.id, now, map.map());
+                r.map_shown = published;
+                self.map_shown = true;
+            }
         }
     }
 

@@ -1,0 +1,94 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use super::*;
+use crate::viewer::Viewer;
+
+const WAIT: Duration = Duration::from_secs(20);
+
+const STRING_DEFINITION: &str = "string data\n";
+
+/// `std_msgs/String` as ROS 2 puts it on the wire: encapsulation header, length with the NUL,
+/// bytes, NUL.
+fn cdr_string(text: &str) -> Vec<u8> {
+    let mut out = vec![0x00, 0x01, 0x00, 0x00];
+    out.extend_from_slice(&(text.len() as u32 + 1).to_le_bytes());
+    out.extend_from_slice(text.as_bytes());
+    out.push(0);
+    out
+}
+
+fn loopback_any_port() -> SocketAddr {
+    SocketAddr::from(([127, 0, 0, 1], 0))
+}
+
+#[test]
+fn a_viewer_sees_advertised_ros2_channels_their_messages_and_the_run_time() {
+    let mut server = LiveServer::start(loopback_any_port(), "spomp test").unwrap();
+    assert_ne!(server.local_addr().port(), 0, "the port the system chose");
+    assert_eq!(server.url(), format!("ws://127.0.0.1:{}", server.local_addr().port()));
+    server.publish("/early", "std_msgs/msg/String", STRING_DEFINITION, 5, &cdr_string("before"), false).unwrap();
+    let mut viewer = Viewer::connect(server.local_addr(), WAIT).unwrap();
+    assert_eq!(viewer.server_info["name"], "spomp test");
+    let capabilities = viewer.server_info["capabilities"].as_array().unwrap();
+    assert!(capabilities.iter().any(|c| c == "time"), "{:?}", viewer.server_info);
+    viewer.wait_for_channels(&["/early"], WAIT).unwrap();
+    let channel = &viewer.channels["/early"];
+    assert_eq!(
+        (channel.encoding.as_str(), channel.schema_name.as_str(), channel.schema_encoding.as_str()),
+        ("cdr", "std_msgs/msg/String", "ros2msg")
+    );
+    assert_eq!(channel.schema, STRING_DEFINITION);
+    viewer.subscribe(&["/early"]).unwrap();
+    // Not latched: what was published before the subscription is not sent again. Wait until
+    // the server has the subscription (its count of viewers is not enough), by publishing until
+    // one arrives.
+    let mut received = None;
+    for k in 0..200u64 {
+        server
+            .publish("/early", "std_msgs/msg/String", STRING_DEFINITION, 1_000 + k, &cdr_string("after"), false)
+            .unwrap();
+        match viewer.next_message(Duration::from_millis(100)) {
+            Ok(m) => {
+                received = Some(m);
+                break;
+            }
+            Err(crate::viewer::ViewerError::Timeout(_)) => continue,
+            Err(e) => panic!("{e}"),
+        }
+    }
+    let m = received.expect("a message after subscribing");
+    assert_eq!(m.topic, "/early");
+    assert!(m.log_time_ns >= 1_000, "only messages after the subscription: {}", m.log_time_ns);
+    assert_eq!(m.data, cdr_string("after"));
+    assert_eq!(server.client_count(), 1);
+    // A channel that appears while the viewer is connected is advertised to it.
+    server.publish("/late", "std_msgs/msg/String", STRING_DEFINITION, 2_000_000_000, &cdr_string("x"), false).unwrap();
+    viewer.wait_for_channels(&["/late"], WAIT).unwrap();
+    assert_eq!(viewer.wait_for_time(2_000_000_000, WAIT).unwrap(), 2_000_000_000, "the run's time is broadcast");
+    assert!(viewer.bytes_received > 0);
+    server.stop();
+}
+
+#[test]
+fn a_late_subscriber_gets_the_latest_message_of_a_latched_channel_at_once() {
+    let mut server = LiveServer::start(loopback_any_port(), "spomp").unwrap();
+    for (t, text) in [(10, "map v1"), (20, "map v2")] {
+        server.publish("/map", "std_msgs/msg/String", STRING_DEFINITION, t, &cdr_string(text), true).unwrap();
+    }
+    let mut viewer = Viewer::connect(server.local_addr(), WAIT).unwrap();
+    viewer.wait_for_channels(&["/map"], WAIT).unwrap();
+    viewer.subscribe(&["/map"]).unwrap();
+    let m = viewer.next_message(WAIT).unwrap();
+    assert_eq!((m.topic.as_str(), m.log_time_ns, m.data), ("/map", 20, cdr_string("map v2")));
+    server.stop();
+}
+
+#[test]
+fn an_address_in_use_is_an_error_naming_it() {
+    let first = LiveServer::start(loopback_any_port(), "spomp").unwrap();
+    let Err(e) = LiveServer::start(first.local_addr(), "spomp") else { panic!("a second server on the same port") };
+    assert!(e.to_string().contains(&first.local_addr().to_string()), "{e}");
+}
