@@ -368,6 +368,16 @@ impl RobotRuntime {
     /// adapter with a worker thread: `spomp run`). Set before the first input.
     pub fn set_background_skills(&mut self, on: bool) {
         self.background_skills = on;
+        // A robot that starts with a map plans from its first tick, as it does inline: the
+        // graph of that map is built now, at setup, not in the background during the first
+        // ticks (the tree would start its drives without a graph).
+        if on
+            && let Some(nav) = self.nav.as_deref_mut()
+            && !nav.has_graph()
+            && let Err(e) = nav.maintain(Time::ZERO, self.map.as_ref(), &self.team, &mut self.rng)
+        {
+            self.problems.push(format!("navigation: {e}"));
+        }
     }
 
     /// Whether the heavy skills run as work taken with [`Self::take_work`].
@@ -657,5 +667,66 @@ impl RobotRuntime {
     /// Takes the problems met since the last call.
     pub fn take_problems(&mut self) -> Vec<String> {
         std::mem::take(&mut self.problems)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+    use spomp_core::{Cell, GridSpec};
+    use spomp_global_planner::synthetic::{class, color};
+
+    /// A 60 × 30 m all-road map (0.5 m cells).
+    fn road_map() -> AerialMap {
+        let mut map = AerialMap::unknown(GridSpec::new(Point2::new(0.0, 0.0), 0.5, 120, 60));
+        for row in 0..60 {
+            for col in 0..120 {
+                let i = map.spec.index(Cell::new(col, row));
+                (map.class[i], map.rgb[i], map.elevation[i]) = (class::ROAD, color::ROAD, 0.0);
+            }
+        }
+        map.version = 1;
+        map
+    }
+
+    fn ugv(prior_map: Option<AerialMap>) -> RobotRuntime {
+        let mut config = RuntimeConfig::basic(RobotId::new("ugv1"), RobotKind::Ugv, 1, Pose2::new(5.0, 5.0, 0.0));
+        config.map_spec = Some(road_map().spec);
+        config.nav = Some(NavParams::default());
+        config.prior_map = prior_map;
+        RobotRuntime::from_config(config).unwrap()
+    }
+
+    #[test]
+    fn a_robot_with_a_prior_map_can_plan_at_its_first_tick_with_background_skills() {
+        let mut rt = ugv(Some(road_map()));
+        rt.set_background_skills(true);
+        assert!(rt.nav().unwrap().has_graph(), "the prior map's graph is built at setup");
+    }
+
+    #[test]
+    fn planner_work_runs_on_a_copy_and_is_swapped_in_with_what_arrived_meanwhile() {
+        let mut rt = ugv(None);
+        rt.set_background_skills(true);
+        assert!(!rt.nav().unwrap().has_graph());
+        // A map arrives (as a received version would make it): the graph is work, not inline.
+        rt.map = Some(Orthomap::from_map(road_map()).unwrap());
+        rt.maintain(Time::from_secs_f64(1.0));
+        assert!(!rt.nav().unwrap().has_graph(), "maintain leaves the heavy upkeep to the work");
+        let work = rt.take_work(Time::from_secs_f64(1.0));
+        assert_eq!(work.iter().map(SkillWork::kind).collect::<Vec<_>>(), vec![WorkKind::Planner]);
+        assert!(rt.take_work(Time::from_secs_f64(1.1)).is_empty(), "one planner job at a time");
+        // Run elsewhere; meanwhile the tree still plans on the planner it has (no graph yet).
+        let done = std::thread::spawn(move || work.into_iter().map(SkillWork::run).collect::<Vec<_>>()).join().unwrap();
+        assert!(!rt.nav().unwrap().has_graph());
+        for d in done {
+            rt.finish_work(d);
+        }
+        assert!(rt.nav().unwrap().has_graph(), "the grown graph is swapped in");
+        assert!(rt.take_problems().is_empty());
+        let nav = rt.nav_mut().unwrap();
+        assert!(nav.plan(Point2::new(5.0, 5.0), Point2::new(50.0, 20.0)).is_ok());
     }
 }
