@@ -132,7 +132,9 @@ impl GoalDetector {
             return Err(MappingError::InconsistentMap(format!("resolution {res} m")));
         }
         let mut detection = Detection::default();
-        if spec.is_empty() {
+        // A goal is placed on a passable cell beside a cluster, so a one-cell map has none (and
+        // imageproc's labelling indexes past its forest on a lone foreground pixel).
+        if spec.is_empty() || spec.len() == 1 {
             return Ok(detection);
         }
 
