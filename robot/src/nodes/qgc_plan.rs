@@ -29,6 +29,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use serde_json::Value;
+use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, read_text};
 use spomp_core::Point2;
 
 /// Radius of the WGS-84 ellipsoid at the equator, metres.
@@ -75,7 +76,9 @@ impl std::error::Error for PlanError {}
 /// Reads and interprets a `.plan` file.
 pub(crate) fn load_plan(path: &Path) -> Result<QgcPlan, PlanError> {
     let error = |message: String| PlanError { path: path.to_path_buf(), message };
-    let text = std::fs::read_to_string(path).map_err(|e| error(format!("cannot read the file: {e}")))?;
+    // The loader checked the file, but it is read again here when the tree is built: the same
+    // rules (a regular file, at most the mission language's size limit) hold at this read too.
+    let text = read_text(path, MAX_SOURCE_BYTES).map_err(|e| error(format!("cannot read the file: {e}")))?;
     parse_plan(&text).map_err(error)
 }
 
@@ -305,6 +308,15 @@ fn fences(fence: &Value, origin: &Origin) -> Result<Vec<Vec<Point2>>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_plan_path_that_is_no_regular_file_is_refused_without_reading_it() {
+        // /dev/zero would be read until memory ran out.
+        let e = load_plan(Path::new("/dev/zero")).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(e.contains("not a regular file"), "{e}");
+        let e = load_plan(Path::new("/no/such/plan.plan")).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(e.contains("cannot read the file"), "{e}");
+    }
 
     fn plan(items: &str, fence: &str) -> String {
         format!(
