@@ -88,6 +88,31 @@ fn output(child: &mut Child) -> (String, String) {
     (out, err)
 }
 
+/// How a farm run ended.
+struct FarmEnd {
+    /// The simulator's summary (`--json`).
+    summary: serde_json::Value,
+    /// How the robot process exited after SIGINT, if it did within 20 s.
+    run_status: Option<std::process::ExitStatus>,
+    /// What the robot process printed.
+    run_out: String,
+    run_err: String,
+}
+
+/// Waits for the farm's run to end (it must succeed, within 300 s), then stops the robot
+/// process with SIGINT and reads both processes' output.
+fn finish_farm(mut sim: Reap, mut run: Reap) -> FarmEnd {
+    let status = wait_with_timeout(&mut sim.0, Duration::from_secs(300));
+    let (sim_out, sim_err) = output(&mut sim.0);
+    let _ = Command::new("kill").args(["-INT", &run.0.id().to_string()]).status();
+    let run_status = wait_with_timeout(&mut run.0, Duration::from_secs(20));
+    let (run_out, run_err) = output(&mut run.0);
+    let status = status.expect("the farm run ends within 300 s");
+    assert!(status.success(), "spomp sim --ros2 failed ({status}):\n{sim_out}\n{sim_err}\n--- run:\n{run_err}");
+    let summary = serde_json::from_str(&sim_out).expect("sim prints its summary as JSON");
+    FarmEnd { summary, run_status, run_out, run_err }
+}
+
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("spomp-ros2-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -100,17 +125,10 @@ fn a_ugv_driven_by_a_separate_spomp_run_process_reaches_its_goals() {
     let out = temp_dir("reach");
     std::fs::create_dir_all(&out).expect("temp dir");
     let robot_log = out.join("ugv1.mcap");
-    let mut sim = start_sim(MISSION, &d, &out.join("sim"), &["--rate", "4", "--no-mcap"]);
-    let mut run = start_run(MISSION, &d, &["--record", robot_log.to_str().expect("utf-8 path")]);
-    let status = wait_with_timeout(&mut sim.0, Duration::from_secs(300));
-    let (sim_out, sim_err) = output(&mut sim.0);
+    let sim = start_sim(MISSION, &d, &out.join("sim"), &["--rate", "4", "--no-mcap"]);
+    let run = start_run(MISSION, &d, &["--record", robot_log.to_str().expect("utf-8 path")]);
     // The robot process stops on SIGINT with a safe command and its figures.
-    let _ = Command::new("kill").args(["-INT", &run.0.id().to_string()]).status();
-    let run_status = wait_with_timeout(&mut run.0, Duration::from_secs(20));
-    let (run_out, run_err) = output(&mut run.0);
-    let status = status.expect("the farm run ends within 300 s");
-    assert!(status.success(), "spomp sim --ros2 failed ({status}):\n{sim_out}\n{sim_err}\n--- run:\n{run_err}");
-    let summary: serde_json::Value = serde_json::from_str(&sim_out).expect("sim prints its summary as JSON");
+    let FarmEnd { summary, run_status, run_out, run_err } = finish_farm(sim, run);
     let trial = &summary["runs"][0];
     assert_eq!(trial["outcome"], "complete", "{summary:#}");
     assert_eq!(trial["goals_visited"], 2, "{summary:#}");
@@ -237,18 +255,11 @@ fn a_uav_driven_over_ros2_maps_the_city_for_the_team() {
     let out = temp_dir("uav");
     std::fs::create_dir_all(&out).expect("temp dir");
     let log = out.join("uav1.mcap");
-    let mut sim = start_sim(UAV_MISSION, &d, &out.join("sim"), &["--drive", "uav1", "--rate", "4", "--no-mcap"]);
-    let mut run = start_robot(UAV_MISSION, "uav1", &d, &["--record", log.to_str().expect("utf-8 path")]);
-    let status = wait_with_timeout(&mut sim.0, Duration::from_secs(300));
-    let (sim_out, sim_err) = output(&mut sim.0);
-    let _ = Command::new("kill").args(["-INT", &run.0.id().to_string()]).status();
-    let _ = wait_with_timeout(&mut run.0, Duration::from_secs(20));
-    let (run_out, run_err) = output(&mut run.0);
-    let status = status.expect("the farm run ends within 300 s");
-    assert!(status.success(), "spomp sim --ros2 failed ({status}):\n{sim_out}\n{sim_err}\n--- run:\n{run_err}");
+    let sim = start_sim(UAV_MISSION, &d, &out.join("sim"), &["--drive", "uav1", "--rate", "4", "--no-mcap"]);
+    let run = start_robot(UAV_MISSION, "uav1", &d, &["--record", log.to_str().expect("utf-8 path")]);
+    let FarmEnd { summary, run_out, .. } = finish_farm(sim, run);
     // The only map the team has is the one the driven UAV built from the camera tiles the farm
     // published: the simulator's UGV found the vehicle cluster in it and visited it.
-    let summary: serde_json::Value = serde_json::from_str(&sim_out).expect("sim prints its summary as JSON");
     let trial = &summary["runs"][0];
     assert_eq!(trial["outcome"], "complete", "{summary:#}");
     assert!(trial["goals_visited"].as_u64().unwrap_or(0) >= 1, "{summary:#}");

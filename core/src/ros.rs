@@ -916,6 +916,14 @@ macro_rules! pose_deps {
         )
     };
 }
+macro_rules! multi_array_layout_deps {
+    () => {
+        concat!(
+            dependency!("std_msgs/MultiArrayLayout", "MultiArrayDimension[] dim\nuint32 data_offset\n"),
+            dependency!("std_msgs/MultiArrayDimension", "string label\nuint32 size\nuint32 stride\n")
+        )
+    };
+}
 macro_rules! twist_deps {
     () => {
         concat!(
@@ -1093,18 +1101,13 @@ impl RosMessage for GridMap {
         ),
         pose_deps!(),
         dependency!("std_msgs/Float32MultiArray", "MultiArrayLayout layout\nfloat32[] data\n"),
-        dependency!("std_msgs/MultiArrayLayout", "MultiArrayDimension[] dim\nuint32 data_offset\n"),
-        dependency!("std_msgs/MultiArrayDimension", "string label\nuint32 size\nuint32 stride\n")
+        multi_array_layout_deps!()
     );
 }
 
 impl RosMessage for BytesMsg {
     const TYPE_NAME: &'static str = "std_msgs/msg/UInt8MultiArray";
-    const DEFINITION: &'static str = concat!(
-        "MultiArrayLayout layout\nuint8[] data\n",
-        dependency!("std_msgs/MultiArrayLayout", "MultiArrayDimension[] dim\nuint32 data_offset\n"),
-        dependency!("std_msgs/MultiArrayDimension", "string label\nuint32 size\nuint32 stride\n")
-    );
+    const DEFINITION: &'static str = concat!("MultiArrayLayout layout\nuint8[] data\n", multi_array_layout_deps!());
 }
 
 #[cfg(test)]

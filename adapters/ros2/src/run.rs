@@ -330,7 +330,7 @@ impl RobotNode {
             self.publish_command(&mut state, now, StopReason::EStop, observer);
             state.report.robot_time_s = now.as_secs_f64();
         }
-        state.finish(id.as_str(), started.elapsed(), self.robot.tick_hz())
+        state.snapshot(&self.robot, started.elapsed())
     }
 
     /// Hands finished skill work back to the robot (publishing a new scan), then the work the
@@ -361,7 +361,6 @@ impl RobotNode {
                 }
             }
         }
-        state.superseded_panoramas = self.robot.runtime().superseded_panoramas();
         let work = self.robot.take_work(now);
         if work.is_empty() {
             return;
@@ -650,7 +649,7 @@ impl RobotNode {
         if let Ok(data) = serde_json::to_string(&status) {
             let _ = self.outputs.status.publish(ros::StringMsg { data });
         }
-        let report = state.snapshot(id.as_str(), wall, self.robot.tick_hz());
+        let report = state.snapshot(&self.robot, wall);
         let level = match reason {
             StopReason::None if state.last_problem.is_none() => 0,
             StopReason::None | StopReason::EStop => 1,
@@ -747,8 +746,6 @@ struct LoopState {
     position_rx: Option<Time>,
     /// A UAV: it needs a fresh position, not odometry and panoramas.
     flies: bool,
-    /// Panoramas the robot replaced before processing (copied from it after each pass).
-    superseded_panoramas: u64,
     estop: bool,
     halted: bool,
     last_altitude_m: Option<f64>,
@@ -803,7 +800,6 @@ impl LoopState {
             skill_failed: false,
             position_rx: None,
             flies: false,
-            superseded_panoramas: 0,
             estop: false,
             halted: false,
             last_altitude_m: None,
@@ -885,22 +881,19 @@ impl LoopState {
         }
     }
 
-    fn snapshot(&self, robot: &str, wall: Duration, tick_hz: f64) -> RunReport {
+    /// The figures so far; `robot` adds its own count of panoramas it replaced before processing.
+    fn snapshot(&self, robot: &Robot, wall: Duration) -> RunReport {
         let mut r = self.report.clone();
-        r.robot = robot.to_string();
+        r.robot = robot.id().to_string();
         r.wall_s = wall.as_secs_f64();
-        r.target_tick_hz = tick_hz;
+        r.target_tick_hz = robot.tick_hz();
         r.tick_rate_hz = if r.wall_s > 0.0 { r.ticks as f64 / r.wall_s } else { 0.0 };
-        r.dropped_inputs += self.pairer.dropped() + self.superseded_panoramas;
+        r.dropped_inputs += self.pairer.dropped() + robot.runtime().superseded_panoramas();
         r.tree_status = self.status.to_string();
         r.robot_time_s = self.now().map_or(0.0, |t| t.as_secs_f64());
         (r.odometry_to_command_p50_ms, r.odometry_to_command_p99_ms) = percentiles(&self.odom_latency);
         (r.panorama_to_command_p50_ms, r.panorama_to_command_p99_ms) = percentiles(&self.panorama_latency);
         r
-    }
-
-    fn finish(self, robot: &str, wall: Duration, tick_hz: f64) -> RunReport {
-        self.snapshot(robot, wall, tick_hz)
     }
 }
 

@@ -117,7 +117,8 @@ pub struct RobotRuntime {
     pose: Option<PoseEstimate>,
     /// Start pose (home).
     start: Pose2,
-    classes: ClassTable,
+    /// Shared with perception work (no copy per panorama).
+    classes: Arc<ClassTable>,
     /// This robot's copy of the aerial map: grown from the map versions received in the team
     /// state, or (on the UAV) by its own camera.
     map: Option<Orthomap>,
@@ -187,7 +188,7 @@ impl RobotRuntime {
             team,
             pose: None,
             start,
-            classes: ClassTable::default_table(),
+            classes: Arc::new(ClassTable::default_table()),
             map: None,
             detector: None,
             detected_version: None,
@@ -218,7 +219,7 @@ impl RobotRuntime {
     /// A runtime set up from a mission's description of the robot.
     pub fn from_config(config: RuntimeConfig) -> Result<Self, RuntimeError> {
         let mut rt = RobotRuntime::new(config.id, config.kind, config.priority, config.start, config.team)?;
-        rt.classes = config.classes;
+        rt.classes = Arc::new(config.classes);
         rt.map_spec = config.map_spec;
         rt.goal_time_per_m_s = config.goal_time_per_m_s;
         rt.rng = ChaCha8Rng::seed_from_u64(config.seed);
@@ -324,7 +325,7 @@ impl RobotRuntime {
         let terrain = self.nav.as_deref_mut().map(|nav| nav.begin_analysis(&frame));
         PerceptionJob {
             map: self.map.as_ref().map(|m| (m.shared(), m.version())),
-            classes: self.classes.clone(),
+            classes: Arc::clone(&self.classes),
             localizer,
             terrain,
             robot: self.id.clone(),

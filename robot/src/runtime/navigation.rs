@@ -67,7 +67,7 @@ pub struct NavStack {
     /// Parameters.
     pub params: NavParams,
     /// Terrain analysis (created for the panorama geometry at the first panorama).
-    pub terrain: Option<TerrainAnalyzer>,
+    pub terrain: Option<Box<TerrainAnalyzer>>,
     /// The latest safe region.
     pub view: Option<LocalView>,
     /// The latest reachability scan (map frame).
@@ -210,8 +210,9 @@ impl NavStack {
     pub(crate) fn begin_analysis(&mut self, frame: &PanoramaFrame) -> Result<TerrainJob, String> {
         let geometry = frame.depth.geometry;
         if self.terrain.as_ref().is_none_or(|t| t.geometry() != geometry) {
-            self.terrain =
-                Some(TerrainAnalyzer::new(geometry, self.params.local.terrain.clone()).map_err(|e| e.to_string())?);
+            let analyzer =
+                TerrainAnalyzer::new(geometry, self.params.local.terrain.clone()).map_err(|e| e.to_string())?;
+            self.terrain = Some(Box::new(analyzer));
         }
         if let (Some(last), Some(view), Some(scan)) = (&self.analyzed_depth, &self.view, &self.latest_scan)
             && Arc::ptr_eq(last, &frame.depth)
@@ -219,9 +220,7 @@ impl NavStack {
             return Ok(TerrainJob::Reuse { region: view.region.clone(), scan: (**scan).clone() });
         }
         match self.terrain.take() {
-            Some(analyzer) => {
-                Ok(TerrainJob::Analyze { analyzer: Box::new(analyzer), params: self.params.local.terrain.clone() })
-            }
+            Some(analyzer) => Ok(TerrainJob::Analyze { analyzer, params: self.params.local.terrain.clone() }),
             None => Err("terrain analysis has no analyzer".into()),
         }
     }
@@ -231,7 +230,7 @@ impl NavStack {
         if let TerrainJob::Analyze { analyzer, .. } = job
             && self.terrain.is_none()
         {
-            self.terrain = Some(*analyzer);
+            self.terrain = Some(analyzer);
         }
     }
 
@@ -299,7 +298,7 @@ impl NavStack {
         for scan in scans.iter().filter(|s| s.robot != own) {
             let _ = self.global.add_scan(scan, false);
             if self.planner_in_flight {
-                self.scans_since_planner_left.push((Arc::new((**scan).clone()), false));
+                self.scans_since_planner_left.push((Arc::clone(scan), false));
             }
         }
         self.team_scan_cursor = cursor;

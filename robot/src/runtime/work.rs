@@ -138,7 +138,7 @@ pub(super) struct PerceptionJob {
     pub frame: Arc<PanoramaFrame>,
     /// The robot's map copy when the work was taken, and its version.
     pub map: Option<(Arc<AerialMap>, u64)>,
-    pub classes: ClassTable,
+    pub classes: Arc<ClassTable>,
     /// The localizer, lent (cross-view robots).
     pub localizer: Option<Box<CrossView>>,
     /// Terrain analysis (UGVs with navigation), and why it could not be set up.
