@@ -61,6 +61,30 @@ pub enum SyncError {
         /// This robot.
         me: String,
     },
+    /// The sender is not in the team's public keys (a secured team).
+    #[error("sender {0} is not a member of the team")]
+    NotAMember(String),
+    /// A secured team got a message without signatures.
+    #[error("unsigned message from {0} (the team requires signatures)")]
+    Unsigned(String),
+    /// A signature does not check: forged, altered, or signed with another key.
+    #[error("bad signature on {what} from {from}")]
+    BadSignature {
+        /// The transport's sender.
+        from: String,
+        /// What was signed: the message, or which record.
+        what: String,
+    },
+    /// A message from an earlier boot of its sender (a replay).
+    #[error("message from {from}'s earlier session {session} (current: {current})")]
+    StaleSession {
+        /// The sender.
+        from: String,
+        /// The message's session.
+        session: u64,
+        /// The sender's newest session seen.
+        current: u64,
+    },
     /// A record in the message is inconsistent (e.g. key and body disagree, non-finite values).
     #[error("invalid record {index}: {reason}")]
     InvalidRecord {

@@ -27,19 +27,23 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod auth;
 mod error;
 mod params;
 mod record;
+mod snapshot;
 mod state;
 mod sync;
 mod view;
 
+pub use auth::{KeyError, SecurityError, Signature, TeamKeys, TeamSecurity};
 pub use error::{SyncError, TeamStateError};
 pub use params::TeamStateParams;
 pub use record::{
-    ClaimRecord, GoalOrigin, GoalRecord, MapVersion, Record, RecordBody, RecordKey, RobotRecord, Tier, TierSet,
+    ClaimRecord, GoalOrigin, GoalRecord, MAX_DOT, MapVersion, Record, RecordBody, RecordKey, RobotRecord, Tier, TierSet,
     UnreachableRecord, VisitRecord,
 };
+pub use snapshot::{RestoreSummary, SnapshotError};
 pub use state::{ApplyReport, ClaimOutcome, IdentifyOutcome, MISSION_WRITER, RobotStatus, TeamState};
 pub use sync::{Ack, SyncMessage, decode, encode};
 pub use view::{ClaimInfo, GoalStatus, GoalView};

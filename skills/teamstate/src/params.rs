@@ -28,6 +28,10 @@ pub struct TeamStateParams {
     /// no longer counts (a dead robot, or one out of contact that long, gives up its goals).
     /// Seconds.
     pub claim_lease_s: f64,
+    /// A peer's record stamped further than this ahead of this robot's clock is left out
+    /// (counted): robots' clocks differ a little, but a claim stamped far in the future would
+    /// stay unclaimable long past its lease. Seconds.
+    pub max_clock_ahead_s: f64,
 }
 
 impl Default for TeamStateParams {
@@ -40,6 +44,7 @@ impl Default for TeamStateParams {
             max_map_blob_bytes: 8 * 1024 * 1024,
             max_in_flight_messages: 64,
             claim_lease_s: 300.0,
+            max_clock_ahead_s: 30.0,
         }
     }
 }
@@ -59,6 +64,9 @@ impl TeamStateParams {
         }
         if !(self.claim_lease_s.is_finite() && self.claim_lease_s > 0.0) {
             return bad("claim_lease_s", "must be finite and > 0");
+        }
+        if !(self.max_clock_ahead_s.is_finite() && self.max_clock_ahead_s >= 0.0) {
+            return bad("max_clock_ahead_s", "must be finite and ≥ 0");
         }
         if !(1..=64).contains(&self.max_in_flight_messages) {
             return bad("max_in_flight_messages", "must be in 1..=64");

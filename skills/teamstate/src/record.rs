@@ -13,6 +13,8 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 use spomp_core::{GoalId, Point2, Pose2, ReachabilityScan, RobotId, Time};
 
+use crate::auth::Signature;
+
 /// Priority tier of a record for sync: lower tiers go first.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub enum Tier {
@@ -252,7 +254,17 @@ pub struct Record {
     pub dot: u64,
     /// The content.
     pub body: RecordBody,
+    /// The writer's signature over key, dot and body (a secured team; see [`crate::auth`]).
+    /// Not part of the record's encoding: a signed sync message carries it in its trailer.
+    #[serde(skip)]
+    pub sig: Option<Signature>,
 }
+
+/// Largest dot accepted from a peer. A writer that wrote a million records a second would need
+/// nine years to reach it; a larger one is a corrupt or hostile counter, and taking it over
+/// (a robot continues above a relayed copy of its own record) would bring the robot's own
+/// counter close to overflow.
+pub const MAX_DOT: u64 = 1 << 48;
 
 /// Limits applied when validating records from peers.
 pub(crate) struct Limits {
@@ -301,6 +313,9 @@ impl Record {
         if self.dot == 0 {
             return Err("dot 0".into());
         }
+        if self.dot > MAX_DOT {
+            return Err(format!("dot {} is beyond any real writer's counter (at most {MAX_DOT})", self.dot));
+        }
         if self.is_immutable() && self.dot != 1 {
             return Err("immutable record with dot ≠ 1".into());
         }
@@ -333,6 +348,19 @@ impl Record {
             _ => return Err("key and body kinds differ".into()),
         }
         Ok(())
+    }
+}
+
+/// The time a record's body carries, if any (what a peer's clock said when it wrote it).
+pub(crate) fn record_stamp(body: &RecordBody) -> Option<Time> {
+    match body {
+        RecordBody::Goal(g) => Some(g.identified_at),
+        RecordBody::Claim(c) => Some(c.stamp),
+        RecordBody::Visit(v) => Some(v.stamp),
+        RecordBody::Unreachable(u) => Some(u.stamp),
+        RecordBody::Robot(r) => Some(r.stamp),
+        RecordBody::Map(m) => Some(m.stamp),
+        RecordBody::RetryEpoch(_) | RecordBody::Scan(_) => None,
     }
 }
 
@@ -378,7 +406,7 @@ mod tests {
     #[test]
     fn copies_order_by_dot_then_bytes() {
         let key = RecordKey::RetryEpoch(RobotId::new("a"));
-        let rec = |dot, epoch| Record { key: key.clone(), dot, body: RecordBody::RetryEpoch(epoch) };
+        let rec = |dot, epoch| Record { key: key.clone(), dot, body: RecordBody::RetryEpoch(epoch), sig: None };
         assert!(compare_copies(&rec(2, 0), &rec(1, 9)).is_gt());
         assert!(compare_copies(&rec(1, 1), &rec(1, 1)).is_eq());
         let (a, b) = (rec(1, 1), rec(1, 2));

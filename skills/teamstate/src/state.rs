@@ -5,12 +5,14 @@ use std::sync::Arc;
 
 use spomp_core::{GoalId, Point2, Pose2, ReachabilityScan, RobotId, Time};
 
+use crate::auth::TeamSecurity;
 use crate::error::{SyncError, TeamStateError};
 use crate::params::TeamStateParams;
 use crate::record::{
     ClaimRecord, GoalOrigin, GoalRecord, Limits, MapVersion, Record, RecordBody, RecordKey, RobotRecord, TierSet,
-    UnreachableRecord, VisitRecord, check_scan, finite_pose,
+    UnreachableRecord, VisitRecord, check_scan, finite_pose, record_stamp,
 };
+use crate::auth::SIGNATURE_BYTES;
 use crate::sync::{HEADER_BYTES, InFlight, PeerState, SyncMessage};
 use crate::view::{GoalIndex, GoalView, Lease, build_goal_index};
 
@@ -58,6 +60,12 @@ pub struct ApplyReport {
     pub new_scans: usize,
     /// Map origins whose version this robot did not have.
     pub new_maps: Vec<RobotId>,
+    /// Records left out because their stamp lies further in the future than
+    /// [`TeamStateParams::max_clock_ahead_s`] (the rest of the message was applied).
+    pub records_from_the_future: usize,
+    /// The sender started a new session (it restarted): what was known of its messages was
+    /// forgotten before this one was applied.
+    pub peer_restarted: bool,
 }
 
 /// A robot's last known state, as recorded in the team state.
@@ -94,6 +102,10 @@ pub struct TeamState {
     /// then, and the stamp of the oldest own active claim. While no record has changed and
     /// that claim is not yet half a lease old, none is, and the look is skipped.
     own_claims_checked: Option<(u64, Option<Time>)>,
+    /// Signing key and team keys (a secured team); None believes every well-formed message.
+    security: Option<Arc<TeamSecurity>>,
+    /// Which boot of this robot this is (see [`SyncMessage::session`]).
+    session: u64,
 }
 
 impl TeamState {
@@ -117,7 +129,47 @@ impl TeamState {
             now: Time::ZERO,
             change_seq: 0,
             own_claims_checked: None,
+            security: None,
+            session: 0,
         })
+    }
+
+    /// Secures the database: from now on its own records and messages are signed, and a
+    /// message is applied only if its sender and every record's writer are team members whose
+    /// signatures check. Records held already are signed now if they are this robot's. Fails if
+    /// the security is another robot's.
+    pub fn set_security(&mut self, security: Arc<TeamSecurity>) -> Result<(), TeamStateError> {
+        if security.robot() != &self.self_id {
+            return Err(TeamStateError::InvalidInput(format!(
+                "the signing key of {} given to the team state of {}",
+                security.robot(),
+                self.self_id
+            )));
+        }
+        for rec in self.records.values_mut() {
+            if rec.key.writer() == &self.self_id {
+                rec.sig = Some(security.sign_record(&record_bytes(rec)));
+            }
+        }
+        self.security = Some(security);
+        Ok(())
+    }
+
+    /// The security in force, if any.
+    pub fn security(&self) -> Option<&TeamSecurity> {
+        self.security.as_deref()
+    }
+
+    /// Sets which boot of this robot this is: a number larger than at any earlier boot (e.g. the
+    /// wall-clock start time in nanoseconds, or a boot counter kept with the state file). Peers
+    /// that see it grow forget what they knew of this robot's earlier messages.
+    pub fn set_session(&mut self, session: u64) {
+        self.session = session;
+    }
+
+    /// This robot's session.
+    pub fn session(&self) -> u64 {
+        self.session
     }
 
     /// This robot's id.
@@ -138,13 +190,20 @@ impl TeamState {
     // ------------------------------------------------------------------ local writes
 
     fn tick(&mut self) -> u64 {
-        self.clock += 1;
+        // Saturates: a peer's numbers never reach here beyond MAX_DOT (validated), and a
+        // counter of 2^64 − 1 local writes does not happen.
+        self.clock = self.clock.saturating_add(1);
         self.clock
     }
 
     /// Inserts a record this robot wrote (or a mission record) and keeps derived state current.
     fn put(&mut self, key: RecordKey, dot: u64, body: RecordBody) {
-        let rec = Record { key: key.clone(), dot, body };
+        let mut rec = Record { key: key.clone(), dot, body, sig: None };
+        if let Some(security) = &self.security
+            && key.writer() == &self.self_id
+        {
+            rec.sig = Some(security.sign_record(&record_bytes(&rec)));
+        }
         let goal_related = key.goal().is_some() || matches!(key, RecordKey::RetryEpoch(_));
         if let RecordBody::Scan(s) = &rec.body {
             self.scan_log.push(s.clone());
@@ -591,6 +650,40 @@ impl TeamState {
         self.records == other.records
     }
 
+    // ------------------------------------------------------------------ snapshots
+
+    /// This robot's counters: its dot, its next goal number and next scan number.
+    pub(crate) fn counters(&self) -> (u64, u32, u64) {
+        (self.clock, self.next_goal_seq, self.next_scan_seq)
+    }
+
+    /// Positions of the scans this robot shared.
+    pub(crate) fn own_scan_positions(&self) -> &[Point2] {
+        &self.own_scan_positions
+    }
+
+    /// Takes a validated record from a snapshot (newer copies win, as in a merge).
+    pub(crate) fn insert_restored(&mut self, rec: Record) {
+        if self.records.get(&rec.key).is_some_and(|cur| crate::record::compare_copies(&rec, cur).is_le()) {
+            return;
+        }
+        if let RecordBody::Scan(s) = &rec.body {
+            self.scan_log.push(s.clone());
+        }
+        self.note_change(&rec.key);
+        self.records.insert(rec.key.clone(), rec);
+    }
+
+    /// Sets the counters after a restore (never below what they are) and rebuilds the goals.
+    pub(crate) fn set_counters(&mut self, clock: u64, next_goal: u32, next_scan: u64, scan_positions: Vec<Point2>) {
+        self.clock = self.clock.max(clock);
+        self.next_goal_seq = self.next_goal_seq.max(next_goal);
+        self.next_scan_seq = self.next_scan_seq.max(next_scan);
+        self.own_scan_positions.extend(scan_positions);
+        self.own_claims_checked = None;
+        self.rebuild_goals();
+    }
+
     // ------------------------------------------------------------------ sync
 
     fn peer_has_all(&self, peer: &PeerState) -> bool {
@@ -641,11 +734,17 @@ impl TeamState {
             peer_has_all: false,
             wants_ack: false,
             records: Vec::new(),
+            session: self.session,
+            signature: None,
         };
-        // Header, envelope and the record-count varint (≤ 5 bytes).
-        let mut used = HEADER_BYTES + postcard::experimental::serialized_size(&msg).unwrap_or(0) + 5;
+        let signed = self.security.is_some();
+        // Header, envelope and the record-count varint (≤ 5 bytes); the trailer: session
+        // (≤ 10 bytes), signature count (≤ 5), the sender's signature.
+        let trailer = if signed { 10 + 5 + SIGNATURE_BYTES } else if self.session != 0 { 11 } else { 0 };
+        let per_record = if signed { 1 + SIGNATURE_BYTES } else { 0 };
+        let mut used = HEADER_BYTES + postcard::experimental::serialized_size(&msg).unwrap_or(0) + 5 + trailer;
         for rec in candidates {
-            let size = postcard::experimental::serialized_size(rec).unwrap_or(usize::MAX);
+            let size = postcard::experimental::serialized_size(rec).unwrap_or(usize::MAX).saturating_add(per_record);
             if used.saturating_add(size) <= byte_budget {
                 used += size;
                 msg.records.push(rec.clone());
@@ -678,6 +777,9 @@ impl TeamState {
             state.in_flight.push_back(InFlight { seq: msg.seq, records: sent });
             state.trim(self.params.max_in_flight_messages);
         }
+        if let Some(security) = &self.security {
+            msg.signature = Some(security.sign_message(&msg.signed_part(true)));
+        }
         Some(msg)
     }
 
@@ -707,12 +809,43 @@ impl TeamState {
         for (index, rec) in msg.records.iter().enumerate() {
             rec.validate(&limits).map_err(|reason| SyncError::InvalidRecord { index, reason })?;
         }
+        if let Some(security) = &self.security {
+            self.authenticate(security, from, msg)?;
+        }
+        let peer_restarted = match self.peers.get(from) {
+            Some(p) if msg.session < p.session => {
+                return Err(SyncError::StaleSession { from: from.to_string(), session: msg.session, current: p.session });
+            }
+            Some(p) => msg.session > p.session,
+            None => false,
+        };
+        if peer_restarted {
+            // What we knew of its messages (sequence numbers, acknowledgements) belongs to its
+            // earlier boot; what it holds now is learnt again from its acknowledgements.
+            self.reset_peer(from);
+        }
+        // Stamps judged on this robot's clock: a peer's stamp from far in the future would keep
+        // a claim alive long past its lease. Before the clock runs (no time yet) nothing is.
+        let ahead_limit = (self.now > Time::ZERO)
+            .then(|| Time::from_nanos(self.now.nanos.saturating_add(Time::from_secs_f64(self.params.max_clock_ahead_s).nanos)));
+        let from_the_future = |rec: &Record| {
+            ahead_limit.is_some_and(|limit| record_stamp(&rec.body).is_some_and(|stamp| stamp > limit))
+        };
 
         // Merge.
         let goals_before: Vec<GoalId> = self.goals().iter().map(|v| v.id.clone()).collect();
-        let mut report = ApplyReport::default();
+        let mut report = ApplyReport { peer_restarted, ..ApplyReport::default() };
         let mut goals_touched = false;
         for rec in &msg.records {
+            if from_the_future(rec) {
+                report.records_from_the_future += 1;
+                continue;
+            }
+            // Mission goals are loaded by every robot from the mission file, never learnt.
+            if rec.key.writer().as_str() == MISSION_WRITER && self.security.is_some() {
+                report.records_ignored += 1;
+                continue;
+            }
             // A relayed copy of our own record newer than our counter means we lost our counter
             // (restart): continue above it so our next writes win.
             if rec.key.writer() == &self.self_id && !rec.is_immutable() {
@@ -758,6 +891,7 @@ impl TeamState {
         // Peer bookkeeping.
         let max_in_flight = self.params.max_in_flight_messages;
         let state = self.peers.entry(from.clone()).or_default();
+        state.session = msg.session;
         state.process_ack(msg.ack, max_in_flight);
         for rec in &msg.records {
             let c = state.confirmed.entry(rec.key.clone()).or_insert(0);
@@ -779,6 +913,38 @@ impl TeamState {
             report.released = self.resolve_own_conflicts();
         }
         Ok(report)
+    }
+
+    /// Checks a message's signatures: the sender's over the message, each writer's over its
+    /// record. Any failure rejects the whole message.
+    fn authenticate(&self, security: &TeamSecurity, from: &RobotId, msg: &SyncMessage) -> Result<(), SyncError> {
+        let keys = security.keys();
+        if !keys.is_member(from) {
+            return Err(SyncError::NotAMember(from.to_string()));
+        }
+        let Some(signature) = &msg.signature else {
+            return Err(SyncError::Unsigned(from.to_string()));
+        };
+        if !security.message_signed_by(from, &msg.signed_part(true), signature) {
+            return Err(SyncError::BadSignature { from: from.to_string(), what: "the message".into() });
+        }
+        for (index, rec) in msg.records.iter().enumerate() {
+            let writer = rec.key.writer();
+            if writer.as_str() == MISSION_WRITER {
+                continue;
+            }
+            if !keys.is_member(writer) {
+                return Err(SyncError::InvalidRecord { index, reason: format!("written by non-member {writer}") });
+            }
+            let checks = rec.sig.as_ref().is_some_and(|sig| security.record_signed_by(writer, &record_bytes(rec), sig));
+            if !checks {
+                return Err(SyncError::BadSignature {
+                    from: from.to_string(),
+                    what: format!("record {index} ({writer}'s {:?})", rec.key.tier()),
+                });
+            }
+        }
+        Ok(())
     }
 
     /// Releases own claims whose goal group is visited or held by a higher-priority robot;
@@ -875,4 +1041,10 @@ mod tests {
         assert_eq!(team.map_writers().collect::<Vec<_>>(), expected);
         assert_eq!(expected.len(), 4);
     }
+}
+
+/// The bytes a record's signature covers: its encoding (key, dot, body; the signature itself is
+/// not part of it).
+pub(crate) fn record_bytes(rec: &Record) -> Vec<u8> {
+    postcard::to_stdvec(rec).unwrap_or_default()
 }

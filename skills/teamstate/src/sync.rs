@@ -4,17 +4,26 @@
 //! [postcard](https://docs.rs/postcard) (serde, varint integers, no field names). A binary format
 //! because scans and map blobs dominate the traffic and JSON would triple their size; postcard
 //! because it is compact, schema-free for our own types and rejects trailing or truncated input.
+//!
+//! Two versions: 2 is the bare message (the simulator's, one process, no sessions, nothing
+//! signed); 3 adds a trailer after it — the sender's session (which boot of the sender this
+//! is) and, on a secured team, each record's signature by its writer and then the sender's
+//! signature over every byte before it.
 
 use std::collections::{BTreeSet, HashMap, VecDeque};
 
 use serde::{Deserialize, Serialize};
 use spomp_core::RobotId;
 
+use crate::auth::{SIGNATURE_BYTES, Signature};
 use crate::error::SyncError;
 use crate::record::{Record, RecordKey};
 
 const MAGIC: &[u8; 4] = b"SPTS";
+/// The bare message.
 const FORMAT_VERSION: u8 = 2;
+/// The message and a trailer: session and signatures.
+const FORMAT_VERSION_TRAILER: u8 = 3;
 /// Bytes before the postcard payload.
 pub(crate) const HEADER_BYTES: usize = MAGIC.len() + 1;
 
@@ -70,21 +79,55 @@ pub struct SyncMessage {
     pub wants_ack: bool,
     /// Records the addressee is not known to hold, highest priority first.
     pub records: Vec<Record>,
+    /// Which boot of the sender this is (0: a sender that never restarts, e.g. in the
+    /// simulator). A peer that sees a newer session forgets what it knew of the sender's
+    /// messages; an older one is a replay and is refused.
+    #[serde(skip)]
+    pub session: u64,
+    /// The sender's signature over the whole message (a secured team), or None. The records'
+    /// own signatures travel in [`Record::sig`].
+    #[serde(skip)]
+    pub signature: Option<Signature>,
+}
+
+/// The trailer of a version-3 message, before the sender's signature.
+#[derive(Serialize, Deserialize)]
+struct Trailer {
+    session: u64,
+    /// Each record's signature by its writer, in record order (None: a mission record, which no
+    /// robot writes); None when the message is not signed.
+    record_sigs: Option<Vec<Option<Signature>>>,
 }
 
 impl SyncMessage {
     /// Encodes the message (see the module doc for the format).
     pub fn encode(&self) -> Vec<u8> {
+        let mut out = self.signed_part(self.signature.is_some());
+        if let Some(sig) = &self.signature {
+            out.extend_from_slice(&sig.0);
+        }
+        out
+    }
+
+    /// Every byte the sender's signature covers: all of the encoding of a message that is
+    /// (`signed`) or is not signed, but the signature itself.
+    pub(crate) fn signed_part(&self, signed: bool) -> Vec<u8> {
+        let trailer = self.session != 0 || signed;
         let mut out = Vec::with_capacity(HEADER_BYTES + 64);
         out.extend_from_slice(MAGIC);
-        out.push(FORMAT_VERSION);
+        out.push(if trailer { FORMAT_VERSION_TRAILER } else { FORMAT_VERSION });
         // Serialising plain data into a Vec cannot fail; fall back to the bare header if it ever
         // did, which any decoder rejects as malformed.
-        postcard::to_extend(self, out).unwrap_or_else(|_| {
-            let mut h = MAGIC.to_vec();
-            h.push(FORMAT_VERSION);
-            h
-        })
+        let header = out.clone();
+        let Ok(mut out) = postcard::to_extend(self, out) else { return header };
+        if trailer {
+            let record_sigs = signed.then(|| self.records.iter().map(|r| r.sig).collect());
+            match postcard::to_extend(&Trailer { session: self.session, record_sigs }, out) {
+                Ok(o) => out = o,
+                Err(_) => return header,
+            }
+        }
+        out
     }
 
     /// Decodes a message, rejecting anything longer than `max_bytes`.
@@ -97,12 +140,42 @@ impl SyncMessage {
 
     /// Decodes a message.
     pub fn decode(bytes: &[u8]) -> Result<SyncMessage, SyncError> {
-        let payload = match bytes.split_at_checked(HEADER_BYTES) {
-            Some((head, payload)) if &head[..4] == MAGIC && head[4] == FORMAT_VERSION => payload,
+        let (version, payload) = match bytes.split_at_checked(HEADER_BYTES) {
+            Some((head, payload))
+                if &head[..4] == MAGIC && (head[4] == FORMAT_VERSION || head[4] == FORMAT_VERSION_TRAILER) =>
+            {
+                (head[4], payload)
+            }
             _ => return Err(SyncError::BadHeader),
         };
-        let (msg, rest) =
-            postcard::take_from_bytes::<SyncMessage>(payload).map_err(|e| SyncError::Malformed(e.to_string()))?;
+        let malformed = |e: postcard::Error| SyncError::Malformed(e.to_string());
+        let (mut msg, rest) = postcard::take_from_bytes::<SyncMessage>(payload).map_err(malformed)?;
+        let rest = if version == FORMAT_VERSION_TRAILER {
+            let (trailer, rest) = postcard::take_from_bytes::<Trailer>(rest).map_err(malformed)?;
+            msg.session = trailer.session;
+            match trailer.record_sigs {
+                None => rest,
+                Some(sigs) => {
+                    if sigs.len() != msg.records.len() {
+                        return Err(SyncError::Malformed(format!(
+                            "{} record signatures for {} records",
+                            sigs.len(),
+                            msg.records.len()
+                        )));
+                    }
+                    for (rec, sig) in msg.records.iter_mut().zip(sigs) {
+                        rec.sig = sig;
+                    }
+                    let (sig, rest) = rest
+                        .split_first_chunk::<SIGNATURE_BYTES>()
+                        .ok_or_else(|| SyncError::Malformed("the sender's signature is cut short".into()))?;
+                    msg.signature = Some(Signature(*sig));
+                    rest
+                }
+            }
+        } else {
+            rest
+        };
         if !rest.is_empty() {
             return Err(SyncError::Malformed(format!("{} trailing bytes", rest.len())));
         }
@@ -159,6 +232,8 @@ pub(crate) struct PeerState {
     /// out again: a lost flag would otherwise leave "sync complete" false for good in a quiet
     /// team, where no later message reveals the loss.
     pub flag_confirmed: bool,
+    /// The peer's session as of its newest message.
+    pub session: u64,
 }
 
 impl PeerState {
