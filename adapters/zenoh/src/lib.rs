@@ -1,1 +1,20 @@
-pub fn x() {}
+//! The team link between robot processes (DESIGN.md §6 "Team link"): the team-state sync
+//! messages of `spomp-teamstate` carried between `spomp run` processes over Zenoh, with
+//! transport authentication, per-tier priorities and the team's key directory; and the state
+//! file a robot resumes from after a reboot.
+//!
+//! - [`link`]: a robot's Zenoh session ([`TeamLink`]): send per peer and tier, receive, who is
+//!   reachable now (liveliness), byte counts.
+//! - [`keys`]: the team's key directory (`spomp keys generate`): one Ed25519 signing key and one
+//!   transport password per robot, the team's public keys and password dictionary.
+//! - [`state_file`]: write a robot's state atomically (write, fsync, rename) and read it back,
+//!   refusing damaged files.
+
+pub mod keys;
+pub mod link;
+pub mod pump;
+pub mod state_file;
+
+pub use keys::{KeyDir, KeyDirError, RobotKeys};
+pub use link::{Credentials, LinkConfig, LinkError, LinkStats, TeamLink, TierCounts};
+pub use state_file::{StateFileError, read_state, write_state};

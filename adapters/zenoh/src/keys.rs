@@ -1,0 +1,294 @@
+//! The team's key directory, made by `spomp keys generate MISSION --out DIR`:
+//!
+//! | file | holds | who needs it |
+//! |---|---|---|
+//! | `team.json` | the team's name and every member's Ed25519 public key | every robot |
+//! | `<robot>.key.json` | that robot's Ed25519 secret key and transport password | that robot only |
+//! | `transport.passwords` | every member's `user:password` line (Zenoh's dictionary) | every robot |
+//!
+//! Secret files are written readable by their owner only. A robot loads `team.json`, its own
+//! key file and the dictionary; a key file of another robot or team is refused.
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use rand::RngCore;
+use serde::{Deserialize, Serialize};
+use spomp_core::RobotId;
+use spomp_teamstate::{TeamKeys, TeamSecurity};
+
+use crate::link::Credentials;
+
+const TEAM_FORMAT: &str = "spomp-team-keys/1";
+const ROBOT_FORMAT: &str = "spomp-robot-key/1";
+/// The team's public keys.
+pub const TEAM_FILE: &str = "team.json";
+/// Zenoh's user/password dictionary.
+pub const PASSWORDS_FILE: &str = "transport.passwords";
+/// Key files are a few hundred bytes; anything much larger is not one.
+const MAX_KEY_FILE_BYTES: u64 = 1 << 20;
+
+/// Why a key directory could not be made or read.
+#[derive(Debug, thiserror::Error)]
+pub enum KeyDirError {
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// A file is not what it should be.
+    #[error("{path}: {reason}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong and what was expected.
+        reason: String,
+    },
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TeamFile {
+    format: String,
+    team: String,
+    /// Robot id → public key (64 hex digits).
+    members: BTreeMap<String, String>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RobotFile {
+    format: String,
+    team: String,
+    robot: String,
+    /// Ed25519 secret key, 64 hex digits.
+    secret_key: String,
+    /// Transport password, hex.
+    password: String,
+}
+
+/// One robot's secrets.
+#[derive(Clone)]
+pub struct RobotKeys {
+    /// The robot.
+    pub robot: RobotId,
+    /// Its Ed25519 secret key.
+    pub secret_key: [u8; 32],
+    /// Its transport password.
+    pub password: String,
+}
+
+impl std::fmt::Debug for RobotKeys {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RobotKeys").field("robot", &self.robot).finish_non_exhaustive()
+    }
+}
+
+/// A loaded key directory: the team's public keys, and where its files are.
+#[derive(Clone, Debug)]
+pub struct KeyDir {
+    dir: PathBuf,
+    team: String,
+    members: BTreeMap<RobotId, [u8; 32]>,
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> KeyDirError + '_ {
+    move |source| KeyDirError::Io { path: path.to_path_buf(), source }
+}
+
+fn invalid(path: &Path, reason: impl Into<String>) -> KeyDirError {
+    KeyDirError::Invalid { path: path.to_path_buf(), reason: reason.into() }
+}
+
+fn read_small(path: &Path) -> Result<String, KeyDirError> {
+    let meta = fs::metadata(path).map_err(io(path))?;
+    if !meta.is_file() {
+        return Err(invalid(path, "not a regular file"));
+    }
+    if meta.len() > MAX_KEY_FILE_BYTES {
+        return Err(invalid(path, format!("{} bytes; a key file is at most {MAX_KEY_FILE_BYTES}", meta.len())));
+    }
+    fs::read_to_string(path).map_err(io(path))
+}
+
+fn key_from_hex(path: &Path, what: &str, text: &str) -> Result<[u8; 32], KeyDirError> {
+    let bytes = hex::decode(text).map_err(|e| invalid(path, format!("{what}: expected 64 hex digits ({e})")))?;
+    <[u8; 32]>::try_from(bytes.as_slice())
+        .map_err(|_| invalid(path, format!("{what}: expected 64 hex digits, found {}", text.len())))
+}
+
+/// Writes `text` to `path`, readable by the owner only when `secret`.
+fn write_file(path: &Path, text: &str, secret: bool) -> Result<(), KeyDirError> {
+    let mut options = fs::OpenOptions::new();
+    options.write(true).create_new(true);
+    #[cfg(unix)]
+    if secret {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.mode(0o600);
+    }
+    #[cfg(not(unix))]
+    let _ = secret;
+    let mut f = options.open(path).map_err(io(path))?;
+    f.write_all(text.as_bytes()).map_err(io(path))?;
+    f.sync_all().map_err(io(path))
+}
+
+fn is_identifier(s: &str) -> bool {
+    !s.is_empty() && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+}
+
+impl KeyDir {
+    /// Makes a key directory for `team` with one key pair and password per robot in `robots`.
+    /// `dir` must not hold keys already (nothing is overwritten).
+    pub fn generate(dir: &Path, team: &str, robots: &[RobotId]) -> Result<KeyDir, KeyDirError> {
+        for r in robots {
+            if !is_identifier(r.as_str()) {
+                return Err(invalid(dir, format!("robot id `{r}` is not an identifier ([A-Za-z0-9_-])")));
+            }
+        }
+        fs::create_dir_all(dir).map_err(io(dir))?;
+        let team_path = dir.join(TEAM_FILE);
+        if team_path.exists() {
+            return Err(invalid(&team_path, "already exists; keys are never overwritten (choose another --out)"));
+        }
+        let mut rng = rand::rng();
+        let mut members = BTreeMap::new();
+        let mut passwords = String::new();
+        for robot in robots {
+            let mut secret = [0u8; 32];
+            rng.fill_bytes(&mut secret);
+            let mut pw = [0u8; 24];
+            rng.fill_bytes(&mut pw);
+            let password = hex::encode(pw);
+            let file = RobotFile {
+                format: ROBOT_FORMAT.into(),
+                team: team.into(),
+                robot: robot.to_string(),
+                secret_key: hex::encode(secret),
+                password: password.clone(),
+            };
+            let text = serde_json::to_string_pretty(&file).map_err(|e| invalid(dir, e.to_string()))?;
+            write_file(&dir.join(format!("{robot}.key.json")), &(text + "\n"), true)?;
+            passwords.push_str(&format!("{robot}:{password}\n"));
+            members.insert(robot.clone(), TeamSecurity::public_key_of(&secret));
+        }
+        write_file(&dir.join(PASSWORDS_FILE), &passwords, true)?;
+        let file = TeamFile {
+            format: TEAM_FORMAT.into(),
+            team: team.into(),
+            members: members.iter().map(|(r, k)| (r.to_string(), hex::encode(k))).collect(),
+        };
+        let text = serde_json::to_string_pretty(&file).map_err(|e| invalid(dir, e.to_string()))?;
+        write_file(&team_path, &(text + "\n"), false)?;
+        Ok(KeyDir { dir: dir.to_path_buf(), team: team.into(), members })
+    }
+
+    /// Reads the team's public keys from `dir/team.json`.
+    pub fn load(dir: &Path) -> Result<KeyDir, KeyDirError> {
+        let path = dir.join(TEAM_FILE);
+        let text = read_small(&path)?;
+        let file: TeamFile = serde_json::from_str(&text).map_err(|e| {
+            invalid(&path, format!("{e}; expected {{\"format\": \"{TEAM_FORMAT}\", \"team\": NAME, \"members\": {{ROBOT: PUBLIC_KEY_HEX}}}}"))
+        })?;
+        if file.format != TEAM_FORMAT {
+            return Err(invalid(&path, format!("format `{}`, expected `{TEAM_FORMAT}`", file.format)));
+        }
+        let mut members = BTreeMap::new();
+        for (robot, key) in &file.members {
+            members.insert(RobotId::new(robot), key_from_hex(&path, &format!("public key of {robot}"), key)?);
+        }
+        Ok(KeyDir { dir: dir.to_path_buf(), team: file.team, members })
+    }
+
+    /// The team's name.
+    pub fn team(&self) -> &str {
+        &self.team
+    }
+
+    /// The members.
+    pub fn members(&self) -> impl Iterator<Item = &RobotId> {
+        self.members.keys()
+    }
+
+    /// The team's public keys, for checking signatures.
+    pub fn team_keys(&self) -> Result<TeamKeys, KeyDirError> {
+        let mut keys = TeamKeys::new(self.team.clone());
+        for (robot, key) in &self.members {
+            keys.add(robot.clone(), key)
+                .map_err(|e| invalid(&self.dir.join(TEAM_FILE), format!("public key of {robot}: {e}")))?;
+        }
+        Ok(keys)
+    }
+
+    /// Reads `robot`'s secrets from `dir/<robot>.key.json`.
+    pub fn robot_keys(&self, robot: &RobotId) -> Result<RobotKeys, KeyDirError> {
+        let path = self.dir.join(format!("{}.key.json", robot));
+        let text = read_small(&path)?;
+        let file: RobotFile = serde_json::from_str(&text).map_err(|e| invalid(&path, e.to_string()))?;
+        if file.format != ROBOT_FORMAT {
+            return Err(invalid(&path, format!("format `{}`, expected `{ROBOT_FORMAT}`", file.format)));
+        }
+        if file.robot != robot.as_str() || file.team != self.team {
+            return Err(invalid(
+                &path,
+                format!("the key of robot `{}` of team `{}`, not of `{robot}` of `{}`", file.robot, file.team, self.team),
+            ));
+        }
+        let secret_key = key_from_hex(&path, "secret_key", &file.secret_key)?;
+        Ok(RobotKeys { robot: robot.clone(), secret_key, password: file.password })
+    }
+
+    /// What `robot` signs and checks with: its secret key and the team's public keys.
+    pub fn security(&self, robot: &RobotId) -> Result<TeamSecurity, KeyDirError> {
+        let keys = self.robot_keys(robot)?;
+        TeamSecurity::new(robot.clone(), &keys.secret_key, Arc::new(self.team_keys()?))
+            .map_err(|e| invalid(&self.dir.join(format!("{robot}.key.json")), e.to_string()))
+    }
+
+    /// `robot`'s transport credentials (its password and the team's dictionary).
+    pub fn credentials(&self, robot: &RobotId) -> Result<Credentials, KeyDirError> {
+        let keys = self.robot_keys(robot)?;
+        let dictionary_file = self.dir.join(PASSWORDS_FILE);
+        read_small(&dictionary_file)?;
+        Ok(Credentials { user: robot.to_string(), password: keys.password, dictionary_file })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_generated_directory_loads_and_each_robot_signs_for_itself_only() {
+        let dir = std::env::temp_dir().join(format!("spomp-keys-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        let robots = [RobotId::new("ugv1"), RobotId::new("uav1")];
+        KeyDir::generate(&dir, "city", &robots).unwrap();
+        assert!(KeyDir::generate(&dir, "city", &robots).is_err(), "never overwrites");
+        let keys = KeyDir::load(&dir).unwrap();
+        assert_eq!(keys.members().count(), 2);
+        let sec = keys.security(&RobotId::new("ugv1")).unwrap();
+        assert_eq!(sec.robot().as_str(), "ugv1");
+        assert!(keys.credentials(&RobotId::new("uav1")).unwrap().password.len() >= 32);
+        // ugv1's file presented as uav1's.
+        fs::copy(dir.join("ugv1.key.json"), dir.join("uav2.key.json")).unwrap();
+        let err = keys.robot_keys(&RobotId::new("uav2")).unwrap_err().to_string();
+        assert!(err.contains("not of `uav2`"), "{err}");
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = fs::metadata(dir.join("ugv1.key.json")).unwrap().permissions().mode();
+            assert_eq!(mode & 0o077, 0, "secret key readable by others: {mode:o}");
+        }
+        fs::write(dir.join(TEAM_FILE), "{\"format\": 1}").unwrap();
+        let err = KeyDir::load(&dir).unwrap_err().to_string();
+        assert!(err.contains("team.json") && err.contains("expected"), "{err}");
+        let _ = fs::remove_dir_all(&dir);
+    }
+}

@@ -1,0 +1,370 @@
+//! A robot's end of the team link: one Zenoh peer session, one key expression per directed link
+//! and tier, liveliness tokens for who is reachable now.
+//!
+//! Key expressions (the team's name and robot ids reduced to `[A-Za-z0-9_-]`):
+//! - `spomp/<team>/team/<to>/<from>/<tier>` carries `from`'s sync messages to `to`; the tier
+//!   (`coordination`, `scans`, `maps`) picks the Zenoh priority, so a map blob never holds up a
+//!   claim on a congested link;
+//! - `spomp/<team>/alive/<robot>` is each robot's liveliness token.
+//!
+//! Nothing here blocks its caller: sends go through a bounded queue to a sender thread (a full
+//! queue drops the message, which the sync protocol resends once acknowledgements show the
+//! gap), and received messages wait in a bounded inbox until [`TeamLink::receive`] takes them.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+
+use serde::Serialize;
+use spomp_core::RobotId;
+use spomp_teamstate::Tier;
+use zenoh::Wait;
+use zenoh::sample::SampleKind;
+
+/// Transport authentication: this robot's user name and password, and the team's dictionary of
+/// every member's (Zenoh's user/password authentication: a challenge and an HMAC, so the password
+/// never crosses the link).
+#[derive(Clone, Debug)]
+pub struct Credentials {
+    /// This robot's user name.
+    pub user: String,
+    /// This robot's password.
+    pub password: String,
+    /// A file of `user:password` lines, one per member: whom this robot accepts.
+    pub dictionary_file: std::path::PathBuf,
+}
+
+/// How a robot joins the team link.
+#[derive(Clone, Debug)]
+pub struct LinkConfig {
+    /// The team's name (the mission's): robots of other teams on the same network never meet.
+    pub team: String,
+    /// This robot.
+    pub robot: RobotId,
+    /// Zenoh endpoints this robot listens on, e.g. `tcp/127.0.0.1:7501`.
+    pub listen: Vec<String>,
+    /// Zenoh endpoints of peers this robot connects to.
+    pub connect: Vec<String>,
+    /// Find peers by UDP multicast scouting too (off unless asked: multicast on a real network
+    /// reaches everything on it).
+    pub multicast_scouting: bool,
+    /// Transport authentication; None admits any peer (signatures still guard the state).
+    pub credentials: Option<Credentials>,
+    /// Largest message accepted from a peer, bytes (larger ones are dropped and counted).
+    pub max_message_bytes: usize,
+    /// Messages kept waiting, each way, before new ones are dropped (and counted).
+    pub queue_messages: usize,
+}
+
+impl LinkConfig {
+    /// A config for `robot` of `team` with the defaults: no endpoints, no scouting, no
+    /// authentication, 16 MiB messages, 256 queued messages.
+    pub fn new(team: &str, robot: RobotId) -> Self {
+        LinkConfig {
+            team: team.to_string(),
+            robot,
+            listen: Vec::new(),
+            connect: Vec::new(),
+            multicast_scouting: false,
+            credentials: None,
+            max_message_bytes: 16 * 1024 * 1024,
+            queue_messages: 256,
+        }
+    }
+}
+
+/// Why the link could not be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// Zenoh refused the configuration or could not open the session.
+    #[error("team link: {0}")]
+    Zenoh(String),
+    /// A bad setting.
+    #[error("team link: {0}")]
+    Config(String),
+}
+
+fn zenoh_err(e: impl std::fmt::Display) -> LinkError {
+    LinkError::Zenoh(e.to_string())
+}
+
+/// Counts of one directed link and tier.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct TierCounts {
+    /// Messages handed to Zenoh.
+    pub messages: u64,
+    /// Their bytes.
+    pub bytes: u64,
+    /// Messages dropped because the send queue was full.
+    pub dropped: u64,
+}
+
+/// What crossed the link so far.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct LinkStats {
+    /// Sent, per peer and tier (`coordination`, `scans`, `maps`).
+    pub sent: BTreeMap<String, BTreeMap<&'static str, TierCounts>>,
+    /// Received messages and bytes per sender.
+    pub received: BTreeMap<String, TierCounts>,
+    /// Received messages dropped: the inbox was full, or a message was over the size limit.
+    pub received_dropped: u64,
+}
+
+/// The name of a tier in key expressions and statistics.
+pub fn tier_name(tier: Tier) -> &'static str {
+    match tier {
+        Tier::Coordination => "coordination",
+        Tier::Scans => "scans",
+        Tier::Maps => "maps",
+    }
+}
+
+/// `s` reduced to what a key-expression chunk may hold here: `[A-Za-z0-9_-]`, never empty.
+pub fn key_chunk(s: &str) -> String {
+    let out: String = s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
+    if out.is_empty() { "_".into() } else { out }
+}
+
+struct Outgoing {
+    key: String,
+    peer: String,
+    tier: Tier,
+    bytes: Vec<u8>,
+}
+
+#[derive(Default)]
+struct Inbox {
+    messages: VecDeque<(RobotId, Vec<u8>)>,
+}
+
+/// A robot's end of the team link (see the module doc).
+pub struct TeamLink {
+    robot: RobotId,
+    team_key: String,
+    session: zenoh::Session,
+    inbox: Arc<Mutex<Inbox>>,
+    alive: Arc<Mutex<BTreeSet<RobotId>>>,
+    stats: Arc<Mutex<LinkStats>>,
+    outbox: Option<SyncSender<Outgoing>>,
+    sender: Option<JoinHandle<()>>,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+    _alive_subscriber: zenoh::pubsub::Subscriber<()>,
+    _token: zenoh::liveliness::LivelinessToken,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    // A panic while holding one of these locks leaves plain counters and queues behind, still
+    // consistent enough to use.
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+impl TeamLink {
+    /// Opens the link: a Zenoh peer session with the config's endpoints, this robot's
+    /// liveliness token, and the subscriptions to its messages and to the team's liveliness.
+    pub fn open(config: &LinkConfig) -> Result<TeamLink, LinkError> {
+        let team_key = key_chunk(&config.team);
+        let me = key_chunk(config.robot.as_str());
+        let zconfig = zenoh_config(config, &team_key)?;
+        let session = zenoh::open(zconfig).wait().map_err(zenoh_err)?;
+
+        let inbox = Arc::new(Mutex::new(Inbox::default()));
+        let stats = Arc::new(Mutex::new(LinkStats::default()));
+        let subscriber = {
+            let (inbox, stats) = (inbox.clone(), stats.clone());
+            let (limit, queue) = (config.max_message_bytes, config.queue_messages);
+            session
+                .declare_subscriber(format!("spomp/{team_key}/team/{me}/*/*"))
+                .callback(move |sample| {
+                    // …/team/<to>/<from>/<tier>: the sender is the second-last chunk.
+                    let key = sample.key_expr().as_str();
+                    let from = key.rsplit('/').nth(1).unwrap_or("").to_string();
+                    let bytes = sample.payload().to_bytes().into_owned();
+                    let mut stats = lock(&stats);
+                    let mut inbox = lock(&inbox);
+                    if bytes.len() > limit || inbox.messages.len() >= queue {
+                        stats.received_dropped += 1;
+                        return;
+                    }
+                    let counts = stats.received.entry(from.clone()).or_default();
+                    counts.messages += 1;
+                    counts.bytes += bytes.len() as u64;
+                    inbox.messages.push_back((RobotId::new(&from), bytes));
+                })
+                .wait()
+                .map_err(zenoh_err)?
+        };
+        let alive = Arc::new(Mutex::new(BTreeSet::new()));
+        let alive_subscriber = {
+            let alive = alive.clone();
+            session
+                .liveliness()
+                .declare_subscriber(format!("spomp/{team_key}/alive/*"))
+                .history(true)
+                .callback(move |sample| {
+                    let Some(robot) = sample.key_expr().as_str().rsplit('/').next().map(RobotId::new) else { return };
+                    let mut alive = lock(&alive);
+                    match sample.kind() {
+                        SampleKind::Put => alive.insert(robot),
+                        SampleKind::Delete => alive.remove(&robot),
+                    };
+                })
+                .wait()
+                .map_err(zenoh_err)?
+        };
+        let token = session.liveliness().declare_token(format!("spomp/{team_key}/alive/{me}")).wait().map_err(zenoh_err)?;
+
+        let (outbox, queue) = sync_channel::<Outgoing>(config.queue_messages.max(1));
+        let sender = {
+            let (session, stats) = (session.clone(), stats.clone());
+            std::thread::Builder::new()
+                .name(format!("team-link-{me}"))
+                .spawn(move || send_loop(&session, &queue, &stats))
+                .map_err(|e| LinkError::Config(format!("starting the sender thread: {e}")))?
+        };
+        Ok(TeamLink {
+            robot: config.robot.clone(),
+            team_key,
+            session,
+            inbox,
+            alive,
+            stats,
+            outbox: Some(outbox),
+            sender: Some(sender),
+            _subscriber: subscriber,
+            _alive_subscriber: alive_subscriber,
+            _token: token,
+        })
+    }
+
+    /// This robot.
+    pub fn robot(&self) -> &RobotId {
+        &self.robot
+    }
+
+    /// Queues a sync message for `to` at `tier`'s priority; false if the queue was full and the
+    /// message was dropped (counted). Never blocks.
+    pub fn send(&self, to: &RobotId, tier: Tier, bytes: Vec<u8>) -> bool {
+        let peer = key_chunk(to.as_str());
+        let key = format!(
+            "spomp/{}/team/{peer}/{}/{}",
+            self.team_key,
+            key_chunk(self.robot.as_str()),
+            tier_name(tier)
+        );
+        let Some(outbox) = &self.outbox else { return false };
+        match outbox.try_send(Outgoing { key, peer: to.to_string(), tier, bytes }) {
+            Ok(()) => true,
+            Err(TrySendError::Full(m) | TrySendError::Disconnected(m)) => {
+                lock(&self.stats).sent.entry(m.peer).or_default().entry(tier_name(tier)).or_default().dropped += 1;
+                false
+            }
+        }
+    }
+
+    /// The messages received since the last call, oldest first, with the sender each key
+    /// expression named (which the receiver's signature check must confirm).
+    pub fn receive(&self) -> Vec<(RobotId, Vec<u8>)> {
+        lock(&self.inbox).messages.drain(..).collect()
+    }
+
+    /// The robots whose liveliness token is visible now (this one included once its own
+    /// token is seen).
+    pub fn reachable(&self) -> BTreeSet<RobotId> {
+        lock(&self.alive).clone()
+    }
+
+    /// What crossed the link so far.
+    pub fn stats(&self) -> LinkStats {
+        lock(&self.stats).clone()
+    }
+
+    /// Closes the session (peers see this robot's token go); waits for queued sends.
+    pub fn close(mut self) {
+        self.shutdown();
+    }
+
+    fn shutdown(&mut self) {
+        self.outbox = None;
+        if let Some(sender) = self.sender.take() {
+            let _ = sender.join();
+        }
+        let _ = self.session.close().wait();
+    }
+}
+
+impl Drop for TeamLink {
+    fn drop(&mut self) {
+        self.shutdown();
+    }
+}
+
+fn send_loop(session: &zenoh::Session, queue: &Receiver<Outgoing>, stats: &Mutex<LinkStats>) {
+    let mut publishers: HashMap<String, zenoh::pubsub::Publisher<'static>> = HashMap::new();
+    while let Ok(msg) = queue.recv() {
+        if !publishers.contains_key(&msg.key) {
+            // The tier's priority and congestion control come from the session's QoS rules.
+            match session.declare_publisher(msg.key.clone()).wait() {
+                Ok(p) => {
+                    publishers.insert(msg.key.clone(), p);
+                }
+                Err(_) => continue,
+            }
+        }
+        let Some(publisher) = publishers.get(&msg.key) else { continue };
+        let len = msg.bytes.len() as u64;
+        let sent = publisher.put(msg.bytes).wait().is_ok();
+        let mut stats = lock(stats);
+        let counts = stats.sent.entry(msg.peer).or_default().entry(tier_name(msg.tier)).or_default();
+        if sent {
+            counts.messages += 1;
+            counts.bytes += len;
+        } else {
+            counts.dropped += 1;
+        }
+    }
+}
+
+fn json_list(items: &[String]) -> Result<String, LinkError> {
+    serde_json::to_string(items).map_err(|e| LinkError::Config(e.to_string()))
+}
+
+/// The Zenoh configuration of a robot's session.
+fn zenoh_config(config: &LinkConfig, team_key: &str) -> Result<zenoh::Config, LinkError> {
+    let mut z = zenoh::Config::default();
+    let mut set = |key: &str, value: String| {
+        z.insert_json5(key, &value).map_err(|e| LinkError::Config(format!("{key} = {value}: {e}")))
+    };
+    set("mode", "\"peer\"".into())?;
+    for endpoint in config.listen.iter().chain(&config.connect) {
+        if !endpoint.starts_with("tcp/") {
+            return Err(LinkError::Config(format!("endpoint `{endpoint}`: only tcp/HOST:PORT endpoints are built in")));
+        }
+    }
+    set("listen/endpoints", json_list(&config.listen)?)?;
+    set("connect/endpoints", json_list(&config.connect)?)?;
+    set("scouting/multicast/enabled", config.multicast_scouting.to_string())?;
+    // Gossip tells peers of peers, so a robot reaches teammates its config does not name.
+    set("scouting/gossip/enabled", "true".into())?;
+    // Coordination first, maps last; a congested link drops rather than blocks (the sync
+    // protocol resends what was not acknowledged).
+    let qos = format!(
+        r#"[
+            {{ key_exprs: ["spomp/{t}/team/*/*/coordination"], config: {{ priority: "interactive_high", congestion_control: "drop", express: true }} }},
+            {{ key_exprs: ["spomp/{t}/team/*/*/scans"], config: {{ priority: "data", congestion_control: "drop" }} }},
+            {{ key_exprs: ["spomp/{t}/team/*/*/maps"], config: {{ priority: "background", congestion_control: "drop" }} }}
+        ]"#,
+        t = team_key
+    );
+    set("qos/publication", qos)?;
+    if let Some(c) = &config.credentials {
+        let user = serde_json::to_string(&c.user).map_err(|e| LinkError::Config(e.to_string()))?;
+        let password = serde_json::to_string(&c.password).map_err(|e| LinkError::Config(e.to_string()))?;
+        let dict = serde_json::to_string(&c.dictionary_file.display().to_string())
+            .map_err(|e| LinkError::Config(e.to_string()))?;
+        set("transport/auth/usrpwd/user", user)?;
+        set("transport/auth/usrpwd/password", password)?;
+        set("transport/auth/usrpwd/dictionary_file", dict)?;
+    }
+    Ok(z)
+}
