@@ -21,6 +21,20 @@ struct Cli {
     command: Command,
 }
 
+/// `spomp keys` subcommands.
+#[derive(Subcommand, Debug)]
+enum KeysCommand {
+    /// One Ed25519 key pair and transport password per robot of the mission, the team's public
+    /// keys and password dictionary, in a new folder (see docs/robots.md, "Team link").
+    Generate {
+        /// Mission file.
+        mission: PathBuf,
+        /// The folder to write (must not hold keys already).
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Check mission files: parse → schema → wiring → team. Exit 0 only when all are valid.
@@ -54,6 +68,11 @@ enum Command {
     /// Run one robot of a mission over ROS 2: on a real robot, or driving a robot of
     /// `spomp sim --ros2`.
     Run(run_cmd::RunArgs),
+    /// Make the team's keys: `spomp keys generate MISSION --out DIR`.
+    Keys {
+        #[command(subcommand)]
+        action: KeysCommand,
+    },
     /// Replay one robot of a log: a fresh robot fed the recorded inputs, its commands, node
     /// transitions and team messages compared with the recorded ones (exit 0 identical, 1 at the
     /// first divergence, 2 when the log cannot be replayed).
@@ -306,6 +325,9 @@ where
         Command::Log { action: LogCommand::Recover { log, out, json } } => log_cmd::recover(&log, &out, json),
         Command::Sim(args) => sim_cmd::sim(&args, registry),
         Command::Run(args) => run_cmd::run(&args, registry),
+        Command::Keys { action: KeysCommand::Generate { mission, out } } => {
+            crate::team_link::generate(&mission, &out, registry)
+        }
         Command::Replay(args) => replay_cmd::replay(&args, registry),
         Command::Schema => commands::schema(registry),
         Command::Nodes { json, markdown, name } => commands::nodes(json, markdown, name.as_deref(), registry),

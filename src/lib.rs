@@ -34,6 +34,7 @@ mod replay_cmd;
 mod run_cmd;
 mod sim_cmd;
 mod sim_plots;
+mod team_link;
 mod terrain_cmd;
 mod world_cmd;
 

@@ -64,6 +64,9 @@ pub struct RunArgs {
     /// (repeatable).
     #[arg(long = "allow-dir", value_name = "DIR")]
     pub allow_dirs: Vec<PathBuf>,
+    /// The team link between robot processes, the team's keys, the state file.
+    #[command(flatten)]
+    pub team_link: crate::team_link::TeamLinkArgs,
 }
 
 /// Runs `spomp run`.
@@ -116,10 +119,21 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         ),
         None => None,
     };
-    let robot =
+    let mut robot =
         Robot::from_setup(&loaded, setup, registry).with_context(|| format!("setting up robot `{}`", args.robot))?;
+    let link = crate::team_link::set_up(&args.team_link, mission, &args.robot, &mut robot)?;
     let peers: Vec<RobotId> = mission.team.iter().filter(|r| r.id != args.robot).map(|r| RobotId::new(&r.id)).collect();
     let mut node = RobotNode::new(robot, settings.clone(), peers).context("starting the ROS 2 node")?;
+    let link = match link {
+        Some((link, notes)) => {
+            for n in notes {
+                eprintln!("{n}");
+            }
+            Some(link)
+        }
+        None => None,
+    };
+    crate::team_link::plug(&mut node, link, &args.team_link, &args.robot);
 
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {

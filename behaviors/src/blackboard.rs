@@ -139,6 +139,24 @@ impl BbValue {
         }
     }
 
+    /// The value as a JSON literal [`BbValue::from_json`] reads back; None for a goal (goals
+    /// are never written literally).
+    pub fn to_json(&self) -> Option<serde_json::Value> {
+        use serde_json::json;
+        Some(match self {
+            BbValue::Bool(b) => json!(b),
+            BbValue::Int(i) => json!(i),
+            BbValue::Float(f) => json!(f),
+            BbValue::Str(s) => json!(s.as_ref()),
+            BbValue::Point(p) => serde_json::to_value(p).ok()?,
+            BbValue::Pose(p) => serde_json::to_value(p).ok()?,
+            BbValue::Goal(_) => return None,
+            BbValue::Robot(r) => json!(r.as_str()),
+            BbValue::Points(p) => serde_json::to_value(p.as_ref()).ok()?,
+            BbValue::Params(v) => (**v).clone(),
+        })
+    }
+
     /// A value of type `ty` from a JSON literal, or why not.
     pub fn from_json(ty: PortType, v: &serde_json::Value) -> Result<BbValue, String> {
         fn expected(what: &str, v: &serde_json::Value) -> String {

@@ -25,7 +25,7 @@ pub mod setup;
 
 pub use checks::MissionRobotChecks;
 pub use nodes::registry;
-pub use robot::{Robot, RobotError};
+pub use robot::{ResumeError, Robot, RobotError};
 pub use runtime::RobotRuntime;
 pub use settings::{NavigationProfile, NavigationSettings, SettingsError, WatchdogParams};
 pub use setup::{OperatingArea, PoseInput, RobotSetup, SetupError, robot_seed};

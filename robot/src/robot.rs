@@ -22,7 +22,10 @@ use spomp_core::{
     FlightCommand, MapTile, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, RobotKind, Time,
     Twist2,
 };
-use spomp_teamstate::{TeamState, TierSet};
+use std::collections::BTreeMap;
+
+use spomp_behaviors::blackboard::BbValue;
+use spomp_teamstate::{ApplyReport, RestoreSummary, SyncError, TeamSecurity, TeamState, TeamStateError, TierSet};
 
 use crate::runtime::{FinishedWork, NavStack, RobotRuntime, RuntimeError, SkillWork};
 use crate::setup::{OperatingArea, PoseInput, RobotSetup, SetupError};
@@ -56,6 +59,22 @@ pub struct Robot {
     tree: TreeExecutor<RobotRuntime>,
     pose_input: PoseInput,
     tick_hz: f64,
+    /// Blackboard entries kept across reboots (the role's `persist`).
+    persist: Vec<String>,
+}
+
+/// Why a robot's saved state was not taken. Nothing of it was.
+#[derive(Debug, thiserror::Error)]
+pub enum ResumeError {
+    /// The bytes are not a robot state.
+    #[error("not a robot state: {0}")]
+    Malformed(String),
+    /// The team state in it was refused.
+    #[error(transparent)]
+    Team(#[from] spomp_teamstate::SnapshotError),
+    /// A kept blackboard entry does not fit the tree.
+    #[error("kept entry `{0}`: {1}")]
+    Entry(String, String),
 }
 
 impl Robot {
@@ -97,7 +116,7 @@ impl Robot {
         let build = BuildOptions { base_dir: Some(loaded.base_dir()) };
         let tree = build_executor(role, registry, &robot_id, start, build)?;
         let tick_hz = if setup.tick_hz.is_finite() && setup.tick_hz > 0.0 { setup.tick_hz } else { 10.0 };
-        Ok(Robot { runtime, tree, pose_input: setup.pose_input, tick_hz })
+        Ok(Robot { runtime, tree, pose_input: setup.pose_input, tick_hz, persist: role.persist.clone() })
     }
 
     // --- identity -------------------------------------------------------------------------------
@@ -145,11 +164,72 @@ impl Robot {
     }
 
     /// A team-state sync message from peer `from`, as bytes off the link. A message that does
-    /// not decode or check is rejected whole, reported, and changes nothing.
-    pub fn on_team_message(&mut self, from: &RobotId, bytes: &[u8]) {
-        if let Err(e) = self.runtime.team_mut().apply_bytes(from, bytes) {
+    /// not decode or check is rejected whole, reported, and changes nothing; the error says why.
+    pub fn on_team_message(&mut self, from: &RobotId, bytes: &[u8]) -> Result<ApplyReport, SyncError> {
+        let result = self.runtime.team_mut().apply_bytes(from, bytes);
+        if let Err(e) = &result {
             self.runtime.report(format!("sync from {from} rejected: {e}"));
         }
+        result
+    }
+
+    // --- the team link on robots ------------------------------------------------------------------
+
+    /// Signs this robot's team-state records and messages and checks its peers' (a secured
+    /// team; see `spomp_teamstate::auth`).
+    pub fn secure_team(&mut self, security: Arc<TeamSecurity>) -> Result<(), TeamStateError> {
+        self.runtime.team_mut().set_security(security)
+    }
+
+    /// Which boot of this robot this is (larger at every boot): peers forget what they knew of
+    /// its earlier messages.
+    pub fn set_team_session(&mut self, session: u64) {
+        self.runtime.team_mut().set_session(session);
+    }
+
+    /// What a reboot resumes from: the team state and the role's kept blackboard entries.
+    pub fn resume_state(&self) -> Vec<u8> {
+        let bb = self.tree.blackboard();
+        let entries: BTreeMap<&str, serde_json::Value> =
+            self.persist.iter().filter_map(|name| Some((name.as_str(), bb.get_by_name(name)?.to_json()?))).collect();
+        let entries = serde_json::to_vec(&entries).unwrap_or_else(|_| b"{}".to_vec());
+        let mut out = Vec::with_capacity(entries.len() + 1024);
+        out.extend_from_slice(&(entries.len() as u32).to_le_bytes());
+        out.extend_from_slice(&entries);
+        out.extend_from_slice(&self.runtime.team().snapshot());
+        out
+    }
+
+    /// Takes a state made by [`Robot::resume_state`] before a reboot: its team state (checked
+    /// as a peer's would be) and kept entries. Call it before the first tick, after
+    /// [`Robot::secure_team`]. Refused whole if any part does not check.
+    pub fn resume(&mut self, bytes: &[u8]) -> Result<RestoreSummary, ResumeError> {
+        let (len, rest) = bytes.split_first_chunk::<4>().ok_or_else(|| ResumeError::Malformed("cut short".into()))?;
+        let (entries, team) = rest
+            .split_at_checked(u32::from_le_bytes(*len) as usize)
+            .ok_or_else(|| ResumeError::Malformed("cut short".into()))?;
+        let entries: BTreeMap<String, serde_json::Value> =
+            serde_json::from_slice(entries).map_err(|e| ResumeError::Malformed(e.to_string()))?;
+        let mut values = Vec::new();
+        for (name, json) in &entries {
+            if !self.persist.contains(name) {
+                return Err(ResumeError::Entry(name.clone(), "the role does not keep it (`persist`)".into()));
+            }
+            let ty = self
+                .tree
+                .blackboard()
+                .get_by_name(name)
+                .map(|v| v.port_type())
+                .ok_or_else(|| ResumeError::Entry(name.clone(), "not on the blackboard".into()))?;
+            values.push((name.clone(), BbValue::from_json(ty, json).map_err(|e| ResumeError::Entry(name.clone(), e))?));
+        }
+        let mut team_state = self.runtime.team().clone();
+        let summary = team_state.restore(team)?;
+        *self.runtime.team_mut() = team_state;
+        for (name, value) in values {
+            self.tree.blackboard_mut().set_by_name(&name, value);
+        }
+        Ok(summary)
     }
 
     // --- stepping ---------------------------------------------------------------------------------

@@ -20,6 +20,7 @@ pub mod farm;
 pub mod pairing;
 pub mod run;
 pub mod settings;
+pub mod team;
 pub mod topics;
 pub mod workers;
 
@@ -29,4 +30,5 @@ pub use farm::FarmLink;
 
 pub use run::{RobotNode, RunObserver, RunReport};
 pub use settings::{RunSettings, SettingsError};
+pub use team::{StateSink, TeamChannel};
 pub use topics::TopicNames;

@@ -32,6 +32,7 @@ use crate::convert;
 use crate::dds::{DdsError, DdsNode, latched_qos, sensor_qos, state_qos};
 use crate::pairing::{OdometryHistory, PanoramaPairer};
 use crate::settings::RunSettings;
+use crate::team::{StateSink, TeamChannel};
 use crate::topics::{CLOCK_TOPIC, ROSOUT_TOPIC, TF_TOPIC};
 use crate::workers::{SkillWorkers, WorkOutcome};
 
@@ -136,6 +137,13 @@ pub struct RunReport {
     pub safety_stops: u64,
     /// Final status of the tree.
     pub tree_status: String,
+    /// Team-state messages refused (unsigned, forged, from non-members, malformed), by the
+    /// sender the transport named.
+    pub team_rejected: std::collections::BTreeMap<String, u64>,
+    /// The team link's figures (bytes per link and tier), when one is plugged in.
+    pub team_link: Option<serde_json::Value>,
+    /// Resume states written.
+    pub states_saved: u64,
 }
 
 /// Inputs received, by kind.
@@ -198,6 +206,10 @@ pub struct RobotNode {
     workers: SkillWorkers,
     settings: RunSettings,
     peers: Vec<RobotId>,
+    /// The team link, when messages go between processes rather than over ROS 2 topics.
+    team_channel: Option<Box<dyn TeamChannel>>,
+    /// Where the resume state goes, and how often (seconds).
+    state_sink: Option<(StateSink, f64)>,
     // Entities before the node: they are dropped first.
     inputs: Inputs,
     outputs: Outputs,
@@ -244,7 +256,17 @@ impl RobotNode {
             team_out: node.publisher(t.get("team/out"), &state_qos(64))?,
             status: node.publisher(&settings.topics.status(), &latched_qos(1))?,
         };
-        Ok(RobotNode { robot, workers, settings, peers, inputs, outputs, _node: node })
+        Ok(RobotNode {
+            robot,
+            workers,
+            settings,
+            peers,
+            inputs,
+            outputs,
+            team_channel: None,
+            state_sink: None,
+            _node: node,
+        })
     }
 
     /// The robot.
@@ -252,11 +274,30 @@ impl RobotNode {
         &self.robot
     }
 
+    /// Sends and receives team-state messages over `channel` instead of the ROS 2 topics.
+    pub fn set_team_channel(&mut self, channel: Box<dyn TeamChannel>) {
+        self.team_channel = Some(channel);
+    }
+
+    /// Hands the robot's resume state ([`Robot::resume_state`]) to `sink` every `period_s` of
+    /// robot time and once at shutdown.
+    pub fn set_state_sink(&mut self, sink: StateSink, period_s: f64) {
+        self.state_sink = Some((sink, period_s.max(0.1)));
+    }
+
+    fn save_state(&mut self, state: &mut LoopState) {
+        if let Some((sink, _)) = self.state_sink.as_mut() {
+            sink(self.robot.resume_state());
+            state.report.states_saved += 1;
+        }
+    }
+
     /// Runs until `stop` is set (SIGINT/SIGTERM) or, when given, until robot time `until_s`;
     /// publishes a safety stop before returning.
     pub fn run(&mut self, stop: &AtomicBool, until_s: Option<f64>, observer: &mut dyn RunObserver) -> RunReport {
         let mut state = LoopState::new(&self.settings, self.robot.tick_hz());
         state.flies = self.robot.kind() == RobotKind::Uav;
+        state.sensorless = self.robot.kind() == RobotKind::Basestation;
         let started = Instant::now();
         let id = self.robot.id().clone();
         let mut transitions = Recorder::default();
@@ -315,6 +356,12 @@ impl RobotNode {
                 state.next_team = Time::from_nanos(now.nanos + Time::from_secs_f64(self.settings.team_period_s).nanos);
                 self.send_team(now, observer);
             }
+            if let Some((_, period)) = self.state_sink.as_ref()
+                && now >= state.next_save
+            {
+                state.next_save = Time::from_nanos(now.nanos + Time::from_secs_f64(*period).nanos);
+                self.save_state(&mut state);
+            }
             if now >= state.next_status {
                 state.next_status = Time::from_nanos(now.nanos + Time::from_secs_f64(STATUS_PERIOD_S).nanos);
                 self.publish_status(&mut state, now, stop_reason, started.elapsed());
@@ -330,7 +377,10 @@ impl RobotNode {
             self.publish_command(&mut state, now, StopReason::EStop, observer);
             state.report.robot_time_s = now.as_secs_f64();
         }
-        state.snapshot(&self.robot, started.elapsed())
+        self.save_state(&mut state);
+        let mut report = state.snapshot(&self.robot, started.elapsed());
+        report.team_link = self.team_channel.as_ref().map(|c| c.stats());
+        report
     }
 
     /// Hands finished skill work back to the robot (publishing a new scan), then the work the
@@ -488,7 +538,20 @@ impl RobotNode {
             let now = state.now().unwrap_or(Time::ZERO);
             let from = RobotId::new(&from);
             observer.on_seam(self.robot.id(), now, SeamInput::TeamIn { from: &from, bytes: &msg.data });
-            self.robot.on_team_message(&from, &msg.data);
+            if self.robot.on_team_message(&from, &msg.data).is_err() {
+                *state.report.team_rejected.entry(from.to_string()).or_default() += 1;
+            }
+        }
+        if let Some(channel) = self.team_channel.as_mut() {
+            for (from, bytes) in channel.receive() {
+                got = true;
+                state.report.received.team += 1;
+                let now = state.now().unwrap_or(Time::ZERO);
+                observer.on_seam(self.robot.id(), now, SeamInput::TeamIn { from: &from, bytes: &bytes });
+                if self.robot.on_team_message(&from, &bytes).is_err() {
+                    *state.report.team_rejected.entry(from.to_string()).or_default() += 1;
+                }
+            }
         }
         got
     }
@@ -612,6 +675,25 @@ impl RobotNode {
     }
 
     fn send_team(&mut self, now: Time, observer: &mut dyn RunObserver) {
+        if let Some(channel) = self.team_channel.as_mut() {
+            // One message per tier, highest first, within the link's budget for the period;
+            // only to peers the link reaches now.
+            let reachable = channel.reachable();
+            for peer in self.peers.iter().filter(|p| reachable.contains(*p)) {
+                let mut left = self.settings.team_budget_bytes;
+                for tier in crate::team::TIERS {
+                    let tiers = TierSet::only(tier);
+                    let sent = self.robot.team_message_for(peer, tiers, left);
+                    let call = SeamInput::TeamOut { to: peer, tiers, budget_bytes: left, sent: sent.as_deref() };
+                    observer.on_seam(self.robot.id(), now, call);
+                    if let Some(bytes) = sent {
+                        left = left.saturating_sub(bytes.len());
+                        channel.send(peer, tier, bytes);
+                    }
+                }
+            }
+            return;
+        }
         for peer in &self.peers {
             let budget_bytes = self.settings.team_budget_bytes;
             let sent = self.robot.team_message_for(peer, TierSet::ALL, budget_bytes);
@@ -725,6 +807,7 @@ struct LoopState {
     period: Time,
     next_tick: Time,
     next_team: Time,
+    next_save: Time,
     next_status: Time,
     status: spomp_behaviors::Status,
     history: OdometryHistory,
@@ -746,6 +829,8 @@ struct LoopState {
     position_rx: Option<Time>,
     /// A UAV: it needs a fresh position, not odometry and panoramas.
     flies: bool,
+    /// A basestation: no inputs to watch.
+    sensorless: bool,
     estop: bool,
     halted: bool,
     last_altitude_m: Option<f64>,
@@ -785,6 +870,7 @@ impl LoopState {
             period: Time::from_secs_f64(1.0 / tick_hz),
             next_tick: Time::ZERO,
             next_team: Time::ZERO,
+            next_save: Time::ZERO,
             next_status: Time::ZERO,
             status: spomp_behaviors::Status::Idle,
             history: OdometryHistory::new(400),
@@ -800,6 +886,7 @@ impl LoopState {
             skill_failed: false,
             position_rx: None,
             flies: false,
+            sensorless: false,
             estop: false,
             halted: false,
             last_altitude_m: None,
@@ -865,6 +952,10 @@ impl LoopState {
             return StopReason::ClockStalled;
         }
         let age = |t: Time| (now.nanos - t.nanos) as f64 * 1e-9;
+        if self.sensorless {
+            // A basestation has no sensors to go stale and nothing to drive.
+            return StopReason::None;
+        }
         if self.flies {
             return match self.position_rx {
                 Some(t) if age(t) <= settings.odometry_timeout_s => StopReason::None,

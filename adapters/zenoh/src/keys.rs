@@ -237,7 +237,10 @@ impl KeyDir {
         if file.robot != robot.as_str() || file.team != self.team {
             return Err(invalid(
                 &path,
-                format!("the key of robot `{}` of team `{}`, not of `{robot}` of `{}`", file.robot, file.team, self.team),
+                format!(
+                    "the key of robot `{}` of team `{}`, not of `{robot}` of `{}`",
+                    file.robot, file.team, self.team
+                ),
             ));
         }
         let secret_key = key_from_hex(&path, "secret_key", &file.secret_key)?;

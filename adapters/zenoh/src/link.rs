@@ -122,7 +122,8 @@ pub fn tier_name(tier: Tier) -> &'static str {
 
 /// `s` reduced to what a key-expression chunk may hold here: `[A-Za-z0-9_-]`, never empty.
 pub fn key_chunk(s: &str) -> String {
-    let out: String = s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
+    let out: String =
+        s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
     if out.is_empty() { "_".into() } else { out }
 }
 
@@ -212,7 +213,8 @@ impl TeamLink {
                 .wait()
                 .map_err(zenoh_err)?
         };
-        let token = session.liveliness().declare_token(format!("spomp/{team_key}/alive/{me}")).wait().map_err(zenoh_err)?;
+        let token =
+            session.liveliness().declare_token(format!("spomp/{team_key}/alive/{me}")).wait().map_err(zenoh_err)?;
 
         let (outbox, queue) = sync_channel::<Outgoing>(config.queue_messages.max(1));
         let sender = {
@@ -246,12 +248,7 @@ impl TeamLink {
     /// message was dropped (counted). Never blocks.
     pub fn send(&self, to: &RobotId, tier: Tier, bytes: Vec<u8>) -> bool {
         let peer = key_chunk(to.as_str());
-        let key = format!(
-            "spomp/{}/team/{peer}/{}/{}",
-            self.team_key,
-            key_chunk(self.robot.as_str()),
-            tier_name(tier)
-        );
+        let key = format!("spomp/{}/team/{peer}/{}/{}", self.team_key, key_chunk(self.robot.as_str()), tier_name(tier));
         let Some(outbox) = &self.outbox else { return false };
         match outbox.try_send(Outgoing { key, peer: to.to_string(), tier, bytes }) {
             Ok(()) => true,

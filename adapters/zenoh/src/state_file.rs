@@ -84,11 +84,7 @@ pub fn read_state(path: &Path, robot: &str) -> Result<Option<Vec<u8>>, StateFile
         return Err(refused(format!("{} bytes, more than a state file holds", meta.len())));
     }
     let bytes = fs::read(path).map_err(io_err(path))?;
-    let body = bytes
-        .len()
-        .checked_sub(4)
-        .map(|n| bytes.split_at(n))
-        .ok_or_else(|| refused("cut short".into()))?;
+    let body = bytes.len().checked_sub(4).map(|n| bytes.split_at(n)).ok_or_else(|| refused("cut short".into()))?;
     let (body, crc) = body;
     let crc = u32::from_le_bytes(crc.try_into().map_err(|_| refused("cut short".into()))?);
     if !body.starts_with(MAGIC) {

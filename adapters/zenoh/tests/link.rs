@@ -133,7 +133,8 @@ fn rogues_without_keys_change_nothing_and_are_counted() {
     let mut insider_config = LinkConfig::new("city", RobotId::new("ugv1"));
     insider_config.listen = vec![format!("tcp/127.0.0.1:{}", ports[3])];
     insider_config.connect = vec![format!("tcp/127.0.0.1:{}", ports[0]), format!("tcp/127.0.0.1:{}", ports[1])];
-    insider_config.credentials = Some(Credentials { user: "ugv1".into(), ..keys.credentials(&RobotId::new("ugv1")).unwrap() });
+    insider_config.credentials =
+        Some(Credentials { user: "ugv1".into(), ..keys.credentials(&RobotId::new("ugv1")).unwrap() });
     let insider = TeamLink::open(&insider_config).unwrap();
     let mut fake = TeamState::new(RobotId::new("ugv1"), 0, TeamStateParams::default()).unwrap();
     fake.set_security(Arc::new(rogue_keys.security(&RobotId::new("ugv1")).unwrap())).unwrap();

@@ -39,6 +39,8 @@ pub struct CompiledRole {
     pub entry_types: BTreeMap<String, PortType>,
     /// Initial blackboard values from the role.
     pub initial: Vec<(String, BbValue)>,
+    /// Entries kept across reboots (`persist`).
+    pub persist: Vec<String>,
     /// Tick rate.
     pub tick_hz: f64,
 }
@@ -325,9 +327,27 @@ pub fn load_mission_str<E: 'static>(
                     },
                 }
             }
+            let mut persist = Vec::new();
+            if let Some(list) = rv.get("persist").and_then(Node::as_seq) {
+                for (k, item) in list.iter().enumerate() {
+                    let Some(name) = item.as_str() else { continue };
+                    if values.iter().any(|(n, _)| n == name) {
+                        persist.push(name.to_string());
+                    } else {
+                        d.push(Diagnostic::new(
+                            path,
+                            item.loc,
+                            format!("roles.{}.persist[{k}]", rk.name),
+                            Stage::Wiring,
+                            format!("`{name}` is kept across reboots, so it needs an initial value in the role's `blackboard`"),
+                        ));
+                    }
+                }
+            }
             diags.append(&mut d);
             let tick_hz = rv.get("tick_hz").and_then(Node::as_f64).unwrap_or(10.0);
-            out.roles.insert(rk.name.clone(), CompiledRole { tree: ir, entry_types, initial: values, tick_hz });
+            out.roles
+                .insert(rk.name.clone(), CompiledRole { tree: ir, entry_types, initial: values, persist, tick_hz });
         }
     }
     // Subtrees no role uses still get checked on their own (when the roles compiled cleanly,
@@ -600,6 +620,15 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, roots: &[PathBuf], di
         if let Some(ros) = &r.ros2 {
             check_ros2(ros, &idx, &mut bad);
         }
+        if let Some(link) = &r.team_link {
+            for (field, list) in [("listen", &link.listen), ("connect", &link.connect)] {
+                for (k, e) in list.iter().enumerate() {
+                    if let Err(why) = check_endpoint(e) {
+                        bad(&["team", &idx, "team_link", field, &k.to_string()], why);
+                    }
+                }
+            }
+        }
     }
     if let Some(sim) = &m.sim {
         if let Some(super::schema::WorldSpec::Dir(dir)) = &sim.world
@@ -780,6 +809,17 @@ fn check_team(
                 format!("role `{name}` is assigned to no robot"),
             ));
         }
+    }
+}
+
+/// Checks a team-link endpoint: `tcp/HOST:PORT` with a port in 1..=65535.
+pub fn check_endpoint(e: &str) -> Result<(), String> {
+    let expected = || format!("expected an endpoint `tcp/HOST:PORT`, found `{e}`");
+    let rest = e.strip_prefix("tcp/").ok_or_else(expected)?;
+    let (host, port) = rest.rsplit_once(':').ok_or_else(expected)?;
+    match port.parse::<u16>() {
+        Ok(p) if p > 0 && !host.is_empty() => Ok(()),
+        _ => Err(expected()),
     }
 }
 

@@ -14,8 +14,8 @@ pub mod yaml;
 pub use build::{BuildError, BuildOptions, build_executor, build_tree};
 pub use diagnostic::{Diagnostic, Rendered, Stage};
 pub use load::{
-    CompiledRole, LoadOptions, LoadedMission, PROVIDED_ENTRIES, load_mission, load_mission_str, load_mission_with,
-    skills_of,
+    CompiledRole, LoadOptions, LoadedMission, PROVIDED_ENTRIES, check_endpoint, load_mission, load_mission_str,
+    load_mission_with, skills_of,
 };
 pub use schema::MissionFile;
 pub use tree::{TreeNode, load_tree_str};

@@ -83,6 +83,9 @@ pub struct RobotSpec {
     /// ROS 2 adapter settings.
     #[serde(default)]
     pub ros2: Option<Ros2Spec>,
+    /// The team link of `spomp run` (team state between robot processes over Zenoh).
+    #[serde(default)]
+    pub team_link: Option<TeamLinkSpec>,
     /// Navigation settings of this robot (UGVs), applied field by field over its role's. The
     /// section's types, defaults and rules are the skills' (see `docs/missions.md`).
     #[serde(default)]
@@ -136,6 +139,21 @@ pub enum LocalizationMode {
     CrossView,
     /// Simulator ground truth plus noise (the paper's simulation switch).
     GroundTruth,
+}
+
+/// How a robot's `spomp run` process meets its teammates (Zenoh endpoints; see docs/robots.md).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TeamLinkSpec {
+    /// Endpoints this robot listens on, `tcp/HOST:PORT` (e.g. `tcp/0.0.0.0:7447` on the radio).
+    #[serde(default)]
+    pub listen: Vec<String>,
+    /// Endpoints of teammates it connects to, `tcp/HOST:PORT`.
+    #[serde(default)]
+    pub connect: Vec<String>,
+    /// Also find teammates by UDP multicast scouting (off: multicast reaches the whole network).
+    #[serde(default)]
+    pub multicast_scouting: bool,
 }
 
 /// ROS 2 settings of a robot.
@@ -302,6 +320,11 @@ pub struct RoleSpec {
     /// Initial blackboard entries: `name: value` (type from the ports they feed).
     #[serde(default)]
     pub blackboard: BTreeMap<String, serde_json::Value>,
+    /// Blackboard entries that survive a reboot: `spomp run` keeps their values in the robot's
+    /// state file with its team state and restores them at start (e.g. the UAV's next survey
+    /// waypoint). Each needs an initial value in `blackboard`.
+    #[serde(default)]
+    pub persist: Vec<String>,
     /// Tick rate of the tree.
     #[serde(default = "default_tick")]
     pub tick_hz: f64,

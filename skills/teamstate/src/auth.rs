@@ -52,9 +52,7 @@ impl<'de> Deserialize<'de> for Signature {
                 write!(f, "{SIGNATURE_BYTES} signature bytes")
             }
             fn visit_bytes<E: serde::de::Error>(self, v: &[u8]) -> Result<Signature, E> {
-                <[u8; SIGNATURE_BYTES]>::try_from(v)
-                    .map(Signature)
-                    .map_err(|_| E::invalid_length(v.len(), &self))
+                <[u8; SIGNATURE_BYTES]>::try_from(v).map(Signature).map_err(|_| E::invalid_length(v.len(), &self))
             }
             fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Signature, A::Error> {
                 let mut out = [0u8; SIGNATURE_BYTES];

@@ -40,8 +40,8 @@ pub use auth::{KeyError, SecurityError, Signature, TeamKeys, TeamSecurity};
 pub use error::{SyncError, TeamStateError};
 pub use params::TeamStateParams;
 pub use record::{
-    ClaimRecord, GoalOrigin, GoalRecord, MAX_DOT, MapVersion, Record, RecordBody, RecordKey, RobotRecord, Tier, TierSet,
-    UnreachableRecord, VisitRecord,
+    ClaimRecord, GoalOrigin, GoalRecord, MAX_DOT, MapVersion, Record, RecordBody, RecordKey, RobotRecord, Tier,
+    TierSet, UnreachableRecord, VisitRecord,
 };
 pub use snapshot::{RestoreSummary, SnapshotError};
 pub use state::{ApplyReport, ClaimOutcome, IdentifyOutcome, MISSION_WRITER, RobotStatus, TeamState};

@@ -101,7 +101,10 @@ impl TeamState {
             .ok_or_else(|| SnapshotError::Malformed("it does not start with SPTSNAP1".into()))?;
         let snap: Snapshot = postcard::from_bytes(payload).map_err(|e| SnapshotError::Malformed(e.to_string()))?;
         if &snap.robot != self.self_id() {
-            return Err(SnapshotError::OtherRobot { expected: self.self_id().to_string(), found: snap.robot.to_string() });
+            return Err(SnapshotError::OtherRobot {
+                expected: self.self_id().to_string(),
+                found: snap.robot.to_string(),
+            });
         }
         let team = self.security().map(|s| s.keys().team().to_string());
         if snap.team != team {
@@ -164,4 +167,3 @@ impl TeamState {
         RestoreSummary { records: count, goals: self.goals().len(), own_claims }
     }
 }
-

@@ -5,6 +5,7 @@ use std::sync::Arc;
 
 use spomp_core::{GoalId, Point2, Pose2, ReachabilityScan, RobotId, Time};
 
+use crate::auth::SIGNATURE_BYTES;
 use crate::auth::TeamSecurity;
 use crate::error::{SyncError, TeamStateError};
 use crate::params::TeamStateParams;
@@ -12,7 +13,6 @@ use crate::record::{
     ClaimRecord, GoalOrigin, GoalRecord, Limits, MapVersion, Record, RecordBody, RecordKey, RobotRecord, TierSet,
     UnreachableRecord, VisitRecord, check_scan, finite_pose, record_stamp,
 };
-use crate::auth::SIGNATURE_BYTES;
 use crate::sync::{HEADER_BYTES, InFlight, PeerState, SyncMessage};
 use crate::view::{GoalIndex, GoalView, Lease, build_goal_index};
 
@@ -740,7 +740,13 @@ impl TeamState {
         let signed = self.security.is_some();
         // Header, envelope and the record-count varint (≤ 5 bytes); the trailer: session
         // (≤ 10 bytes), signature count (≤ 5), the sender's signature.
-        let trailer = if signed { 10 + 5 + SIGNATURE_BYTES } else if self.session != 0 { 11 } else { 0 };
+        let trailer = if signed {
+            10 + 5 + SIGNATURE_BYTES
+        } else if self.session != 0 {
+            11
+        } else {
+            0
+        };
         let per_record = if signed { 1 + SIGNATURE_BYTES } else { 0 };
         let mut used = HEADER_BYTES + postcard::experimental::serialized_size(&msg).unwrap_or(0) + 5 + trailer;
         for rec in candidates {
@@ -814,7 +820,11 @@ impl TeamState {
         }
         let peer_restarted = match self.peers.get(from) {
             Some(p) if msg.session < p.session => {
-                return Err(SyncError::StaleSession { from: from.to_string(), session: msg.session, current: p.session });
+                return Err(SyncError::StaleSession {
+                    from: from.to_string(),
+                    session: msg.session,
+                    current: p.session,
+                });
             }
             Some(p) => msg.session > p.session,
             None => false,
@@ -826,11 +836,11 @@ impl TeamState {
         }
         // Stamps judged on this robot's clock: a peer's stamp from far in the future would keep
         // a claim alive long past its lease. Before the clock runs (no time yet) nothing is.
-        let ahead_limit = (self.now > Time::ZERO)
-            .then(|| Time::from_nanos(self.now.nanos.saturating_add(Time::from_secs_f64(self.params.max_clock_ahead_s).nanos)));
-        let from_the_future = |rec: &Record| {
-            ahead_limit.is_some_and(|limit| record_stamp(&rec.body).is_some_and(|stamp| stamp > limit))
-        };
+        let ahead_limit = (self.now > Time::ZERO).then(|| {
+            Time::from_nanos(self.now.nanos.saturating_add(Time::from_secs_f64(self.params.max_clock_ahead_s).nanos))
+        });
+        let from_the_future =
+            |rec: &Record| ahead_limit.is_some_and(|limit| record_stamp(&rec.body).is_some_and(|stamp| stamp > limit));
 
         // Merge.
         let goals_before: Vec<GoalId> = self.goals().iter().map(|v| v.id.clone()).collect();
@@ -981,6 +991,12 @@ impl TeamState {
     }
 }
 
+/// The bytes a record's signature covers: its encoding (key, dot, body; the signature itself is
+/// not part of it).
+pub(crate) fn record_bytes(rec: &Record) -> Vec<u8> {
+    postcard::to_stdvec(rec).unwrap_or_default()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1041,10 +1057,4 @@ mod tests {
         assert_eq!(team.map_writers().collect::<Vec<_>>(), expected);
         assert_eq!(expected.len(), 4);
     }
-}
-
-/// The bytes a record's signature covers: its encoding (key, dot, body; the signature itself is
-/// not part of it).
-pub(crate) fn record_bytes(rec: &Record) -> Vec<u8> {
-    postcard::to_stdvec(rec).unwrap_or_default()
 }

@@ -10,8 +10,8 @@ use common::*;
 use proptest::prelude::*;
 use spomp_core::{GoalId, Point2, Pose2, Time};
 use spomp_teamstate::{
-    ClaimRecord, GoalOrigin, Record, RecordBody, RecordKey, Signature, SnapshotError, SyncError, SyncMessage,
-    TeamKeys, TeamSecurity, TeamState, TierSet, VisitRecord,
+    ClaimRecord, GoalOrigin, Record, RecordBody, RecordKey, Signature, SnapshotError, SyncError, SyncMessage, TeamKeys,
+    TeamSecurity, TeamState, TierSet, VisitRecord,
 };
 
 const MEMBERS: [(&str, u8, u32); 3] = [("ugv1", 1, 1), ("ugv2", 2, 2), ("uav", 3, 9)];

@@ -328,7 +328,9 @@ impl State {
             SeamCall::Panorama(p) => robot.on_panorama(Arc::new(*p)),
             SeamCall::ExternalPose(e) => robot.on_external_pose(e),
             SeamCall::CameraTiles(t) => robot.on_camera_tiles(&t, now),
-            SeamCall::TeamIn { from, bytes } => robot.on_team_message(&from, &bytes),
+            SeamCall::TeamIn { from, bytes } => {
+                let _ = robot.on_team_message(&from, &bytes);
+            }
             SeamCall::TeamOut { to, out } => {
                 let budget = usize::try_from(out.budget_bytes).unwrap_or(usize::MAX);
                 let sent = robot.team_message_for(&to, tiers_from_bits(out.tiers), budget);

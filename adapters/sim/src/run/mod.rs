@@ -966,7 +966,7 @@ impl Simulation {
                         Some(d) => d.deliver_team_message(&to, &from, &bytes),
                         None => {
                             observer.on_seam(&to, self.now, SeamInput::TeamIn { from: &from, bytes: &bytes });
-                            self.robots[b].robot.on_team_message(&from, &bytes);
+                            let _ = self.robots[b].robot.on_team_message(&from, &bytes);
                         }
                     }
                 }

@@ -1,0 +1,27 @@
+//! Where a robot's team-state messages travel. By default over ROS 2 topics (`team/out`,
+//! `team/in`: the simulator farm relays them through its modelled radio); on robots over a team
+//! link between processes, which the CLI plugs in (`spomp-zenoh`; adapters never depend on
+//! each other, so the node knows the link only through this trait).
+
+use std::collections::BTreeSet;
+
+use spomp_core::RobotId;
+use spomp_teamstate::Tier;
+
+/// A team link between robot processes, as the node drives it: it must never block.
+pub trait TeamChannel: Send {
+    /// The peers reachable now; messages go only to them.
+    fn reachable(&self) -> BTreeSet<RobotId>;
+    /// Queues a message for `to` at `tier`'s priority.
+    fn send(&mut self, to: &RobotId, tier: Tier, bytes: Vec<u8>);
+    /// Messages received since the last call: (sender the transport names, bytes).
+    fn receive(&mut self) -> Vec<(RobotId, Vec<u8>)>;
+    /// Figures for diagnostics (bytes per link and tier, drops), as JSON.
+    fn stats(&self) -> serde_json::Value;
+}
+
+/// Where a robot's resume state goes (the CLI writes it to a file atomically).
+pub type StateSink = Box<dyn FnMut(Vec<u8>) + Send>;
+
+/// The tiers in the order a round sends them.
+pub const TIERS: [Tier; 3] = [Tier::Coordination, Tier::Scans, Tier::Maps];

@@ -1,0 +1,189 @@
+//! `spomp run`'s team link: the Zenoh link of `spomp-zenoh` plugged into the ROS 2 node, the
+//! team's keys, and the resume state file; and `spomp keys generate`.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+
+use anyhow::{Context, Result};
+use spomp_behaviors::NodeRegistry;
+use spomp_behaviors::mission::schema::MissionFile;
+use spomp_behaviors::mission::{LoadOptions, load_mission_with};
+use spomp_core::RobotId;
+use spomp_robot::{Robot, RobotRuntime};
+use spomp_ros2::{RobotNode, TeamChannel};
+use spomp_teamstate::Tier;
+use spomp_zenoh::{KeyDir, LinkConfig, TeamLink};
+
+/// The team-link options of `spomp run`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct TeamLinkArgs {
+    /// The team's key directory (`spomp keys generate`): records and messages are signed and
+    /// checked, and the team link admits only the team's robots. Without it the team link runs
+    /// unauthenticated (a warning says so).
+    #[arg(long, value_name = "DIR")]
+    pub keys: Option<PathBuf>,
+    /// A team-link endpoint to listen on, `tcp/HOST:PORT` (repeatable; default: the robot's
+    /// `team_link.listen`).
+    #[arg(long = "listen", value_name = "ENDPOINT")]
+    pub listen: Vec<String>,
+    /// A teammate's endpoint to connect to, `tcp/HOST:PORT` (repeatable; default: the robot's
+    /// `team_link.connect`).
+    #[arg(long = "connect", value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+    /// Keep the robot's team state (and its role's `persist` entries) in this file, written
+    /// atomically every `--state-period-s` and at shutdown; at start the robot resumes from it
+    /// if it is there and checks out (a damaged or foreign file is reported and ignored).
+    #[arg(long, value_name = "FILE")]
+    pub state_file: Option<PathBuf>,
+    /// How often the state file is written, seconds of robot time.
+    #[arg(long, default_value_t = 5.0, value_parser = crate::args::period)]
+    pub state_period_s: f64,
+}
+
+impl TeamLinkArgs {
+    /// Whether the team state goes over the Zenoh link rather than ROS 2 topics.
+    fn wanted(&self, mission: &MissionFile, robot: &str) -> bool {
+        self.keys.is_some()
+            || !self.listen.is_empty()
+            || !self.connect.is_empty()
+            || mission.team.iter().any(|r| r.id == robot && r.team_link.is_some())
+    }
+}
+
+/// The Zenoh link as the ROS 2 node's team channel.
+struct ZenohChannel(TeamLink);
+
+impl TeamChannel for ZenohChannel {
+    fn reachable(&self) -> BTreeSet<RobotId> {
+        self.0.reachable()
+    }
+    fn send(&mut self, to: &RobotId, tier: Tier, bytes: Vec<u8>) {
+        self.0.send(to, tier, bytes);
+    }
+    fn receive(&mut self) -> Vec<(RobotId, Vec<u8>)> {
+        self.0.receive()
+    }
+    fn stats(&self) -> serde_json::Value {
+        serde_json::to_value(self.0.stats()).unwrap_or_default()
+    }
+}
+
+/// Secures the robot, resumes it from its state file and opens the team link, as the options
+/// and the mission say. Call before the node runs. Returns what happened, for the operator.
+pub fn set_up(
+    args: &TeamLinkArgs,
+    mission: &MissionFile,
+    robot_id: &str,
+    robot: &mut Robot,
+) -> Result<Option<(TeamLink, Vec<String>)>> {
+    let mut notes = Vec::new();
+    let id = RobotId::new(robot_id);
+    let keys = match &args.keys {
+        Some(dir) => {
+            let keys = KeyDir::load(dir)?;
+            if keys.team() != mission.mission {
+                anyhow::bail!(
+                    "{}: the keys are of team `{}`, the mission is `{}`",
+                    dir.display(),
+                    keys.team(),
+                    mission.mission
+                );
+            }
+            robot.secure_team(Arc::new(keys.security(&id)?)).context("securing the team state")?;
+            notes.push(format!("team state signed and checked with the keys in {}", dir.display()));
+            Some(keys)
+        }
+        None => None,
+    };
+    // Every boot a larger session, so peers forget this robot's earlier messages.
+    let session = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(1)
+        .max(1);
+    robot.set_team_session(session);
+    if let Some(path) = &args.state_file {
+        match spomp_zenoh::read_state(path, robot_id) {
+            Ok(None) => notes.push(format!("no state file at {} yet: starting fresh", path.display())),
+            Ok(Some(bytes)) => match robot.resume(&bytes) {
+                Ok(s) => notes.push(format!(
+                    "resumed from {}: {} records, {} goals, {} own claims",
+                    path.display(),
+                    s.records,
+                    s.goals,
+                    s.own_claims
+                )),
+                Err(e) => notes.push(format!("state file {} ignored: {e}", path.display())),
+            },
+            Err(e) => notes.push(format!("state file ignored: {e}")),
+        }
+    }
+    if !args.wanted(mission, robot_id) {
+        return Ok(None);
+    }
+    let spec = mission.team.iter().find(|r| r.id == robot_id).and_then(|r| r.team_link.clone()).unwrap_or_default();
+    let mut config = LinkConfig::new(&mission.mission, id.clone());
+    config.listen = if args.listen.is_empty() { spec.listen } else { args.listen.clone() };
+    config.connect = if args.connect.is_empty() { spec.connect } else { args.connect.clone() };
+    for e in config.listen.iter().chain(&config.connect) {
+        spomp_behaviors::mission::check_endpoint(e).map_err(|why| anyhow::anyhow!("--listen/--connect: {why}"))?;
+    }
+    config.multicast_scouting = spec.multicast_scouting;
+    match &keys {
+        Some(k) => config.credentials = Some(k.credentials(&id)?),
+        None => notes.push("warning: team link without --keys: any process that reaches it is believed".into()),
+    }
+    let link = TeamLink::open(&config)?;
+    notes.push(format!(
+        "team link: Zenoh, listening on [{}], connecting to [{}]",
+        config.listen.join(", "),
+        config.connect.join(", ")
+    ));
+    Ok(Some((link, notes)))
+}
+
+/// Plugs the link and the state file into the node.
+pub fn plug(node: &mut RobotNode, link: Option<TeamLink>, args: &TeamLinkArgs, robot_id: &str) {
+    if let Some(link) = link {
+        node.set_team_channel(Box::new(ZenohChannel(link)));
+    }
+    if let Some(path) = args.state_file.clone() {
+        let robot = robot_id.to_string();
+        node.set_state_sink(
+            Box::new(move |bytes| {
+                if let Err(e) = spomp_zenoh::write_state(&path, &robot, &bytes) {
+                    eprintln!("warning: writing the state file: {e}");
+                }
+            }),
+            args.state_period_s,
+        );
+    }
+}
+
+/// `spomp keys generate MISSION --out DIR`.
+pub fn generate(mission: &Path, out: &Path, registry: &NodeRegistry<RobotRuntime>) -> Result<ExitCode> {
+    let loaded = load_mission_with(mission, registry, &LoadOptions::default());
+    if !loaded.is_valid() {
+        crate::commands::print_diagnostics(&loaded);
+        return Ok(ExitCode::from(1));
+    }
+    let Some(m) = loaded.mission.as_ref() else { anyhow::bail!("mission did not load") };
+    let robots: Vec<RobotId> = m.team.iter().map(|r| RobotId::new(&r.id)).collect();
+    match KeyDir::generate(out, &m.mission, &robots) {
+        Ok(_) => {
+            out!(
+                "keys of team `{}` for {} robots in {}: team.json and transport.passwords go to every robot, <robot>.key.json only to its robot",
+                m.mission,
+                robots.len(),
+                out.display()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            Ok(ExitCode::from(1))
+        }
+    }
+}

@@ -1,0 +1,390 @@
+//! The team link end to end on loopback: four `spomp run` processes (basestation, UAV, two
+//! UGVs) drive the robots of `spomp sim --ros2` over DDS, and their team state goes between them
+//! over Zenoh, signed with keys from `spomp keys generate`. A rogue that has the team's transport
+//! password but not its signing keys injects goals, claims and visits all along.
+//!
+//! DDS stays on 127.0.0.1 (`ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`, a domain id per test);
+//! Zenoh listens and connects on 127.0.0.1 ports only, multicast scouting off.
+
+use std::collections::BTreeMap;
+use std::net::TcpListener;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use spomp_core::{GoalId, Point2, RobotId, Time};
+use spomp_teamstate::{GoalOrigin, RecordKey, TeamState, TeamStateParams, Tier, TierSet};
+use spomp_zenoh::{KeyDir, LinkConfig, TeamLink};
+
+const MISSION: &str = "tests/missions/ros2/farm-team-link.yaml";
+const ROBOTS: [&str; 4] = ["base", "uav1", "ugv1", "ugv2"];
+
+fn spomp() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_spomp"));
+    c.current_dir(env!("CARGO_MANIFEST_DIR"));
+    c.env("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST");
+    c.env_remove("ROS_DOMAIN_ID");
+    c
+}
+
+fn domain(offset: u32) -> String {
+    (12 + (std::process::id() % 50) * 4 + offset / 100).to_string()
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0").map(|l| l.local_addr().map(|a| a.port()).unwrap_or(0)).unwrap_or(0)
+}
+
+/// Kills the child when the test ends, however it ends.
+struct Reap(Child);
+impl Drop for Reap {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn wait_with_timeout(child: &mut Child, limit: Duration) -> Option<std::process::ExitStatus> {
+    let deadline = Instant::now() + limit;
+    while Instant::now() < deadline {
+        if let Ok(Some(status)) = child.try_wait() {
+            return Some(status);
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    None
+}
+
+fn output(child: &mut Child) -> (String, String) {
+    use std::io::Read;
+    let (mut out, mut err) = (String::new(), String::new());
+    if let Some(mut s) = child.stdout.take() {
+        let _ = s.read_to_string(&mut out);
+    }
+    if let Some(mut s) = child.stderr.take() {
+        let _ = s.read_to_string(&mut err);
+    }
+    (out, err)
+}
+
+/// A test's processes: the farm, the team's key folder, each robot's port and state file.
+struct Team {
+    dir: PathBuf,
+    domain: String,
+    ports: BTreeMap<&'static str, u16>,
+}
+
+impl Team {
+    fn new(name: &str, domain: String) -> Team {
+        let dir = std::env::temp_dir().join(format!("spomp-team-link-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let keys = spomp().args(["keys", "generate", MISSION, "--out"]).arg(dir.join("keys")).output().expect("keys");
+        assert!(keys.status.success(), "{}", String::from_utf8_lossy(&keys.stderr));
+        let ports = ROBOTS.iter().map(|r| (*r, free_port())).collect();
+        Team { dir, domain, ports }
+    }
+
+    fn keys(&self) -> PathBuf {
+        self.dir.join("keys")
+    }
+
+    fn state_file(&self, robot: &str) -> PathBuf {
+        self.dir.join(format!("{robot}.state"))
+    }
+
+    fn start_farm(&self) -> Reap {
+        let child = spomp()
+            .args([
+                "sim",
+                MISSION,
+                "--ros2",
+                "--domain-id",
+                &self.domain,
+                "--json",
+                "--rate",
+                "2",
+                "--no-mcap",
+                "--out",
+            ])
+            .arg(self.dir.join("sim"))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spomp sim starts");
+        Reap(child)
+    }
+
+    /// `spomp run` of `robot`: listening on its port, connecting to the basestation's and
+    /// ugv1's (gossip finds the rest).
+    fn start_robot(&self, robot: &str) -> Reap {
+        let mut cmd = spomp();
+        cmd.args(["run", MISSION, "--robot", robot, "--use-sim-time", "--json", "--domain-id", &self.domain]);
+        cmd.arg("--keys").arg(self.keys());
+        cmd.args(["--listen", &format!("tcp/127.0.0.1:{}", self.ports[robot])]);
+        for hub in ["base", "ugv1"].iter().filter(|h| **h != robot) {
+            cmd.args(["--connect", &format!("tcp/127.0.0.1:{}", self.ports[hub])]);
+        }
+        cmd.arg("--state-file").arg(self.state_file(robot)).args(["--state-period-s", "1"]);
+        Reap(cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("spomp run starts"))
+    }
+
+    /// A robot's team state from its state file, checked with the team's keys.
+    fn team_state(&self, robot: &str) -> Option<TeamState> {
+        let bytes = spomp_zenoh::read_state(&self.state_file(robot), robot).ok()??;
+        // The robot's resume state: [entries length][entries JSON][team snapshot].
+        let (len, rest) = bytes.split_first_chunk::<4>()?;
+        let team = rest.get(u32::from_le_bytes(*len) as usize..)?;
+        let id = RobotId::new(robot);
+        let mut state = TeamState::new(id.clone(), 1, TeamStateParams::default()).ok()?;
+        let keys = KeyDir::load(&self.keys()).ok()?;
+        state.set_security(Arc::new(keys.security(&id).ok()?)).ok()?;
+        state.restore(team).ok()?;
+        Some(state)
+    }
+}
+
+impl Drop for Team {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// The rogue: the team's transport password (a leaked one), no signing key of the team. Until
+/// `stop`, it sends every robot forged goals, claims on every mission goal and visits of them, in
+/// ugv1's name (signed with its own key) and in a non-member's.
+fn start_rogue(team: &Team, stop: Arc<AtomicBool>) -> std::thread::JoinHandle<()> {
+    let keys = KeyDir::load(&team.keys()).expect("team keys");
+    let credentials = keys.credentials(&RobotId::new("base")).expect("credentials");
+    let own_keys_dir = team.dir.join("rogue-keys");
+    let own = KeyDir::generate(&own_keys_dir, "farm-team-link", &[RobotId::new("ugv1"), RobotId::new("mallory")])
+        .expect("rogue keys");
+    let configs: Vec<LinkConfig> = ["ugv1", "mallory"]
+        .iter()
+        .map(|name| {
+            let mut config = LinkConfig::new("farm-team-link", RobotId::new(name));
+            config.listen = vec![format!("tcp/127.0.0.1:{}", free_port())];
+            config.connect =
+                vec![format!("tcp/127.0.0.1:{}", team.ports["base"]), format!("tcp/127.0.0.1:{}", team.ports["ugv1"])];
+            config.credentials = Some(credentials.clone());
+            config
+        })
+        .collect();
+    std::thread::spawn(move || {
+        let links: Vec<TeamLink> = configs.iter().filter_map(|c| TeamLink::open(c).ok()).collect();
+        if links.len() != configs.len() {
+            return;
+        }
+        let mut forgers: Vec<TeamState> = ["ugv1", "mallory"]
+            .iter()
+            .map(|name| {
+                let id = RobotId::new(name);
+                let mut s = TeamState::new(id.clone(), 0, TeamStateParams::default()).expect("state");
+                s.set_security(Arc::new(own.security(&id).expect("rogue key"))).expect("secure");
+                s.set_session(1);
+                for k in 0..3 {
+                    let _ = s.add_mission_goal(k, Point2::new(30.0 + 20.0 * k as f64, 9.0));
+                }
+                let _ = s.identify_goal(Point2::new(110.0, 90.0), GoalOrigin::Detected, Time::ZERO);
+                for k in 0..3 {
+                    let g = GoalId { origin: RobotId::new("mission"), seq: k };
+                    let _ = s.claim(&g, Time::from_secs_f64(1e6));
+                    if k > 0 {
+                        let _ = s.mark_visited(&g, Time::from_secs_f64(1.0));
+                    }
+                }
+                s
+            })
+            .collect();
+        while !stop.load(Ordering::SeqCst) {
+            for (forger, link) in forgers.iter_mut().zip(&links) {
+                for victim in ROBOTS {
+                    let to = RobotId::new(victim);
+                    if let Some(m) = forger.make_sync(&to, TierSet::ALL, usize::MAX) {
+                        link.send(&to, Tier::Coordination, m.encode());
+                    }
+                    forger.reset_peer(&to);
+                }
+            }
+            std::thread::sleep(Duration::from_millis(300));
+        }
+    })
+}
+
+/// Goal group → the robots that visited it, from a team state's records.
+fn visits(state: &TeamState) -> BTreeMap<GoalId, Vec<RobotId>> {
+    let mut out: BTreeMap<GoalId, Vec<RobotId>> = BTreeMap::new();
+    for r in state.records() {
+        if let RecordKey::Visit { goal, robot } = &r.key {
+            let group = state.goal(goal).map(|v| v.id.clone()).unwrap_or_else(|| goal.clone());
+            out.entry(group).or_default().push(robot.clone());
+        }
+    }
+    out
+}
+
+/// Stops the robot processes with SIGINT; their JSON reports.
+fn stop_robots(robots: Vec<(&str, Reap)>) -> BTreeMap<String, serde_json::Value> {
+    let mut out = BTreeMap::new();
+    for (_, r) in &robots {
+        let _ = Command::new("kill").args(["-INT", &r.0.id().to_string()]).status();
+    }
+    for (name, mut r) in robots {
+        let _ = wait_with_timeout(&mut r.0, Duration::from_secs(20));
+        let (stdout, stderr) = output(&mut r.0);
+        let report =
+            serde_json::from_str(&stdout).unwrap_or_else(|_| panic!("{name} printed no report:\n{stdout}\n{stderr}"));
+        out.insert(name.to_string(), report);
+    }
+    out
+}
+
+fn finish_farm(farm: &mut Reap, limit: Duration) -> serde_json::Value {
+    let status = wait_with_timeout(&mut farm.0, limit);
+    let (out, err) = output(&mut farm.0);
+    let status = status.unwrap_or_else(|| panic!("the farm run did not end within {limit:?}:\n{err}"));
+    assert!(status.success(), "spomp sim --ros2 failed ({status}):\n{out}\n{err}");
+    serde_json::from_str(&out).expect("sim prints its summary as JSON")
+}
+
+#[test]
+fn four_processes_complete_a_mission_over_the_signed_team_link_and_a_rogue_changes_nothing() {
+    let team = Team::new("complete", domain(600));
+    let mut farm = team.start_farm();
+    let robots: Vec<(&str, Reap)> = ROBOTS.iter().map(|r| (*r, team.start_robot(r))).collect();
+    let stop = Arc::new(AtomicBool::new(false));
+    let rogue = start_rogue(&team, stop.clone());
+
+    let summary = finish_farm(&mut farm, Duration::from_secs(400));
+    stop.store(true, Ordering::SeqCst);
+    let _ = rogue.join();
+    let reports = stop_robots(robots);
+    let trial = &summary["runs"][0];
+    assert_eq!(trial["outcome"], "complete", "{summary:#}");
+    assert_eq!(trial["goals_visited"], 3, "{summary:#}");
+
+    // What every robot ended with: the three mission goals, no forged one; every visit by a
+    // real UGV, and no goal visited twice.
+    for robot in ROBOTS {
+        let state = team.team_state(robot).unwrap_or_else(|| panic!("{robot}'s state file"));
+        assert_eq!(state.goals().len(), 3, "{robot}: {:?}", state.goals());
+        for (goal, by) in visits(&state) {
+            let history: Vec<String> = state
+                .records()
+                .filter(|r| r.key.goal().is_some())
+                .map(|r| format!("{:?} dot {} {:?}", r.key, r.dot, r.body))
+                .collect();
+            assert_eq!(by.len(), 1, "{robot}: goal {goal} visited by {by:?}\n{}", history.join("\n"));
+            assert!(["ugv1", "ugv2"].contains(&by[0].as_str()), "{robot}: goal {goal} visited by {by:?}");
+        }
+    }
+    // The forgeries arrived and were refused and counted, in ugv1's name and mallory's.
+    let rejected: u64 = reports
+        .values()
+        .flat_map(|r| r["team_rejected"].as_object().into_iter().flatten().map(|(_, n)| n.as_u64().unwrap_or(0)))
+        .sum();
+    assert!(rejected > 0, "{reports:#?}");
+    assert!(reports["base"]["team_rejected"].get("mallory").is_some(), "{:#}", reports["base"]);
+    // Bytes per link and tier, for the note.
+    eprintln!("ugv1's link: {:#}", reports["ugv1"]["team_link"]);
+    eprintln!("robot time {:.0} s", trial["time_s"].as_f64().unwrap_or(0.0));
+}
+
+#[test]
+fn a_killed_ugv_frees_its_goal_after_the_lease_and_resumes_from_its_state_file() {
+    let team = Team::new("resume", domain(700));
+    let mut farm = team.start_farm();
+    let mut robots: Vec<(&str, Reap)> = ROBOTS.iter().map(|r| (*r, team.start_robot(r))).collect();
+
+    // Wait until ugv2 holds a goal (its state file says so), then kill it without warning.
+    let start = Instant::now();
+    let held = loop {
+        assert!(start.elapsed() < Duration::from_secs(120), "ugv2 never held a goal");
+        let claim = team.team_state("ugv2").and_then(|s| {
+            s.goals().iter().find(|v| v.is_held_by(&RobotId::new("ugv2")) && v.visited.is_none()).map(|v| v.id.clone())
+        });
+        if let Some(g) = claim {
+            break g;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let (_, mut ugv2) = robots.remove(3);
+    let _ = ugv2.0.kill();
+    let _ = ugv2.0.wait();
+
+    // ugv1 takes that goal once ugv2's lease has run out, and visits it.
+    let start = Instant::now();
+    let visitor = loop {
+        assert!(start.elapsed() < Duration::from_secs(240), "goal {held} held by the dead ugv2 was never visited");
+        let by = team.team_state("ugv1").and_then(|s| s.goal(&held).and_then(|v| v.visited.clone()));
+        if let Some((_, robot)) = by {
+            break robot;
+        }
+        std::thread::sleep(Duration::from_millis(250));
+    };
+    assert_eq!(visitor.as_str(), "ugv1");
+
+    // ugv2 reboots: it resumes from its state file and re-converges with the team.
+    let before = team.team_state("ugv2").expect("ugv2's state file survived");
+    assert!(before.goal(&held).is_some_and(|v| v.visited.is_none()), "ugv2 died before learning of the visit");
+    let restarted = Instant::now();
+    robots.push(("ugv2", team.start_robot("ugv2")));
+    let converged = loop {
+        assert!(restarted.elapsed() < Duration::from_secs(60), "ugv2 did not re-converge within 60 s");
+        let views = |r: &str| {
+            team.team_state(r)
+                .map(|s| s.goals().iter().map(|v| (v.id.clone(), v.status, v.visited.clone())).collect::<Vec<_>>())
+        };
+        if let (Some(a), Some(b)) = (views("ugv2"), views("ugv1"))
+            && a == b
+            && a.iter().any(|(g, _, visited)| g == &held && visited.is_some())
+        {
+            break restarted.elapsed();
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    eprintln!("ugv2 re-converged {converged:?} (wall) after its restart");
+    let summary = finish_farm(&mut farm, Duration::from_secs(400));
+    let reports = stop_robots(robots);
+    assert_eq!(summary["runs"][0]["outcome"], "complete", "{summary:#}");
+    assert!(reports["ugv2"]["states_saved"].as_u64().unwrap_or(0) > 0, "{:#}", reports["ugv2"]);
+}
+
+/// A robot's resume state carries its role's `persist` entries: a rebooted UAV continues its
+/// survey at the waypoint it had reached. Another robot's state, or an entry the role does not
+/// keep, is refused whole.
+#[test]
+fn a_resumed_uav_continues_its_survey_where_it_was() {
+    use spomp_behaviors::mission::{LoadOptions, load_mission_with};
+    let registry = spomp_robot::registry();
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(MISSION);
+    let loaded = load_mission_with(&path, &registry, &LoadOptions::default());
+    assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
+    let mission = loaded.mission.as_ref().expect("mission");
+    let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), 1).expect("world");
+    let area = spomp_sim::run::operating_area(mission, &world);
+    let make = |id: &str| spomp_robot::Robot::from_mission(&loaded, id, &area, 1, &registry).expect("robot");
+
+    let state = make("uav1").resume_state();
+    let (len, rest) = state.split_first_chunk::<4>().expect("framed");
+    let (entries, team) = rest.split_at(u32::from_le_bytes(*len) as usize);
+    assert_eq!(std::str::from_utf8(entries).expect("json"), r#"{"next_waypoint":0}"#);
+    // As if it had reached waypoint 2 before the reboot.
+    let reframe = |json: &str| {
+        let mut out = (json.len() as u32).to_le_bytes().to_vec();
+        out.extend_from_slice(json.as_bytes());
+        out.extend_from_slice(team);
+        out
+    };
+    let mut rebooted = make("uav1");
+    rebooted.resume(&reframe(r#"{"next_waypoint":2}"#)).expect("resume");
+    assert!(rebooted.resume_state().windows(17).any(|w| w == br#"{"next_waypoint":"#), "entries kept");
+    assert!(String::from_utf8_lossy(&rebooted.resume_state()).contains(r#""next_waypoint":2"#));
+
+    assert!(make("uav1").resume(&reframe(r#"{"speed":3}"#)).is_err(), "an entry the role does not keep");
+    assert!(make("uav1").resume(&reframe(r#"{"next_waypoint":"two"}"#)).is_err(), "a value of the wrong type");
+    assert!(make("ugv1").resume(&reframe("{}")).is_err(), "the UAV's team state given to ugv1");
+    assert!(make("uav1").resume(&state[..state.len() / 2]).is_err(), "cut short");
+}
