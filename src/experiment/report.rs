@@ -467,7 +467,9 @@ fn metrics_plot(meta: &ExperimentMeta, table: &Table, path: &Path) -> Result<()>
                 .enumerate()
                 .filter_map(|(i, c)| table.get(&(c.clone(), metric)).map(|s| (i, *s)))
                 .collect();
-            let top = values.iter().map(|(_, s)| s.mean + s.sd).fold(0.0, f64::max).max(1e-9) * 1.15;
+            let highest = values.iter().map(|(_, s)| s.mean + s.sd).fold(0.0, f64::max);
+            // An all-zero metric still gets a readable axis.
+            let top = if highest > 0.0 { highest * 1.15 } else { 1.0 };
             let bottom = values.iter().map(|(_, s)| s.mean - s.sd).fold(0.0, f64::min);
             let mut chart = ChartBuilder::on(area)
                 .caption(metric.as_str(), ("sans-serif", 15))

@@ -407,7 +407,7 @@ pub fn load_experiment(
         Err(e) => {
             let loc = e.loc.unwrap_or_else(|| loc_at(&root, &e.path));
             let message = if matches!(e.path.last(), Some(PathSeg::Key(k)) if k == "seeds") {
-                format!("{}; seeds are a list (`[1, 2, 3]`) or a range (`{{ from: 1, to: 10 }}`)", e.message)
+                "seeds are a list (`[1, 2, 3]`) or an inclusive range (`{ from: 1, to: 10 }`)".to_string()
             } else {
                 e.message.clone()
             };
