@@ -976,3 +976,38 @@ mod tests {
         assert_eq!(p.find("comms"), None);
     }
 }
+
+#[cfg(test)]
+mod shard_properties {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    fn trials(configurations: usize, seeds: usize) -> Vec<Trial> {
+        (0..configurations * seeds)
+            .map(|i| Trial { index: i, configuration: i / seeds, seed: (i % seeds) as u64 + 1 })
+            .collect()
+    }
+
+    proptest! {
+        /// The shards of any experiment hold every trial exactly once, and none is more than
+        /// one trial larger than another.
+        #[test]
+        fn shards_partition_the_trials(configurations in 1usize..12, seeds in 1usize..15, count in 1usize..20) {
+            let all = trials(configurations, seeds);
+            let mut seen = vec![0u32; all.len()];
+            let mut sizes = Vec::new();
+            for i in 1..=count {
+                let shard = shard_of(&all, i, count);
+                sizes.push(shard.len());
+                for t in shard {
+                    seen[t.index] += 1;
+                }
+            }
+            prop_assert!(seen.iter().all(|&n| n == 1), "{seen:?}");
+            let (lo, hi) = (sizes.iter().min().copied().unwrap_or(0), sizes.iter().max().copied().unwrap_or(0));
+            prop_assert!(hi - lo <= 1, "{sizes:?}");
+            prop_assert!(shard_of(&all, 0, count).is_empty() && shard_of(&all, count + 1, count).is_empty());
+        }
+    }
+}
