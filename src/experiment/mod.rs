@@ -56,6 +56,13 @@ pub struct ExperimentArgs {
     /// Run only shard I of N: the trials whose index mod N is I − 1.
     #[arg(long, value_name = "I/N", value_parser = shard_arg)]
     pub shard: Option<(usize, usize)>,
+    /// Run only this configuration (repeatable): a part of a study, whose rows a later run of
+    /// the whole study takes with --resume.
+    #[arg(long, value_name = "NAME")]
+    pub only: Vec<String>,
+    /// Run only this seed of the experiment's (repeatable).
+    #[arg(long = "seed", value_name = "SEED")]
+    pub seeds: Vec<u64>,
     /// Print a JSON summary instead of the progress bar and table.
     #[arg(long)]
     pub json: bool,
@@ -195,10 +202,22 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
     }
     let hashes: Vec<String> =
         loaded.trials.iter().map(|t| trial_hash(&loaded.configurations[t.configuration], t.seed)).collect();
-    let selected = match args.shard {
+    let names: Vec<&str> = loaded.configurations.iter().map(|c| c.name.as_str()).collect();
+    if let Some(bad) = args.only.iter().find(|o| !names.contains(&o.as_str())) {
+        return usage(format!("--only {bad}: no such configuration; configurations are: {}", names.join(", ")));
+    }
+    let seeds = loaded.seeds();
+    if let Some(bad) = args.seeds.iter().find(|s| !seeds.contains(s)) {
+        return usage(format!("--seed {bad}: not a seed of the experiment"));
+    }
+    let selected: Vec<Trial> = match args.shard {
         Some((i, n)) => shard_of(&loaded.trials, i, n),
         None => loaded.trials.clone(),
-    };
+    }
+    .into_iter()
+    .filter(|t| args.only.is_empty() || args.only.contains(&loaded.configurations[t.configuration].name))
+    .filter(|t| args.seeds.is_empty() || args.seeds.contains(&t.seed))
+    .collect();
     // Rows already there: each must be a trial of this experiment as it is now.
     let mut done: BTreeMap<(String, u64), &TrialRow> = BTreeMap::new();
     for r in &existing {
