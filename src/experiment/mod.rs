@@ -132,7 +132,7 @@ pub fn experiment(args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>) 
     match &args.action {
         Some(ExperimentCommand::Report { dirs, out, json }) => report::report(dirs, out.as_deref(), *json),
         Some(ExperimentCommand::Schema) => {
-            let schema = schemars::schema_for!(spec::ExperimentFile);
+            let schema = experiment_schema(registry);
             out!("{}", serde_json::to_string_pretty(&schema).context("serialising the schema")?);
             Ok(ExitCode::SUCCESS)
         }
@@ -160,6 +160,37 @@ pub fn experiment(args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>) 
             None => usage("give an experiment file, or `report DIR...`".into()),
         },
     }
+}
+
+/// The JSON Schema of experiment files: the serde types', with every `navigation` override
+/// described by the robots' own navigation schema (the one missions use).
+pub fn experiment_schema(registry: &NodeRegistry<RobotRuntime>) -> serde_json::Value {
+    let mut root = serde_json::to_value(schemars::schema_for!(spec::ExperimentFile)).unwrap_or_default();
+    if let Some(checks) = registry.robot_checks() {
+        let mut nav = checks.navigation_schema();
+        let nav_defs = nav.as_object_mut().and_then(|o| o.remove("$defs"));
+        if let Some(o) = nav.as_object_mut() {
+            o.remove("$schema");
+        }
+        if let Some(serde_json::Value::Object(defs)) = root.get_mut("$defs") {
+            if let Some(serde_json::Value::Object(extra)) = nav_defs {
+                for (k, v) in extra {
+                    defs.entry(k).or_insert(v);
+                }
+            }
+            defs.insert("Navigation".into(), nav);
+            for owner in ["Configuration", "RoleOverride", "RobotOverride"] {
+                if let Some(p) = defs.get_mut(owner).and_then(|d| d.pointer_mut("/properties/navigation")) {
+                    let description = p.get("description").cloned().unwrap_or(serde_json::Value::Null);
+                    *p = serde_json::json!({"description": description, "$ref": "#/$defs/Navigation"});
+                }
+            }
+        }
+    }
+    if let serde_json::Value::Object(o) = &mut root {
+        o.insert("title".into(), serde_json::Value::String("spomp experiment".into()));
+    }
+    root
 }
 
 /// A usage error: printed, exit 2.
