@@ -1,6 +1,6 @@
 //! `spomp experiment` as a user runs it on `experiments/smoke.yaml`: a one-shot run, the same
-//! study as two shards merged by `report`, and a run resumed after losing half its rows and a
-//! row cut in half by a crash all give the same trial rows; an edited experiment is refused on
+//! study as two shards merged by `report`, a run resumed after losing half its rows and a row
+//! cut in half by a crash, and a run stopped by Ctrl-C then resumed all give the same trial rows; an edited experiment is refused on
 //! resume; bad input and bad usage have their exit codes.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
@@ -99,6 +99,33 @@ fn shards_merged_and_a_resumed_run_equal_one_run() {
     assert_eq!(csv.lines().count(), 5, "the CSV is rebuilt from the record: {csv}");
     // Nothing left to do.
     assert_eq!(run(&resumed, &["--resume"])["trials_run"], 0);
+
+    // Ctrl-C after the first row: the finished rows stay, the rest resumes to the same rows.
+    #[cfg(unix)]
+    {
+        let interrupted = tmp.path().join("interrupted");
+        let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("spomp"))
+            .current_dir(root())
+            .args(["experiment", SMOKE, "--json", "--jobs", "1", "--out"])
+            .arg(&interrupted)
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+        while read_rows(&interrupted).map_or(0, |r| r.len()) == 0 {
+            assert!(std::time::Instant::now() < deadline, "no row within 120 s");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        let sent = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+        assert!(sent.success());
+        let status = child.wait().unwrap();
+        let kept = read_rows(&interrupted).unwrap().len();
+        // 130 unless every trial had finished by the time the signal arrived.
+        assert!(status.code() == Some(130) || (status.code() == Some(0) && kept == 4), "{status:?}, {kept} rows");
+        assert!(kept >= 1);
+        run(&interrupted, &["--resume"]);
+        assert_eq!(deterministic(read_rows(&interrupted).unwrap()), reference);
+    }
 
     // A conflicting duplicate (the same trial with other results) is an error in `report`.
     let forged = tmp.path().join("forged");
