@@ -883,11 +883,13 @@ fn resolve(
         return None;
     }
     // What the trials depend on besides the seed: the base mission's text as written, this
-    // configuration's overrides as parsed, and the experiment-wide time limit.
+    // configuration's overrides as parsed (its description aside: words change no result), and
+    // the experiment-wide time limit.
+    let overrides = Configuration { description: None, ..c.clone() };
     let hash_input = serde_json::json!({
         "row_format": ROW_FORMAT,
         "base_mission": base_text,
-        "configuration": c,
+        "configuration": overrides,
         "time_limit_s": file.time_limit_s,
     })
     .to_string();
