@@ -40,6 +40,10 @@ pub struct RobotRow {
     pub localization_error_m: Option<f64>,
     /// Team-state bytes it sent.
     pub bytes_sent: u64,
+    /// Its tree's status at the end (`success`, `failure`, `running`, …): whether a robot
+    /// whose tree ends — a `navigate_to` — got there.
+    #[serde(default)]
+    pub tree_status: String,
 }
 
 /// One trial's row.
@@ -201,6 +205,7 @@ pub fn row_of(
                 collisions: r.collisions,
                 localization_error_m: r.localization_error_m.map(|e| e.median),
                 bytes_sent: bytes.full.get(&r.id).copied().unwrap_or(0) + bytes.small.get(&r.id).copied().unwrap_or(0),
+                tree_status: r.tree_status.clone(),
             }
         })
         .collect();
@@ -406,6 +411,7 @@ mod tests {
                 collisions: 1,
                 localization_error_m: Some(0.4),
                 bytes_sent: 30,
+                tree_status: "running".into(),
             }],
         }
     }
