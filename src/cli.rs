@@ -11,7 +11,7 @@ use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
 use spomp_core::{Point2, Pose2};
 use spomp_robot::RobotRuntime;
 
-use crate::{args, commands, log_cmd, plan_cmd, replay_cmd, run_cmd, sim_cmd, terrain_cmd, world_cmd};
+use crate::{args, commands, experiment, log_cmd, plan_cmd, replay_cmd, run_cmd, sim_cmd, terrain_cmd, world_cmd};
 
 /// Mission framework for air–ground robot teams.
 #[derive(Parser, Debug)]
@@ -77,6 +77,10 @@ enum Command {
     /// transitions and team messages compared with the recorded ones (exit 0 identical, 1 at the
     /// first divergence, 2 when the log cannot be replayed).
     Replay(replay_cmd::ReplayArgs),
+    /// Run an experiment file's trials (configurations × seeds) in the simulator, one row per
+    /// trial in OUT/trials.{jsonl,csv}; `report` merges output folders (shards) into report.md
+    /// and plots. See docs/experiments.md.
+    Experiment(experiment::ExperimentArgs),
     /// Print the JSON Schema of the mission language (for editors' YAML language servers).
     Schema,
     /// List the node types with their ports.
@@ -324,6 +328,7 @@ where
         Command::Log { action: LogCommand::Check { log, json } } => log_cmd::check(&log, json),
         Command::Log { action: LogCommand::Recover { log, out, json } } => log_cmd::recover(&log, &out, json),
         Command::Sim(args) => sim_cmd::sim(&args, registry),
+        Command::Experiment(args) => experiment::experiment(&args, registry),
         Command::Run(args) => run_cmd::run(&args, registry),
         Command::Keys { action: KeysCommand::Generate { mission, out } } => {
             crate::team_link::generate(&mission, &out, registry)

@@ -14,12 +14,18 @@ use spomp_robot::RobotRuntime;
 
 /// Renders a mission's diagnostics with their source lines.
 fn render_diagnostics(loaded: &LoadedMission) -> String {
+    render_located(&loaded.diagnostics, &|f| loaded.source_of(f).unwrap_or_default().to_string())
+}
+
+/// Renders located diagnostics (of missions, experiment files) with their source lines;
+/// `source_of` gives a file's text (empty when unknown).
+pub(crate) fn render_located(diagnostics: &[Diagnostic], source_of: &dyn Fn(&std::path::Path) -> String) -> String {
     let mut human = String::new();
     // `Rendered` hands the renderer the offending line only, never the rest of a file.
     let handler = miette::GraphicalReportHandler::new_themed(miette::GraphicalTheme::unicode_nocolor());
-    for d in &loaded.diagnostics {
+    for d in diagnostics {
         human.push_str(&format!("{d}\n"));
-        let src = loaded.source_of(&d.file).unwrap_or_default().to_string();
+        let src = source_of(&d.file);
         let rendered = Rendered::new(d.clone(), src);
         let mut out = String::new();
         if handler.render_report(&mut out, &rendered).is_ok() {

@@ -26,6 +26,7 @@ macro_rules! out {
 mod args;
 pub mod cli;
 mod commands;
+pub mod experiment;
 mod farm_cmd;
 mod live;
 mod log_cmd;

@@ -307,7 +307,7 @@ pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
 
 /// A flag raised by SIGINT or SIGTERM: the trials then finish their current step, close their
 /// logs and write their summaries. A second signal of the same kind ends the process at once.
-fn stop_on_signals() -> Result<Arc<AtomicBool>> {
+pub(crate) fn stop_on_signals() -> Result<Arc<AtomicBool>> {
     let flag = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         // Registered first, so it acts on the second signal only (when the flag is already set).

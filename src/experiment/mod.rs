@@ -1,0 +1,424 @@
+//! `spomp experiment`: run an experiment file's trials (configurations × seeds) in the
+//! simulator, one crash-safe row per finished trial, resumable and shardable; `report` merges
+//! folders of rows into `report.md` and plots; `schema` prints the file's JSON Schema.
+//!
+//! See `docs/experiments.md`.
+
+pub mod report;
+pub mod rows;
+pub mod spec;
+
+use std::collections::BTreeMap;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use spomp_behaviors::NodeRegistry;
+use spomp_robot::RobotRuntime;
+use spomp_sim::run::{Outcome, SimOptions, Simulation};
+
+use rows::{ByteCounter, RowSink, TrialRow};
+use spec::{Claim, LoadedExperiment, ResolvedConfiguration, Trial, load_experiment, shard_of, trial_hash};
+
+/// Exit code of a run stopped by Ctrl-C or SIGTERM (128 + SIGINT, as shells report it).
+const EXIT_INTERRUPTED: u8 = 130;
+
+/// What `spomp experiment` writes beside the rows: the experiment as it was run, so `report`
+/// knows the configurations' order and the claims, and can tell shards of different
+/// experiments apart.
+pub const META: &str = "experiment.json";
+
+/// `spomp experiment` and its subcommands.
+#[derive(Debug, Clone, clap::Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+pub struct ExperimentArgs {
+    /// Experiment file (`experiments/*.yaml`).
+    #[arg(required = true)]
+    pub file: Option<PathBuf>,
+    /// Trials run at once (default: the number of cores).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=256))]
+    pub jobs: Option<u32>,
+    /// Output folder (default `runs/experiments/<name>`): `trials.jsonl`, `trials.csv`,
+    /// `experiment.json`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Skip the trials already complete in the output folder (same configuration, seed and
+    /// hash); a trial whose configuration changed since is refused.
+    #[arg(long)]
+    pub resume: bool,
+    /// Run only shard I of N: the trials whose index mod N is I − 1.
+    #[arg(long, value_name = "I/N", value_parser = shard_arg)]
+    pub shard: Option<(usize, usize)>,
+    /// Run only this configuration (repeatable): a part of a study, whose rows a later run of
+    /// the whole study takes with --resume.
+    #[arg(long, value_name = "NAME")]
+    pub only: Vec<String>,
+    /// Run only this seed of the experiment's (repeatable).
+    #[arg(long = "seed", value_name = "SEED")]
+    pub seeds: Vec<u64>,
+    /// Print a JSON summary instead of the progress bar and table.
+    #[arg(long)]
+    pub json: bool,
+    /// A folder besides the experiment's own that its missions and worlds may be in
+    /// (repeatable).
+    #[arg(long = "allow-dir", value_name = "DIR")]
+    pub allow_dirs: Vec<PathBuf>,
+    /// `report`, `schema` or `validate` instead of a run.
+    #[command(subcommand)]
+    pub action: Option<ExperimentCommand>,
+}
+
+/// Subcommands of `spomp experiment`.
+#[derive(Debug, Clone, clap::Subcommand)]
+pub enum ExperimentCommand {
+    /// Merge the rows of one or more output folders (shards) and write report.md and plots.
+    Report {
+        /// Output folders of `spomp experiment` runs (shards of one experiment).
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Report folder (default: the first folder).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print the merged summary as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Print the JSON Schema of experiment files (experiments/experiment.schema.json).
+    Schema,
+    /// Check experiment files (each configuration's patched mission included): exit 0 only
+    /// when all are valid.
+    Validate {
+        /// Experiment files.
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+        /// A folder besides the experiment's own that its missions and worlds may be in.
+        #[arg(long = "allow-dir", value_name = "DIR")]
+        allow_dirs: Vec<PathBuf>,
+    },
+}
+
+/// `--shard I/N` with 1 ≤ I ≤ N.
+fn shard_arg(text: &str) -> Result<(usize, usize), String> {
+    let bad = || format!("expected I/N with 1 ≤ I ≤ N (e.g. 2/4), got `{text}`");
+    let (i, n) = text.split_once('/').ok_or_else(bad)?;
+    match (i.trim().parse::<usize>(), n.trim().parse::<usize>()) {
+        (Ok(i), Ok(n)) if i >= 1 && i <= n => Ok((i, n)),
+        _ => Err(bad()),
+    }
+}
+
+/// The experiment as run: written to `experiment.json` in the output folder.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ExperimentMeta {
+    /// Experiment name.
+    pub experiment: String,
+    /// Configuration names, in file order.
+    pub configurations: Vec<String>,
+    /// Seeds, in order.
+    pub seeds: Vec<u64>,
+    /// The claims.
+    pub claims: Vec<Claim>,
+}
+
+/// `spomp experiment …`.
+pub fn experiment(args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<ExitCode> {
+    match &args.action {
+        Some(ExperimentCommand::Report { dirs, out, json }) => report::report(dirs, out.as_deref(), *json),
+        Some(ExperimentCommand::Schema) => {
+            let schema = experiment_schema(registry);
+            out!("{}", serde_json::to_string_pretty(&schema).context("serialising the schema")?);
+            Ok(ExitCode::SUCCESS)
+        }
+        Some(ExperimentCommand::Validate { files, allow_dirs }) => {
+            let mut ok = true;
+            for f in files {
+                let loaded = load_experiment(f, registry, allow_dirs);
+                if loaded.is_valid() {
+                    out!(
+                        "✔ {}: experiment `{}` is valid ({} configurations, {} trials)",
+                        f.display(),
+                        loaded.file.as_ref().map_or("", |x| x.experiment.as_str()),
+                        loaded.configurations.len(),
+                        loaded.trials.len()
+                    );
+                } else {
+                    print_problems(f, &loaded);
+                    ok = false;
+                }
+            }
+            Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
+        }
+        None => match &args.file {
+            Some(file) => run(file, args, registry),
+            None => usage("give an experiment file, or `report DIR...`".into()),
+        },
+    }
+}
+
+/// The JSON Schema of experiment files: the serde types', with every `navigation` override
+/// described by the robots' own navigation schema (the one missions use).
+pub fn experiment_schema(registry: &NodeRegistry<RobotRuntime>) -> serde_json::Value {
+    let mut root = serde_json::to_value(schemars::schema_for!(spec::ExperimentFile)).unwrap_or_default();
+    if let Some(checks) = registry.robot_checks() {
+        let mut nav = checks.navigation_schema();
+        let nav_defs = nav.as_object_mut().and_then(|o| o.remove("$defs"));
+        if let Some(o) = nav.as_object_mut() {
+            o.remove("$schema");
+        }
+        if let Some(serde_json::Value::Object(defs)) = root.get_mut("$defs") {
+            if let Some(serde_json::Value::Object(extra)) = nav_defs {
+                for (k, v) in extra {
+                    defs.entry(k).or_insert(v);
+                }
+            }
+            defs.insert("Navigation".into(), nav);
+            for owner in ["Configuration", "RoleOverride", "RobotOverride"] {
+                if let Some(p) = defs.get_mut(owner).and_then(|d| d.pointer_mut("/properties/navigation")) {
+                    let description = p.get("description").cloned().unwrap_or(serde_json::Value::Null);
+                    *p = serde_json::json!({"description": description, "$ref": "#/$defs/Navigation"});
+                }
+            }
+        }
+    }
+    if let serde_json::Value::Object(o) = &mut root {
+        o.insert("title".into(), serde_json::Value::String("spomp experiment".into()));
+    }
+    root
+}
+
+/// A usage error: printed, exit 2.
+fn usage(message: String) -> Result<ExitCode> {
+    eprintln!("error: {message}");
+    Ok(ExitCode::from(2))
+}
+
+fn print_problems(file: &Path, loaded: &LoadedExperiment) {
+    let source_of = |f: &Path| loaded.sources.get(f).cloned().unwrap_or_default();
+    let mut text = crate::commands::render_located(&loaded.diagnostics, &source_of);
+    text.push_str(&format!("✘ {}: {} problem(s)\n", file.display(), loaded.diagnostics.len()));
+    out!("{}", text.trim_end());
+}
+
+/// Runs the experiment's (shard of) trials.
+fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<ExitCode> {
+    let loaded = load_experiment(file, registry, &args.allow_dirs);
+    if !loaded.is_valid() {
+        print_problems(file, &loaded);
+        return Ok(ExitCode::from(1));
+    }
+    let Some(spec_file) = loaded.file.as_ref() else { bail!("the experiment did not load") };
+    let out_dir =
+        args.out.clone().unwrap_or_else(|| PathBuf::from("runs").join("experiments").join(&spec_file.experiment));
+    std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    let meta = ExperimentMeta {
+        experiment: spec_file.experiment.clone(),
+        configurations: loaded.configurations.iter().map(|c| c.name.clone()).collect(),
+        seeds: loaded.seeds(),
+        claims: spec_file.claims.clone(),
+    };
+    let existing = rows::read_rows(&out_dir)?;
+    if !existing.is_empty() && !args.resume {
+        return usage(format!(
+            "{} already holds {} trial rows; give --resume to continue that run, or another --out",
+            out_dir.display(),
+            existing.len()
+        ));
+    }
+    let hashes: Vec<String> =
+        loaded.trials.iter().map(|t| trial_hash(&loaded.configurations[t.configuration], t.seed)).collect();
+    let names: Vec<&str> = loaded.configurations.iter().map(|c| c.name.as_str()).collect();
+    if let Some(bad) = args.only.iter().find(|o| !names.contains(&o.as_str())) {
+        return usage(format!("--only {bad}: no such configuration; configurations are: {}", names.join(", ")));
+    }
+    let seeds = loaded.seeds();
+    if let Some(bad) = args.seeds.iter().find(|s| !seeds.contains(s)) {
+        return usage(format!("--seed {bad}: not a seed of the experiment"));
+    }
+    let selected: Vec<Trial> = match args.shard {
+        Some((i, n)) => shard_of(&loaded.trials, i, n),
+        None => loaded.trials.clone(),
+    }
+    .into_iter()
+    .filter(|t| args.only.is_empty() || args.only.contains(&loaded.configurations[t.configuration].name))
+    .filter(|t| args.seeds.is_empty() || args.seeds.contains(&t.seed))
+    .collect();
+    // Rows already there: each must be a trial of this experiment as it is now.
+    let mut done: BTreeMap<(String, u64), &TrialRow> = BTreeMap::new();
+    for r in &existing {
+        let trial = loaded
+            .trials
+            .iter()
+            .find(|t| loaded.configurations[t.configuration].name == r.configuration && t.seed == r.seed);
+        match trial {
+            Some(t) if hashes[t.index] == r.config_hash => {
+                done.insert((r.configuration.clone(), r.seed), r);
+            }
+            Some(_) => {
+                eprintln!(
+                    "error: {}: the row of configuration `{}` seed {} was run with another version of that \
+                     configuration (its base mission or overrides changed since); run the edited experiment \
+                     into another --out",
+                    out_dir.join(rows::JSONL).display(),
+                    r.configuration,
+                    r.seed
+                );
+                return Ok(ExitCode::from(1));
+            }
+            None => {
+                eprintln!(
+                    "error: {} holds a row of configuration `{}` seed {}, which the experiment no longer has; \
+                     run it into another --out",
+                    out_dir.join(rows::JSONL).display(),
+                    r.configuration,
+                    r.seed
+                );
+                return Ok(ExitCode::from(1));
+            }
+        }
+    }
+    if let Ok(text) = std::fs::read_to_string(out_dir.join(META))
+        && let Ok(previous) = serde_json::from_str::<ExperimentMeta>(&text)
+        && !existing.is_empty()
+        && (previous.experiment != meta.experiment || previous.configurations != meta.configurations)
+    {
+        eprintln!(
+            "error: {} holds rows of experiment `{}` (configurations {}); run `{}` into another --out",
+            out_dir.display(),
+            previous.experiment,
+            previous.configurations.join(", "),
+            meta.experiment
+        );
+        return Ok(ExitCode::from(1));
+    }
+    rows::write_synced(&out_dir.join(META), serde_json::to_string_pretty(&meta)?.as_bytes())?;
+    let pending: Vec<Trial> = selected
+        .iter()
+        .filter(|t| !done.contains_key(&(loaded.configurations[t.configuration].name.clone(), t.seed)))
+        .cloned()
+        .collect();
+    let skipped = selected.len() - pending.len();
+    let existing_owned: Vec<TrialRow> = existing.clone();
+    let sink = Mutex::new(RowSink::open(&out_dir, &existing_owned)?);
+    let interrupted = crate::sim_cmd::stop_on_signals()?;
+    let quiet = args.json || !std::io::stderr().is_terminal();
+    let bar = ProgressBar::with_draw_target(
+        Some(pending.len() as u64),
+        if quiet { ProgressDrawTarget::hidden() } else { ProgressDrawTarget::stderr() },
+    );
+    bar.set_style(
+        ProgressStyle::with_template("trials {bar:30} {pos}/{len} [{elapsed_precise}, ~{eta} left] {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build().context("starting the trial threads")?;
+    let start = Instant::now();
+    let failures: Mutex<Vec<String>> = Mutex::new(Vec::new());
+    let written = std::sync::atomic::AtomicUsize::new(0);
+    pool.install(|| {
+        pending.par_iter().for_each(|t| {
+            if interrupted.load(Ordering::Relaxed) {
+                return;
+            }
+            let configuration = &loaded.configurations[t.configuration];
+            let outcome = run_trial(t, configuration, &hashes[t.index], registry, &interrupted);
+            match outcome {
+                Ok(Some(row)) => {
+                    let appended = sink
+                        .lock()
+                        .map_err(|_| anyhow::anyhow!("a trial thread panicked"))
+                        .and_then(|mut s| s.append(&row));
+                    match appended {
+                        Ok(()) => {
+                            written.fetch_add(1, Ordering::Relaxed);
+                            bar.set_message(format!("{} seed {}: {}", row.configuration, row.seed, row.outcome));
+                        }
+                        Err(e) => push(&failures, format!("{e:#}")),
+                    }
+                }
+                Ok(None) => {} // cut short by a signal: not a finished trial
+                Err(e) => push(&failures, format!("configuration `{}` seed {}: {e:#}", configuration.name, t.seed)),
+            }
+            bar.inc(1);
+        });
+    });
+    bar.finish_and_clear();
+    let failures = failures.into_inner().unwrap_or_default();
+    let was_interrupted = interrupted.load(Ordering::Relaxed);
+    let ran = written.load(Ordering::Relaxed);
+    let summary = serde_json::json!({
+        "experiment": meta.experiment,
+        "out": out_dir,
+        "shard": args.shard.map(|(i, n)| format!("{i}/{n}")),
+        "trials_selected": selected.len(),
+        "trials_skipped": skipped,
+        "trials_run": ran,
+        "failures": failures,
+        "interrupted": was_interrupted,
+        "wall_s": start.elapsed().as_secs_f64(),
+    });
+    if args.json {
+        out!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        let shard = args.shard.map_or_else(String::new, |(i, n)| format!(" (shard {i}/{n})"));
+        out!(
+            "experiment `{}`{shard}: {ran} trials run, {skipped} already complete, of {} selected, in {:.1} s",
+            meta.experiment,
+            selected.len(),
+            start.elapsed().as_secs_f64()
+        );
+        for f in &failures {
+            out!("  failed: {f}");
+        }
+        if was_interrupted {
+            out!(
+                "interrupted: the finished trials are in {}; run again with --resume",
+                out_dir.join(rows::JSONL).display()
+            );
+        }
+        out!("rows: {} and {}", out_dir.join(rows::JSONL).display(), out_dir.join(rows::CSV).display());
+        out!("report: spomp experiment report {}", out_dir.display());
+    }
+    Ok(if was_interrupted {
+        ExitCode::from(EXIT_INTERRUPTED)
+    } else if failures.is_empty() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+fn push(list: &Mutex<Vec<String>>, message: String) {
+    if let Ok(mut l) = list.lock() {
+        l.push(message);
+    }
+}
+
+/// Runs one trial; `None` when a signal cut it short.
+fn run_trial(
+    trial: &Trial,
+    configuration: &ResolvedConfiguration,
+    hash: &str,
+    registry: &NodeRegistry<RobotRuntime>,
+    interrupted: &AtomicBool,
+) -> Result<Option<TrialRow>> {
+    let loaded = &configuration.loaded;
+    let Some(mission) = loaded.mission.as_ref() else { bail!("the mission did not load") };
+    let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), trial.seed)
+        .with_context(|| format!("building the world of `{}`", mission.mission))?;
+    let options = SimOptions { seed: trial.seed, ..SimOptions::default() };
+    let sim = Simulation::new(loaded, registry, Arc::new(world), options)
+        .with_context(|| format!("setting up `{}`", mission.mission))?;
+    let mut bytes = ByteCounter::default();
+    let result = sim.run_until(&mut bytes, &mut || interrupted.load(Ordering::Relaxed));
+    if result.summary.outcome == Outcome::Interrupted {
+        return Ok(None);
+    }
+    Ok(Some(rows::row_of(trial.index, &configuration.name, hash, &result.summary, &bytes)))
+}

@@ -1,0 +1,585 @@
+//! `spomp experiment report`: merges the rows of one or more output folders (shards), and writes
+//! `report.md` (per configuration the mean and spread of each metric over seeds, time to the
+//! k-th goal, a verdict per claim) with PNG plots (goals visited over time, a band per
+//! configuration; each metric's mean and spread).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, anyhow, bail};
+use plotters::prelude::*;
+use serde::Serialize;
+
+use super::rows::{self, TrialRow};
+use super::spec::{Claim, Expect, Metric};
+use super::{ExperimentMeta, META};
+
+/// Mean and spread of a metric over a configuration's trials.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Stats {
+    /// Trials with a value.
+    pub n: usize,
+    /// Mean.
+    pub mean: f64,
+    /// Sample standard deviation (0 for one trial).
+    pub sd: f64,
+    /// Smallest value.
+    pub min: f64,
+    /// Largest value.
+    pub max: f64,
+}
+
+impl Stats {
+    /// The statistics of `values`; `None` when empty.
+    pub fn of(values: &[f64]) -> Option<Stats> {
+        if values.is_empty() {
+            return None;
+        }
+        let n = values.len();
+        let mean = values.iter().sum::<f64>() / n as f64;
+        let var = if n > 1 { values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64 } else { 0.0 };
+        let min = values.iter().copied().fold(f64::INFINITY, f64::min);
+        let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        Some(Stats { n, mean, sd: var.sqrt(), min, max })
+    }
+
+    /// Standard error of the mean.
+    pub fn se(&self) -> f64 {
+        self.sd / (self.n.max(1) as f64).sqrt()
+    }
+}
+
+/// A claim's result.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ClaimResult {
+    /// The claim.
+    pub claim: Claim,
+    /// The compared means, in the claim's order (`None`: no trial of that configuration).
+    pub stats: Vec<Option<Stats>>,
+    /// `holds`, `fails` or `no data`.
+    pub verdict: &'static str,
+    /// The smallest step between neighbours in units of their combined standard error
+    /// (increasing/decreasing claims with at least two trials each): below 2 the order could be
+    /// noise.
+    pub weakest_step_se: Option<f64>,
+}
+
+/// Checks one claim against the merged rows.
+pub fn check_claim(claim: &Claim, rows: &[TrialRow]) -> ClaimResult {
+    let k = claim.k.unwrap_or(1);
+    let stats: Vec<Option<Stats>> = claim
+        .over
+        .iter()
+        .map(|name| {
+            let values: Vec<f64> = rows
+                .iter()
+                .filter(|r| &r.configuration == name)
+                .filter_map(|r| r.metric(claim.metric, k, claim.robot.as_deref()))
+                .collect();
+            Stats::of(&values)
+        })
+        .collect();
+    let Some(means) = stats.iter().map(|s| s.map(|s| s.mean)).collect::<Option<Vec<f64>>>() else {
+        return ClaimResult { claim: claim.clone(), stats, verdict: "no data", weakest_step_se: None };
+    };
+    let holds = match claim.expect {
+        Expect::Increasing => means.windows(2).all(|w| w[1] > w[0]),
+        Expect::Decreasing => means.windows(2).all(|w| w[1] < w[0]),
+        Expect::Similar => {
+            let tol = claim.tolerance.unwrap_or(0.1);
+            let first = means[0];
+            means.iter().all(|m| (m - first).abs() <= tol * first.abs().max(f64::EPSILON))
+        }
+    };
+    let weakest_step_se = match claim.expect {
+        Expect::Similar => None,
+        _ => stats
+            .windows(2)
+            .filter_map(|w| match (w[0], w[1]) {
+                (Some(a), Some(b)) if a.n > 1 && b.n > 1 => {
+                    let se = (a.se().powi(2) + b.se().powi(2)).sqrt();
+                    (se > 0.0).then(|| (b.mean - a.mean).abs() / se)
+                }
+                _ => None,
+            })
+            .reduce(f64::min),
+    };
+    ClaimResult { claim: claim.clone(), stats, verdict: if holds { "holds" } else { "fails" }, weakest_step_se }
+}
+
+/// Reads and merges the rows of `dirs`: one row per (configuration, seed); equal duplicates
+/// (the same trial in two folders) count once, differing ones are an error.
+pub fn merge(dirs: &[PathBuf]) -> Result<(ExperimentMeta, Vec<TrialRow>)> {
+    let mut meta: Option<(ExperimentMeta, &Path)> = None;
+    let mut merged: BTreeMap<(String, u64), (TrialRow, PathBuf)> = BTreeMap::new();
+    for dir in dirs {
+        let path = dir.join(META);
+        let text = std::fs::read_to_string(&path).with_context(|| {
+            format!("reading {} (is {} an experiment output folder?)", path.display(), dir.display())
+        })?;
+        let m: ExperimentMeta = serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        match &meta {
+            None => meta = Some((m, dir)),
+            Some((first, first_dir)) if *first != m => bail!(
+                "{} and {} hold different experiments (`{}` and `{}`, or their configurations, seeds or claims differ)",
+                first_dir.display(),
+                dir.display(),
+                first.experiment,
+                m.experiment
+            ),
+            Some(_) => {}
+        }
+        for row in rows::read_rows(dir)? {
+            let key = (row.configuration.clone(), row.seed);
+            match merged.get(&key) {
+                Some((other, from)) if other.deterministic_part() != row.deterministic_part() => bail!(
+                    "configuration `{}` seed {}: the rows in {} and {} differ (hash {} and {}); \
+                     they are not the same trial",
+                    row.configuration,
+                    row.seed,
+                    from.display(),
+                    dir.display(),
+                    other.config_hash,
+                    row.config_hash
+                ),
+                Some(_) => {}
+                None => {
+                    merged.insert(key, (row, dir.clone()));
+                }
+            }
+        }
+    }
+    let Some((meta, _)) = meta else { bail!("no output folder given") };
+    let mut rows: Vec<TrialRow> = merged.into_values().map(|(r, _)| r).collect();
+    rows.sort_by_key(|r| r.trial);
+    Ok((meta, rows))
+}
+
+/// `spomp experiment report DIR... [--out DIR]`.
+pub fn report(dirs: &[PathBuf], out: Option<&Path>, json: bool) -> Result<ExitCode> {
+    let (meta, rows) = merge(dirs)?;
+    let out_dir = out.map(Path::to_path_buf).or_else(|| dirs.first().cloned()).ok_or_else(|| anyhow!("no folder"))?;
+    let plots = out_dir.join("plots");
+    std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
+    let mut jsonl = String::new();
+    let mut csv = format!("{}\n", rows::CSV_HEADER);
+    for r in &rows {
+        jsonl.push_str(&serde_json::to_string(r)?);
+        jsonl.push('\n');
+        csv.push_str(&rows::csv_line(r));
+    }
+    rows::write_synced(&out_dir.join("merged-trials.jsonl"), jsonl.as_bytes())?;
+    rows::write_synced(&out_dir.join("merged-trials.csv"), csv.as_bytes())?;
+    let table = stats_table(&meta, &rows);
+    let claims: Vec<ClaimResult> = meta.claims.iter().map(|c| check_claim(c, &rows)).collect();
+    goals_over_time_plot(&meta, &rows, &plots.join("goals_over_time.png"))?;
+    metrics_plot(&meta, &table, &plots.join("metrics.png"))?;
+    let md = markdown(&meta, &rows, &table, &claims);
+    rows::write_synced(&out_dir.join("report.md"), md.as_bytes())?;
+    let expected = meta.configurations.len() * meta.seeds.len();
+    if json {
+        let configurations: Vec<_> = meta
+            .configurations
+            .iter()
+            .map(|c| {
+                let metrics: BTreeMap<&str, Option<Stats>> =
+                    Metric::ALL.iter().map(|m| (m.as_str(), table.get(&(c.clone(), *m)).copied())).collect();
+                serde_json::json!({ "name": c, "trials": rows.iter().filter(|r| &r.configuration == c).count(), "metrics": metrics })
+            })
+            .collect();
+        let v = serde_json::json!({
+            "experiment": meta.experiment,
+            "trials": rows.len(),
+            "trials_expected": expected,
+            "configurations": configurations,
+            "claims": claims,
+            "report": out_dir.join("report.md"),
+        });
+        out!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        out!(
+            "experiment `{}`: {} of {expected} trials merged from {} folder(s)",
+            meta.experiment,
+            rows.len(),
+            dirs.len()
+        );
+        for c in &claims {
+            out!("  {:<8} {}", c.verdict, c.claim.name);
+        }
+        out!("report: {}", out_dir.join("report.md").display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+type Table = BTreeMap<(String, Metric), Stats>;
+
+fn stats_table(meta: &ExperimentMeta, rows: &[TrialRow]) -> Table {
+    let mut t = Table::new();
+    for c in &meta.configurations {
+        for m in Metric::ALL {
+            let values: Vec<f64> =
+                rows.iter().filter(|r| &r.configuration == c).filter_map(|r| r.metric(m, 1, None)).collect();
+            if let Some(s) = Stats::of(&values) {
+                t.insert((c.clone(), m), s);
+            }
+        }
+    }
+    t
+}
+
+fn fmt_num(v: f64) -> String {
+    if v.abs() >= 1e6 {
+        format!("{:.3e}", v)
+    } else if v.abs() >= 100.0 {
+        format!("{v:.0}")
+    } else if v.abs() >= 1.0 {
+        format!("{v:.2}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
+fn markdown(meta: &ExperimentMeta, rows: &[TrialRow], table: &Table, claims: &[ClaimResult]) -> String {
+    let mut md = String::new();
+    let expected = meta.configurations.len() * meta.seeds.len();
+    let _ = writeln!(md, "# Experiment `{}`\n", meta.experiment);
+    let _ = writeln!(
+        md,
+        "{} of {expected} trials ({} configurations × {} seeds). Each cell: mean ± standard deviation over seeds \
+         [min – max]. `time_to_goal_s` is the first visit; a trial that never visited counts its time limit.\n",
+        rows.len(),
+        meta.configurations.len(),
+        meta.seeds.len()
+    );
+    let _ = writeln!(md, "## Claims\n");
+    if claims.is_empty() {
+        let _ = writeln!(md, "The experiment declares no claims.\n");
+    } else {
+        let _ = writeln!(md, "| claim | metric | expect | configurations: mean ± se (n) | verdict | weakest step |");
+        let _ = writeln!(md, "|---|---|---|---|---|---|");
+        for c in claims {
+            let metric = match (&c.claim.robot, c.claim.metric, c.claim.k) {
+                (r, Metric::TimeToGoalS, k) => format!(
+                    "time_to_goal_s (goal {}){}",
+                    k.unwrap_or(1),
+                    r.as_ref().map_or_else(String::new, |r| format!(", {r}"))
+                ),
+                (Some(r), m, _) => format!("{} ({r})", m.as_str()),
+                (None, m, _) => m.as_str().to_string(),
+            };
+            let expect = match c.claim.expect {
+                Expect::Increasing => "increasing".to_string(),
+                Expect::Decreasing => "decreasing".to_string(),
+                Expect::Similar => format!("similar (±{:.0} %)", c.claim.tolerance.unwrap_or(0.1) * 100.0),
+            };
+            let values: Vec<String> = c
+                .claim
+                .over
+                .iter()
+                .zip(&c.stats)
+                .map(|(name, s)| match s {
+                    Some(s) => format!("{name}: {} ± {} ({})", fmt_num(s.mean), fmt_num(s.se()), s.n),
+                    None => format!("{name}: —"),
+                })
+                .collect();
+            let step = c.weakest_step_se.map_or_else(|| "—".to_string(), |s| format!("{s:.1} se"));
+            let _ = writeln!(
+                md,
+                "| {} | {metric} | {expect} | {} | **{}** | {step} |",
+                c.claim.name,
+                values.join("; "),
+                c.verdict
+            );
+        }
+        let _ = writeln!(
+            md,
+            "\nA verdict compares means only; the weakest step (the smallest difference between neighbours in units \
+             of their combined standard error) below 2 says the order could be noise.\n"
+        );
+    }
+    let _ = writeln!(md, "## Metrics per configuration\n");
+    let _ = write!(md, "| configuration | trials |");
+    for m in Metric::ALL {
+        let _ = write!(md, " {} |", m.as_str());
+    }
+    let _ = writeln!(md);
+    let _ = writeln!(md, "|---|---|{}", "---|".repeat(Metric::ALL.len()));
+    for c in &meta.configurations {
+        let n = rows.iter().filter(|r| &r.configuration == c).count();
+        let _ = write!(md, "| {c} | {n} |");
+        for m in Metric::ALL {
+            match table.get(&(c.clone(), m)) {
+                Some(s) => {
+                    let _ = write!(
+                        md,
+                        " {} ± {} [{} – {}] |",
+                        fmt_num(s.mean),
+                        fmt_num(s.sd),
+                        fmt_num(s.min),
+                        fmt_num(s.max)
+                    );
+                }
+                None => md.push_str(" — |"),
+            }
+        }
+        let _ = writeln!(md);
+    }
+    // Time to the k-th goal, for every k some trial reached.
+    let max_k = rows.iter().map(|r| r.visit_times_s.len()).max().unwrap_or(0).min(20);
+    if max_k > 0 {
+        let _ = writeln!(
+            md,
+            "\n## Time to the k-th goal (s)\n\nMean over seeds; a trial that did not reach goal k counts its time limit \
+             (the number of trials that did is in brackets).\n"
+        );
+        let _ = write!(md, "| configuration |");
+        for k in 1..=max_k {
+            let _ = write!(md, " {k} |");
+        }
+        let _ = writeln!(md);
+        let _ = writeln!(md, "|---|{}", "---|".repeat(max_k));
+        for c in &meta.configurations {
+            let runs: Vec<&TrialRow> = rows.iter().filter(|r| &r.configuration == c).collect();
+            let _ = write!(md, "| {c} |");
+            for k in 1..=max_k {
+                let values: Vec<f64> =
+                    runs.iter().filter_map(|r| r.metric(Metric::TimeToGoalS, k as u32, None)).collect();
+                let reached = runs.iter().filter(|r| r.visit_times_s.len() >= k).count();
+                match Stats::of(&values) {
+                    Some(s) => {
+                        let _ = write!(md, " {:.0} ({reached}) |", s.mean);
+                    }
+                    None => md.push_str(" — |"),
+                }
+            }
+            let _ = writeln!(md);
+        }
+    }
+    let _ = writeln!(md, "\n## Plots\n");
+    let _ = writeln!(md, "![goals visited over time](plots/goals_over_time.png)\n");
+    let _ = writeln!(md, "![metrics](plots/metrics.png)\n");
+    let missing: Vec<String> = meta
+        .configurations
+        .iter()
+        .flat_map(|c| meta.seeds.iter().map(move |s| (c, *s)))
+        .filter(|(c, s)| !rows.iter().any(|r| &&r.configuration == c && r.seed == *s))
+        .map(|(c, s)| format!("{c}/{s}"))
+        .collect();
+    if !missing.is_empty() {
+        let shown: Vec<&str> = missing.iter().take(30).map(String::as_str).collect();
+        let _ = writeln!(md, "## Trials without a row\n\n{} (of {}).\n", shown.join(", "), missing.len());
+    }
+    md
+}
+
+/// Plot colours per configuration.
+const COLOURS: [RGBColor; 8] = [
+    RGBColor(0, 114, 178),
+    RGBColor(213, 94, 0),
+    RGBColor(0, 158, 115),
+    RGBColor(204, 121, 167),
+    RGBColor(230, 159, 0),
+    RGBColor(86, 180, 233),
+    RGBColor(120, 120, 120),
+    RGBColor(0, 0, 0),
+];
+
+/// Goals visited over time: per configuration the mean over seeds with a band of ± one
+/// standard deviation (the paper's figure style).
+fn goals_over_time_plot(meta: &ExperimentMeta, rows: &[TrialRow], path: &Path) -> Result<()> {
+    crate::sim_plots::ensure_font()?;
+    let t_max = rows.iter().map(|r| r.end_s.max(r.time_limit_s.min(r.end_s))).fold(1.0, f64::max);
+    let y_max = rows.iter().map(|r| r.goals_visited).max().unwrap_or(1).max(1) as f64 * 1.1;
+    const STEPS: usize = 200;
+    let root = BitMapBackend::new(path, (900, 500)).into_drawing_area();
+    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(format!("{}: goals visited over time (mean ± sd over seeds)", meta.experiment), ("sans-serif", 18))
+            .margin(15)
+            .x_label_area_size(35)
+            .y_label_area_size(45)
+            .build_cartesian_2d(0.0..t_max, 0.0..y_max)?;
+        chart.configure_mesh().x_desc("time (s)").y_desc("goals visited").draw()?;
+        for (i, c) in meta.configurations.iter().enumerate() {
+            let runs: Vec<&TrialRow> = rows.iter().filter(|r| &r.configuration == c).collect();
+            if runs.is_empty() {
+                continue;
+            }
+            let colour = COLOURS[i % COLOURS.len()];
+            let mut mean = Vec::with_capacity(STEPS + 1);
+            let mut upper = Vec::with_capacity(STEPS + 1);
+            let mut lower = Vec::with_capacity(STEPS + 1);
+            for s in 0..=STEPS {
+                let t = t_max * s as f64 / STEPS as f64;
+                let counts: Vec<f64> =
+                    runs.iter().map(|r| r.visit_times_s.iter().filter(|v| **v <= t).count() as f64).collect();
+                if let Some(st) = Stats::of(&counts) {
+                    mean.push((t, st.mean));
+                    upper.push((t, st.mean + st.sd));
+                    lower.push((t, (st.mean - st.sd).max(0.0)));
+                }
+            }
+            let mut band = upper;
+            band.extend(lower.into_iter().rev());
+            chart.draw_series(std::iter::once(Polygon::new(band, colour.mix(0.2).filled())))?;
+            chart
+                .draw_series(LineSeries::new(mean, colour.stroke_width(2)))?
+                .label(format!("{c} ({} seeds)", runs.len()))
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], colour.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(|e| anyhow!("drawing {}: {e}", path.display()))
+}
+
+/// Each metric's mean per configuration, with a bar of ± one standard deviation.
+fn metrics_plot(meta: &ExperimentMeta, table: &Table, path: &Path) -> Result<()> {
+    crate::sim_plots::ensure_font()?;
+    let shown = [
+        Metric::GoalsVisited,
+        Metric::TimeToGoalS,
+        Metric::DistanceM,
+        Metric::HeadingToGoalFraction,
+        Metric::Collisions,
+        Metric::LocalizationErrorM,
+        Metric::BytesSent,
+        Metric::WallS,
+    ];
+    let n = meta.configurations.len().max(1);
+    let root = BitMapBackend::new(path, (1200, 700)).into_drawing_area();
+    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+        root.fill(&WHITE)?;
+        let areas = root.split_evenly((2, 4));
+        for (area, metric) in areas.iter().zip(shown) {
+            let values: Vec<(usize, Stats)> = meta
+                .configurations
+                .iter()
+                .enumerate()
+                .filter_map(|(i, c)| table.get(&(c.clone(), metric)).map(|s| (i, *s)))
+                .collect();
+            let highest = values.iter().map(|(_, s)| s.mean + s.sd).fold(0.0, f64::max);
+            // An all-zero metric still gets a readable axis.
+            let top = if highest > 0.0 { highest * 1.15 } else { 1.0 };
+            let bottom = values.iter().map(|(_, s)| s.mean - s.sd).fold(0.0, f64::min);
+            let mut chart = ChartBuilder::on(area)
+                .caption(metric.as_str(), ("sans-serif", 15))
+                .margin(8)
+                .x_label_area_size(20)
+                .y_label_area_size(50)
+                .build_cartesian_2d(-0.5..(n as f64 - 0.5), bottom..top)?;
+            chart
+                .configure_mesh()
+                .disable_x_mesh()
+                .x_labels(n)
+                .x_label_formatter(&|x| {
+                    let i = x.round();
+                    if (x - i).abs() < 1e-6 && i >= 0.0 {
+                        meta.configurations.get(i as usize).cloned().unwrap_or_default()
+                    } else {
+                        String::new()
+                    }
+                })
+                .draw()?;
+            for (i, s) in values {
+                let colour = COLOURS[i % COLOURS.len()];
+                let x = i as f64;
+                chart.draw_series(std::iter::once(Rectangle::new(
+                    [(x - 0.3, 0.0), (x + 0.3, s.mean)],
+                    colour.mix(0.6).filled(),
+                )))?;
+                chart.draw_series(std::iter::once(PathElement::new(
+                    [(x, s.mean - s.sd), (x, s.mean + s.sd)],
+                    BLACK.stroke_width(2),
+                )))?;
+            }
+        }
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(|e| anyhow!("drawing {}: {e}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn row(configuration: &str, seed: u64, goals: usize) -> TrialRow {
+        TrialRow {
+            trial: 0,
+            configuration: configuration.into(),
+            seed,
+            config_hash: "h".into(),
+            mission: "m".into(),
+            outcome: "time_limit".into(),
+            end_s: 100.0,
+            time_limit_s: 100.0,
+            ugvs: 1,
+            goals_total: 10,
+            goals_visited: goals,
+            clusters_total: None,
+            clusters_visited: None,
+            visit_times_s: (0..goals).map(|k| 10.0 * (k + 1) as f64).collect(),
+            distance_m: 10.0,
+            heading_to_goal_fraction: 0.5,
+            collisions: 0,
+            localization_error_m: None,
+            bytes_sent: 100 * goals as u64,
+            bytes_sent_full_links: 0,
+            bytes_sent_small_links: 0,
+            wall_s: 1.0,
+            robots: Vec::new(),
+        }
+    }
+
+    fn claim(expect: Expect, metric: Metric, over: &[&str]) -> Claim {
+        Claim {
+            name: "c".into(),
+            metric,
+            k: None,
+            robot: None,
+            expect,
+            over: over.iter().map(|s| s.to_string()).collect(),
+            tolerance: None,
+        }
+    }
+
+    #[test]
+    fn stats_are_the_sample_ones() {
+        let s = Stats::of(&[1.0, 2.0, 3.0, 4.0]).unwrap();
+        assert_eq!((s.n, s.mean, s.min, s.max), (4, 2.5, 1.0, 4.0));
+        assert!((s.sd - 1.290_994_448_7).abs() < 1e-9);
+        assert!(Stats::of(&[]).is_none());
+    }
+
+    #[test]
+    fn claims_get_their_verdicts() {
+        let rows = vec![row("a", 1, 2), row("a", 2, 4), row("b", 1, 5), row("b", 2, 7), row("c", 1, 7)];
+        assert_eq!(check_claim(&claim(Expect::Increasing, Metric::GoalsVisited, &["a", "b"]), &rows).verdict, "holds");
+        assert_eq!(check_claim(&claim(Expect::Decreasing, Metric::GoalsVisited, &["a", "b"]), &rows).verdict, "fails");
+        // b: mean 6, c: 7 → within 20 % but not 10 %.
+        let mut similar = claim(Expect::Similar, Metric::GoalsVisited, &["b", "c"]);
+        assert_eq!(check_claim(&similar, &rows).verdict, "fails");
+        similar.tolerance = Some(0.2);
+        assert_eq!(check_claim(&similar, &rows).verdict, "holds");
+        assert_eq!(
+            check_claim(&claim(Expect::Increasing, Metric::GoalsVisited, &["a", "zz"]), &rows).verdict,
+            "no data"
+        );
+        // Time to the first goal is the same (10 s) everywhere: neither increasing nor decreasing.
+        assert_eq!(check_claim(&claim(Expect::Decreasing, Metric::TimeToGoalS, &["a", "b"]), &rows).verdict, "fails");
+        let step = check_claim(&claim(Expect::Increasing, Metric::GoalsVisited, &["a", "b"]), &rows).weakest_step_se;
+        // Means 3 and 6, sds √2 each, n 2 each: se of the difference is √2, the step 3/√2.
+        assert!((step.unwrap() - 3.0 / 2f64.sqrt()).abs() < 1e-9);
+    }
+}
