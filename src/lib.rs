@@ -36,6 +36,7 @@ mod sim_cmd;
 mod sim_plots;
 mod terrain_cmd;
 mod world_cmd;
+mod world_import;
 
 pub use spomp_behaviors::NodeRegistry;
 pub use spomp_robot::RobotRuntime;
