@@ -23,12 +23,14 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Check mission files: parse → schema → wiring → team. Exit 0 only when all are valid.
+    /// Check mission files: parse → schema → wiring → team → world (for a mission naming a world
+    /// folder). Exit 0 only when all are valid; warnings do not fail.
     Validate {
         /// Mission files.
         #[arg(required = true)]
         files: Vec<PathBuf>,
-        /// Print the diagnostics as a JSON array of {file, line, column, node_path, stage, message}
+        /// Print the diagnostics as a JSON array of {file, line, column, node_path, stage, message,
+        /// severity}
         /// (with --dry-run: {diagnostics, dry_runs}).
         #[arg(long)]
         json: bool,

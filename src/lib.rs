@@ -37,6 +37,7 @@ mod sim_plots;
 mod terrain_cmd;
 mod world_cmd;
 mod world_import;
+mod world_stage;
 
 pub use spomp_behaviors::NodeRegistry;
 pub use spomp_robot::RobotRuntime;

@@ -20,6 +20,9 @@ pub enum Stage {
     Wiring,
     /// Roles, priorities, ids, skills per robot kind.
     Team,
+    /// The world a mission names: it loads, start poses are usable, goals can exist, waypoints
+    /// stay in it (run by `spomp validate`, which can load worlds).
+    World,
     /// Simulated dry run.
     DryRun,
 }
@@ -32,9 +35,22 @@ impl Stage {
             Stage::Schema => "schema",
             Stage::Wiring => "wiring",
             Stage::Team => "team",
+            Stage::World => "world",
             Stage::DryRun => "dry_run",
         }
     }
+}
+
+/// How serious a problem is: an error makes a mission invalid, a warning does not (DESIGN.md
+/// §3: exit code 0 only when valid).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Severity {
+    /// The mission is invalid.
+    #[default]
+    Error,
+    /// The mission is valid but probably not what its author meant.
+    Warning,
 }
 
 /// One problem in a mission.
@@ -52,6 +68,8 @@ pub struct Diagnostic {
     pub stage: Stage,
     /// What was expected and what was found.
     pub message: String,
+    /// Error or warning.
+    pub severity: Severity,
     /// Byte span for rendering.
     #[serde(skip)]
     pub span: Option<(usize, usize)>,
@@ -73,14 +91,29 @@ impl Diagnostic {
             node_path: node_path.into(),
             stage,
             message: message.into(),
+            severity: Severity::Error,
             span: loc.offset.map(|o| (o, loc.len.max(1))),
         }
+    }
+
+    /// The same problem as a warning.
+    pub fn into_warning(mut self) -> Self {
+        self.severity = Severity::Warning;
+        self
+    }
+
+    /// Whether it makes the mission invalid.
+    pub fn is_error(&self) -> bool {
+        self.severity == Severity::Error
     }
 }
 
 impl fmt::Display for Diagnostic {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}:{}:{}: [{}] ", self.file.display(), self.line, self.column, self.stage.as_str())?;
+        if self.severity == Severity::Warning {
+            f.write_str("warning: ")?;
+        }
         if !self.node_path.is_empty() {
             write!(f, "at {}: ", self.node_path)?;
         }
@@ -137,6 +170,12 @@ impl fmt::Display for Rendered {
 impl std::error::Error for Rendered {}
 
 impl miette::Diagnostic for Rendered {
+    fn severity(&self) -> Option<miette::Severity> {
+        Some(match self.diag.severity {
+            Severity::Error => miette::Severity::Error,
+            Severity::Warning => miette::Severity::Warning,
+        })
+    }
     fn code<'a>(&'a self) -> Option<Box<dyn fmt::Display + 'a>> {
         Some(Box::new(format!("spomp::{}", self.diag.stage.as_str())))
     }

@@ -89,6 +89,13 @@ pub(crate) fn load_plan(path: &Path) -> Result<QgcPlan, PlanError> {
     parse_plan(&text).map_err(error)
 }
 
+/// The waypoints of a QGroundControl `.plan` file in the map frame (its planned home is the
+/// origin), read and interpreted exactly as `follow_waypoints` reads it: for checks made outside
+/// the node, such as `spomp validate`'s world stage. The error names the file and the problem.
+pub fn plan_waypoints(path: &Path) -> Result<Vec<Point2>, String> {
+    load_plan(path).map(|p| p.waypoints.iter().map(|w| w.position).collect()).map_err(|e| e.to_string())
+}
+
 /// Interprets the text of a `.plan` file; errors say where in the file the problem is.
 pub(crate) fn parse_plan(text: &str) -> Result<QgcPlan, String> {
     let root: Value = serde_json::from_str(text).map_err(|e| format!("not valid JSON: {e}"))?;
