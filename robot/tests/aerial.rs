@@ -590,7 +590,10 @@ time_limit_s: 100
     let outside = dir.join("outside.plan");
     std::fs::write(&outside, plan(&[item(100.0, 10.0), item(60.0, 60.0)])).unwrap();
     let err = follow_node(&[plan_port(&outside)]).err().unwrap();
-    assert!(err.contains("waypoint 1") && err.contains("outside the inclusion geofence"), "{err}");
+    assert!(
+        err.contains("outside.plan") && err.contains("waypoint 1") && err.contains("outside the inclusion geofence"),
+        "{err}"
+    );
 
     // The same fence written in the mission: `no_fly.inside`.
     let inside_param = serde_json::json!({

@@ -416,16 +416,21 @@ fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, Str
     };
     let no_fly = NoFly::new(polys, fences, margin)?;
     if let Source::Fixed(w) = &source {
+        // Name the plan the waypoints and fences came from, so the operator knows which file.
+        let from = match p.get("plan_file") {
+            Binding::Literal(BbValue::Str(path)) => format!("QGroundControl plan `{path}`: "),
+            _ => String::new(),
+        };
         for (i, wp) in w.iter().enumerate() {
             if !(wp.x.is_finite() && wp.y.is_finite()) {
-                return Err(format!("waypoint {i} is not finite"));
+                return Err(format!("{from}waypoint {i} is not finite"));
             }
             if let Some(z) = no_fly.zone_containing(*wp) {
-                return Err(format!("waypoint {i} at ({:.1}, {:.1}) lies inside no-fly zone {z}", wp.x, wp.y));
+                return Err(format!("{from}waypoint {i} at ({:.1}, {:.1}) lies inside no-fly zone {z}", wp.x, wp.y));
             }
             if no_fly.outside_fences(*wp) {
                 return Err(format!(
-                    "waypoint {i} at ({:.1}, {:.1}) lies outside the inclusion geofence (fly only inside)",
+                    "{from}waypoint {i} at ({:.1}, {:.1}) lies outside the inclusion geofence (fly only inside)",
                     wp.x, wp.y
                 ));
             }
