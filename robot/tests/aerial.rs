@@ -586,6 +586,14 @@ time_limit_s: 100
         + Point2::new(100.0, 10.0).distance(Point2::new(10.0, 100.0));
     assert!(flown > straight + 5.0 && flown < straight + 40.0, "{flown} vs {straight}");
 
+    // A UAV that takes off outside the fence flies straight in, then stays inside.
+    let ex = build(&dir, yaml, "explorer", "uav1", Pose2::new(60.0, 60.0, 0.0));
+    let mut uav = Uav::new(ex, Point2::new(60.0, 60.0));
+    assert_eq!(uav.run(3000), Status::Success, "{:?}", uav.reports());
+    let first_inside = uav.track.iter().position(|p| in_polygon(&poly, *p)).unwrap();
+    assert!(uav.track[first_inside..].iter().all(|p| in_polygon(&poly, *p)), "left the fence after entering it");
+    assert!(close(uav.pos, Point2::new(10.0, 100.0), 2.1), "{:?}", uav.pos);
+
     // A waypoint outside the fence is refused when the mission is built, naming it.
     let outside = dir.join("outside.plan");
     std::fs::write(&outside, plan(&[item(100.0, 10.0), item(60.0, 60.0)])).unwrap();
