@@ -222,6 +222,10 @@ enum WorldCommand {
         /// Pixels per metre (instead of --resolution-m).
         #[arg(long)]
         pixels_per_m: Option<f64>,
+        /// Cell size of the world, metres (default: one cell per pixel); each cell takes the
+        /// most common class of its pixels.
+        #[arg(long)]
+        cell_m: Option<f64>,
         /// WGS-84 LAT,LON of the raster's north-west (top-left) corner, degrees.
         #[arg(long, value_parser = args::lat_lon, allow_hyphen_values = true)]
         gps_reference: Option<(f64, f64)>,
@@ -290,6 +294,7 @@ fn run_world(action: WorldCommand) -> anyhow::Result<ExitCode> {
             classes,
             resolution_m,
             pixels_per_m,
+            cell_m,
             gps_reference,
             colour_tolerance,
             start_near,
@@ -307,6 +312,7 @@ fn run_world(action: WorldCommand) -> anyhow::Result<ExitCode> {
                 raster,
                 classes,
                 scale,
+                cell_m,
                 gps_reference,
                 colour_tolerance,
                 start_near,

@@ -91,6 +91,8 @@ pub struct ImportArgs {
     pub classes: PathBuf,
     /// Pixel size.
     pub scale: Scale,
+    /// Cell size of the world, metres; `None`: one cell per pixel.
+    pub cell_m: Option<f64>,
     /// WGS-84 latitude and longitude of the raster's north-west (top-left) corner, degrees.
     pub gps_reference: Option<(f64, f64)>,
     /// Largest RGB distance counted as a match.
@@ -448,6 +450,73 @@ pub fn start_poses(world: &World, near: Point2, count: usize) -> Vec<Pose2> {
     out
 }
 
+/// A class grid, row-major, rows top-down (as the image).
+struct ClassGrid {
+    width: u32,
+    height: u32,
+    class: Vec<ClassId>,
+}
+
+/// The pixel classes on a grid of `cell_m` cells over the same extent: each cell takes the most
+/// common class of the pixels whose centres fall in it (ties to the easier rank, then the lower
+/// index: a road pixel is not lost to an equal count of building), or of the pixel under its
+/// centre when it is smaller than a pixel. Errors when the grid would exceed the world's cells.
+fn resample(
+    pixels: &[ClassId],
+    width: u32,
+    height: u32,
+    pixel_m: f64,
+    cell_m: f64,
+    table: &ClassTable,
+) -> Result<ClassGrid> {
+    if (cell_m - pixel_m).abs() <= 1e-9 * pixel_m {
+        return Ok(ClassGrid { width, height, class: pixels.to_vec() });
+    }
+    let cols = ((f64::from(width) * pixel_m / cell_m).round() as u64).max(1);
+    let rows = ((f64::from(height) * pixel_m / cell_m).round() as u64).max(1);
+    if cols * rows > spomp_sim::MAX_WORLD_CELLS {
+        bail!(
+            "at --cell-m {cell_m} the world would be {cols} × {rows} cells; at most {} are allowed",
+            spomp_sim::MAX_WORLD_CELLS
+        );
+    }
+    let (cols, rows) = (cols as u32, rows as u32);
+    let rank = table.rank_lut();
+    // The pixel span of a cell along one axis: the pixels whose centres lie in the cell, or the
+    // pixel under the cell's centre.
+    let span = |k: u32, n_px: u32| -> (u32, u32) {
+        let (a, b) = (f64::from(k) * cell_m / pixel_m, f64::from(k + 1) * cell_m / pixel_m);
+        let first = (a - 0.5).ceil().max(0.0) as u32;
+        let last = ((b - 0.5).ceil().max(0.0) as u32).min(n_px);
+        if first < last {
+            (first, last)
+        } else {
+            let centre = (((a + b) / 2.0).floor() as u32).min(n_px - 1);
+            (centre, centre + 1)
+        }
+    };
+    let mut class = Vec::with_capacity(cols as usize * rows as usize);
+    let mut votes = [0u32; 256];
+    for r in 0..rows {
+        let (y0, y1) = span(r, height);
+        for c in 0..cols {
+            let (x0, x1) = span(c, width);
+            votes.fill(0);
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    votes[pixels[y as usize * width as usize + x as usize] as usize] += 1;
+                }
+            }
+            let best = (0..256usize)
+                .filter(|&k| votes[k] > 0)
+                .max_by_key(|&k| (votes[k], std::cmp::Reverse(rank[k]), std::cmp::Reverse(k)))
+                .unwrap_or(0);
+            class.push(best as ClassId);
+        }
+    }
+    Ok(ClassGrid { width: cols, height: rows, class })
+}
+
 /// Vehicle-cluster centres as the goal detector sees them with its defaults in the whole map;
 /// none when the table has no `vehicle` class.
 fn vehicle_clusters(map: &AerialMap, table: &ClassTable) -> Vec<Point2> {
@@ -468,7 +537,9 @@ pub struct ImportRecord {
     pub raster: PathBuf,
     /// The class table file.
     pub classes: PathBuf,
-    /// Metres per pixel (= per cell).
+    /// Metres per raster pixel.
+    pub pixel_m: f64,
+    /// Metres per world cell.
     pub resolution_m: f64,
     /// Size in metres (east–west, north–south).
     pub size_m: [f64; 2],
@@ -506,14 +577,20 @@ pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
         );
     }
 
-    let spec = GridSpec::new(Point2::new(0.0, 0.0), res, width, height);
+    let cell_m = a.cell_m.unwrap_or(res);
+    let (lo, hi) = spomp_sim::RESOLUTION_RANGE_M;
+    if !(cell_m.is_finite() && (lo..=hi).contains(&cell_m)) {
+        bail!("--cell-m must be between {lo} and {hi} m, got {cell_m}");
+    }
+    let cells = resample(&pixel_classes, width, height, res, cell_m, &classes.table)?;
+    let spec = GridSpec::new(Point2::new(0.0, 0.0), cell_m, cells.width, cells.height);
     let mut map = AerialMap::unknown(spec);
     let mut colour_of = [[0u8; 3]; 256];
     for c in &classes.table.classes {
         colour_of[c.index as usize] = c.color;
     }
-    let (w, h) = (width as usize, height as usize);
-    for (k, &class) in pixel_classes.iter().enumerate() {
+    let (w, h) = (cells.width as usize, cells.height as usize);
+    for (k, &class) in cells.class.iter().enumerate() {
         let (x, y) = (k % w, k / w);
         let i = (h - 1 - y) * w + x;
         map.class[i] = class;
@@ -527,7 +604,7 @@ pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
     let near = a.start_near.unwrap_or(spec.origin);
     world.meta.start_poses = start_poses(&world, near, a.starts);
 
-    let (w_m, h_m) = spec.size_m();
+    let (w_m, h_m) = (f64::from(width) * res, f64::from(height) * res);
     let gps_origin = match a.gps_reference {
         Some((lat, lon)) => {
             if !(lat.is_finite() && lat.abs() <= 85.0 && lon.is_finite() && lon.abs() <= 180.0) {
@@ -540,7 +617,8 @@ pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
     let record = ImportRecord {
         raster: a.raster.clone(),
         classes: a.classes.clone(),
-        resolution_m: res,
+        pixel_m: res,
+        resolution_m: cell_m,
         size_m: [w_m, h_m],
         gps_reference_north_west: a.gps_reference.map(|(lat, lon)| [lat, lon]),
         gps_origin,
@@ -580,6 +658,7 @@ pub fn import(a: &ImportArgs) -> Result<ExitCode> {
             "width": spec.width,
             "height": spec.height,
             "resolution_m": spec.resolution_m,
+            "pixel_m": record.pixel_m,
             "size_m": record.size_m,
             "colours": {
                 "exact": record.colours.exact,
@@ -624,6 +703,17 @@ pub fn import(a: &ImportArgs) -> Result<ExitCode> {
         if let Some([lat, lon]) = record.gps_origin {
             out!("map origin (south-west corner) at {lat:.7}, {lon:.7} (ros2.gps_origin, QGC planned home)");
         }
+    }
+    if world.meta.vehicle_clusters.is_empty()
+        && let Some(vehicle) = world.classes().by_name("vehicle")
+        && world.count_class(vehicle.index) > 0
+    {
+        eprintln!(
+            "warning: the world has {} vehicle cells but the goal detector finds no cluster in them at {} m per cell \
+             (it removes specks thinner than about two cells); a finer --cell-m keeps them",
+            world.count_class(vehicle.index),
+            spec.resolution_m
+        );
     }
     if world.meta.start_poses.len() < a.starts {
         eprintln!(
@@ -705,6 +795,25 @@ mod tests {
         // Alone, a far colour takes the nearest class colour.
         let lone = image::RgbImage::from_pixel(1, 1, image::Rgb([140, 157, 140]));
         assert_eq!(classify(&lone, &table, 30.0).0, [6]);
+    }
+
+    #[test]
+    fn resampling_takes_the_majority_of_the_pixels_of_a_cell() {
+        let t = table();
+        // 4 × 2 pixels of 0.5 m: road, road, building, grass / road, building, building, grass.
+        let px = [0, 0, 2, 3, 0, 2, 2, 3];
+        let one = resample(&px, 4, 2, 0.5, 1.0, &t.table).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!((one.width, one.height), (2, 1));
+        // Left cell: three road, one building; right cell: two building, two grass: a tie that
+        // goes to the easier grass.
+        assert_eq!(one.class, [0, 3]);
+        let fine = resample(&px, 4, 2, 0.5, 0.25, &t.table).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!((fine.width, fine.height), (8, 4));
+        assert_eq!(fine.class[..8], [0, 0, 0, 0, 2, 2, 3, 3]);
+        assert_eq!(fine.class[24..], [0, 0, 2, 2, 2, 2, 3, 3]);
+        let same = resample(&px, 4, 2, 0.5, 0.5, &t.table).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(same.class, px);
+        assert!(resample(&px, 4, 2, 0.5, 0.0001, &t.table).is_err(), "too many cells");
     }
 
     #[test]

@@ -94,6 +94,27 @@ fn the_imported_campus_is_a_world_whose_mission_runs_to_completion() {
 }
 
 #[test]
+fn the_world_can_have_its_own_cell_size() {
+    let dir = tempfile::tempdir().unwrap();
+    // Finer cells than pixels: 0.25 m, four cells per pixel, the same three clusters.
+    let out = import(&dir.path().join("fine"), &["--resolution-m", "0.5", "--cell-m", "0.25", "--json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((v["width"].as_u64(), v["height"].as_u64()), (Some(640), Some(480)));
+    assert_eq!((v["resolution_m"].as_f64(), v["pixel_m"].as_f64()), (Some(0.25), Some(0.5)));
+    assert_eq!(v["size_m"], serde_json::json!([160.0, 120.0]));
+    assert_eq!(v["vehicle_clusters"].as_array().unwrap().len(), 3, "{v}");
+    // Coarser: 1 m cells keep the layout, but 2 m wide cars become specks the detector removes,
+    // and the import says so.
+    let out = import(&dir.path().join("coarse"), &["--resolution-m", "0.5", "--cell-m", "1", "--json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((v["width"].as_u64(), v["height"].as_u64()), (Some(160), Some(120)));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("finds no cluster") && err.contains("--cell-m"), "{err}");
+}
+
+#[test]
 fn an_implausible_resolution_is_questioned_unless_forced() {
     let dir = tempfile::tempdir().unwrap();
     // 320 pixels at 30 m: a 9.6 km campus.
