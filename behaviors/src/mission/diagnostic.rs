@@ -188,3 +188,33 @@ impl miette::Diagnostic for Rendered {
         Some(Box::new(std::iter::once(miette::LabeledSpan::new(Some(label), offset, len))))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(line: u32) -> Loc {
+        Loc { line, column: 3, offset: None, len: 0 }
+    }
+
+    #[test]
+    fn warnings_are_marked_and_do_not_invalidate_a_mission() {
+        let error = Diagnostic::new("m.yaml", at(4), "team[0].start", Stage::World, "off the map");
+        let warning = Diagnostic::new("m.yaml", at(9), "goals.detect", Stage::World, "no goal").into_warning();
+        assert!(error.is_error() && !warning.is_error());
+        assert_eq!(error.to_string(), "m.yaml:4:3: [world] at team[0].start: off the map");
+        assert_eq!(warning.to_string(), "m.yaml:9:3: [world] warning: at goals.detect: no goal");
+        let json = serde_json::to_value(&warning).unwrap_or_default();
+        assert_eq!((json["severity"].as_str(), json["stage"].as_str()), (Some("warning"), Some("world")));
+
+        let mut loaded = crate::mission::LoadedMission {
+            mission: serde_saphyr::from_str("mission: m\nteam: []\nroles: {}\ntime_limit_s: 10\n").ok(),
+            ..Default::default()
+        };
+        assert!(loaded.mission.is_some());
+        loaded.diagnostics.push(warning);
+        assert!(loaded.is_valid(), "a warning leaves the mission valid");
+        loaded.diagnostics.push(error);
+        assert!(!loaded.is_valid());
+    }
+}
