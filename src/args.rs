@@ -29,6 +29,15 @@ pub fn pose(text: &str) -> Result<Pose2, String> {
     Ok(Pose2::new(v[0], v[1], v[2]))
 }
 
+/// `LAT,LON` in degrees.
+pub fn lat_lon(text: &str) -> Result<(f64, f64), String> {
+    let v = numbers(text, 2, "LAT,LON in degrees")?;
+    if v[0].abs() > 90.0 || v[1].abs() > 180.0 {
+        return Err(format!("latitude must be within ±90 and longitude within ±180 degrees, got `{text}`"));
+    }
+    Ok((v[0], v[1]))
+}
+
 /// `W,H` in metres, both positive.
 pub fn size(text: &str) -> Result<(f64, f64), String> {
     let v = numbers(text, 2, "W,H in metres")?;

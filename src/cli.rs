@@ -11,7 +11,9 @@ use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
 use spomp_core::{Point2, Pose2};
 use spomp_robot::RobotRuntime;
 
-use crate::{args, commands, experiment, log_cmd, plan_cmd, replay_cmd, run_cmd, sim_cmd, terrain_cmd, world_cmd};
+use crate::{
+    args, commands, experiment, log_cmd, plan_cmd, replay_cmd, run_cmd, sim_cmd, terrain_cmd, world_cmd, world_import,
+};
 
 /// Mission framework for air–ground robot teams.
 #[derive(Parser, Debug)]
@@ -37,12 +39,14 @@ enum KeysCommand {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Check mission files: parse → schema → wiring → team. Exit 0 only when all are valid.
+    /// Check mission files: parse → schema → wiring → team → world (for a mission naming a world
+    /// folder). Exit 0 only when all are valid; warnings do not fail.
     Validate {
         /// Mission files.
         #[arg(required = true)]
         files: Vec<PathBuf>,
-        /// Print the diagnostics as a JSON array of {file, line, column, node_path, stage, message}
+        /// Print the diagnostics as a JSON array of {file, line, column, node_path, stage, message,
+        /// severity}
         /// (with --dry-run: {diagnostics, dry_runs}).
         #[arg(long)]
         json: bool,
@@ -229,6 +233,47 @@ enum WorldCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Import a colour-coded semantic raster (an aerial survey's class map, PNG) as a world
+    /// folder: class layer, elevation from the classes, start poses (see docs/missions.md).
+    Import {
+        /// The class raster (PNG; row 0 is the northern edge).
+        raster: PathBuf,
+        /// Class table YAML: `classes: [{index, name, rank, color: [R, G, B], height_m?}, …]`.
+        #[arg(long)]
+        classes: PathBuf,
+        /// Metres per pixel.
+        #[arg(long, required_unless_present = "pixels_per_m", conflicts_with = "pixels_per_m")]
+        resolution_m: Option<f64>,
+        /// Pixels per metre (instead of --resolution-m).
+        #[arg(long)]
+        pixels_per_m: Option<f64>,
+        /// Cell size of the world, metres (default: one cell per pixel); each cell takes the
+        /// most common class of its pixels.
+        #[arg(long)]
+        cell_m: Option<f64>,
+        /// WGS-84 LAT,LON of the raster's north-west (top-left) corner, degrees.
+        #[arg(long, value_parser = args::lat_lon, allow_hyphen_values = true)]
+        gps_reference: Option<(f64, f64)>,
+        /// Largest RGB distance (0–441) at which a colour counts as its class's; farther colours
+        /// are snapped to the nearest class and their share reported.
+        #[arg(long, default_value_t = world_import::DEFAULT_COLOUR_TOLERANCE)]
+        colour_tolerance: f64,
+        /// Place start poses nearest this X,Y (metres, map frame; default: the south-west corner).
+        #[arg(long, value_parser = args::point, allow_hyphen_values = true)]
+        start_near: Option<Point2>,
+        /// Number of start poses.
+        #[arg(long, default_value_t = 4)]
+        starts: usize,
+        /// Import even if the resolution looks implausible or most colours match no class.
+        #[arg(long)]
+        force: bool,
+        /// Output world folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Render the depth panorama seen from a pose as a 16-bit PNG of range counts.
     Pano {
         /// World folder.
@@ -269,6 +314,39 @@ fn run_world(action: WorldCommand) -> anyhow::Result<ExitCode> {
             world_cmd::generate(&world_cmd::GenerateArgs { seed, size_m, clusters, roadblocks, out, json })
         }
         WorldCommand::Show { dir, out, json } => world_cmd::show(&dir, out.as_deref(), json),
+        WorldCommand::Import {
+            raster,
+            classes,
+            resolution_m,
+            pixels_per_m,
+            cell_m,
+            gps_reference,
+            colour_tolerance,
+            start_near,
+            starts,
+            force,
+            out,
+            json,
+        } => {
+            let scale = match (resolution_m, pixels_per_m) {
+                (Some(m), _) => world_import::Scale::MetresPerPixel(m),
+                (None, Some(p)) => world_import::Scale::PixelsPerMetre(p),
+                (None, None) => anyhow::bail!("give --resolution-m or --pixels-per-m"),
+            };
+            world_import::import(&world_import::ImportArgs {
+                raster,
+                classes,
+                scale,
+                cell_m,
+                gps_reference,
+                colour_tolerance,
+                start_near,
+                starts,
+                force,
+                out,
+                json,
+            })
+        }
         WorldCommand::Pano {
             dir,
             at,

@@ -58,11 +58,21 @@ pub fn validate(
     let mut failed_runs = 0;
     let mut human = String::new();
     for file in files {
-        let loaded = load_mission_with(file, registry, options);
-        if loaded.diagnostics.is_empty() {
+        let mut loaded = load_mission_with(file, registry, options);
+        // The world stage runs once the earlier stages pass (it needs a typed mission).
+        let world = crate::world_stage::check(&loaded, options);
+        loaded.diagnostics.extend(world);
+        if loaded.is_valid() {
+            // Warnings only: shown, and the mission is valid.
+            human.push_str(&render_diagnostics(&loaded));
             if let Some(m) = &loaded.mission {
+                let warnings = match loaded.diagnostics.len() {
+                    0 => String::new(),
+                    1 => ", 1 warning".to_string(),
+                    n => format!(", {n} warnings"),
+                };
                 human.push_str(&format!(
-                    "✔ {}: mission `{}` is valid ({} robots, {} roles)\n",
+                    "✔ {}: mission `{}` is valid ({} robots, {} roles{warnings})\n",
                     file.display(),
                     m.mission,
                     m.team.len(),
@@ -102,6 +112,7 @@ pub fn validate(
         }
         all.extend(loaded.diagnostics);
     }
+    let errors = all.iter().filter(|d| d.is_error()).count();
     if json {
         if dry_run.is_some() {
             let v = serde_json::json!({ "diagnostics": all, "dry_runs": dry_runs });
@@ -112,7 +123,8 @@ pub fn validate(
     } else {
         emit(&human);
     }
-    Ok(if all.is_empty() && failed_runs == 0 { ExitCode::SUCCESS } else { ExitCode::from(1) })
+    // Warnings do not fail validation (DESIGN.md §3: exit 0 only when valid).
+    Ok(if errors == 0 && failed_runs == 0 { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
 /// `spomp schema`.

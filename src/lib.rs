@@ -38,6 +38,8 @@ mod sim_plots;
 mod team_link;
 mod terrain_cmd;
 mod world_cmd;
+mod world_import;
+mod world_stage;
 
 pub use spomp_behaviors::NodeRegistry;
 pub use spomp_robot::RobotRuntime;

@@ -331,14 +331,36 @@ fn dry_runs_are_capped_and_report_setup_failures() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["dry_runs"][0]["dry_run"]["outcome"], "interrupted", "{v}");
     assert!(start.elapsed() < Duration::from_secs(60));
-    // A world folder that is not there: the mission is valid, the dry run cannot start.
+    // A world folder that is not there: the world stage finds it, at the mission's world field,
+    // before any dry run.
     let m = mission(dir.path(), "m2.yaml", "sim:\n  world: { dir: no-such-world }\n");
     let out = spomp().args(["validate", "--dry-run", "--json"]).arg(&m).output().unwrap();
     assert_eq!(out.status.code(), Some(1));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let d = &v["diagnostics"][0];
-    assert_eq!(d["stage"], "dry_run", "{v}");
+    assert_eq!(
+        (d["stage"].as_str(), d["line"].as_u64(), d["node_path"].as_str()),
+        (Some("world"), Some(11), Some("sim.world.dir")),
+        "{v}"
+    );
     assert!(d["message"].as_str().unwrap().contains("no-such-world"), "{v}");
+    assert_eq!(v["dry_runs"], serde_json::json!([]), "{v}");
+    // A generated world exists only per seed: a UGV off its map is found when the dry run sets
+    // the simulation up, a diagnostic of the dry-run stage.
+    let m = dir.path().join("m3.yaml");
+    std::fs::write(
+        &m,
+        "mission: off-map\nteam:\n  - { id: ugv1, kind: ugv, role: r, priority: 1, start: { x_m: -50, y_m: 10 }, localization: { mode: ground_truth } }\n\
+         roles:\n  r:\n    tree:\n      wait: { duration_s: 1e9 }\ncomplete_when: time_limit\ntime_limit_s: 60\n\
+         sim:\n  world: { generate: { size_m: [120, 100], vehicle_clusters: 1, roadblocks: 0 } }\n",
+    )
+    .unwrap();
+    let out = spomp().args(["validate", "--dry-run", "--json"]).arg(&m).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let d = &v["diagnostics"][0];
+    assert_eq!(d["stage"], "dry_run", "{v}");
+    assert!(d["message"].as_str().unwrap().contains("ugv1"), "{v}");
 }
 
 /// Writes a world folder, then breaks one line of its `world.yaml`.

@@ -4,7 +4,7 @@
 //!   and re-enters the state, keeps `progress` (and with `resume_from` flies back to the point of
 //!   interruption so a survey leaves no gap), reads QGroundControl plans (the shipped
 //!   `missions/explore.plan`, against hand-computed metres), refuses malformed plans with clear
-//!   errors, and routes transfers around no-fly polygons;
+//!   errors, routes transfers around no-fly polygons and keeps them inside inclusion geofences;
 //! - `seek_robot` rotates round-robin over the robots its team state knows and flies to the end
 //!   of a robot's path when its pose is stale, re-targeting on newer poses;
 //! - `wait_for_sync` succeeds after a full exchange of team states, ignores a sync completed
@@ -510,6 +510,117 @@ time_limit_s: 100
     let fence = square(59.7, -11.1, 102.4, 22.3);
     assert!(uav.track.iter().all(|p| !inside_box(*p, &fence)), "the UAV crossed the geofence");
     assert!(close(uav.pos, Point2::new(170.7, 0.0), 2.1), "{:?}", uav.pos);
+}
+
+/// Latitude and longitude of a map point of a plan whose home is 39.9526 N 75.1652 W (the plan
+/// module's equirectangular projection, inverted).
+fn latlon(x: f64, y: f64) -> [f64; 2] {
+    const R: f64 = 6_378_137.0;
+    let (lat0, lon0) = (39.9526_f64, -75.1652_f64);
+    [lat0 + (y / R).to_degrees(), lon0 + (x / (R * lat0.to_radians().cos())).to_degrees()]
+}
+
+/// Even-odd point-in-polygon test (the fence check of the tests, independent of the node's).
+fn in_polygon(poly: &[Point2], p: Point2) -> bool {
+    let n = poly.len();
+    let mut inside = false;
+    for i in 0..n {
+        let (a, b) = (poly[i], poly[(i + n - 1) % n]);
+        if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
+            inside = !inside;
+        }
+    }
+    inside
+}
+
+#[test]
+fn inclusion_geofences_of_a_plan_keep_transfers_inside() {
+    // An L-shaped inclusion fence (metres): the straight line between the two waypoints, one at
+    // the end of each arm, cuts across the missing quarter, outside the fence.
+    let fence = [(-10.0, -10.0), (120.0, -10.0), (120.0, 30.0), (30.0, 30.0), (30.0, 120.0), (-10.0, 120.0)];
+    let vertices: Vec<String> = fence
+        .iter()
+        .map(|&(x, y)| {
+            let [lat, lon] = latlon(x, y);
+            format!("[{lat:.9}, {lon:.9}]")
+        })
+        .collect();
+    let item = |x: f64, y: f64| {
+        let [lat, lon] = latlon(x, y);
+        format!(
+            r#"{{"type": "SimpleItem", "command": 16, "frame": 3, "params": [0, 0, 0, null, {lat:.9}, {lon:.9}, 60]}}"#
+        )
+    };
+    let plan = |items: &[String]| {
+        format!(
+            r#"{{"fileType": "Plan", "version": 1,
+              "geoFence": {{"version": 2, "circles": [], "polygons": [{{"inclusion": true, "version": 1, "polygon": [{}]}}]}},
+              "mission": {{"version": 2, "plannedHomePosition": [39.9526, -75.1652, 0], "items": [{}]}}}}"#,
+            vertices.join(", "),
+            items.join(", ")
+        )
+    };
+    let dir = temp_dir("inclusion");
+    std::fs::write(dir.join("inside.plan"), plan(&[item(100.0, 10.0), item(10.0, 100.0)])).unwrap();
+    let yaml = r#"
+mission: inclusion
+team:
+  - { id: uav1, kind: uav, role: explorer, start: { x_m: 0, y_m: 0 } }
+roles:
+  explorer:
+    blackboard: { next: 0 }
+    tree: { follow_waypoints: { plan_file: inside.plan, speed_mps: 8, progress: "{next}" } }
+time_limit_s: 100
+"#;
+    let ex = build(&dir, yaml, "explorer", "uav1", Pose2::default());
+    let mut uav = Uav::new(ex, Point2::new(0.0, 0.0));
+    let status = uav.run(3000);
+    assert_eq!(status, Status::Success, "{:?}", uav.reports());
+    let poly: Vec<Point2> = fence.iter().map(|&(x, y)| Point2::new(x, y)).collect();
+    assert!(uav.track.iter().all(|p| in_polygon(&poly, *p)), "the UAV left the inclusion fence");
+    assert!(close(uav.pos, Point2::new(10.0, 100.0), 2.1), "{:?}", uav.pos);
+    // It turned at the inner corner, pushed inward by the 5 m margin, instead of cutting across.
+    assert!(uav.targets.iter().any(|t| t.x < 30.0 && t.y < 30.0 && t.x > 20.0 && t.y > 20.0), "{:?}", uav.targets);
+    let flown: f64 = uav.track.windows(2).map(|w| w[0].distance(w[1])).sum();
+    let straight = Point2::new(0.0, 0.0).distance(Point2::new(100.0, 10.0))
+        + Point2::new(100.0, 10.0).distance(Point2::new(10.0, 100.0));
+    assert!(flown > straight + 5.0 && flown < straight + 40.0, "{flown} vs {straight}");
+
+    // A UAV that takes off outside the fence flies straight in, then stays inside.
+    let ex = build(&dir, yaml, "explorer", "uav1", Pose2::new(60.0, 60.0, 0.0));
+    let mut uav = Uav::new(ex, Point2::new(60.0, 60.0));
+    assert_eq!(uav.run(3000), Status::Success, "{:?}", uav.reports());
+    let first_inside = uav.track.iter().position(|p| in_polygon(&poly, *p)).unwrap();
+    assert!(uav.track[first_inside..].iter().all(|p| in_polygon(&poly, *p)), "left the fence after entering it");
+    assert!(close(uav.pos, Point2::new(10.0, 100.0), 2.1), "{:?}", uav.pos);
+
+    // A waypoint outside the fence is refused when the mission is built, naming it.
+    let outside = dir.join("outside.plan");
+    std::fs::write(&outside, plan(&[item(100.0, 10.0), item(60.0, 60.0)])).unwrap();
+    let err = follow_node(&[plan_port(&outside)]).err().unwrap();
+    assert!(
+        err.contains("outside.plan") && err.contains("waypoint 1") && err.contains("outside the inclusion geofence"),
+        "{err}"
+    );
+
+    // The same fence written in the mission: `no_fly.inside`.
+    let inside_param = serde_json::json!({
+        "inside": [fence.iter().map(|&(x, y)| serde_json::json!({"x": x, "y": y})).collect::<Vec<_>>()],
+    });
+    let err = follow_node(&[
+        ("waypoints", BbValue::Points(Arc::new(vec![Point2::new(60.0, 60.0)]))),
+        ("no_fly", BbValue::Params(Arc::new(inside_param.clone()))),
+    ])
+    .err()
+    .unwrap();
+    assert!(err.contains("waypoint 0") && err.contains("outside the inclusion geofence"), "{err}");
+    assert!(
+        follow_node(&[
+            ("waypoints", BbValue::Points(Arc::new(vec![Point2::new(10.0, 100.0)]))),
+            ("no_fly", BbValue::Params(Arc::new(inside_param))),
+        ])
+        .is_ok()
+    );
 }
 
 // ------------------------------------------------------------------------ seek_robot

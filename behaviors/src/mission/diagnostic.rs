@@ -20,6 +20,9 @@ pub enum Stage {
     Wiring,
     /// Roles, priorities, ids, skills per robot kind.
     Team,
+    /// The world a mission names: it loads, start poses are usable, goals can exist, waypoints
+    /// stay in it (run by `spomp validate`, which can load worlds).
+    World,
     /// Simulated dry run.
     DryRun,
 }
@@ -32,9 +35,22 @@ impl Stage {
             Stage::Schema => "schema",
             Stage::Wiring => "wiring",
             Stage::Team => "team",
+            Stage::World => "world",
             Stage::DryRun => "dry_run",
         }
     }
+}
+
+/// How serious a problem is: an error makes a mission invalid, a warning does not (DESIGN.md
+/// §3: exit code 0 only when valid).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Severity {
+    /// The mission is invalid.
+    #[default]
+    Error,
+    /// The mission is valid but probably not what its author meant.
+    Warning,
 }
 
 /// One problem in a mission.
@@ -52,6 +68,8 @@ pub struct Diagnostic {
     pub stage: Stage,
     /// What was expected and what was found.
     pub message: String,
+    /// Error or warning.
+    pub severity: Severity,
     /// Byte span for rendering.
     #[serde(skip)]
     pub span: Option<(usize, usize)>,
@@ -73,14 +91,29 @@ impl Diagnostic {
             node_path: node_path.into(),
             stage,
             message: message.into(),
+            severity: Severity::Error,
             span: loc.offset.map(|o| (o, loc.len.max(1))),
         }
+    }
+
+    /// The same problem as a warning.
+    pub fn into_warning(mut self) -> Self {
+        self.severity = Severity::Warning;
+        self
+    }
+
+    /// Whether it makes the mission invalid.
+    pub fn is_error(&self) -> bool {
+        self.severity == Severity::Error
     }
 }
 
 impl fmt::Display for Diagnostic {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}:{}:{}: [{}] ", self.file.display(), self.line, self.column, self.stage.as_str())?;
+        if self.severity == Severity::Warning {
+            f.write_str("warning: ")?;
+        }
         if !self.node_path.is_empty() {
             write!(f, "at {}: ", self.node_path)?;
         }
@@ -137,6 +170,12 @@ impl fmt::Display for Rendered {
 impl std::error::Error for Rendered {}
 
 impl miette::Diagnostic for Rendered {
+    fn severity(&self) -> Option<miette::Severity> {
+        Some(match self.diag.severity {
+            Severity::Error => miette::Severity::Error,
+            Severity::Warning => miette::Severity::Warning,
+        })
+    }
     fn code<'a>(&'a self) -> Option<Box<dyn fmt::Display + 'a>> {
         Some(Box::new(format!("spomp::{}", self.diag.stage.as_str())))
     }
@@ -147,5 +186,35 @@ impl miette::Diagnostic for Rendered {
         let (offset, len) = self.diag.span?;
         let label = format!("{}:{}:{}", self.diag.file.display(), self.diag.line, self.diag.column);
         Some(Box::new(std::iter::once(miette::LabeledSpan::new(Some(label), offset, len))))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(line: u32) -> Loc {
+        Loc { line, column: 3, offset: None, len: 0 }
+    }
+
+    #[test]
+    fn warnings_are_marked_and_do_not_invalidate_a_mission() {
+        let error = Diagnostic::new("m.yaml", at(4), "team[0].start", Stage::World, "off the map");
+        let warning = Diagnostic::new("m.yaml", at(9), "goals.detect", Stage::World, "no goal").into_warning();
+        assert!(error.is_error() && !warning.is_error());
+        assert_eq!(error.to_string(), "m.yaml:4:3: [world] at team[0].start: off the map");
+        assert_eq!(warning.to_string(), "m.yaml:9:3: [world] warning: at goals.detect: no goal");
+        let json = serde_json::to_value(&warning).unwrap_or_default();
+        assert_eq!((json["severity"].as_str(), json["stage"].as_str()), (Some("warning"), Some("world")));
+
+        let mut loaded = crate::mission::LoadedMission {
+            mission: serde_saphyr::from_str("mission: m\nteam: []\nroles: {}\ntime_limit_s: 10\n").ok(),
+            ..Default::default()
+        };
+        assert!(loaded.mission.is_some());
+        loaded.diagnostics.push(warning);
+        assert!(loaded.is_valid(), "a warning leaves the mission valid");
+        loaded.diagnostics.push(error);
+        assert!(!loaded.is_valid());
     }
 }

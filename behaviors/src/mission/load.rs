@@ -61,9 +61,9 @@ pub struct LoadedMission {
 }
 
 impl LoadedMission {
-    /// Whether the mission is valid.
+    /// Whether the mission is valid: it has no error (warnings allowed).
     pub fn is_valid(&self) -> bool {
-        self.diagnostics.is_empty() && self.mission.is_some()
+        self.mission.is_some() && !self.diagnostics.iter().any(Diagnostic::is_error)
     }
 
     /// The source text of a diagnostic's file.

@@ -12,7 +12,7 @@ pub mod tree;
 pub mod yaml;
 
 pub use build::{BuildError, BuildOptions, build_executor, build_tree};
-pub use diagnostic::{Diagnostic, Rendered, Stage};
+pub use diagnostic::{Diagnostic, Rendered, Severity, Stage};
 pub use load::{
     CompiledRole, LoadOptions, LoadedMission, PROVIDED_ENTRIES, check_endpoint, load_mission, load_mission_str,
     load_mission_with, skills_of,

@@ -15,7 +15,7 @@ use serde_json::json;
 use spomp_core::{FlightCommand, Point2, RobotId, RobotKind, Time};
 
 use super::Ctx;
-use super::qgc_plan::load_plan;
+use super::qgc_plan::{Polygons, load_plan};
 use crate::runtime::RobotRuntime;
 use spomp_behaviors::Status;
 use spomp_behaviors::blackboard::{BbValue, Binding, PortType};
@@ -35,14 +35,14 @@ pub fn register_aerial(r: &mut NodeRegistry<RobotRuntime>) {
         NodeTypeSpec::leaf(
             "follow_waypoints",
             Action,
-            "Flies the waypoint list — `waypoints`, or the NAV_WAYPOINT items of a QGroundControl `plan_file` (read when the mission is built; its planned home position is the map origin, x east, y north, metres; exclusion geofences become no-fly zones) — at `altitude_m` and `speed_mps`, starting at index `progress` and advancing it on arrival within `arrive_radius_m` of each waypoint, so a state machine that leaves and re-enters the state resumes where it left off. With `resume_from` connected it resumes at the very point it was interrupted: it flies back there first and then on along the interrupted leg, so a survey leaves no gap. Transfers route around `no_fly` polygons (shortest path over their corners, kept `margin_m` clear); a waypoint inside a zone, or with no route to it, is reported and skipped. Succeeds when the list is exhausted. Give exactly one of `waypoints` and `plan_file`.",
+            "Flies the waypoint list — `waypoints`, or the NAV_WAYPOINT items of a QGroundControl `plan_file` (read when the mission is built; its planned home position is the map origin, x east, y north, metres; exclusion geofences become no-fly zones, inclusion geofences fences the transfers stay inside) — at `altitude_m` and `speed_mps`, starting at index `progress` and advancing it on arrival within `arrive_radius_m` of each waypoint, so a state machine that leaves and re-enters the state resumes where it left off. With `resume_from` connected it resumes at the very point it was interrupted: it flies back there first and then on along the interrupted leg, so a survey leaves no gap. Transfers route around `no_fly` polygons and stay inside its `inside` fences, if any (shortest path over their corners, kept `margin_m` clear; a UAV outside every fence flies straight in); a waypoint inside a zone or outside every fence is refused when the mission is built (a waypoint read from the blackboard: reported and skipped), one with no route to it reported and skipped. Succeeds when the list is exhausted. Give exactly one of `waypoints` and `plan_file`.",
             vec![
                 PortSpec::optional("waypoints", Points, "Waypoints (map frame), flown in order."),
                 PortSpec::optional("plan_file", Str, "QGroundControl .plan file, relative to the mission file; its altitudes are ignored in favour of `altitude_m`."),
                 PortSpec::input("altitude_m", Float, "Flight altitude above take-off, metres.").with_default(json!(60.0)),
                 PortSpec::input("speed_mps", Float, "Cruise speed, m/s.").with_default(json!(5.0)),
                 PortSpec::input("arrive_radius_m", Float, "A waypoint (or route corner) counts as reached within this distance, metres.").with_default(json!(2.0)),
-                PortSpec::optional("no_fly", Params, "No-fly polygons: `{zones: [[{x, y}, …], …], margin_m: 5}` (map frame, metres)."),
+                PortSpec::optional("no_fly", Params, "No-fly polygons and inclusion fences: `{zones: [[{x, y}, …], …], inside: [[{x, y}, …], …], margin_m: 5}` (map frame, metres; `inside`: fly only inside one of these)."),
                 PortSpec::in_out("progress", Int, "Index of the next waypoint; share one entry between states so exploring resumes where it left off."),
                 PortSpec {
                     optional: true,
@@ -146,10 +146,13 @@ struct Zone {
     corners: Vec<Point2>,
 }
 
-/// The no-fly polygons a node routes around.
+/// The no-fly polygons a node routes around, and the inclusion fences it stays inside.
 #[derive(Clone, Debug, Default)]
 struct NoFly {
     zones: Vec<Zone>,
+    /// Inclusion fences: when any is given, transfers stay inside one of them at every point
+    /// (their corners pushed inward by the margin are where routes turn).
+    fences: Vec<Zone>,
 }
 
 fn signed_area(poly: &[Point2]) -> f64 {
@@ -224,14 +227,24 @@ impl Zone {
         let n = self.poly.len();
         (0..n).any(|i| segments_meet(a, b, self.poly[i], self.poly[(i + 1) % n])) || contains(&self.poly, (a + b) * 0.5)
     }
+
+    /// Whether the segment ab lies inside this polygon (as a fence): both ends inside and no
+    /// edge crossed or touched.
+    fn holds(&self, a: Point2, b: Point2) -> bool {
+        let n = self.poly.len();
+        contains(&self.poly, a)
+            && contains(&self.poly, b)
+            && !(0..n).any(|i| segments_meet(a, b, self.poly[i], self.poly[(i + 1) % n]))
+    }
 }
 
 impl NoFly {
-    /// Parses the `no_fly` parameter block.
-    fn from_params(v: &serde_json::Value) -> Result<(Vec<Vec<Point2>>, f64), String> {
+    /// Parses the `no_fly` parameter block: the zones, the inclusion fences (`inside`) and the
+    /// margin.
+    fn from_params(v: &serde_json::Value) -> Result<(Polygons, Polygons, f64), String> {
         let Some(obj) = v.as_object() else { return Err("`no_fly` must be a mapping `{zones: […]}`".into()) };
-        if let Some(k) = obj.keys().find(|k| !matches!(k.as_str(), "zones" | "margin_m")) {
-            return Err(format!("`no_fly`: unknown key `{k}`; expected `zones`, `margin_m`"));
+        if let Some(k) = obj.keys().find(|k| !matches!(k.as_str(), "zones" | "inside" | "margin_m")) {
+            return Err(format!("`no_fly`: unknown key `{k}`; expected `zones`, `inside`, `margin_m`"));
         }
         let margin = match obj.get("margin_m") {
             None => DEFAULT_NO_FLY_MARGIN_M,
@@ -240,19 +253,32 @@ impl NoFly {
                 .filter(|m| m.is_finite() && *m >= 0.0)
                 .ok_or_else(|| format!("`no_fly.margin_m` must be a non-negative number of metres, found {m}"))?,
         };
-        let zones = obj.get("zones").ok_or("`no_fly` needs `zones: [[{x, y}, …], …]`")?;
-        let zones: Vec<Vec<Point2>> = serde_json::from_value(zones.clone())
-            .map_err(|e| format!("`no_fly.zones` must be a list of polygons [[{{x, y}}, …], …]: {e}"))?;
-        Ok((zones, margin))
+        let polygons = |key: &str| -> Result<Polygons, String> {
+            match obj.get(key) {
+                None => Ok(Vec::new()),
+                Some(v) => serde_json::from_value(v.clone())
+                    .map_err(|e| format!("`no_fly.{key}` must be a list of polygons [[{{x, y}}, …], …]: {e}")),
+            }
+        };
+        if !obj.contains_key("zones") && !obj.contains_key("inside") {
+            return Err("`no_fly` needs `zones: [[{x, y}, …], …]` (and/or `inside: […]`, fences to stay in)".into());
+        }
+        Ok((polygons("zones")?, polygons("inside")?, margin))
     }
 
-    fn new(polys: Vec<Vec<Point2>>, margin: f64) -> Result<NoFly, String> {
+    fn new(polys: Polygons, fences: Polygons, margin: f64) -> Result<NoFly, String> {
         let zones = polys
             .into_iter()
             .enumerate()
             .map(|(i, p)| Zone::new(p, margin).map_err(|e| format!("no-fly zone {i}: {e}")))
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(NoFly { zones })
+        // A fence's corners are pushed inward: the same construction with the margin negated.
+        let fences = fences
+            .into_iter()
+            .enumerate()
+            .map(|(i, p)| Zone::new(p, -margin).map_err(|e| format!("inclusion fence {i}: {e}")))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(NoFly { zones, fences })
     }
 
     /// The zone containing `p`, if any.
@@ -260,13 +286,25 @@ impl NoFly {
         self.zones.iter().position(|z| contains(&z.poly, p))
     }
 
+    /// Whether there are inclusion fences and `p` is outside all of them.
+    fn outside_fences(&self, p: Point2) -> bool {
+        !self.fences.is_empty() && !self.fences.iter().any(|f| contains(&f.poly, p))
+    }
+
     /// The shortest polyline from `from` to `to` that crosses no zone (except zones `from` is
-    /// already inside, which it may leave), as the points to fly through, `to` last. Shortest
-    /// over the visibility graph of the zones' outward-pushed corners. None: no route.
+    /// already inside, which it may leave) and, with inclusion fences, stays inside one fence on
+    /// every segment (a UAV outside every fence flies straight in on its first segment), as the
+    /// points to fly through, `to` last. Shortest over the visibility graph of the zones'
+    /// outward-pushed and the fences' inward-pushed corners. None: no route.
     fn route(&self, from: Point2, to: Point2) -> Option<VecDeque<Point2>> {
         let active: Vec<&Zone> = self.zones.iter().filter(|z| !contains(&z.poly, from)).collect();
-        let clear = |a: Point2, b: Point2| active.iter().all(|z| !z.blocks(a, b));
-        if clear(from, to) {
+        let from_outside = self.outside_fences(from);
+        let fenced = |a: Point2, b: Point2| self.fences.is_empty() || self.fences.iter().any(|f| f.holds(a, b));
+        // Node 0 is `from`: the segments leaving it are exempt from the fences when it is outside.
+        let clear = |u: usize, a: Point2, b: Point2| {
+            active.iter().all(|z| !z.blocks(a, b)) && ((u == 0 && from_outside) || fenced(a, b))
+        };
+        if clear(0, from, to) {
             return Some(VecDeque::from([to]));
         }
         let mut nodes = vec![from, to];
@@ -274,7 +312,8 @@ impl NoFly {
             active
                 .iter()
                 .flat_map(|z| z.corners.iter().copied())
-                .filter(|c| active.iter().all(|z| !contains(&z.poly, *c))),
+                .chain(self.fences.iter().flat_map(|f| f.corners.iter().copied()))
+                .filter(|c| active.iter().all(|z| !contains(&z.poly, *c)) && !self.outside_fences(*c)),
         );
         // Dijkstra on the dense visibility graph (tens of nodes).
         let n = nodes.len();
@@ -294,7 +333,7 @@ impl NoFly {
                     continue;
                 }
                 let d = dist[u] + nodes[u].distance(nodes[v]);
-                if d < dist[v] && clear(nodes[u], nodes[v]) {
+                if d < dist[v] && clear(u, nodes[u], nodes[v]) {
                     dist[v] = d;
                     prev[v] = u;
                 }
@@ -344,10 +383,11 @@ struct FollowWaypoints {
 
 fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, String> {
     let mut polys = Vec::new();
+    let mut fences = Vec::new();
     let mut margin = DEFAULT_NO_FLY_MARGIN_M;
     match (p.get("no_fly"), p.literal("no_fly")) {
         (Binding::Unset, _) => {}
-        (_, Some(BbValue::Params(v))) => (polys, margin) = NoFly::from_params(v)?,
+        (_, Some(BbValue::Params(v))) => (polys, fences, margin) = NoFly::from_params(v)?,
         _ => return Err("`no_fly` must be written in the mission as `{zones: [[{x, y}, …], …]}`".into()),
     }
     let waypoints = p.get("waypoints");
@@ -364,6 +404,7 @@ fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, Str
                 return Err(format!("QGroundControl plan `{path}` has no waypoints to fly"));
             }
             polys.extend(plan.no_fly);
+            fences.extend(plan.fly_inside);
             Source::Fixed(Arc::new(plan.waypoints.iter().map(|w| w.position).collect()))
         }
         (Binding::Unset, _) => {
@@ -373,14 +414,25 @@ fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, Str
         (b, Binding::Unset) => Source::Port(b),
         (_, _) => return Err("give either `waypoints` or `plan_file`, not both".into()),
     };
-    let no_fly = NoFly::new(polys, margin)?;
+    let no_fly = NoFly::new(polys, fences, margin)?;
     if let Source::Fixed(w) = &source {
+        // Name the plan the waypoints and fences came from, so the operator knows which file.
+        let from = match p.get("plan_file") {
+            Binding::Literal(BbValue::Str(path)) => format!("QGroundControl plan `{path}`: "),
+            _ => String::new(),
+        };
         for (i, wp) in w.iter().enumerate() {
             if !(wp.x.is_finite() && wp.y.is_finite()) {
-                return Err(format!("waypoint {i} is not finite"));
+                return Err(format!("{from}waypoint {i} is not finite"));
             }
             if let Some(z) = no_fly.zone_containing(*wp) {
-                return Err(format!("waypoint {i} at ({:.1}, {:.1}) lies inside no-fly zone {z}", wp.x, wp.y));
+                return Err(format!("{from}waypoint {i} at ({:.1}, {:.1}) lies inside no-fly zone {z}", wp.x, wp.y));
+            }
+            if no_fly.outside_fences(*wp) {
+                return Err(format!(
+                    "{from}waypoint {i} at ({:.1}, {:.1}) lies outside the inclusion geofence (fly only inside)",
+                    wp.x, wp.y
+                ));
             }
         }
     }
@@ -458,6 +510,14 @@ impl Behavior<RobotRuntime> for FollowWaypoints {
             if self.route_to != Some(self.index) {
                 if let Some(z) = no_fly.zone_containing(goal) {
                     reports.push(format!("{FOLLOW}: waypoint {} lies inside no-fly zone {z}; skipped", self.index));
+                    self.index += 1;
+                    continue;
+                }
+                if no_fly.outside_fences(goal) {
+                    reports.push(format!(
+                        "{FOLLOW}: waypoint {} lies outside the inclusion geofence; skipped",
+                        self.index
+                    ));
                     self.index += 1;
                     continue;
                 }

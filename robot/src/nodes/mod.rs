@@ -12,6 +12,7 @@ use std::sync::Arc;
 pub use aerial::register_aerial;
 pub use coordination::register_coordination;
 pub use navigation::register_navigation;
+pub use qgc_plan::plan_waypoints;
 
 use spomp_behaviors::{NodeRegistry, TickContext, engine_registry};
 

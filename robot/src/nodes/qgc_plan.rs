@@ -20,9 +20,11 @@
 //!   `ComplexItem` (survey, corridor or structure scan) is refused with an error naming the item:
 //!   spomp would otherwise fly a different route than the operator planned.
 //!
-//! Geofences: exclusion polygons become no-fly zones; exclusion circles become the 16-gon that
-//! circumscribes them; inclusion fences are refused (spomp only routes around zones).
-//! Rally points are ignored.
+//! Geofences (as PX4 reads them): exclusion polygons become no-fly zones, exclusion circles the
+//! 16-gon that circumscribes them; inclusion polygons become fences the UAV's transfers stay
+//! inside, inclusion circles the 16-gon inscribed in them (so inside the polygon is inside the
+//! circle). With several inclusion fences the UAV may fly anywhere inside any of them (their
+//! union), never inside an exclusion zone. Rally points are ignored.
 
 use std::f64::consts::PI;
 use std::fmt;
@@ -37,6 +39,9 @@ pub(crate) const EARTH_RADIUS_M: f64 = 6_378_137.0;
 
 /// Farthest a waypoint or fence vertex may lie from the plan's home, metres.
 pub(crate) const MAX_EXTENT_M: f64 = 50_000.0;
+
+/// Polygons in the map frame (each a list of vertices).
+pub(crate) type Polygons = Vec<Vec<Point2>>;
 
 /// A waypoint of a plan, in the map frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -53,7 +58,9 @@ pub(crate) struct QgcPlan {
     /// Waypoints in flight order.
     pub waypoints: Vec<PlanWaypoint>,
     /// Exclusion geofences as polygons in the map frame.
-    pub no_fly: Vec<Vec<Point2>>,
+    pub no_fly: Polygons,
+    /// Inclusion geofences as polygons in the map frame: fly only inside (any of) them.
+    pub fly_inside: Polygons,
 }
 
 /// Why a plan file cannot be flown.
@@ -82,6 +89,13 @@ pub(crate) fn load_plan(path: &Path) -> Result<QgcPlan, PlanError> {
     parse_plan(&text).map_err(error)
 }
 
+/// The waypoints of a QGroundControl `.plan` file in the map frame (its planned home is the
+/// origin), read and interpreted exactly as `follow_waypoints` reads it: for checks made outside
+/// the node, such as `spomp validate`'s world stage. The error names the file and the problem.
+pub fn plan_waypoints(path: &Path) -> Result<Vec<Point2>, String> {
+    load_plan(path).map(|p| p.waypoints.iter().map(|w| w.position).collect()).map_err(|e| e.to_string())
+}
+
 /// Interprets the text of a `.plan` file; errors say where in the file the problem is.
 pub(crate) fn parse_plan(text: &str) -> Result<QgcPlan, String> {
     let root: Value = serde_json::from_str(text).map_err(|e| format!("not valid JSON: {e}"))?;
@@ -106,7 +120,7 @@ pub(crate) fn parse_plan(text: &str) -> Result<QgcPlan, String> {
         }
     }
     if let Some(fence) = obj.get("geoFence") {
-        plan.no_fly = fences(fence, &origin)?;
+        (plan.no_fly, plan.fly_inside) = fences(fence, &origin)?;
     }
     Ok(plan)
 }
@@ -244,16 +258,11 @@ fn item_waypoint(item: &Value, origin: &Origin) -> Result<Option<PlanWaypoint>, 
 /// Number of sides of the polygon that replaces a circular fence.
 const CIRCLE_SIDES: usize = 16;
 
-fn fences(fence: &Value, origin: &Origin) -> Result<Vec<Vec<Point2>>, String> {
-    let mut zones = Vec::new();
-    let inclusion = |v: &Value, at: &str| -> Result<(), String> {
-        match v.get("inclusion").and_then(Value::as_bool) {
-            Some(false) => Ok(()),
-            Some(true) => {
-                Err(format!("{at}: inclusion geofences are not supported; spomp only routes around exclusion zones"))
-            }
-            None => Err(format!("{at}: missing `inclusion` (true or false)")),
-        }
+/// The exclusion zones and the inclusion fences of a `geoFence` section.
+fn fences(fence: &Value, origin: &Origin) -> Result<(Polygons, Polygons), String> {
+    let (mut zones, mut inside) = (Vec::new(), Vec::new());
+    let inclusion = |v: &Value, at: &str| -> Result<bool, String> {
+        v.get("inclusion").and_then(Value::as_bool).ok_or_else(|| format!("{at}: missing `inclusion` (true or false)"))
     };
     let latlon = |v: &Value, at: &str| -> Result<Point2, String> {
         let arr =
@@ -266,7 +275,7 @@ fn fences(fence: &Value, origin: &Origin) -> Result<Vec<Vec<Point2>>, String> {
         let polys = polys.as_array().ok_or("`geoFence.polygons` must be a list")?;
         for (i, p) in polys.iter().enumerate() {
             let at = format!("geoFence.polygons[{i}]");
-            inclusion(p, &at)?;
+            let include = inclusion(p, &at)?;
             let verts = p.get("polygon").and_then(Value::as_array).ok_or_else(|| format!("{at}: missing `polygon`"))?;
             if verts.len() < 3 {
                 return Err(format!("{at}: a polygon needs at least 3 vertices, found {}", verts.len()));
@@ -276,14 +285,14 @@ fn fences(fence: &Value, origin: &Origin) -> Result<Vec<Vec<Point2>>, String> {
                 .enumerate()
                 .map(|(j, v)| latlon(v, &format!("{at}.polygon[{j}]")))
                 .collect::<Result<Vec<_>, _>>()?;
-            zones.push(pts);
+            if include { inside.push(pts) } else { zones.push(pts) }
         }
     }
     if let Some(circles) = fence.get("circles") {
         let circles = circles.as_array().ok_or("`geoFence.circles` must be a list")?;
         for (i, c) in circles.iter().enumerate() {
             let at = format!("geoFence.circles[{i}]");
-            inclusion(c, &at)?;
+            let include = inclusion(c, &at)?;
             let circle = c.get("circle").ok_or_else(|| format!("{at}: missing `circle`"))?;
             let center = latlon(circle.get("center").unwrap_or(&Value::Null), &format!("{at}.circle.center"))?;
             let radius = circle
@@ -291,18 +300,19 @@ fn fences(fence: &Value, origin: &Origin) -> Result<Vec<Vec<Point2>>, String> {
                 .and_then(Value::as_f64)
                 .filter(|r| r.is_finite() && *r > 0.0)
                 .ok_or_else(|| format!("{at}.circle.radius: expected a positive number of metres"))?;
-            let r = radius / (PI / CIRCLE_SIDES as f64).cos();
-            zones.push(
-                (0..CIRCLE_SIDES)
-                    .map(|k| {
-                        let a = 2.0 * PI * k as f64 / CIRCLE_SIDES as f64;
-                        Point2::new(center.x + r * a.cos(), center.y + r * a.sin())
-                    })
-                    .collect(),
-            );
+            // Exclusion: the polygon around the circle; inclusion: the polygon inside it. Either
+            // way the polygon errs on the safe side.
+            let r = if include { radius } else { radius / (PI / CIRCLE_SIDES as f64).cos() };
+            let polygon = (0..CIRCLE_SIDES)
+                .map(|k| {
+                    let a = 2.0 * PI * k as f64 / CIRCLE_SIDES as f64;
+                    Point2::new(center.x + r * a.cos(), center.y + r * a.sin())
+                })
+                .collect();
+            if include { inside.push(polygon) } else { zones.push(polygon) }
         }
     }
-    Ok(zones)
+    Ok((zones, inside))
 }
 
 #[cfg(test)]
@@ -346,16 +356,29 @@ mod tests {
     }
 
     #[test]
-    fn exclusion_fences_become_zones_and_inclusion_fences_are_refused() {
+    fn exclusion_fences_become_zones_and_inclusion_fences_become_fences() {
         let fence = r#"{"version": 2, "polygons": [{"inclusion": false, "version": 1,
             "polygon": [[39.9527, -75.1650], [39.9527, -75.1640], [39.9530, -75.1640]]}],
             "circles": [{"inclusion": false, "version": 1, "circle": {"center": [39.9530, -75.1630], "radius": 10}}]}"#;
         let p = parse_plan(&plan(&wp(16, 39.9527, -75.1651), fence)).unwrap();
         assert_eq!(p.no_fly.len(), 2);
+        assert!(p.fly_inside.is_empty());
         assert_eq!(p.no_fly[1].len(), CIRCLE_SIDES);
-        let inc = fence.replacen("\"inclusion\": false", "\"inclusion\": true", 1);
-        let e = parse_plan(&plan(&wp(16, 39.9527, -75.1651), &inc)).unwrap_err();
-        assert!(e.contains("geoFence.polygons[0]") && e.contains("inclusion"), "{e}");
+        // The exclusion polygon circumscribes its circle: its vertices lie beyond the radius.
+        let centre = p.no_fly[1].iter().fold(Point2::new(0.0, 0.0), |a, b| a + *b) * (1.0 / CIRCLE_SIDES as f64);
+        assert!(p.no_fly[1].iter().all(|v| v.distance(centre) > 10.0));
+
+        let both = fence.replace("\"inclusion\": false", "\"inclusion\": true");
+        let p = parse_plan(&plan(&wp(16, 39.9527, -75.1651), &both)).unwrap();
+        assert!(p.no_fly.is_empty());
+        assert_eq!(p.fly_inside.len(), 2);
+        // The inclusion polygon is inscribed: its vertices lie on the circle.
+        let centre = p.fly_inside[1].iter().fold(Point2::new(0.0, 0.0), |a, b| a + *b) * (1.0 / CIRCLE_SIDES as f64);
+        assert!(p.fly_inside[1].iter().all(|v| (v.distance(centre) - 10.0).abs() < 1e-6));
+
+        let missing = fence.replacen("\"inclusion\": false, ", "", 1);
+        let e = parse_plan(&plan(&wp(16, 39.9527, -75.1651), &missing)).unwrap_err();
+        assert!(e.contains("geoFence.polygons[0]") && e.contains("missing `inclusion`"), "{e}");
     }
 
     #[test]

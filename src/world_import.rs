@@ -1,0 +1,858 @@
+//! `spomp world import`: a colour-coded semantic raster (an aerial survey's class map) becomes a
+//! world folder the simulator loads.
+//!
+//! - Every raster pixel becomes one cell of `--resolution-m` metres (or `1 / --pixels-per-m`);
+//!   row 0 of the image is the northern edge, the map frame's origin is the south-west corner.
+//! - Each pixel takes the class whose table colour is nearest (Euclidean RGB distance); colours
+//!   farther than `--colour-tolerance` from every class are still snapped to the nearest class,
+//!   and their share (and the most common such colours) is reported: anti-aliased edges are
+//!   common, a wrong class table shows as a large share.
+//! - Elevation comes from the classes: each class's `height_m` in the table, else the world
+//!   loader's default height for its name (building 12 m, vehicle 1.5 m, grass_sidewalk 0.15 m, …),
+//!   so a sidewalk next to a road is a curb step, as in generated cities.
+//! - The colour layer is the class colours (anti-aliasing removed).
+//! - Vehicle clusters (scoring ground truth) are what the goal detector finds with its default
+//!   settings in the whole map, when the table has a `vehicle` class.
+//! - Start poses: cells of the easiest class at least [`START_CLEARANCE_M`] from any cell of
+//!   another class, nearest to `--start-near` (default: the south-west corner), at least
+//!   [`START_SPACING_M`] apart, facing the world's centre, each one a pose the simulator's UGV can
+//!   stand on.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, read_regular, read_text};
+use spomp_behaviors::mission::yaml;
+use spomp_core::{AerialMap, ClassId, ClassInfo, ClassTable, GridSpec, Point2, Pose2};
+use spomp_sim::{DerivedElevationParams, Ugv, UgvParams, World, WorldMeta};
+
+/// The largest raster file read, bytes.
+pub const MAX_RASTER_BYTES: u64 = 64 << 20;
+
+/// The most pixels a raster may have: one cell per pixel, and a world has at most this many.
+pub const MAX_RASTER_PIXELS: u64 = 16_000_000;
+
+/// A raster spanning more than this (its longer side) is questioned, metres.
+pub const MAX_PLAUSIBLE_SPAN_M: f64 = 5_000.0;
+
+/// A raster spanning less than this (its longer side) is questioned, metres.
+pub const MIN_PLAUSIBLE_SPAN_M: f64 = 5.0;
+
+/// A start pose is at least this far from any cell not of its class, metres.
+pub const START_CLEARANCE_M: f64 = 2.0;
+
+/// Start poses are at least this far apart, metres.
+pub const START_SPACING_M: f64 = 4.0;
+
+/// Default colour tolerance: Euclidean distance in RGB (0–441).
+pub const DEFAULT_COLOUR_TOLERANCE: f64 = 30.0;
+
+/// WGS-84 equatorial radius, metres (the equirectangular approximation QGC plans use too).
+const EARTH_RADIUS_M: f64 = 6_378_137.0;
+
+/// The class-table format `--classes` expects, shown when a table does not parse.
+pub const CLASS_TABLE_FORMAT: &str = "\
+classes:
+  - { index: 0, name: road,     rank: 0, color: [128, 64, 128] }
+  - { index: 2, name: building, rank: 5, color: [70, 70, 70], height_m: 10 }
+  # index: label value 0-254, unique; name: unique; rank: 0 easiest … 5 impassable;
+  # color: the class's [R, G, B] in the raster; optional height_m (metres above the road,
+  # default by name: building 12, vehicle 1.5, grass_sidewalk 0.15, vegetation 1,
+  # tree_trunk 5, light_pole 6, others 0) and ignored (true for classes such as people)";
+
+/// The pixel scale of the raster.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Scale {
+    /// Metres per pixel.
+    MetresPerPixel(f64),
+    /// Pixels per metre.
+    PixelsPerMetre(f64),
+}
+
+impl Scale {
+    fn metres_per_pixel(self) -> f64 {
+        match self {
+            Scale::MetresPerPixel(m) => m,
+            Scale::PixelsPerMetre(p) => 1.0 / p,
+        }
+    }
+}
+
+/// Options of `spomp world import`.
+#[derive(Clone, Debug)]
+pub struct ImportArgs {
+    /// The colour-coded class raster (PNG).
+    pub raster: PathBuf,
+    /// The class table (YAML, [`CLASS_TABLE_FORMAT`]).
+    pub classes: PathBuf,
+    /// Pixel size.
+    pub scale: Scale,
+    /// Cell size of the world, metres; `None`: one cell per pixel.
+    pub cell_m: Option<f64>,
+    /// WGS-84 latitude and longitude of the raster's north-west (top-left) corner, degrees.
+    pub gps_reference: Option<(f64, f64)>,
+    /// Largest RGB distance counted as a match.
+    pub colour_tolerance: f64,
+    /// Start poses are placed nearest this map-frame point (default: the south-west corner).
+    pub start_near: Option<Point2>,
+    /// How many start poses to place.
+    pub starts: usize,
+    /// Import even when the resolution looks implausible or most colours match no class.
+    pub force: bool,
+    /// Output world folder.
+    pub out: PathBuf,
+    /// Print JSON.
+    pub json: bool,
+}
+
+/// One row of the import class table: the core class row plus a height.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ImportClass {
+    index: ClassId,
+    name: String,
+    rank: u8,
+    color: [u8; 3],
+    #[serde(default)]
+    ignored: bool,
+    #[serde(default)]
+    height_m: Option<f32>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ImportTable {
+    classes: Vec<ImportClass>,
+}
+
+/// A class table for import: the classes and each one's height, metres.
+#[derive(Clone, Debug)]
+pub struct ImportClasses {
+    /// The table the world will carry.
+    pub table: ClassTable,
+    /// Height of each class index, metres.
+    pub heights_m: [f32; 256],
+}
+
+fn table_error(path: &Path, line: u32, column: u32, message: &str) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{}:{line}:{column}: the class table does not parse: {message}\nexpected format:\n{CLASS_TABLE_FORMAT}",
+        path.display()
+    )
+}
+
+/// Reads an import class table: a regular YAML file of at most the mission language's size
+/// limit. Errors name the file, line and column and show the expected format.
+pub fn read_classes(path: &Path) -> Result<ImportClasses> {
+    let text = read_text(path, MAX_SOURCE_BYTES).map_err(|e| anyhow::anyhow!("class table: {e}"))?;
+    parse_classes(path, &text)
+}
+
+/// Parses the text of an import class table (`path` names it in errors).
+pub fn parse_classes(path: &Path, text: &str) -> Result<ImportClasses> {
+    let root = yaml::parse(text).map_err(|e| table_error(path, e.loc.line, e.loc.column, &e.message))?;
+    let parsed: ImportTable = root.deserialize().map_err(|e| {
+        let field = e.path_string();
+        let loc = e.loc.unwrap_or(root.loc);
+        let message = if field.is_empty() { e.message.clone() } else { format!("{field}: {}", e.message) };
+        table_error(path, loc.line, loc.column, &message)
+    })?;
+    let defaults = DerivedElevationParams::default();
+    let mut heights_m = [0.0f32; 256];
+    for (i, c) in parsed.classes.iter().enumerate() {
+        let h = c.height_m.unwrap_or_else(|| defaults.height_of(&c.name));
+        if !(h.is_finite() && (-100.0..=1000.0).contains(&h)) {
+            let loc = class_loc(&root, i);
+            return Err(table_error(
+                path,
+                loc.line,
+                loc.column,
+                &format!("classes[{i}].height_m must be between -100 and 1000 metres, got {h}"),
+            ));
+        }
+        heights_m[c.index as usize] = h;
+    }
+    let table = ClassTable {
+        classes: parsed
+            .classes
+            .iter()
+            .map(|c| ClassInfo {
+                index: c.index,
+                name: c.name.clone(),
+                rank: c.rank,
+                color: c.color,
+                ignored: c.ignored,
+            })
+            .collect(),
+    };
+    // Duplicates located at the entry that repeats an earlier one (the core check below would
+    // only name the value).
+    for (i, c) in parsed.classes.iter().enumerate() {
+        let earlier = &parsed.classes[..i];
+        let what = if earlier.iter().any(|e| e.index == c.index) {
+            Some(format!("classes[{i}]: index {} is used twice", c.index))
+        } else if earlier.iter().any(|e| e.name == c.name) {
+            Some(format!("classes[{i}]: name `{}` is used twice", c.name))
+        } else {
+            None
+        };
+        if let Some(message) = what {
+            let loc = class_loc(&root, i);
+            return Err(table_error(path, loc.line, loc.column, &message));
+        }
+    }
+    if table.classes.is_empty() {
+        return Err(table_error(path, root.loc.line, root.loc.column, "`classes` is empty; list at least one class"));
+    }
+    // The core parser owns the table's rules (unique indices and names, ranks, reserved index).
+    let text = serde_saphyr::to_string(&table).context("serialising the class table")?;
+    if let Err(e) = ClassTable::from_yaml(&text) {
+        let loc = root.get("classes").map_or(root.loc, |n| n.loc);
+        return Err(table_error(path, loc.line, loc.column, &e.to_string()));
+    }
+    Ok(ImportClasses { table, heights_m })
+}
+
+fn class_loc(root: &yaml::Node, i: usize) -> yaml::Loc {
+    root.get("classes").and_then(|c| c.as_seq()).and_then(|s| s.get(i)).map_or(root.loc, |n| n.loc)
+}
+
+/// Decodes a PNG raster within the limits: a regular file of at most [`MAX_RASTER_BYTES`], at
+/// most [`MAX_RASTER_PIXELS`] pixels (checked from the header before decoding).
+pub fn read_raster(path: &Path) -> Result<image::RgbImage> {
+    let bytes = read_regular(path, MAX_RASTER_BYTES).map_err(|e| anyhow::anyhow!("raster: {e}"))?;
+    let reader = || {
+        image::ImageReader::new(std::io::Cursor::new(&bytes[..]))
+            .with_guessed_format()
+            .with_context(|| format!("reading {}", path.display()))
+    };
+    let (w, h) = reader()?.into_dimensions().with_context(|| format!("{}: not a readable image", path.display()))?;
+    let pixels = u64::from(w) * u64::from(h);
+    if pixels == 0 || pixels > MAX_RASTER_PIXELS {
+        bail!("{}: the raster is {w} × {h} pixels; between 1 and {MAX_RASTER_PIXELS} are allowed", path.display());
+    }
+    let mut reader = reader()?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(w);
+    limits.max_image_height = Some(h);
+    limits.max_alloc = Some(pixels * 16 + (64 << 20));
+    reader.limits(limits);
+    let img = reader.decode().with_context(|| format!("{}: not a readable image", path.display()))?;
+    Ok(img.to_rgb8())
+}
+
+/// How the raster's colours matched the classes.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ColourMatch {
+    /// Pixels whose colour is a class colour.
+    pub exact: u64,
+    /// Pixels within the tolerance of a class colour.
+    pub near: u64,
+    /// Pixels farther than the tolerance from every class colour, snapped to the nearest.
+    pub snapped: u64,
+    /// The most common snapped colours: `[r, g, b]`, pixels, the class they went to.
+    pub top_snapped: Vec<([u8; 3], u64, String)>,
+}
+
+impl ColourMatch {
+    /// Share of pixels snapped, 0–1.
+    pub fn snapped_share(&self) -> f64 {
+        self.snapped as f64 / (self.exact + self.near + self.snapped).max(1) as f64
+    }
+}
+
+/// The class of every pixel (row-major, image rows top-down) and how the colours matched.
+///
+/// A colour within `tolerance` of a class colour takes that class (the nearest one). A colour
+/// farther from every class is snapped: to the most common class among the matched pixels
+/// around it (3 × 3, else 5 × 5), else to the class of the nearest colour. Neighbours first,
+/// because such pixels are mostly anti-aliased edges whose blended colour can lie nearer a third
+/// class than either of the two it mixes (road and grass blend to a colour nearest gravel's).
+pub fn classify(img: &image::RgbImage, table: &ClassTable, tolerance: f64) -> (Vec<ClassId>, ColourMatch) {
+    let colours: Vec<([u8; 3], ClassId)> = table.classes.iter().map(|c| (c.color, c.index)).collect();
+    let nearest = |rgb: [u8; 3]| -> (ClassId, f64) {
+        let d2 = |c: [u8; 3]| (0..3).map(|k| (f64::from(c[k]) - f64::from(rgb[k])).powi(2)).sum::<f64>();
+        colours
+            .iter()
+            .map(|&(c, idx)| (idx, d2(c)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or((0, f64::INFINITY), |(idx, d)| (idx, d.sqrt()))
+    };
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let mut memo: HashMap<[u8; 3], (ClassId, f64)> = HashMap::new();
+    let mut report = ColourMatch::default();
+    let mut classes = Vec::with_capacity(w * h);
+    let mut matched = Vec::with_capacity(w * h);
+    for px in img.pixels() {
+        let (class, distance) = *memo.entry(px.0).or_insert_with(|| nearest(px.0));
+        if distance == 0.0 {
+            report.exact += 1;
+        } else if distance <= tolerance {
+            report.near += 1;
+        } else {
+            report.snapped += 1;
+        }
+        classes.push(class);
+        matched.push(distance <= tolerance);
+    }
+    let mut snapped_to: HashMap<([u8; 3], ClassId), u64> = HashMap::new();
+    let mut votes = [0u32; 256];
+    for i in (0..w * h).filter(|&i| !matched[i]) {
+        let (x, y) = ((i % w) as i64, (i / w) as i64);
+        for radius in [1i64, 2] {
+            votes.fill(0);
+            for dy in -radius..=radius {
+                for dx in -radius..=radius {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx >= 0 && ny >= 0 && (nx as usize) < w && (ny as usize) < h {
+                        let j = ny as usize * w + nx as usize;
+                        if matched[j] {
+                            votes[classes[j] as usize] += 1;
+                        }
+                    }
+                }
+            }
+            // The most votes; ties to the lower index, so the result does not depend on order.
+            let best = (0..256).max_by_key(|&c| (votes[c], std::cmp::Reverse(c))).filter(|&c| votes[c] > 0);
+            if let Some(c) = best {
+                classes[i] = c as ClassId;
+                break;
+            }
+        }
+        let rgb = img.as_raw()[i * 3..i * 3 + 3].try_into().unwrap_or([0; 3]);
+        *snapped_to.entry((rgb, classes[i])).or_insert(0) += 1;
+    }
+    // Per snapped colour: its pixel count and the class most of them went to.
+    let mut per_colour: HashMap<[u8; 3], (u64, ClassId, u64)> = HashMap::new();
+    for ((rgb, class), n) in snapped_to {
+        let e = per_colour.entry(rgb).or_insert((0, class, 0));
+        e.0 += n;
+        if n > e.2 || (n == e.2 && class < e.1) {
+            (e.1, e.2) = (class, n);
+        }
+    }
+    let mut top: Vec<([u8; 3], u64, ClassId)> = per_colour.into_iter().map(|(rgb, (n, c, _))| (rgb, n, c)).collect();
+    top.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+    report.top_snapped = top
+        .into_iter()
+        .take(5)
+        .map(|(rgb, n, c)| (rgb, n, table.get(c).map_or("?", |c| c.name.as_str()).to_string()))
+        .collect();
+    (classes, report)
+}
+
+/// Checks a pixel size and the span it gives the raster; an implausible span is an error
+/// unless `force`.
+pub fn check_scale(scale: Scale, width: u32, height: u32, force: bool) -> Result<f64> {
+    let res = scale.metres_per_pixel();
+    let (lo, hi) = spomp_sim::RESOLUTION_RANGE_M;
+    if !(res.is_finite() && (lo..=hi).contains(&res)) {
+        bail!("a pixel must be between {lo} and {hi} m; got {res} m per pixel");
+    }
+    let (w_m, h_m) = (f64::from(width) * res, f64::from(height) * res);
+    let span = w_m.max(h_m);
+    if !force && !(MIN_PLAUSIBLE_SPAN_M..=MAX_PLAUSIBLE_SPAN_M).contains(&span) {
+        bail!(
+            "at {res} m per pixel the {width} × {height} raster would span {w_m:.1} m × {h_m:.1} m; a robot mission's \
+             aerial map spans between {MIN_PLAUSIBLE_SPAN_M} m and {:.0} km. Check --resolution-m / --pixels-per-m \
+             (metres per pixel vs pixels per metre?), or pass --force to import it anyway",
+            MAX_PLAUSIBLE_SPAN_M / 1000.0
+        );
+    }
+    Ok(res)
+}
+
+/// Distance of every cell to the nearest cell for which `blocked` is true, metres (chamfer
+/// distance with 1 and √2 steps: within 8 % of Euclidean, enough to keep starts clear).
+fn clearance_m(spec: &GridSpec, blocked: impl Fn(usize) -> bool) -> Vec<f32> {
+    let (w, h) = (spec.width as usize, spec.height as usize);
+    let res = spec.resolution_m as f32;
+    let diag = res * std::f32::consts::SQRT_2;
+    let mut d: Vec<f32> = (0..w * h).map(|i| if blocked(i) { 0.0 } else { f32::INFINITY }).collect();
+    let relax = |d: &mut Vec<f32>, i: usize, c: i64, r: i64, step: f32| {
+        if c >= 0 && r >= 0 && (c as usize) < w && (r as usize) < h {
+            let v = d[r as usize * w + c as usize] + step;
+            if v < d[i] {
+                d[i] = v;
+            }
+        }
+    };
+    for r in 0..h as i64 {
+        for c in 0..w as i64 {
+            let i = r as usize * w + c as usize;
+            relax(&mut d, i, c - 1, r, res);
+            relax(&mut d, i, c, r - 1, res);
+            relax(&mut d, i, c - 1, r - 1, diag);
+            relax(&mut d, i, c + 1, r - 1, diag);
+        }
+    }
+    for r in (0..h as i64).rev() {
+        for c in (0..w as i64).rev() {
+            let i = r as usize * w + c as usize;
+            relax(&mut d, i, c + 1, r, res);
+            relax(&mut d, i, c, r + 1, res);
+            relax(&mut d, i, c + 1, r + 1, diag);
+            relax(&mut d, i, c - 1, r + 1, diag);
+        }
+    }
+    d
+}
+
+/// Start poses for a team in `world`: see the module documentation. Fewer than `count` when the
+/// world has too little clear easy ground.
+pub fn start_poses(world: &World, near: Point2, count: usize) -> Vec<Pose2> {
+    let spec = *world.spec();
+    let classes = world.classes();
+    let map = world.map();
+    let present: Vec<ClassId> = classes.easiest_first().into_iter().filter(|&c| map.class.contains(&c)).collect();
+    let Some(&easiest) = present.first() else { return Vec::new() };
+    if classes.rank(easiest) >= spomp_core::classes::IMPASSABLE_RANK {
+        return Vec::new();
+    }
+    let clear = clearance_m(&spec, |i| map.class[i] != easiest);
+    let (w_m, h_m) = spec.size_m();
+    let inside = |p: Point2| {
+        let (dx, dy) = (p.x - spec.origin.x, p.y - spec.origin.y);
+        dx.min(w_m - dx).min(dy).min(h_m - dy) >= START_CLEARANCE_M
+    };
+    let mut candidates: Vec<(f64, usize)> = (0..spec.len())
+        // Cell centre to cell centre, less half a cell: the distance to the other class's edge.
+        .filter(|&i| {
+            f64::from(clear[i]) - spec.resolution_m / 2.0 >= START_CLEARANCE_M
+                && inside(spec.center(spec.cell_of_index(i)))
+        })
+        .map(|i| (spec.center(spec.cell_of_index(i)).distance(near), i))
+        .collect();
+    candidates.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let centre = Point2::new(spec.origin.x + w_m / 2.0, spec.origin.y + h_m / 2.0);
+    let mut out: Vec<Pose2> = Vec::new();
+    for (_, i) in candidates {
+        if out.len() >= count {
+            break;
+        }
+        let p = spec.center(spec.cell_of_index(i));
+        if out.iter().any(|s| s.position().distance(p) < START_SPACING_M) {
+            continue;
+        }
+        let to_centre = centre - p;
+        let yaw = if to_centre.norm() > 1e-9 { to_centre.y.atan2(to_centre.x) } else { 0.0 };
+        // Round to centimetres and centiradians so the poses read well in a mission file.
+        let pose =
+            Pose2::new((p.x * 100.0).round() / 100.0, (p.y * 100.0).round() / 100.0, (yaw * 100.0).round() / 100.0);
+        if Ugv::new(world, UgvParams::default(), pose).is_ok() {
+            out.push(pose);
+        }
+    }
+    out
+}
+
+/// A class grid, row-major, rows top-down (as the image).
+struct ClassGrid {
+    width: u32,
+    height: u32,
+    class: Vec<ClassId>,
+}
+
+/// The pixel classes on a grid of `cell_m` cells over the same extent: each cell takes the most
+/// common class of the pixels whose centres fall in it (ties to the easier rank, then the lower
+/// index: a road pixel is not lost to an equal count of building), or of the pixel under its
+/// centre when it is smaller than a pixel. Errors when the grid would exceed the world's cells.
+fn resample(
+    pixels: &[ClassId],
+    width: u32,
+    height: u32,
+    pixel_m: f64,
+    cell_m: f64,
+    table: &ClassTable,
+) -> Result<ClassGrid> {
+    if (cell_m - pixel_m).abs() <= 1e-9 * pixel_m {
+        return Ok(ClassGrid { width, height, class: pixels.to_vec() });
+    }
+    let cols = ((f64::from(width) * pixel_m / cell_m).round() as u64).max(1);
+    let rows = ((f64::from(height) * pixel_m / cell_m).round() as u64).max(1);
+    if cols * rows > spomp_sim::MAX_WORLD_CELLS {
+        bail!(
+            "at --cell-m {cell_m} the world would be {cols} × {rows} cells; at most {} are allowed",
+            spomp_sim::MAX_WORLD_CELLS
+        );
+    }
+    let (cols, rows) = (cols as u32, rows as u32);
+    let rank = table.rank_lut();
+    // The pixel span of a cell along one axis: the pixels whose centres lie in the cell, or the
+    // pixel under the cell's centre.
+    let span = |k: u32, n_px: u32| -> (u32, u32) {
+        let (a, b) = (f64::from(k) * cell_m / pixel_m, f64::from(k + 1) * cell_m / pixel_m);
+        let first = (a - 0.5).ceil().max(0.0) as u32;
+        let last = ((b - 0.5).ceil().max(0.0) as u32).min(n_px);
+        if first < last {
+            (first, last)
+        } else {
+            let centre = (((a + b) / 2.0).floor() as u32).min(n_px - 1);
+            (centre, centre + 1)
+        }
+    };
+    let mut class = Vec::with_capacity(cols as usize * rows as usize);
+    let mut votes = [0u32; 256];
+    for r in 0..rows {
+        let (y0, y1) = span(r, height);
+        for c in 0..cols {
+            let (x0, x1) = span(c, width);
+            votes.fill(0);
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    votes[pixels[y as usize * width as usize + x as usize] as usize] += 1;
+                }
+            }
+            let best = (0..256usize)
+                .filter(|&k| votes[k] > 0)
+                .max_by_key(|&k| (votes[k], std::cmp::Reverse(rank[k]), std::cmp::Reverse(k)))
+                .unwrap_or(0);
+            class.push(best as ClassId);
+        }
+    }
+    Ok(ClassGrid { width: cols, height: rows, class })
+}
+
+/// Vehicle-cluster centres as the goal detector sees them with its defaults in the whole map;
+/// none when the table has no `vehicle` class.
+fn vehicle_clusters(map: &AerialMap, table: &ClassTable) -> Vec<Point2> {
+    let params = spomp_mapping::GoalDetectionParams::default();
+    if table.by_name(&params.class).is_none() {
+        return Vec::new();
+    }
+    match spomp_mapping::GoalDetector::new(params, table).and_then(|mut d| d.detect(map, &[])) {
+        Ok(found) => found.goals.iter().map(|g| g.cluster_centroid).collect(),
+        Err(_) => Vec::new(),
+    }
+}
+
+/// Where a world was imported from: written beside `world.yaml` as `import.yaml`.
+#[derive(Clone, Debug, Serialize)]
+pub struct ImportRecord {
+    /// The raster file.
+    pub raster: PathBuf,
+    /// The class table file.
+    pub classes: PathBuf,
+    /// Metres per raster pixel.
+    pub pixel_m: f64,
+    /// Metres per world cell.
+    pub resolution_m: f64,
+    /// Size in metres (east–west, north–south).
+    pub size_m: [f64; 2],
+    /// WGS-84 position of the raster's north-west corner, `[lat, lon]` degrees, as given.
+    pub gps_reference_north_west: Option<[f64; 2]>,
+    /// WGS-84 position of the map frame's origin (the south-west corner), `[lat, lon]`: the
+    /// `gps_origin` of a robot's `ros2:` settings and the planned home of a QGC plan drawn on
+    /// this world.
+    pub gps_origin: Option<[f64; 2]>,
+    /// Colour tolerance used.
+    pub colour_tolerance: f64,
+    /// How the colours matched.
+    pub colours: ColourMatch,
+}
+
+/// Imports a raster into a [`World`] (not yet written).
+pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
+    if !(a.colour_tolerance.is_finite() && a.colour_tolerance >= 0.0) {
+        bail!("--colour-tolerance must be a non-negative RGB distance, got {}", a.colour_tolerance);
+    }
+    let classes = read_classes(&a.classes)?;
+    let img = read_raster(&a.raster)?;
+    let (width, height) = img.dimensions();
+    let res = check_scale(a.scale, width, height, a.force)?;
+    let (pixel_classes, colours) = classify(&img, &classes.table, a.colour_tolerance);
+    let share = colours.snapped_share();
+    if share > 0.2 && !a.force {
+        bail!(
+            "{:.1} % of the raster's pixels are farther than {} from every class colour (most common: {}); is {} the \
+             table this raster was drawn with? Raise --colour-tolerance, fix the table, or pass --force",
+            share * 100.0,
+            a.colour_tolerance,
+            describe_top(&colours),
+            a.classes.display()
+        );
+    }
+
+    let cell_m = a.cell_m.unwrap_or(res);
+    let (lo, hi) = spomp_sim::RESOLUTION_RANGE_M;
+    if !(cell_m.is_finite() && (lo..=hi).contains(&cell_m)) {
+        bail!("--cell-m must be between {lo} and {hi} m, got {cell_m}");
+    }
+    let cells = resample(&pixel_classes, width, height, res, cell_m, &classes.table)?;
+    let spec = GridSpec::new(Point2::new(0.0, 0.0), cell_m, cells.width, cells.height);
+    let mut map = AerialMap::unknown(spec);
+    let mut colour_of = [[0u8; 3]; 256];
+    for c in &classes.table.classes {
+        colour_of[c.index as usize] = c.color;
+    }
+    let (w, h) = (cells.width as usize, cells.height as usize);
+    for (k, &class) in cells.class.iter().enumerate() {
+        let (x, y) = (k % w, k / w);
+        let i = (h - 1 - y) * w + x;
+        map.class[i] = class;
+        map.rgb[i] = colour_of[class as usize];
+        map.elevation[i] = classes.heights_m[class as usize];
+    }
+    map.version = 1;
+    let clusters = vehicle_clusters(&map, &classes.table);
+    let mut world = World::new(map, classes.table, WorldMeta { vehicle_clusters: clusters, ..WorldMeta::default() })
+        .context("building the world")?;
+    let near = a.start_near.unwrap_or(spec.origin);
+    world.meta.start_poses = start_poses(&world, near, a.starts);
+
+    let (w_m, h_m) = (f64::from(width) * res, f64::from(height) * res);
+    let gps_origin = match a.gps_reference {
+        Some((lat, lon)) => {
+            if !(lat.is_finite() && lat.abs() <= 85.0 && lon.is_finite() && lon.abs() <= 180.0) {
+                bail!("--gps-reference must be LAT,LON in degrees (|LAT| ≤ 85, |LON| ≤ 180), got {lat},{lon}");
+            }
+            Some([lat - (h_m / EARTH_RADIUS_M).to_degrees(), lon])
+        }
+        None => None,
+    };
+    let record = ImportRecord {
+        raster: a.raster.clone(),
+        classes: a.classes.clone(),
+        pixel_m: res,
+        resolution_m: cell_m,
+        size_m: [w_m, h_m],
+        gps_reference_north_west: a.gps_reference.map(|(lat, lon)| [lat, lon]),
+        gps_origin,
+        colour_tolerance: a.colour_tolerance,
+        colours,
+    };
+    Ok((world, record))
+}
+
+fn describe_top(c: &ColourMatch) -> String {
+    if c.top_snapped.is_empty() {
+        return "none".into();
+    }
+    c.top_snapped
+        .iter()
+        .map(|(rgb, n, class)| format!("[{}, {}, {}] × {n} → {class}", rgb[0], rgb[1], rgb[2]))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// `spomp world import`.
+pub fn import(a: &ImportArgs) -> Result<ExitCode> {
+    if a.out.exists() && !a.out.is_dir() {
+        bail!("--out {}: exists and is not a folder", a.out.display());
+    }
+    let (world, record) = import_world(a)?;
+    world.save(&a.out).with_context(|| format!("writing the world to {}", a.out.display()))?;
+    let record_path = a.out.join("import.yaml");
+    let text = serde_saphyr::to_string(&record).context("serialising the import record")?;
+    std::fs::write(&record_path, text).with_context(|| format!("writing {}", record_path.display()))?;
+
+    let spec = *world.spec();
+    let share = record.colours.snapped_share();
+    if a.json {
+        let v = json!({
+            "dir": a.out,
+            "width": spec.width,
+            "height": spec.height,
+            "resolution_m": spec.resolution_m,
+            "pixel_m": record.pixel_m,
+            "size_m": record.size_m,
+            "colours": {
+                "exact": record.colours.exact,
+                "near": record.colours.near,
+                "snapped": record.colours.snapped,
+                "snapped_share": share,
+                "top_snapped": record.colours.top_snapped,
+            },
+            "vehicle_clusters": world.meta.vehicle_clusters,
+            "start_poses": world.meta.start_poses,
+            "gps_origin": record.gps_origin,
+        });
+        out!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        out!(
+            "wrote {} ({} × {} cells at {} m = {:.1} m × {:.1} m): {} vehicle clusters, {} start poses",
+            a.out.display(),
+            spec.width,
+            spec.height,
+            spec.resolution_m,
+            record.size_m[0],
+            record.size_m[1],
+            world.meta.vehicle_clusters.len(),
+            world.meta.start_poses.len()
+        );
+        let total = (record.colours.exact + record.colours.near + record.colours.snapped).max(1) as f64;
+        out!(
+            "colours: {:.1} % exact, {:.1} % within tolerance {}, {:.1} % matched no class and were snapped{}",
+            record.colours.exact as f64 / total * 100.0,
+            record.colours.near as f64 / total * 100.0,
+            a.colour_tolerance,
+            share * 100.0,
+            if record.colours.snapped > 0 {
+                format!(" (most common: {})", describe_top(&record.colours))
+            } else {
+                String::new()
+            }
+        );
+        for (i, s) in world.meta.start_poses.iter().enumerate() {
+            out!("start pose {i}: {{ x_m: {:.2}, y_m: {:.2}, yaw_deg: {:.0} }}", s.x, s.y, s.yaw.to_degrees());
+        }
+        if let Some([lat, lon]) = record.gps_origin {
+            out!("map origin (south-west corner) at {lat:.7}, {lon:.7} (ros2.gps_origin, QGC planned home)");
+        }
+    }
+    if world.meta.vehicle_clusters.is_empty()
+        && let Some(vehicle) = world.classes().by_name("vehicle")
+        && world.count_class(vehicle.index) > 0
+    {
+        eprintln!(
+            "warning: the world has {} vehicle cells but the goal detector finds no cluster in them at {} m per cell \
+             (it removes specks thinner than about two cells); a finer --cell-m keeps them",
+            world.count_class(vehicle.index),
+            spec.resolution_m
+        );
+    }
+    if world.meta.start_poses.len() < a.starts {
+        eprintln!(
+            "warning: only {} of {} start poses found (clear easy ground at least {START_CLEARANCE_M} m from other \
+             classes)",
+            world.meta.start_poses.len(),
+            a.starts
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn table() -> ImportClasses {
+        let yaml = "classes:\n  - { index: 0, name: road, rank: 0, color: [128, 64, 128] }\n  - { index: 2, name: building, rank: 5, color: [70, 70, 70], height_m: 10 }\n  - { index: 3, name: grass_sidewalk, rank: 2, color: [152, 251, 152] }\n";
+        match parse_classes(Path::new("t.yaml"), yaml) {
+            Ok(t) => t,
+            Err(e) => panic!("{e:#}"),
+        }
+    }
+
+    #[test]
+    fn heights_come_from_the_table_or_the_class_name() {
+        let t = table();
+        assert_eq!(t.heights_m[2], 10.0);
+        assert_eq!(t.heights_m[3], 0.15, "the loader's curb height for grass_sidewalk");
+        assert_eq!(t.heights_m[0], 0.0);
+    }
+
+    #[test]
+    fn a_bad_table_names_file_line_column_and_shows_the_format() {
+        let yaml = "classes:\n  - { index: 0, name: road, rank: 0 }\n";
+        let e = format!(
+            "{:#}",
+            parse_classes(Path::new("tbl.yaml"), yaml).err().map(|e| e.to_string()).unwrap_or_default()
+        );
+        assert!(e.starts_with("tbl.yaml:2:"), "{e}");
+        assert!(e.contains("color") && e.contains("expected format"), "{e}");
+        let dup = "classes:\n  - { index: 0, name: a, rank: 0, color: [1, 2, 3] }\n  - { index: 0, name: b, rank: 0, color: [4, 5, 6] }\n";
+        let e = parse_classes(Path::new("d.yaml"), dup).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(e.contains("d.yaml:3:5") && e.contains("classes[1]: index 0 is used twice"), "{e}");
+        let garbage = "classes: [1, 2";
+        let e = parse_classes(Path::new("g.yaml"), garbage).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(e.starts_with("g.yaml:") && e.contains("expected format"), "{e}");
+    }
+
+    #[test]
+    fn colours_snap_to_the_nearest_class_and_far_ones_are_counted() {
+        let t = table();
+        let mut img = image::RgbImage::new(4, 1);
+        img.put_pixel(0, 0, image::Rgb([128, 64, 128])); // exact road
+        img.put_pixel(1, 0, image::Rgb([120, 60, 125])); // anti-aliased road
+        img.put_pixel(2, 0, image::Rgb([75, 72, 70])); // near building
+        img.put_pixel(3, 0, image::Rgb([255, 255, 0])); // no class: snapped to its neighbours'
+        let (classes, m) = classify(&img, &t.table, 30.0);
+        assert_eq!(classes, [0, 0, 2, 2]);
+        assert_eq!((m.exact, m.near, m.snapped), (1, 2, 1));
+        assert!((m.snapped_share() - 0.25).abs() < 1e-12);
+        assert_eq!(m.top_snapped, vec![([255, 255, 0], 1, "building".to_string())]);
+        // A blend of road and grass lies nearer gravel's colour than either; among road and
+        // grass pixels it goes to the majority around it, not to gravel.
+        let mut table = t.table.clone();
+        table.classes.push(ClassInfo {
+            index: 6,
+            name: "gravel".into(),
+            rank: 1,
+            color: [190, 153, 153],
+            ignored: false,
+        });
+        let mut edge = image::RgbImage::from_pixel(3, 3, image::Rgb([152, 251, 152]));
+        edge.put_pixel(0, 0, image::Rgb([128, 64, 128]));
+        edge.put_pixel(1, 1, image::Rgb([140, 157, 140]));
+        let (classes, m) = classify(&edge, &table, 30.0);
+        assert_eq!(classes[4], 3, "{classes:?}");
+        assert_eq!(m.snapped, 1);
+        // Alone, a far colour takes the nearest class colour.
+        let lone = image::RgbImage::from_pixel(1, 1, image::Rgb([140, 157, 140]));
+        assert_eq!(classify(&lone, &table, 30.0).0, [6]);
+    }
+
+    #[test]
+    fn resampling_takes_the_majority_of_the_pixels_of_a_cell() {
+        let t = table();
+        // 4 × 2 pixels of 0.5 m: road, road, building, grass / road, building, building, grass.
+        let px = [0, 0, 2, 3, 0, 2, 2, 3];
+        let one = resample(&px, 4, 2, 0.5, 1.0, &t.table).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!((one.width, one.height), (2, 1));
+        // Left cell: three road, one building; right cell: two building, two grass: a tie that
+        // goes to the easier grass.
+        assert_eq!(one.class, [0, 3]);
+        let fine = resample(&px, 4, 2, 0.5, 0.25, &t.table).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!((fine.width, fine.height), (8, 4));
+        assert_eq!(fine.class[..8], [0, 0, 0, 0, 2, 2, 3, 3]);
+        assert_eq!(fine.class[24..], [0, 0, 2, 2, 2, 2, 3, 3]);
+        let same = resample(&px, 4, 2, 0.5, 0.5, &t.table).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(same.class, px);
+        assert!(resample(&px, 4, 2, 0.5, 0.0001, &t.table).is_err(), "too many cells");
+    }
+
+    #[test]
+    fn implausible_spans_are_questioned_unless_forced() {
+        // A 600-pixel campus at 15 m per pixel would be 9 km across.
+        let e = check_scale(Scale::MetresPerPixel(15.0), 600, 400, false).err().map(|e| e.to_string());
+        assert!(e.as_deref().unwrap_or_default().contains("9000.0 m × 6000.0 m"), "{e:?}");
+        assert_eq!(check_scale(Scale::MetresPerPixel(15.0), 600, 400, true).ok(), Some(15.0));
+        // Pixels per metre confused with metres per pixel: 2 m across.
+        assert!(check_scale(Scale::PixelsPerMetre(200.0), 400, 300, false).is_err());
+        assert_eq!(check_scale(Scale::PixelsPerMetre(2.0), 400, 300, false).ok(), Some(0.5));
+        assert!(check_scale(Scale::MetresPerPixel(f64::NAN), 4, 4, true).is_err());
+    }
+
+    #[test]
+    fn start_poses_are_on_clear_road_near_the_anchor_and_apart() {
+        let t = table();
+        // 60 × 40 m of grass with a 10 m wide road along y in [10, 20).
+        let spec = GridSpec::new(Point2::new(0.0, 0.0), 0.5, 120, 80);
+        let mut world = World::flat(spec, t.table.clone(), 3, 0.15).unwrap_or_else(|e| panic!("{e}"));
+        for row in 20..40 {
+            for col in 0..120 {
+                world.set_cell(spomp_core::Cell::new(col, row), 0, [128, 64, 128], 0.0);
+            }
+        }
+        let starts = start_poses(&world, Point2::new(0.0, 0.0), 3);
+        assert_eq!(starts.len(), 3);
+        for s in &starts {
+            assert!(s.y >= 12.0 && s.y <= 18.0, "clear of the curb by 2 m: {s:?}");
+            assert!(s.x < 20.0, "near the south-west corner: {s:?}");
+        }
+        for (i, a) in starts.iter().enumerate() {
+            for b in &starts[i + 1..] {
+                assert!(a.position().distance(b.position()) >= START_SPACING_M);
+            }
+        }
+        // No road at all: no start pose.
+        let grass = World::flat(spec, t.table, 3, 0.15).unwrap_or_else(|e| panic!("{e}"));
+        let on_grass = start_poses(&grass, Point2::new(0.0, 0.0), 2);
+        assert!(on_grass.iter().all(|s| grass.class_at(s.position()) == Some(3)));
+    }
+}
