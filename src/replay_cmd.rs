@@ -32,6 +32,10 @@ pub struct ReplayArgs {
     /// e.g. `navigation.terrain.inflation_m=0.9`.
     #[arg(long = "set", value_name = "PATH=VALUE", value_parser = set)]
     pub sets: Vec<(String, String)>,
+    /// The team's key folder, to replay a robot that signed its team state (`spomp run
+    /// --keys`): the replay signs as it did, so its messages are the same bytes.
+    #[arg(long, value_name = "DIR")]
+    pub keys: Option<PathBuf>,
 }
 
 fn set(text: &str) -> Result<(String, String), String> {
@@ -54,7 +58,22 @@ pub fn replay(
             return Ok(ExitCode::from(2));
         }
     };
-    let options = ReplayOptions { robot: args.robot.clone(), until_s: args.until, sets: args.sets.clone() };
+    let security = match &args.keys {
+        None => None,
+        Some(dir) => {
+            let keys = spomp_zenoh::KeyDir::load(dir)
+                .and_then(|k| k.security(&spomp_core::RobotId::new(&args.robot)))
+                .map_err(|e| anyhow::anyhow!("--keys: {e}"));
+            match keys {
+                Ok(s) => Some(std::sync::Arc::new(s)),
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    return Ok(ExitCode::from(2));
+                }
+            }
+        }
+    };
+    let options = ReplayOptions { robot: args.robot.clone(), until_s: args.until, sets: args.sets.clone(), security };
     let trace = args.trace;
     let mut print = |t: &spomp_behaviors::trace::TransitionRecord| {
         if trace {

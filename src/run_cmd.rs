@@ -104,7 +104,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     let setup = RobotSetup::from_mission(mission, &args.robot, &area, seed)
         .with_context(|| format!("setting up robot `{}`", args.robot))?;
     // What a replay of the log needs to build this robot again.
-    let run_info = match &args.record {
+    let mut run_info = match &args.record {
         Some(_) => Some(
             spomp_mcap::replay::run_info(
                 &loaded,
@@ -122,18 +122,17 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     let mut robot =
         Robot::from_setup(&loaded, setup, registry).with_context(|| format!("setting up robot `{}`", args.robot))?;
     let link = crate::team_link::set_up(&args.team_link, mission, &args.robot, &mut robot)?;
+    if let Some(info) = run_info.as_mut() {
+        info.team_session = robot.team().session();
+        info.team_secured = robot.team().security().is_some();
+    }
     let peers: Vec<RobotId> = mission.team.iter().filter(|r| r.id != args.robot).map(|r| RobotId::new(&r.id)).collect();
     let mut node = RobotNode::new(robot, settings.clone(), peers).context("starting the ROS 2 node")?;
-    let link = match link {
-        Some((link, notes)) => {
-            for n in notes {
-                eprintln!("{n}");
-            }
-            Some(link)
-        }
-        None => None,
-    };
-    crate::team_link::plug(&mut node, link, &args.team_link, &args.robot);
+    for n in &link.notes {
+        eprintln!("{n}");
+    }
+    let resumed = link.resumed;
+    crate::team_link::plug(&mut node, link.link, &args.team_link, &args.robot);
 
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
@@ -173,16 +172,16 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
             if let Some(tap) = live {
                 rec.set_tap(Box::new(tap));
             }
-            drive(&mut node, &stop, args.until_s, Some(rec))?
+            drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref())?
         }
         (None, Some(tap)) => {
             // Only the live view wants the messages: recorded into nothing, uncompressed.
             let options = RecorderOptions { compress: false, ..options };
             let mut rec = Recorder::new(Discard::default(), options).context("starting the live view's recorder")?;
             rec.set_tap(Box::new(tap));
-            drive(&mut node, &stop, args.until_s, Some(rec))?
+            drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref())?
         }
-        (None, None) => drive::<SafeFile>(&mut node, &stop, args.until_s, None)?,
+        (None, None) => drive::<SafeFile>(&mut node, &stop, args.until_s, None, resumed.as_deref())?,
     };
     if let Some(e) = error {
         return Err(e.context("recording"));
@@ -229,8 +228,13 @@ fn drive<W: Write + Seek>(
     stop: &AtomicBool,
     until_s: Option<f64>,
     recorder: Option<Recorder<W>>,
+    resumed: Option<&[u8]>,
 ) -> Result<(spomp_ros2::RunReport, Option<anyhow::Error>)> {
     let mut observer = RecordingObserver { recorder, error: None };
+    if let Some(bytes) = resumed {
+        // Before every other call, as it happened: a replay resumes its robot the same way.
+        observer.on_seam(node.robot().id(), Time::ZERO, SeamInput::Resume(bytes));
+    }
     let report = node.run(stop, until_s, &mut observer);
     if let Some(rec) = observer.recorder.take() {
         rec.finish().context("finishing the log")?;

@@ -71,14 +71,10 @@ impl TeamChannel for ZenohChannel {
 }
 
 /// Secures the robot, resumes it from its state file and opens the team link, as the options
-/// and the mission say. Call before the node runs. Returns what happened, for the operator.
-pub fn set_up(
-    args: &TeamLinkArgs,
-    mission: &MissionFile,
-    robot_id: &str,
-    robot: &mut Robot,
-) -> Result<Option<(TeamLink, Vec<String>)>> {
+/// and the mission say. Call before the node runs.
+pub fn set_up(args: &TeamLinkArgs, mission: &MissionFile, robot_id: &str, robot: &mut Robot) -> Result<SetUp> {
     let mut notes = Vec::new();
+    let mut resumed = None;
     let id = RobotId::new(robot_id);
     let keys = match &args.keys {
         Some(dir) => {
@@ -108,20 +104,23 @@ pub fn set_up(
         match spomp_zenoh::read_state(path, robot_id) {
             Ok(None) => notes.push(format!("no state file at {} yet: starting fresh", path.display())),
             Ok(Some(bytes)) => match robot.resume(&bytes) {
-                Ok(s) => notes.push(format!(
-                    "resumed from {}: {} records, {} goals, {} own claims",
-                    path.display(),
-                    s.records,
-                    s.goals,
-                    s.own_claims
-                )),
+                Ok(s) => {
+                    notes.push(format!(
+                        "resumed from {}: {} records, {} goals, {} own claims",
+                        path.display(),
+                        s.records,
+                        s.goals,
+                        s.own_claims
+                    ));
+                    resumed = Some(bytes);
+                }
                 Err(e) => notes.push(format!("state file {} ignored: {e}", path.display())),
             },
             Err(e) => notes.push(format!("state file ignored: {e}")),
         }
     }
     if !args.wanted(mission, robot_id) {
-        return Ok(None);
+        return Ok(SetUp { link: None, notes, resumed });
     }
     let spec = mission.team.iter().find(|r| r.id == robot_id).and_then(|r| r.team_link.clone()).unwrap_or_default();
     let mut config = LinkConfig::new(&mission.mission, id.clone());
@@ -141,7 +140,17 @@ pub fn set_up(
         config.listen.join(", "),
         config.connect.join(", ")
     ));
-    Ok(Some((link, notes)))
+    Ok(SetUp { link: Some(link), notes, resumed })
+}
+
+/// What [`set_up`] did.
+pub struct SetUp {
+    /// The team link, when the team state goes over Zenoh.
+    pub link: Option<TeamLink>,
+    /// What to tell the operator.
+    pub notes: Vec<String>,
+    /// The state the robot resumed from (a seam call a replay repeats).
+    pub resumed: Option<Vec<u8>>,
 }
 
 /// Plugs the link and the state file into the node.

@@ -119,7 +119,7 @@ impl Team {
 
     /// `spomp run` of `robot`: listening on its port, connecting to the basestation's and
     /// ugv1's (gossip finds the rest).
-    fn start_robot(&self, robot: &str) -> Reap {
+    fn start_robot(&self, robot: &str, extra: &[&str]) -> Reap {
         let mut cmd = spomp();
         cmd.args(["run", MISSION, "--robot", robot, "--use-sim-time", "--json", "--domain-id", &self.domain]);
         cmd.arg("--keys").arg(self.keys());
@@ -127,7 +127,7 @@ impl Team {
         for hub in ["base", "ugv1"].iter().filter(|h| **h != robot) {
             cmd.args(["--connect", &format!("tcp/127.0.0.1:{}", self.ports[hub])]);
         }
-        cmd.arg("--state-file").arg(self.state_file(robot)).args(["--state-period-s", "1"]);
+        cmd.arg("--state-file").arg(self.state_file(robot)).args(["--state-period-s", "1"]).args(extra);
         Reap(cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("spomp run starts"))
     }
 
@@ -253,7 +253,7 @@ fn finish_farm(farm: &mut Reap, limit: Duration) -> serde_json::Value {
 fn four_processes_complete_a_mission_over_the_signed_team_link_and_a_rogue_changes_nothing() {
     let team = Team::new("complete", domain(600));
     let mut farm = team.start_farm();
-    let robots: Vec<(&str, Reap)> = ROBOTS.iter().map(|r| (*r, team.start_robot(r))).collect();
+    let robots: Vec<(&str, Reap)> = ROBOTS.iter().map(|r| (*r, team.start_robot(r, &[]))).collect();
     let stop = Arc::new(AtomicBool::new(false));
     let rogue = start_rogue(&team, stop.clone());
 
@@ -287,16 +287,30 @@ fn four_processes_complete_a_mission_over_the_signed_team_link_and_a_rogue_chang
         .sum();
     assert!(rejected > 0, "{reports:#?}");
     assert!(reports["base"]["team_rejected"].get("mallory").is_some(), "{:#}", reports["base"]);
+    for robot in ROBOTS {
+        // Every message of a teammate checks (ugv1's name is the rogue's too); the farm's own
+        // simulated basestation, which talks on the ROS 2 `team/in` topic, is not listened to
+        // once the team link is up (regression: its unsigned messages were refused as the real
+        // basestation's).
+        for teammate in ROBOTS.iter().filter(|r| **r != "ugv1") {
+            assert!(
+                reports[robot]["team_rejected"].get(teammate).is_none(),
+                "{robot} refused {teammate}'s messages: {:#}",
+                reports[robot]
+            );
+        }
+    }
+    assert!(reports["ugv1"]["team_in_ignored"].as_u64().unwrap_or(0) > 0, "{:#}", reports["ugv1"]);
     // Bytes per link and tier, for the note.
     eprintln!("ugv1's link: {:#}", reports["ugv1"]["team_link"]);
-    eprintln!("robot time {:.0} s", trial["time_s"].as_f64().unwrap_or(0.0));
+    eprintln!("mission time {:.0} s", trial["end_s"].as_f64().unwrap_or(0.0));
 }
 
 #[test]
 fn a_killed_ugv_frees_its_goal_after_the_lease_and_resumes_from_its_state_file() {
     let team = Team::new("resume", domain(700));
     let mut farm = team.start_farm();
-    let mut robots: Vec<(&str, Reap)> = ROBOTS.iter().map(|r| (*r, team.start_robot(r))).collect();
+    let mut robots: Vec<(&str, Reap)> = ROBOTS.iter().map(|r| (*r, team.start_robot(r, &[]))).collect();
 
     // Wait until ugv2 holds a goal (its state file says so), then kill it without warning.
     let start = Instant::now();
@@ -330,7 +344,8 @@ fn a_killed_ugv_frees_its_goal_after_the_lease_and_resumes_from_its_state_file()
     let before = team.team_state("ugv2").expect("ugv2's state file survived");
     assert!(before.goal(&held).is_some_and(|v| v.visited.is_none()), "ugv2 died before learning of the visit");
     let restarted = Instant::now();
-    robots.push(("ugv2", team.start_robot("ugv2")));
+    let log = team.dir.join("ugv2-resumed.mcap");
+    robots.push(("ugv2", team.start_robot("ugv2", &["--record", log.to_str().expect("utf-8 path")])));
     let converged = loop {
         assert!(restarted.elapsed() < Duration::from_secs(60), "ugv2 did not re-converge within 60 s");
         let views = |r: &str| {
@@ -350,6 +365,21 @@ fn a_killed_ugv_frees_its_goal_after_the_lease_and_resumes_from_its_state_file()
     let reports = stop_robots(robots);
     assert_eq!(summary["runs"][0]["outcome"], "complete", "{summary:#}");
     assert!(reports["ugv2"]["states_saved"].as_u64().unwrap_or(0) > 0, "{:#}", reports["ugv2"]);
+
+    // The resumed, signing robot's log replays: the resume is a seam call, and with the team's
+    // keys the replay signs its messages as the robot did.
+    let replay =
+        spomp().args(["replay"]).arg(&log).args(["--robot", "ugv2", "--json", "--keys"]).arg(team.keys()).output();
+    let replay = replay.expect("replay runs");
+    assert!(
+        replay.status.success(),
+        "the resumed robot's log does not replay:\n{}\n{}",
+        String::from_utf8_lossy(&replay.stdout),
+        String::from_utf8_lossy(&replay.stderr)
+    );
+    let without_keys = spomp().args(["replay"]).arg(&log).args(["--robot", "ugv2"]).output().expect("replay runs");
+    assert!(!without_keys.status.success());
+    assert!(String::from_utf8_lossy(&without_keys.stderr).contains("--keys"));
 }
 
 /// A robot's resume state carries its role's `persist` entries: a rebooted UAV continues its

@@ -48,6 +48,8 @@ pub enum SeamInput<'a> {
     TakeWork(&'a [u64]),
     /// `finish_work` with the result of work number `id`.
     FinishWork(u64),
+    /// `resume` with a state saved before a reboot (before the first tick).
+    Resume(&'a [u8]),
 }
 
 /// A tier set as bits (bit k = tier k), the way logs store it.

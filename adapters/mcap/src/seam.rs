@@ -142,6 +142,8 @@ pub enum SeamCall {
     TakeWork(Vec<u64>),
     /// `Robot::finish_work` with work number `id`'s result.
     FinishWork(u64),
+    /// `Robot::resume` with the state the robot rebooted with.
+    Resume(Vec<u8>),
 }
 
 /// The wire name of a call on a robot's seam.
@@ -157,6 +159,7 @@ pub fn call_name(call: &SeamInput<'_>) -> &'static str {
         SeamInput::Halt => "halt",
         SeamInput::TakeWork(_) => "take_work",
         SeamInput::FinishWork(_) => "finish_work",
+        SeamInput::Resume(_) => "resume",
     }
 }
 
@@ -177,6 +180,7 @@ pub fn call_to_msg(call: &SeamInput<'_>, now: Time) -> Result<SeamCallMsg, Recor
         SeamInput::Halt => (String::new(), Vec::new()),
         SeamInput::TakeWork(ids) => (String::new(), cdr(&ids)?),
         SeamInput::FinishWork(id) => (String::new(), cdr(&id)?),
+        SeamInput::Resume(bytes) => (String::new(), bytes.to_vec()),
     };
     Ok(SeamCallMsg { stamp_ns: now.nanos, call: call_name(call).to_string(), peer, data })
 }
@@ -200,6 +204,7 @@ impl SeamCall {
             "halt" => SeamCall::Halt,
             "take_work" => SeamCall::TakeWork(uncdr(data).ok_or_else(|| decode("work numbers"))?),
             "finish_work" => SeamCall::FinishWork(uncdr(data).ok_or_else(|| decode("work number"))?),
+            "resume" => SeamCall::Resume(msg.data.clone()),
             other => return Err(bad(format!("unknown seam call `{other}`"))),
         })
     }
@@ -248,6 +253,11 @@ pub struct RunInfo {
     /// The robots ran their heavy skills in the background (`spomp run`): their seam calls
     /// include `take_work` and `finish_work`, and a replay sets its robot up the same way.
     pub background_skills: bool,
+    /// The session the recorded robot's team-state messages carried (`spomp run` starts a new
+    /// one each boot; 0 in the simulator): a replay sets it so its messages are the same bytes.
+    pub team_session: u64,
+    /// The recorded robot signed its team state with the team's keys (`spomp run --keys`).
+    pub team_secured: bool,
 }
 
 impl RunInfo {
@@ -260,6 +270,8 @@ impl RunInfo {
         m.insert("map_compression".into(), self.map_compression.clone());
         m.insert("files".into(), self.files.len().to_string());
         m.insert("background_skills".into(), self.background_skills.to_string());
+        m.insert("team_session".into(), self.team_session.to_string());
+        m.insert("team_secured".into(), self.team_secured.to_string());
         for (k, (path, text)) in self.files.iter().enumerate() {
             m.insert(format!("file.{k}.path"), path.clone());
             m.insert(format!("file.{k}.text"), text.clone());
@@ -300,6 +312,14 @@ impl RunInfo {
             area,
             // Logs from before background skills existed ran every skill inline.
             background_skills: m.get("background_skills").is_some_and(|v| v == "true"),
+            team_secured: m.get("team_secured").is_some_and(|v| v == "true"),
+            // Logs from before sessions had none.
+            team_session: match m.get("team_session") {
+                None => 0,
+                Some(v) => {
+                    v.parse().map_err(|_| ReadError::Corrupt("run metadata `team_session` is not a number".into()))?
+                }
+            },
         })
     }
 }
@@ -463,6 +483,8 @@ mod tests {
                 prior_map: None,
             },
             background_skills: true,
+            team_session: u64::MAX - 3,
+            team_secured: true,
         }
     }
 
@@ -504,6 +526,7 @@ mod tests {
             (Time::from_nanos(9), SeamInput::Halt),
             (Time::from_nanos(9), SeamInput::TakeWork(&[7, 8])),
             (Time::from_nanos(10), SeamInput::FinishWork(8)),
+            (Time::from_nanos(10), SeamInput::Resume(&[1, 2, 3])),
         ];
         let log = read_replay_log(&record(&calls)).unwrap();
         assert!(!log.truncated);
@@ -528,6 +551,7 @@ mod tests {
         assert_eq!(read[5], SeamCall::Halt);
         assert_eq!(read[6], SeamCall::TakeWork(vec![7, 8]));
         assert_eq!(read[7], SeamCall::FinishWork(8));
+        assert_eq!(read[8], SeamCall::Resume(vec![1, 2, 3]));
     }
 
     #[test]

@@ -140,10 +140,22 @@ pub struct RunReport {
     /// Team-state messages refused (unsigned, forged, from non-members, malformed), by the
     /// sender the transport named.
     pub team_rejected: std::collections::BTreeMap<String, u64>,
+    /// Why the last refused message of each sender was refused.
+    pub team_rejected_why: std::collections::BTreeMap<String, String>,
     /// The team link's figures (bytes per link and tier), when one is plugged in.
     pub team_link: Option<serde_json::Value>,
     /// Resume states written.
     pub states_saved: u64,
+    /// Messages on the ROS 2 `team/in` topic ignored because the team state goes over the
+    /// team link.
+    pub team_in_ignored: u64,
+}
+
+impl RunReport {
+    fn note_rejected(&mut self, from: &RobotId, why: &spomp_teamstate::SyncError) {
+        *self.team_rejected.entry(from.to_string()).or_default() += 1;
+        self.team_rejected_why.insert(from.to_string(), why.to_string());
+    }
 }
 
 /// Inputs received, by kind.
@@ -530,6 +542,13 @@ impl RobotNode {
         }
         while let Some(msg) = take(&self.inputs.team_in, &mut state.report.malformed_inputs) {
             got = true;
+            if self.team_channel.is_some() {
+                // With a team link, the team state comes only over it: `team/in` is a
+                // simulator farm's radio (whose simulated robots are not the team's processes)
+                // or anyone on the DDS domain.
+                state.report.team_in_ignored += 1;
+                continue;
+            }
             let Some(from) = msg.layout.dim.first().map(|d| d.label.clone()).filter(|f| !f.is_empty()) else {
                 state.refuse(id.as_str(), observer, "team/in: a message without its sender (layout.dim[0].label)");
                 continue;
@@ -538,8 +557,8 @@ impl RobotNode {
             let now = state.now().unwrap_or(Time::ZERO);
             let from = RobotId::new(&from);
             observer.on_seam(self.robot.id(), now, SeamInput::TeamIn { from: &from, bytes: &msg.data });
-            if self.robot.on_team_message(&from, &msg.data).is_err() {
-                *state.report.team_rejected.entry(from.to_string()).or_default() += 1;
+            if let Err(e) = self.robot.on_team_message(&from, &msg.data) {
+                state.report.note_rejected(&from, &e);
             }
         }
         if let Some(channel) = self.team_channel.as_mut() {
@@ -548,8 +567,8 @@ impl RobotNode {
                 state.report.received.team += 1;
                 let now = state.now().unwrap_or(Time::ZERO);
                 observer.on_seam(self.robot.id(), now, SeamInput::TeamIn { from: &from, bytes: &bytes });
-                if self.robot.on_team_message(&from, &bytes).is_err() {
-                    *state.report.team_rejected.entry(from.to_string()).or_default() += 1;
+                if let Err(e) = self.robot.on_team_message(&from, &bytes) {
+                    state.report.note_rejected(&from, &e);
                 }
             }
         }

@@ -90,7 +90,7 @@ fn zenoh_err(e: impl std::fmt::Display) -> LinkError {
 }
 
 /// Counts of one directed link and tier.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct TierCounts {
     /// Messages handed to Zenoh.
     pub messages: u64,
@@ -98,6 +98,8 @@ pub struct TierCounts {
     pub bytes: u64,
     /// Messages dropped because the send queue was full.
     pub dropped: u64,
+    /// Bytes per second since the link opened (filled in by [`TeamLink::stats`]).
+    pub bytes_per_s: f64,
 }
 
 /// What crossed the link so far.
@@ -109,6 +111,8 @@ pub struct LinkStats {
     pub received: BTreeMap<String, TierCounts>,
     /// Received messages dropped: the inbox was full, or a message was over the size limit.
     pub received_dropped: u64,
+    /// Wall-clock seconds since the link opened.
+    pub elapsed_s: f64,
 }
 
 /// The name of a tier in key expressions and statistics.
@@ -149,6 +153,7 @@ pub struct TeamLink {
     stats: Arc<Mutex<LinkStats>>,
     outbox: Option<SyncSender<Outgoing>>,
     sender: Option<JoinHandle<()>>,
+    opened: std::time::Instant,
     _subscriber: zenoh::pubsub::Subscriber<()>,
     _alive_subscriber: zenoh::pubsub::Subscriber<()>,
     _token: zenoh::liveliness::LivelinessToken,
@@ -233,6 +238,7 @@ impl TeamLink {
             stats,
             outbox: Some(outbox),
             sender: Some(sender),
+            opened: std::time::Instant::now(),
             _subscriber: subscriber,
             _alive_subscriber: alive_subscriber,
             _token: token,
@@ -271,9 +277,14 @@ impl TeamLink {
         lock(&self.alive).clone()
     }
 
-    /// What crossed the link so far.
+    /// What crossed the link so far, with rates over the time since it opened.
     pub fn stats(&self) -> LinkStats {
-        lock(&self.stats).clone()
+        let mut stats = lock(&self.stats).clone();
+        stats.elapsed_s = self.opened.elapsed().as_secs_f64();
+        let rate = |c: &mut TierCounts| c.bytes_per_s = c.bytes as f64 / stats.elapsed_s.max(1e-9);
+        stats.sent.values_mut().flat_map(|tiers| tiers.values_mut()).for_each(rate);
+        stats.received.values_mut().for_each(rate);
+        stats
     }
 
     /// Closes the session (peers see this robot's token go); waits for queued sends.

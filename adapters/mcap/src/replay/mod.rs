@@ -63,6 +63,9 @@ pub struct ReplayOptions {
     /// Settings changed on replay: (`navigation.…` path, value as YAML/JSON scalar or text),
     /// applied as the robot's own `navigation` overrides.
     pub sets: Vec<(String, String)>,
+    /// The robot's signing key and its team's public keys, for a robot that signed its team
+    /// state (`spomp run --keys`): its messages are then the same bytes, signatures included.
+    pub security: Option<std::sync::Arc<spomp_teamstate::TeamSecurity>>,
 }
 
 /// Where the replay first differed from the log.
@@ -149,6 +152,17 @@ pub fn replay(
         return Err(ReplayError::Log(format!("no robot `{id}` in the log; robots in the run: {robots:?}")));
     }
     let mut robot = build_robot(info, id, &options.sets, registry)?;
+    match (&options.security, info.team_secured) {
+        (Some(security), _) => {
+            robot.secure_team(security.clone()).map_err(|e| ReplayError::Robot(e.to_string()))?;
+        }
+        (None, true) => {
+            return Err(ReplayError::Robot(format!(
+                "{id} signed its team state (spomp run --keys): give the team's key folder with --keys DIR to replay it"
+            )));
+        }
+        (None, false) => {}
+    }
     let until_ns = options.until_s.map(|s| Time::from_secs_f64(s).nanos);
     let mut state = State {
         id: id.to_string(),
@@ -230,6 +244,7 @@ fn build_robot(
     setup.config.map_compression = CompressionParams { level: setup::png_level(&info.map_compression)? };
     let mut robot = Robot::from_setup(&loaded, setup, registry).map_err(|e| ReplayError::Robot(e.to_string()))?;
     robot.set_background_skills(info.background_skills);
+    robot.set_team_session(info.team_session);
     drop(dir);
     Ok(robot)
 }
@@ -370,6 +385,19 @@ impl State {
                 }
             }
             SeamCall::Halt => robot.halt(now, None),
+            SeamCall::Resume(bytes) => {
+                // The recorded robot took it, or it would not have been logged: it must take
+                // here too (a secured robot's needs the keys, `--keys`).
+                if let Err(e) = robot.resume(&bytes) {
+                    return Some(Divergence {
+                        time_s: now.as_secs_f64(),
+                        channel: channel("resume"),
+                        recorded: "resumed from its saved state".into(),
+                        replayed: format!("refused the saved state: {e}"),
+                        node_path: String::new(),
+                    });
+                }
+            }
             SeamCall::TakeWork(recorded) => {
                 let work = robot.take_work(now);
                 let replayed: Vec<u64> = work.iter().map(|w| w.id()).collect();

@@ -125,6 +125,8 @@ pub fn run_info(
         map_compression: png_level_name(map_compression).to_string(),
         area: area_record(area),
         background_skills: false,
+        team_session: 0,
+        team_secured: false,
     })
 }
 
