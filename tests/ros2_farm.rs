@@ -4,48 +4,23 @@
 //! DDS stays on this machine: `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` restricts both processes
 //! to 127.0.0.1, and each test uses a domain id of its own.
 
+mod processes;
+
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use processes::{Reap, output, spomp, wait_with_timeout};
 use spomp_core::ros;
 
 const MISSION: &str = "tests/missions/ros2/farm-one-ugv.yaml";
 const FAR_MISSION: &str = "tests/missions/ros2/farm-kill.yaml";
 const UAV_MISSION: &str = "tests/missions/ros2/farm-uav.yaml";
 
-fn spomp() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_spomp"));
-    c.current_dir(env!("CARGO_MANIFEST_DIR"));
-    c.env("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST");
-    c.env_remove("ROS_DOMAIN_ID");
-    c
-}
-
 /// A domain id of this process and test (offsets below 100): parallel runs of the suite and
 /// the tests of one run do not hear each other.
 fn domain(offset: u32) -> String {
     (10 + (std::process::id() % 50) * 4 + offset / 100).to_string()
-}
-
-/// Kills the child when the test ends, however it ends.
-struct Reap(Child);
-impl Drop for Reap {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn wait_with_timeout(child: &mut Child, limit: Duration) -> Option<std::process::ExitStatus> {
-    let deadline = Instant::now() + limit;
-    while Instant::now() < deadline {
-        if let Ok(Some(status)) = child.try_wait() {
-            return Some(status);
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    None
 }
 
 fn start_sim(mission: &str, domain: &str, out: &Path, extra: &[&str]) -> Reap {
@@ -73,19 +48,6 @@ fn start_robot(mission: &str, robot: &str, domain: &str, extra: &[&str]) -> Reap
         .spawn()
         .expect("spomp run starts");
     Reap(child)
-}
-
-fn output(child: &mut Child) -> (String, String) {
-    use std::io::Read;
-    let mut out = String::new();
-    let mut err = String::new();
-    if let Some(mut s) = child.stdout.take() {
-        let _ = s.read_to_string(&mut out);
-    }
-    if let Some(mut s) = child.stderr.take() {
-        let _ = s.read_to_string(&mut err);
-    }
-    (out, err)
 }
 
 /// How a farm run ended.

@@ -6,14 +6,17 @@
 //! DDS stays on 127.0.0.1 (`ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`, a domain id per test);
 //! Zenoh listens and connects on 127.0.0.1 ports only, multicast scouting off.
 
+mod processes;
+
 use std::collections::BTreeMap;
 use std::net::TcpListener;
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use processes::{Reap, output, spomp, wait_with_timeout};
 use spomp_core::{GoalId, Point2, RobotId, Time};
 use spomp_teamstate::{GoalOrigin, RecordKey, TeamState, TeamStateParams, Tier, TierSet};
 use spomp_zenoh::{KeyDir, LinkConfig, TeamLink};
@@ -21,52 +24,12 @@ use spomp_zenoh::{KeyDir, LinkConfig, TeamLink};
 const MISSION: &str = "tests/missions/ros2/farm-team-link.yaml";
 const ROBOTS: [&str; 4] = ["base", "uav1", "ugv1", "ugv2"];
 
-fn spomp() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_spomp"));
-    c.current_dir(env!("CARGO_MANIFEST_DIR"));
-    c.env("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST");
-    c.env_remove("ROS_DOMAIN_ID");
-    c
-}
-
 fn domain(offset: u32) -> String {
     (12 + (std::process::id() % 50) * 4 + offset / 100).to_string()
 }
 
 fn free_port() -> u16 {
     TcpListener::bind("127.0.0.1:0").map(|l| l.local_addr().map(|a| a.port()).unwrap_or(0)).unwrap_or(0)
-}
-
-/// Kills the child when the test ends, however it ends.
-struct Reap(Child);
-impl Drop for Reap {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn wait_with_timeout(child: &mut Child, limit: Duration) -> Option<std::process::ExitStatus> {
-    let deadline = Instant::now() + limit;
-    while Instant::now() < deadline {
-        if let Ok(Some(status)) = child.try_wait() {
-            return Some(status);
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    None
-}
-
-fn output(child: &mut Child) -> (String, String) {
-    use std::io::Read;
-    let (mut out, mut err) = (String::new(), String::new());
-    if let Some(mut s) = child.stdout.take() {
-        let _ = s.read_to_string(&mut out);
-    }
-    if let Some(mut s) = child.stderr.take() {
-        let _ = s.read_to_string(&mut err);
-    }
-    (out, err)
 }
 
 /// A test's processes: the farm, the team's key folder, each robot's port and state file.
