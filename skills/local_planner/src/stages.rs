@@ -36,9 +36,10 @@ pub struct Tables {
     pub col_cos: Vec<f32>,
     /// sin φ per column.
     pub col_sin: Vec<f32>,
-    /// Elevation gradient window w_e per row (0: no row above is far enough, no elevation term).
+    /// Elevation gradient window w_e per row: below the horizon the paper's flat-ground rule,
+    /// at and above it 1 (the next row up); 0 for row 0 (no elevation term).
     pub elevation_window: Vec<u32>,
-    /// η_z = η·|sin θ| per row, metres.
+    /// η_z = η·sin θ per row (negative below the horizon), metres.
     pub noise_z_m: Vec<f32>,
     /// η_xy = η·cos θ per row, metres.
     pub noise_xy_m: Vec<f32>,
@@ -60,8 +61,14 @@ impl Tables {
         let cot: Vec<f64> = elevations.iter().map(|t| t.cos() / t.sin()).collect();
         let elevation_window = (0..rows)
             .map(|row| {
-                // Smallest δ whose flat-ground ranges h_s/tan θ differ by at least W. Without
-                // one inside the field of view, use the top row, the farthest available.
+                // At and above the horizon there is no flat ground to predict ranges from: the
+                // next row up (the authors' rule; row 0 has none).
+                if elevations[row] >= 0.0 || elevations[row].is_nan() {
+                    return row.min(1) as u32;
+                }
+                // Smallest δ whose flat-ground ranges h_s/tan θ differ by at least W (a row
+                // above the horizon always does). Without one inside the field of view, use
+                // the top row, the farthest available.
                 let found = (1..=row).find(|&delta| {
                     let gap = sensor_height_m * (cot[row] - cot[row - delta]).abs();
                     gap >= window_m || gap.is_nan()
@@ -77,7 +84,7 @@ impl Tables {
             col_cos: (0..cols).map(|c| (-(c as f64) * col_step).cos() as f32).collect(),
             col_sin: (0..cols).map(|c| (-(c as f64) * col_step).sin() as f32).collect(),
             elevation_window,
-            noise_z_m: elevations.iter().map(|t| (noise_m * t.sin().abs()) as f32).collect(),
+            noise_z_m: elevations.iter().map(|t| (noise_m * t.sin()) as f32).collect(),
             noise_xy_m: elevations.iter().map(|t| (noise_m * t.cos()) as f32).collect(),
         }
     }
@@ -266,8 +273,10 @@ pub struct GradientScratch {
 /// Stage 3: gradient magnitude |∇| = sqrt(∇_a² + ∇_e²) per pixel, with the paper's metric
 /// windows w_a = ⌊min(W/s_xy, W_max)/2⌋ + 1 (azimuth, wrapping) and w_e (per row, from
 /// [`Tables`]), and the noise η_z subtracted from height differences and η_xy added to the
-/// horizontal-range difference. `z` and `r` come from [`project`] (NaN without a return); a term
-/// whose neighbour has no return is 0, and so is the gradient of a pixel without a return.
+/// horizontal-range difference (η_z = η·sin θ is signed: below the horizon subtracting it adds
+/// |η_z|, as the paper's formula and the authors' code have it). `z` and `r` come from
+/// [`project`] (NaN without a return); a term whose neighbour has no return is 0 (the other term
+/// stands alone), and the gradient of a pixel without a return is 0.
 pub fn gradients(
     z: &[f32],
     r: &[f32],
@@ -372,6 +381,9 @@ pub(crate) fn gradient_row(
                 // sqrt(∇_a² + ∇_e²) with one division: sqrt((a·n_e)² + (e·n_a)²) / (n_a·n_e).
                 let rise_e = (z_c - z_up).abs() - noise_z;
                 let (rise_e, run_e) = positive_part_lanes(rise_e, (r_c - r_up).abs() + noise_xy);
+                // No return one window up: ∇_e = 0 (its rise is already 0) and the azimuth term
+                // stands alone; a run of 1 keeps the NaN out of the shared denominator.
+                let run_e = r_up.simd_eq(r_up).select(run_e, one);
                 let (ta, te) = (rise_a * run_e, rise_e * run_a);
                 finish((ta * ta + te * te).sqrt() / (run_a * run_e))
             };
@@ -527,20 +539,21 @@ fn small_to_u32(v: f32) -> u32 {
     (v + SHIFT).to_bits().wrapping_sub(SHIFT.to_bits())
 }
 
-/// Stage 4: obstacle = gradient above `slope_threshold`; then, along each row with wrap, runs of
-/// obstacle pixels whose arc length Σ(2π/A)·ρ is below `min_run_m` are cleared as noise.
+/// Stage 4: obstacle = gradient above `slope_threshold` (pixels with a return only); then,
+/// along each row with wrap in azimuth, runs of fewer than `min_run_px` obstacle pixels are
+/// cleared as noise. A row that is obstacle all round is one closed ring and is kept.
 pub fn obstacles(
     gradient: &[f32],
     ranges: &[f32],
     cols: usize,
     slope_threshold: f32,
-    min_run_m: f32,
+    min_run_px: u32,
     obstacle: &mut [bool],
 ) {
     if cols == 0 {
         return;
     }
-    let step = std::f32::consts::TAU / cols as f32;
+    let min_run = min_run_px as usize;
     let rows = gradient.chunks_exact(cols).zip(ranges.chunks_exact(cols));
     for ((grad, rho), obs) in rows.zip(obstacle.chunks_exact_mut(cols)) {
         let mut any = false;
@@ -548,15 +561,14 @@ pub fn obstacles(
             *o = (g > slope_threshold) & (rho > 0.0);
             any |= *o;
         }
-        if !any {
+        if !any || min_run <= 1 {
             continue;
         }
-        // A row that is all obstacle is one closed ring, at least as long as any run: kept.
         let Some(first_free) = obs.iter().position(|&o| !o) else { continue };
         let last_free = obs.iter().rposition(|&o| !o).unwrap_or(first_free);
         // The run across the seam: (last_free, cols) then [0, first_free).
-        let seam = run_length(rho[last_free + 1..].iter().chain(&rho[..first_free]), step, min_run_m);
-        if seam > 0.0 && seam < min_run_m {
+        let seam = (cols - 1 - last_free) + first_free;
+        if seam > 0 && seam < min_run {
             obs[last_free + 1..].iter_mut().for_each(|o| *o = false);
             obs[..first_free].iter_mut().for_each(|o| *o = false);
         }
@@ -565,27 +577,12 @@ pub fn obstacles(
             let Some(offset) = first_equal(&obs[c..last_free], true) else { break };
             let start = c + offset;
             let end = first_equal(&obs[start..last_free], false).map_or(last_free, |o| start + o);
-            if run_length(rho[start..end].iter(), step, min_run_m) < min_run_m {
+            if end - start < min_run {
                 obs[start..end].iter_mut().for_each(|o| *o = false);
             }
             c = end;
         }
     }
-}
-
-/// The arc length (Σρ)·`step` of a run, summed in order, or as soon as the partial sum already
-/// reaches `min_run_m` that partial length (ranges are ≥ 0, so the sum only grows: a run found
-/// long stays long, and the comparison with `min_run_m` comes out as with the full sum).
-#[inline]
-fn run_length<'a>(ranges: impl Iterator<Item = &'a f32>, step: f32, min_run_m: f32) -> f32 {
-    let mut sum = 0.0f32;
-    for &rho in ranges {
-        sum += rho;
-        if sum * step >= min_run_m {
-            break;
-        }
-    }
-    sum * step
 }
 
 /// Scratch space for [`distance_transform`]: one value per column and the row pass state.
@@ -1043,8 +1040,9 @@ impl ReachLanes {
         let live = self.active & has_return;
         let jump = self.last_r.simd_ge(Lanes::ZERO) & (horizontal - self.last_r).abs().simd_gt(gap);
         let accept = live & !jump & trav;
-        // A jump ends the walk (unknown beyond), an obstacle ends it (known obstacle).
-        self.blocked |= live & !jump & !trav;
+        // A non-traversable pixel ends the walk as a known obstacle, also beyond a gap (the
+        // authors' order); a jump onto traversable ground ends it as unknown.
+        self.blocked |= live & !trav;
         self.active &= !live | accept;
         self.last_r = accept.select(horizontal, self.last_r);
         // Accepted pixels have a return: `horizontal` is a positive number there.
@@ -1064,10 +1062,12 @@ fn load_lanes_or<T: Copy>(values: &[T], start: usize, pad: T, map: impl Fn(T) ->
 
 /// Stage 6: the reachability scan S(φ). Each column is walked up from the bottom row (nearest
 /// ground) over pixels with a return. The walk stops at the first non-traversable pixel (a known
-/// obstacle ends the safe stretch) or when the horizontal range jumps by more than `gap_m`
-/// between successive returns (the unknown begins). `range_m` gets the largest horizontal range
-/// of the safe pixels walked, `obstacle` whether an obstacle ended the walk, and `last_row` the
-/// last safe row (`rows` if none).
+/// obstacle ends the safe stretch, even when its range lies more than `gap_m` beyond the last
+/// safe pixel) or at a traversable pixel whose horizontal range jumps by more than `gap_m` from
+/// the last safe pixel's (the unknown begins). `range_m` gets the largest horizontal range of the
+/// safe pixels walked, at least `min_range_m` (the blind zone around the robot counts as safe),
+/// `obstacle` whether an obstacle ended the walk, and `last_row` the last safe row (`rows` if
+/// none).
 ///
 /// All columns advance together one row at a time, as SIMD lanes with masks for the per-column
 /// decisions; a vector of columns drops out of the walk once none of its columns is walking.
@@ -1078,6 +1078,7 @@ pub fn reachability(
     traversable: &[bool],
     cols: usize,
     gap_m: f32,
+    min_range_m: f32,
     scratch: &mut ReachScratch,
     range_m: &mut [f32],
     obstacle: &mut [bool],
@@ -1139,7 +1140,8 @@ pub fn reachability(
     for (v, lanes) in state.iter().enumerate() {
         let (range, blocked, last) = (lanes.range.to_array(), lanes.blocked.to_array(), lanes.last_row.to_array());
         for (i, c) in (v * LANES..cols.min(v * LANES + LANES)).enumerate() {
-            range_m[c] = range[i];
+            // The floor also applies to a column that accepted nothing (range 0).
+            range_m[c] = range[i].max(min_range_m);
             obstacle[c] = blocked[i].to_bits() != 0;
             // An integer-valued row index below 2²³ (or `rows`): exact.
             last_row[c] = small_to_u32(last[i]);
@@ -1371,22 +1373,23 @@ mod tests {
 
     #[test]
     fn short_obstacle_runs_are_removed_long_ones_kept() {
-        // One row at 2 m: a pixel spans 2π/16·2 ≈ 0.785 m, so use a wider ring for short runs.
         let cols = 256;
-        let ranges = vec![2.0f32; cols]; // 0.049 m per pixel
+        let ranges = vec![2.0f32; cols];
         let mut gradient = vec![0.0f32; cols];
         for c in (10..14).chain(100..120).chain((0..3).chain(cols - 3..cols)) {
             gradient[c] = 1.0;
         }
         let mut obstacle = vec![false; cols];
-        obstacles(&gradient, &ranges, cols, 0.3, 0.3, &mut obstacle);
-        // 4 px ≈ 0.2 m: removed; 20 px ≈ 0.98 m: kept; 6 px across the seam ≈ 0.29 m: removed.
+        obstacles(&gradient, &ranges, cols, 0.3, 5, &mut obstacle);
+        // Fewer than 5 px: removed; 20 px: kept; 6 px across the seam: kept.
         assert!(obstacle[10..14].iter().all(|&o| !o));
         assert!(obstacle[100..120].iter().all(|&o| o));
+        assert!(obstacle[..3].iter().chain(&obstacle[cols - 3..]).all(|&o| o));
+        // With 7 px: the seam run goes; with 4 px the 4-pixel run stays.
+        obstacles(&gradient, &ranges, cols, 0.3, 7, &mut obstacle);
         assert!(obstacle[..3].iter().chain(&obstacle[cols - 3..]).all(|&o| !o));
-        // 7 px across the seam ≈ 0.34 m: kept.
-        gradient[3] = 1.0;
-        obstacles(&gradient, &ranges, cols, 0.3, 0.3, &mut obstacle);
-        assert!(obstacle[..4].iter().chain(&obstacle[cols - 3..]).all(|&o| o));
+        assert!(obstacle[100..120].iter().all(|&o| o));
+        obstacles(&gradient, &ranges, cols, 0.3, 4, &mut obstacle);
+        assert!(obstacle[10..14].iter().all(|&o| o));
     }
 }

@@ -8,36 +8,56 @@ use spomp_core::{DepthPanorama, PanoramaGeometry, Pose2, ReachabilityScan, Robot
 use crate::error::{ParamsError, TerrainError, non_negative, positive};
 use crate::stages::{self, DistanceScratch, GradientScratch, GradientWindow, ReachScratch, Tables};
 
-/// Parameters of terrain analysis. Defaults are the paper's real-robot values (DESIGN.md §5);
-/// [`TerrainParams::simulation`] gives the simulation values.
+/// Parameters of terrain analysis. Defaults are the real-robot values (DESIGN.md §5; where the
+/// paper gives none, the authors' launch file); [`TerrainParams::simulation`] gives the
+/// simulation values. The local planner README's table says where each rule comes from.
+///
+/// [`TerrainParams::validate`] states each field's valid range; a mission's parameter errors
+/// come from there.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TerrainParams {
-    /// D_m: largest hole along a row that is filled by interpolation, metres of arc.
+    /// D_m: largest hole along a row that is filled by interpolation, metres of arc (default
+    /// 0.1; finite, ≥ 0).
     pub hole_fill_max_m: f64,
-    /// W: metric size of the gradient windows, metres.
+    /// W: metric size of the gradient windows, metres (default 0.5; finite, > 0).
     pub gradient_window_m: f64,
-    /// W_max as a fraction of the panorama width A (paper: A/5), so W_max = fraction·A pixels.
+    /// W_max as a fraction of the panorama width A (paper: A/5), so W_max = fraction·A pixels
+    /// (default 0.2; finite, in (0, 1]).
     pub gradient_window_max_fraction: f64,
-    /// h_s: height of the sensor above flat ground, metres (sets the elevation window w_e).
+    /// h_s: height of the sensor above flat ground, metres; sets the elevation window w_e of
+    /// the rows below the horizon (default 0.4; finite, > 0).
     pub sensor_height_m: f64,
-    /// η: order of the range noise, metres.
+    /// η: order of the range noise, metres; η_z = η·sin θ is subtracted from height
+    /// differences, η_xy = η·cos θ added to horizontal-range differences (default 0.05; finite,
+    /// ≥ 0).
     pub range_noise_m: f64,
-    /// ∇_thresh: gradient magnitude (rise over run) above which a pixel is an obstacle.
+    /// ∇_thresh: gradient magnitude (rise over run) above which a pixel is an obstacle
+    /// (default 0.3, simulation 0.25; finite, > 0).
     pub slope_threshold: f64,
-    /// Obstacle runs along a row shorter than this arc length are dropped as noise, metres.
-    pub min_obstacle_run_m: f64,
-    /// D_max: cap of the distance transform, metres.
+    /// Obstacle runs along a row (with wrap in azimuth) shorter than this many pixels are
+    /// dropped as noise, pixels (default 3, as the authors; 0 or 1 keeps every run; at most
+    /// 4096).
+    pub min_obstacle_run_px: u32,
+    /// D_max: cap of the distance transform, metres (default 2.0; finite, > 0).
     pub max_obstacle_distance_m: f64,
-    /// Traversable where the distance to the nearest obstacle is at least this, metres.
+    /// Traversable where the distance to the nearest obstacle is at least this, metres
+    /// (default 0.5, simulation 0.75; finite, in [0, `max_obstacle_distance_m`]).
     pub inflation_m: f64,
     /// Reachability: a jump in horizontal range between successive returns of a column larger
-    /// than this ends the known ground (unknown beyond), metres.
+    /// than this ends the known ground (unknown beyond), metres (default 2.0, the authors'
+    /// launch value; finite, > 0).
     pub reach_gap_m: f64,
+    /// Reachability: every bin's safe range is at least this, metres — the blind zone around
+    /// the robot is taken as safe, as the authors do (default 0.5; finite, ≥ 0).
+    pub min_reach_range_m: f64,
     /// Range cell of the polar clearance table a [`crate::SafeRegion`] builds for the
-    /// controller, metres.
+    /// controller, metres (default 0.1; finite, > 0).
     pub clearance_cell_m: f64,
 }
+
+/// Largest accepted [`TerrainParams::min_obstacle_run_px`] (four times the default panorama's width).
+const MAX_OBSTACLE_RUN_PX: u32 = 4096;
 
 impl Default for TerrainParams {
     fn default() -> Self {
@@ -48,22 +68,24 @@ impl Default for TerrainParams {
             sensor_height_m: 0.4,
             range_noise_m: 0.05,
             slope_threshold: 0.3,
-            min_obstacle_run_m: 0.3,
+            min_obstacle_run_px: 3,
             max_obstacle_distance_m: 2.0,
             inflation_m: 0.5,
-            reach_gap_m: 0.5,
+            reach_gap_m: 2.0,
+            min_reach_range_m: 0.5,
             clearance_cell_m: 0.1,
         }
     }
 }
 
 impl TerrainParams {
-    /// The paper's simulation values: slope threshold 0.25, inflation 0.75 m.
+    /// The paper's simulation values: slope threshold 0.25, inflation 0.75 m; the rest as
+    /// [`TerrainParams::default`].
     pub fn simulation() -> Self {
         TerrainParams { slope_threshold: 0.25, inflation_m: 0.75, ..Self::default() }
     }
 
-    /// Checks every field's range.
+    /// Checks every field's range (see each field's documentation).
     pub fn validate(&self) -> Result<(), ParamsError> {
         non_negative("hole_fill_max_m", self.hole_fill_max_m)?;
         positive("gradient_window_m", self.gradient_window_m)?;
@@ -74,13 +96,16 @@ impl TerrainParams {
         positive("sensor_height_m", self.sensor_height_m)?;
         non_negative("range_noise_m", self.range_noise_m)?;
         positive("slope_threshold", self.slope_threshold)?;
-        non_negative("min_obstacle_run_m", self.min_obstacle_run_m)?;
+        if self.min_obstacle_run_px > MAX_OBSTACLE_RUN_PX {
+            return Err(ParamsError::new("min_obstacle_run_px", "must be <= 4096"));
+        }
         positive("max_obstacle_distance_m", self.max_obstacle_distance_m)?;
         non_negative("inflation_m", self.inflation_m)?;
         if self.inflation_m > self.max_obstacle_distance_m {
             return Err(ParamsError::new("inflation_m", "must be <= max_obstacle_distance_m"));
         }
         positive("reach_gap_m", self.reach_gap_m)?;
+        non_negative("min_reach_range_m", self.min_reach_range_m)?;
         positive("clearance_cell_m", self.clearance_cell_m)?;
         Ok(())
     }
@@ -344,7 +369,7 @@ impl TerrainAnalyzer {
             let gradient = &mut out.gradient[span.clone()];
             stages::gradient_row(row, &out.z_m, &out.r_m, tables, window, gradient_scratch, gradient);
             let obstacle = &mut out.obstacle[span.clone()];
-            stages::obstacles(gradient, rho, cols, p.slope_threshold as f32, p.min_obstacle_run_m as f32, obstacle);
+            stages::obstacles(gradient, rho, cols, p.slope_threshold as f32, p.min_obstacle_run_px, obstacle);
             let d_a = &mut out.column_distance_m[span.clone()];
             stages::column_pass_row(rho, obstacle, nearest, d_max, d_a);
             // Algorithm 1's row passes run on blocks of rows, one per SIMD lane, as soon as a block
@@ -426,7 +451,7 @@ impl TerrainAnalyzer {
                 &out.ranges_m,
                 cols,
                 p.slope_threshold as f32,
-                p.min_obstacle_run_m as f32,
+                p.min_obstacle_run_px,
                 &mut out.obstacle,
             ),
             TerrainStage::DistanceTransform => {
@@ -447,6 +472,7 @@ impl TerrainAnalyzer {
                 &out.traversable,
                 cols,
                 p.reach_gap_m as f32,
+                p.min_reach_range_m as f32,
                 &mut self.reach_scratch,
                 &mut out.reach_range_m,
                 &mut out.reach_obstacle,

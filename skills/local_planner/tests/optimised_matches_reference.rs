@@ -60,7 +60,7 @@ fn run_reference(depth: &DepthPanorama, p: &TerrainParams) -> ReferenceOutput {
     };
     let mut gradient_scratch = reference::GradientScratch::default();
     reference::gradients(&o.z, &o.r, &tables, window, &mut gradient_scratch, &mut o.gradient);
-    let (slope, run) = (p.slope_threshold as f32, p.min_obstacle_run_m as f32);
+    let (slope, run) = (p.slope_threshold as f32, p.min_obstacle_run_px);
     reference::obstacles(&o.gradient, &o.ranges, cols, slope, run, &mut o.obstacle);
     let mut distance_scratch = reference::DistanceScratch::default();
     reference::distance_transform(
@@ -80,6 +80,7 @@ fn run_reference(depth: &DepthPanorama, p: &TerrainParams) -> ReferenceOutput {
         &o.traversable,
         cols,
         p.reach_gap_m as f32,
+        p.min_reach_range_m as f32,
         &mut reach_scratch,
         &mut o.reach_range,
         &mut o.reach_obstacle,

@@ -42,10 +42,13 @@ fn flat_reach_limit(g: PanoramaGeometry, gap: f64) -> f64 {
 
 #[test]
 fn flat_plane_has_no_obstacles_and_reaches_the_gap_limit() {
-    let a = analyze(&Scene::flat(H), TerrainParams::default());
+    let params = TerrainParams::default();
+    let a = analyze(&Scene::flat(H), params.clone());
     let out = a.output();
     assert!(out.obstacle().iter().all(|&o| !o));
-    let limit = flat_reach_limit(geometry(), 0.5) as f32;
+    // With the 2 m gap of the defaults (decision 8) the flat ground is known out to ≈ 11 m.
+    let limit = flat_reach_limit(geometry(), params.reach_gap_m) as f32;
+    assert!(limit > 10.0, "{limit}");
     for (c, (&r, &o)) in out.reach_range_m().iter().zip(out.reach_obstacle()).enumerate() {
         assert!(!o, "column {c} claims an obstacle");
         assert!((r - limit).abs() < 1e-3 * limit, "column {c}: {r} vs {limit}");
@@ -65,7 +68,7 @@ fn wall_ends_reachability_in_its_columns_only() {
     let a = analyze(&scene, params.clone());
     let out = a.output();
     let g = geometry();
-    let limit = flat_reach_limit(g, 0.5) as f32;
+    let limit = flat_reach_limit(g, params.reach_gap_m) as f32;
     for c in 0..g.cols {
         let az = -g.azimuth_of_col(c).rem_euclid(std::f64::consts::TAU);
         let az = spomp_core::normalize_angle(-az);
@@ -185,8 +188,10 @@ fn wrong_geometry_is_an_error() {
 
 #[test]
 fn gradient_of_a_ramp_matches_the_noise_corrected_slope() {
-    // On a ramp of grade m along x, straight ahead: z differences are m times the r differences,
-    // the azimuth window is symmetric (no azimuth term), so |∇| = (m·Δr − η_z)/(Δr + η_xy).
+    // On a ramp of grade m along x, straight ahead: z differences are m times the r differences
+    // and the azimuth window is symmetric (no height difference across it), so
+    // ∇_e = (m·Δr − η_z)/(Δr + η_xy) and ∇_a = −η_z/(s·(2w_a + 1)), with η_z = η·sin θ < 0 below
+    // the horizon.
     let grade = 0.4;
     let params = TerrainParams::default();
     let scene = Scene::flat(H).with(Primitive::Ramp { start_x_m: 0.0, z_m: -H, grade });
@@ -202,8 +207,14 @@ fn gradient_of_a_ramp_matches_the_noise_corrected_slope() {
             continue;
         }
         let dr = (out.r_m()[i] - out.r_m()[j]).abs();
-        let (se, ce) = (t.row_sin[row].abs(), t.row_cos[row]);
-        let expected = ((grade as f32 * dr - eta * se).max(0.0)) / (dr + eta * ce);
+        let (se, ce) = (t.row_sin[row], t.row_cos[row]);
+        let along = ((grade as f32 * dr - eta * se).max(0.0)) / (dr + eta * ce);
+        let (rho, r) = (out.ranges_m()[i], out.r_m()[i]);
+        let step = std::f32::consts::TAU / g.cols as f32;
+        let max_px = (params.gradient_window_max_fraction * g.cols as f64) as f32;
+        let w_a = ((params.gradient_window_m as f32 / (step * r)).min(max_px) / 2.0).floor() + 1.0;
+        let across = (-eta * se).max(0.0) / (step * rho * (2.0 * w_a + 1.0));
+        let expected = (along * along + across * across).sqrt();
         let got = out.gradient()[i];
         assert!((got - expected).abs() < 2e-3 + 1e-2 * expected, "row {row}: {got} vs {expected}");
         checked += 1;
