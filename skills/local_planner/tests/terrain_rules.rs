@@ -231,7 +231,12 @@ fn rule_8_defaults_are_the_authors_launch_values() {
     assert_eq!((range, obstacle), (10.0, false));
     let (range, obstacle, _) = walk(&[10.2, 8.1, 7.0], &[true; 3], gap, 0.5);
     assert_eq!((range, obstacle), (8.1, false));
-    // The simulation profile differs only in the paper's simulation values.
+    // The simulation profile differs in the paper's simulation values and keeps a 0.5 m gap
+    // (measured: see `TerrainParams::simulation`).
     let sim = TerrainParams::simulation();
-    assert_eq!(TerrainParams { slope_threshold: 0.3, inflation_m: 0.5, ..sim }, TerrainParams::default());
+    assert_eq!((sim.slope_threshold, sim.inflation_m, sim.reach_gap_m), (0.25, 0.75, 0.5));
+    assert_eq!(
+        TerrainParams { slope_threshold: 0.3, inflation_m: 0.5, reach_gap_m: 2.0, ..sim },
+        TerrainParams::default()
+    );
 }
