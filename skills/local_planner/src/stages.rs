@@ -39,7 +39,9 @@ pub struct Tables {
     /// Elevation gradient window w_e per row: below the horizon the paper's flat-ground rule,
     /// at and above it 1 (the next row up); 0 for row 0 (no elevation term).
     pub elevation_window: Vec<u32>,
-    /// η_z = η·sin θ per row (negative below the horizon), metres.
+    /// |η_z| = η·|sin θ| per row, metres: subtracted from height differences, so the gradient is
+    /// the smallest one noise of order η could hide (the paper's stated intent; see the README's
+    /// rule 2).
     pub noise_z_m: Vec<f32>,
     /// η_xy = η·cos θ per row, metres.
     pub noise_xy_m: Vec<f32>,
@@ -84,7 +86,7 @@ impl Tables {
             col_cos: (0..cols).map(|c| (-(c as f64) * col_step).cos() as f32).collect(),
             col_sin: (0..cols).map(|c| (-(c as f64) * col_step).sin() as f32).collect(),
             elevation_window,
-            noise_z_m: elevations.iter().map(|t| (noise_m * t.sin()) as f32).collect(),
+            noise_z_m: elevations.iter().map(|t| (noise_m * t.sin().abs()) as f32).collect(),
             noise_xy_m: elevations.iter().map(|t| (noise_m * t.cos()) as f32).collect(),
         }
     }
@@ -272,11 +274,12 @@ pub struct GradientScratch {
 
 /// Stage 3: gradient magnitude |∇| = sqrt(∇_a² + ∇_e²) per pixel, with the paper's metric
 /// windows w_a = ⌊min(W/s_xy, W_max)/2⌋ + 1 (azimuth, wrapping) and w_e (per row, from
-/// [`Tables`]), and the noise η_z subtracted from height differences and η_xy added to the
-/// horizontal-range difference (η_z = η·sin θ is signed: below the horizon subtracting it adds
-/// |η_z|, as the paper's formula and the authors' code have it). `z` and `r` come from
-/// [`project`] (NaN without a return); a term whose neighbour has no return is 0 (the other term
-/// stands alone), and the gradient of a pixel without a return is 0.
+/// [`Tables`]), and the noise |η_z| = η·|sin θ| subtracted from height differences and η_xy
+/// added to the horizontal-range difference: the minimum gradient noise of order η could hide,
+/// as the paper's text says (its formula's signed sin θ would add |η_z| below the horizon; see
+/// the README's rule 2). `z` and `r` come from [`project`] (NaN without a return); a term whose
+/// neighbour has no return is 0 (the other term stands alone), and the gradient of a pixel
+/// without a return is 0.
 pub fn gradients(
     z: &[f32],
     r: &[f32],

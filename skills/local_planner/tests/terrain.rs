@@ -189,9 +189,8 @@ fn wrong_geometry_is_an_error() {
 #[test]
 fn gradient_of_a_ramp_matches_the_noise_corrected_slope() {
     // On a ramp of grade m along x, straight ahead: z differences are m times the r differences
-    // and the azimuth window is symmetric (no height difference across it), so
-    // ∇_e = (m·Δr − η_z)/(Δr + η_xy) and ∇_a = −η_z/(s·(2w_a + 1)), with η_z = η·sin θ < 0 below
-    // the horizon.
+    // and the azimuth window is symmetric (no height difference across it, so ∇_a = 0), so
+    // |∇| = ∇_e = (m·Δr − η·|sin θ|)/(Δr + η_xy).
     let grade = 0.4;
     let params = TerrainParams::default();
     let scene = Scene::flat(H).with(Primitive::Ramp { start_x_m: 0.0, z_m: -H, grade });
@@ -207,14 +206,8 @@ fn gradient_of_a_ramp_matches_the_noise_corrected_slope() {
             continue;
         }
         let dr = (out.r_m()[i] - out.r_m()[j]).abs();
-        let (se, ce) = (t.row_sin[row], t.row_cos[row]);
-        let along = ((grade as f32 * dr - eta * se).max(0.0)) / (dr + eta * ce);
-        let (rho, r) = (out.ranges_m()[i], out.r_m()[i]);
-        let step = std::f32::consts::TAU / g.cols as f32;
-        let max_px = (params.gradient_window_max_fraction * g.cols as f64) as f32;
-        let w_a = ((params.gradient_window_m as f32 / (step * r)).min(max_px) / 2.0).floor() + 1.0;
-        let across = (-eta * se).max(0.0) / (step * rho * (2.0 * w_a + 1.0));
-        let expected = (along * along + across * across).sqrt();
+        let (se, ce) = (t.row_sin[row].abs(), t.row_cos[row]);
+        let expected = ((grade as f32 * dr - eta * se).max(0.0)) / (dr + eta * ce);
         let got = out.gradient()[i];
         assert!((got - expected).abs() < 2e-3 + 1e-2 * expected, "row {row}: {got} vs {expected}");
         checked += 1;

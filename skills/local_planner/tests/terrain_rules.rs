@@ -22,15 +22,16 @@ fn analyze(depth: &DepthPanorama, params: TerrainParams) -> TerrainAnalyzer {
 }
 
 /// ∇_a of the paper for a pixel of range `rho` in a row of elevation `elevation` whose two
-/// azimuth neighbours (w_a = 1) differ in height by `rise`: (|Δz| − η·sin θ)/(s·3), s = (2π/A)·ρ.
+/// azimuth neighbours (w_a = 1) differ in height by `rise`: (|Δz| − η·|sin θ|)/(s·3),
+/// s = (2π/A)·ρ.
 fn azimuth_gradient(rise: f32, rho: f32, elevation: f32, cols: usize, eta: f32) -> f32 {
-    (rise - eta * elevation.sin()).max(0.0) / (TAU / cols as f32 * rho * 3.0)
+    (rise - eta * elevation.sin().abs()).max(0.0) / (TAU / cols as f32 * rho * 3.0)
 }
 
 /// Rule 1 (bug): the minimal case. Row 3 (θ = −π/4) steps from 5 m to 10 m at column 8,
 /// row 2 (one window up) has no returns. The vertical term is 0 there, but the azimuth term
-/// stands: 0.61 on the near side of the step, half of it on the far side (spomp gave 0.00).
-/// With the paper's 3-D arc length s = (2π/A)·ρ (rule 4) and η_z = η·sin θ (rule 2).
+/// stands: 0.59 on the near side of the step, half of it on the far side (spomp gave 0.00).
+/// With the paper's 3-D arc length s = (2π/A)·ρ (rule 4) and η·|sin θ| subtracted (rule 2).
 #[test]
 fn rule_1_a_missing_return_one_window_up_zeroes_only_the_vertical_term() {
     let g = geometry();
@@ -53,39 +54,50 @@ fn rule_1_a_missing_return_one_window_up_zeroes_only_the_vertical_term() {
     let (got_near, got_far) = (out.gradient()[row * cols + 7], out.gradient()[row * cols + 8]);
     assert!((got_near - near).abs() < 1e-5 * near, "{got_near} vs {near}");
     assert!((got_far - far).abs() < 1e-5 * far, "{got_far} vs {far}");
-    assert!((got_near - 0.606).abs() < 1e-3 && (got_near - 2.0 * got_far).abs() < 1e-5);
+    assert!((got_near - 0.594).abs() < 1e-3 && (got_near - 2.0 * got_far).abs() < 1e-5);
     // Across the seam (column 15 at 10 m, column 0 at 5 m) likewise.
     assert!((out.gradient()[row * cols] - near).abs() < 1e-5 * near);
-    // Away from the step only the noise term is left.
-    let flat = azimuth_gradient(0.0, 5.0, theta, cols, eta);
-    assert!((out.gradient()[row * cols + 4] - flat).abs() < 1e-6, "{}", out.gradient()[row * cols + 4]);
+    // Away from the step there is no height difference: 0.
+    assert_eq!(out.gradient()[row * cols + 4], 0.0);
 }
 
-/// Rule 2: η_z = η·sin θ is signed, as in the paper's formula and the authors' code. On a row of
-/// constant range (no height difference anywhere) below the horizon, subtracting η_z adds
-/// η·|sin θ| to the rise: a small positive gradient; above the horizon it clamps to 0.
+/// Rule 2: the noise term is η·|sin θ|, so the gradient is the minimum one noise of order η
+/// could hide, below the horizon as above it (the paper's text; its formula and the authors'
+/// code use the signed η·sin θ, which below the horizon adds η·|sin θ| to every rise instead —
+/// measured to cost the team mission clusters, see the README). Rows 1 (θ = π/4) and 3
+/// (θ = −π/4), mirror images of each other, step from 4 m to 6 m at column 8: both get the same
+/// gradient at the step, (|Δz| − η·|sin θ|)/(s·3), and 0 where the range is constant.
 #[test]
-fn rule_2_the_noise_term_is_eta_sin_theta_with_its_sign() {
+fn rule_2_the_noise_term_is_eta_abs_sin_theta() {
     let g = geometry();
     let cols = g.cols;
-    // Only rows 1 (θ = π/4) and 3 (θ = −π/4) have returns, so neither has a vertical term.
+    // Only rows 1 and 3 have returns, so neither has a vertical term.
     let mut range_m = vec![0.0f32; g.len()];
     for row in [1, 3] {
-        range_m[row * cols..(row + 1) * cols].iter_mut().for_each(|r| *r = 4.0);
+        for c in 0..cols {
+            range_m[row * cols + c] = if c < 8 { 4.0 } else { 6.0 };
+        }
     }
     let depth = DepthPanorama { geometry: g, range_m };
     let params = TerrainParams::default();
     let a = analyze(&depth, params.clone());
     let eta = params.range_noise_m as f32;
     let t = a.tables();
-    assert!(t.noise_z_m[1] > 0.0 && t.noise_z_m[3] < 0.0);
-    assert!((t.noise_z_m[3] - eta * (g.elevation_of_row(3) as f32).sin()).abs() < 1e-7);
-    let below = azimuth_gradient(0.0, 4.0, g.elevation_of_row(3) as f32, cols, eta);
-    assert!(below > 0.0);
-    for c in 0..cols {
-        assert_eq!(a.output().gradient()[cols + c], 0.0, "above the horizon, column {c}");
-        let got = a.output().gradient()[3 * cols + c];
-        assert!((got - below).abs() < 1e-6 * below.max(1.0), "below the horizon, column {c}: {got} vs {below}");
+    let theta = g.elevation_of_row(3) as f32;
+    assert!(t.noise_z_m[1] > 0.0 && (t.noise_z_m[1] - t.noise_z_m[3]).abs() < 1e-7);
+    assert!((t.noise_z_m[3] - eta * theta.sin().abs()).abs() < 1e-7);
+    let rise = 2.0 * theta.sin().abs();
+    let expected = azimuth_gradient(rise, 4.0, theta, cols, eta);
+    // The signed term would have given (|Δz| + η·|sin θ|)/(s·3) in row 3.
+    let signed = (rise + eta * theta.sin().abs()) / (TAU / cols as f32 * 4.0 * 3.0);
+    let out = a.output().gradient();
+    for row in [1, 3] {
+        let got = out[row * cols + 7];
+        assert!((got - expected).abs() < 1e-5 * expected, "row {row}: {got} vs {expected}");
+        assert!(signed - got > 0.01, "row {row}: {got} vs {signed}");
+        for c in [3, 4, 12] {
+            assert_eq!(out[row * cols + c], 0.0, "row {row}, column {c}");
+        }
     }
 }
 
@@ -205,11 +217,17 @@ fn rule_6_an_obstacle_beyond_a_gap_is_a_known_obstacle() {
     assert_eq!((range, obstacle), (3.0, true));
 }
 
-/// Rule 7: every bin's safe range is at least `min_reach_range_m` (0.5 m): a column blocked at
-/// its bottom pixel, or without any return, still has the blind zone around the robot.
+/// Rule 7: every bin's safe range is at least `min_reach_range_m` (0.5 m by default, as the
+/// authors): a column blocked at its bottom pixel, or without any return, still has the blind
+/// zone around the robot. The simulation profile has no floor (measured, see
+/// `TerrainParams::simulation`): there a column blocked at its bottom pixel keeps 0 m.
 #[test]
 fn rule_7_each_bin_is_floored_at_the_minimum_reach_range() {
     assert_eq!(TerrainParams::default().min_reach_range_m, 0.5);
+    let sim_floor = TerrainParams::simulation().min_reach_range_m as f32;
+    assert_eq!(sim_floor, 0.0);
+    let (range, obstacle, last) = walk(&[2.0, 1.0], &[true, false], 0.5, sim_floor);
+    assert_eq!((range, obstacle, last), (0.0, true, 2));
     let (range, obstacle, last) = walk(&[2.0, 1.0], &[true, false], 2.0, 0.5);
     assert_eq!((range, obstacle, last), (0.5, true, 2));
     let (range, obstacle, _) = walk(&[f32::NAN, f32::NAN], &[false, false], 2.0, 0.5);
@@ -231,12 +249,12 @@ fn rule_8_defaults_are_the_authors_launch_values() {
     assert_eq!((range, obstacle), (10.0, false));
     let (range, obstacle, _) = walk(&[10.2, 8.1, 7.0], &[true; 3], gap, 0.5);
     assert_eq!((range, obstacle), (8.1, false));
-    // The simulation profile differs in the paper's simulation values and keeps a 0.5 m gap
-    // (measured: see `TerrainParams::simulation`).
+    // The simulation profile differs in the paper's simulation values, keeps a 0.5 m gap and
+    // has no range floor (both measured: see `TerrainParams::simulation`).
     let sim = TerrainParams::simulation();
-    assert_eq!((sim.slope_threshold, sim.inflation_m, sim.reach_gap_m), (0.25, 0.75, 0.5));
+    assert_eq!((sim.slope_threshold, sim.inflation_m, sim.reach_gap_m, sim.min_reach_range_m), (0.25, 0.75, 0.5, 0.0));
     assert_eq!(
-        TerrainParams { slope_threshold: 0.3, inflation_m: 0.5, reach_gap_m: 2.0, ..sim },
+        TerrainParams { slope_threshold: 0.3, inflation_m: 0.5, reach_gap_m: 2.0, min_reach_range_m: 0.5, ..sim },
         TerrainParams::default()
     );
 }

@@ -23,7 +23,7 @@ pub struct Tables {
     /// Elevation gradient window w_e per row: below the horizon the flat-ground rule, at and
     /// above it 1; 0 for row 0 (no elevation term).
     pub elevation_window: Vec<u32>,
-    /// η_z = η·sin θ per row (negative below the horizon), metres.
+    /// |η_z| = η·|sin θ| per row, metres.
     pub noise_z_m: Vec<f32>,
     /// η_xy = η·cos θ per row, metres.
     pub noise_xy_m: Vec<f32>,
@@ -66,7 +66,7 @@ impl Tables {
             col_cos: (0..cols).map(|c| (-(c as f64) * col_step).cos() as f32).collect(),
             col_sin: (0..cols).map(|c| (-(c as f64) * col_step).sin() as f32).collect(),
             elevation_window,
-            noise_z_m: elevations.iter().map(|t| (noise_m * t.sin()) as f32).collect(),
+            noise_z_m: elevations.iter().map(|t| (noise_m * t.sin().abs()) as f32).collect(),
             noise_xy_m: elevations.iter().map(|t| (noise_m * t.cos()) as f32).collect(),
         }
     }
