@@ -166,6 +166,7 @@ fn sanitize(range: f32) -> f32 {
 /// and fills, along each row with wrap in azimuth, every run of missing pixels whose arc length
 /// is at most `max_gap_m` (the paper's D_m; D_px = D_m / s with s = (2π/A)·ρ, ρ the larger of the
 /// two ranges bounding the run) by linear interpolation between its ends.
+#[inline(always)]
 pub fn fill_holes(input: &[f32], out: &mut [f32], cols: usize, max_gap_m: f32) {
     if cols == 0 {
         return;
@@ -225,6 +226,7 @@ fn fill_gap(row: &mut [f32], from: usize, to: usize, col_step: f32, max_gap_m: f
 /// Stage 2: projects ranges to height z (sensor frame, z up) and horizontal range r, from
 /// per-row trigonometry. Pixels without a return get NaN. (x and y = r·cos φ, r·sin φ are not
 /// stored — no stage needs them; [`crate::TerrainOutput::point_m`] gives them per pixel.)
+#[inline(always)]
 pub fn project(ranges: &[f32], tables: &Tables, z: &mut [f32], r: &mut [f32]) {
     let cols = tables.cols;
     if cols == 0 {
@@ -241,7 +243,7 @@ pub fn project(ranges: &[f32], tables: &Tables, z: &mut [f32], r: &mut [f32]) {
 }
 
 /// [`project`] for one row of elevation θ (`sin_e`, `cos_e`).
-#[inline]
+#[inline(always)]
 pub(crate) fn project_row(rho: &[f32], sin_e: f32, cos_e: f32, z: &mut [f32], r: &mut [f32]) {
     for ((&rho, z), r) in rho.iter().zip(z.iter_mut()).zip(r.iter_mut()) {
         // No return: NaN, so that later differences with it are NaN and drop out.
@@ -280,6 +282,7 @@ pub struct GradientScratch {
 /// the README's rule 2). `z` and `r` come from [`project`] (NaN without a return); a term whose
 /// neighbour has no return is 0 (the other term stands alone), and the gradient of a pixel
 /// without a return is 0.
+#[inline(always)]
 pub fn gradients(
     z: &[f32],
     r: &[f32],
@@ -301,6 +304,7 @@ pub fn gradients(
 
 /// [`gradients`] for one row: `z` and `r` are whole panoramas, of which this row and the row
 /// w_e above it are read; `out` is the row's gradient.
+#[inline(always)]
 pub(crate) fn gradient_row(
     row: usize,
     z: &[f32],
@@ -431,10 +435,37 @@ fn lanes_of(chunk: &[f32]) -> Lanes {
 }
 
 /// |z(c − w_a) − z(c + w_a)| per column c: `padded` is the row with `pad` ≥ every w_a columns of
-/// wrap-around on both sides, `half` holds w_a per column. (Its own function: inlined, the
-/// surrounding vector code leaves too few registers for this scalar loop.)
+/// wrap-around on both sides, `half` holds w_a per column.
+///
+/// On ground and walls w_a changes slowly along a row, so most runs of [`LANES`] columns share
+/// one w_a: their neighbours at ±w_a are then two vector loads instead of a gather. Runs with
+/// mixed w_a take the scalar loop. (Selecting among the loads of each distinct w_a of a run was
+/// measured slower: mixed runs mostly spread widely. Its own function: inlined, the surrounding
+/// vector code leaves too few registers for the scalar loop.)
 #[inline(never)]
 fn azimuth_rise(padded: &[f32], pad: usize, half: &[u32], rise: &mut [f32]) {
+    let cols = rise.len().min(half.len()).min(padded.len().saturating_sub(2 * pad));
+    let (half, rise) = (&half[..cols], &mut rise[..cols]);
+    let vectorised = cols / LANES * LANES;
+    let chunks = rise[..vectorised].chunks_exact_mut(LANES).zip(half[..vectorised].chunks_exact(LANES));
+    for ((rise, h), start) in chunks.zip((0..).step_by(LANES)) {
+        let first = h[0];
+        if h.iter().fold(true, |same, &x| same & (x == first)) {
+            let h = (first as usize).min(pad);
+            // Column c sits at c + pad in `padded`.
+            let left = lanes_of(&padded[start + pad - h..start + pad - h + LANES]);
+            let right = lanes_of(&padded[start + pad + h..start + pad + h + LANES]);
+            rise.copy_from_slice(&(left - right).abs().to_array());
+        } else {
+            azimuth_rise_scalar(&padded[start..start + 2 * pad + LANES], pad, h, rise);
+        }
+    }
+    azimuth_rise_scalar(&padded[vectorised..], pad, &half[vectorised..], &mut rise[vectorised..]);
+}
+
+/// [`azimuth_rise`] one column at a time (`padded` starts at the first column's window).
+#[inline(always)]
+fn azimuth_rise_scalar(padded: &[f32], pad: usize, half: &[u32], rise: &mut [f32]) {
     // Column c's window is padded[c..=c + 2·pad], centred on c + pad.
     for ((rise, &h), window) in rise.iter_mut().zip(half).zip(padded.windows(2 * pad + 1)) {
         let h = (h as usize).min(pad);
@@ -545,6 +576,7 @@ fn small_to_u32(v: f32) -> u32 {
 /// Stage 4: obstacle = gradient above `slope_threshold` (pixels with a return only); then,
 /// along each row with wrap in azimuth, runs of fewer than `min_run_px` obstacle pixels are
 /// cleared as noise. A row that is obstacle all round is one closed ring and is kept.
+#[inline(always)]
 pub fn obstacles(
     gradient: &[f32],
     ranges: &[f32],
@@ -620,6 +652,7 @@ pub(crate) struct RowBlockScratch {
 /// |p_a − p_last|·s(p_last), where p_last is the last column whose own D_a beat the propagated
 /// value; the passes wrap around in azimuth: after a pass reaches the end of a row it continues
 /// from the other end for as long as the propagated distance stays below `max_distance_m`.
+#[inline(always)]
 pub fn distance_transform(
     ranges: &[f32],
     obstacle: &[bool],
@@ -653,7 +686,7 @@ pub fn distance_transform(
 
 /// The column pass of Algorithm 1 for one row: `nearest` holds, per column, the smallest range
 /// of an obstacle in the rows above (∞ before any).
-#[inline]
+#[inline(always)]
 pub(crate) fn column_pass_row(rho: &[f32], obs: &[bool], nearest: &mut [f32], d_max: f32, d_a: &mut [f32]) {
     let n = rho.len().min(obs.len()).min(d_a.len()).min(nearest.len());
     let (rho, obs, nearest, d_a) = (&rho[..n], &obs[..n], &mut nearest[..n], &mut d_a[..n]);
@@ -698,6 +731,7 @@ impl DistanceScratch {
 /// Wherever the propagated distance has reached D_max and the columns ahead have D_a = D_max,
 /// the result is D_max and the state that follows is decided by the next column with
 /// D_a < D_max alone (it beats any propagated value ≥ D_max): such stretches are skipped.
+#[inline(always)]
 pub(crate) fn row_passes(rho: &[f32], d_a: &[f32], d: &mut [f32], step: f32, d_max: f32) {
     let cols = d.len().min(d_a.len()).min(rho.len());
     let (rho, d_a, d) = (&rho[..cols], &d_a[..cols], &mut d[..cols]);
@@ -717,6 +751,7 @@ pub(crate) fn row_passes(rho: &[f32], d_a: &[f32], d: &mut [f32], step: f32, d_m
 /// column where its own D_a < D_max exactly as the scalar pass does, so while every lane is
 /// there the block may jump to the next column where some lane has D_a < D_max, or not: the
 /// jump is only an optimisation, tried at columns where no lane has D_a < D_max.
+#[inline(always)]
 pub(crate) fn row_passes_block(
     rho: &[f32],
     d_a: &[f32],
@@ -758,6 +793,7 @@ pub(crate) fn row_passes_block(
 
 /// Row l of the `BLOCK_ROWS × cols` block `rows` becomes lane l of `lanes` (`cols` entries),
 /// 4 × 4 tiles at a time.
+#[inline(always)]
 fn transpose_to_lanes(rows: &[f32], cols: usize, lanes: &mut [BlockLanes]) {
     let quads: &mut [f32x4] = bytemuck::cast_slice_mut(lanes);
     let tiled = cols / 4 * 4;
@@ -784,6 +820,7 @@ fn transpose_to_lanes(rows: &[f32], cols: usize, lanes: &mut [BlockLanes]) {
 }
 
 /// The inverse of [`transpose_to_lanes`].
+#[inline(always)]
 fn transpose_from_lanes(lanes: &[BlockLanes], cols: usize, rows: &mut [f32]) {
     let quads: &[f32x4] = bytemuck::cast_slice(lanes);
     let tiled = cols / 4 * 4;
@@ -1005,6 +1042,7 @@ fn row_pass<const FORWARD: bool>(rho: &[f32], d_a: &[f32], d: &mut [f32], step: 
 }
 
 /// Traversable: a return, not an obstacle, and at least `inflation_m` from the nearest obstacle.
+#[inline(always)]
 pub fn traversable(ranges: &[f32], distance: &[f32], inflation_m: f32, out: &mut [bool]) {
     for ((o, &rho), &d) in out.iter_mut().zip(ranges).zip(distance) {
         // `&` rather than `&&`: no short-circuit branch, so the loop vectorises.
@@ -1075,6 +1113,7 @@ fn load_lanes_or<T: Copy>(values: &[T], start: usize, pad: T, map: impl Fn(T) ->
 /// All columns advance together one row at a time, as SIMD lanes with masks for the per-column
 /// decisions; a vector of columns drops out of the walk once none of its columns is walking.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 pub fn reachability(
     r: &[f32],
     ranges: &[f32],

@@ -287,6 +287,36 @@ impl TerrainOutput {
     }
 }
 
+/// Instruction sets the terrain stages are compiled for; [`TerrainAnalyzer::new`] picks the
+/// widest the processor has. The results are bit for bit the same with each.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum InstructionSet {
+    /// The build's baseline (SSE2 on x86-64): every processor the binary runs on.
+    Baseline,
+    /// x86-64-v3: AVX2, FMA and their companions.
+    Avx2,
+    /// x86-64-v4: AVX-512 (F, BW, CD, DQ, VL).
+    Avx512,
+}
+
+impl InstructionSet {
+    /// Every instruction set, narrowest first.
+    pub const ALL: [InstructionSet; 3] = [InstructionSet::Baseline, InstructionSet::Avx2, InstructionSet::Avx512];
+
+    /// The dispatcher for this set, if this processor has it.
+    fn arch(self) -> Option<pulp::Arch> {
+        match self {
+            InstructionSet::Baseline => Some(pulp::Arch::Scalar),
+            #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+            InstructionSet::Avx2 => pulp::x86::V3::try_new().map(pulp::Arch::V3),
+            #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+            InstructionSet::Avx512 => pulp::x86::V4::try_new().map(pulp::Arch::V4),
+            #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
+            InstructionSet::Avx2 | InstructionSet::Avx512 => None,
+        }
+    }
+}
+
 /// Runs terrain analysis on panoramas of one geometry, reusing its tables and buffers: no
 /// allocation per panorama.
 #[derive(Clone, Debug)]
@@ -298,6 +328,9 @@ pub struct TerrainAnalyzer {
     distance_scratch: DistanceScratch,
     reach_scratch: ReachScratch,
     output: TerrainOutput,
+    /// The widest instruction set of this processor (AVX-512, AVX2 with FMA, or the build's
+    /// baseline, SSE2 on x86-64), detected once: the stages run compiled for it.
+    simd: pulp::Arch,
 }
 
 impl TerrainAnalyzer {
@@ -330,7 +363,20 @@ impl TerrainAnalyzer {
             distance_scratch: DistanceScratch::default(),
             reach_scratch: ReachScratch::default(),
             output,
+            simd: pulp::Arch::new(),
         })
+    }
+
+    /// Runs the stages compiled for `set` from now on; false (and no change) if this processor
+    /// lacks it. For comparing the code paths; the default is the widest available.
+    pub fn select_instruction_set(&mut self, set: InstructionSet) -> bool {
+        match set.arch() {
+            Some(simd) => {
+                self.simd = simd;
+                true
+            }
+            None => false,
+        }
     }
 
     /// The geometry this analyzer accepts.
@@ -360,11 +406,18 @@ impl TerrainAnalyzer {
     /// running the stages one after the other ([`Self::analyze_observed`]).
     pub fn analyze(&mut self, depth: &DepthPanorama) -> Result<&TerrainOutput, TerrainError> {
         self.check(depth)?;
-        self.run_fused(depth);
-        self.run_stage(TerrainStage::Reachability, depth);
+        self.simd.dispatch(Fused { analyzer: self, depth });
         Ok(&self.output)
     }
 
+    /// Stages 1–6 with 1–5 fused ([`Self::analyze`] without the checks).
+    #[inline(always)]
+    fn run_all_fused(&mut self, depth: &DepthPanorama) {
+        self.run_fused(depth);
+        self.run_stage_inline(TerrainStage::Reachability, depth);
+    }
+
+    #[inline(always)]
     fn run_fused(&mut self, depth: &DepthPanorama) {
         let TerrainAnalyzer { geometry, params: p, tables, gradient_scratch, distance_scratch, output: out, .. } = self;
         let (rows, cols) = (geometry.rows, geometry.cols);
@@ -447,7 +500,13 @@ impl TerrainAnalyzer {
         Ok(())
     }
 
+    /// Runs one stage compiled for the processor's widest instruction set.
     fn run_stage(&mut self, stage: TerrainStage, depth: &DepthPanorama) {
+        self.simd.dispatch(SingleStage { analyzer: self, stage, depth });
+    }
+
+    #[inline(always)]
+    fn run_stage_inline(&mut self, stage: TerrainStage, depth: &DepthPanorama) {
         let cols = self.geometry.cols;
         let p = &self.params;
         let out = &mut self.output;
@@ -500,5 +559,40 @@ impl TerrainAnalyzer {
                 &mut out.reach_last_row,
             ),
         }
+    }
+}
+
+/// [`TerrainAnalyzer::analyze`]'s work as a [`pulp::WithSimd`] operation: `pulp` runs it inside a
+/// function compiled for the detected instruction set, and the stages, all `#[inline(always)]`,
+/// are compiled into it (the `wide` vectors then use VEX or EVEX encodings, and the compiler may
+/// use the wider registers for the loops it vectorises itself).
+struct Fused<'a> {
+    analyzer: &'a mut TerrainAnalyzer,
+    depth: &'a DepthPanorama,
+}
+
+impl pulp::WithSimd for Fused<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        self.analyzer.run_all_fused(self.depth);
+    }
+}
+
+/// One stage of [`TerrainAnalyzer::analyze_observed`] as a [`pulp::WithSimd`] operation (see
+/// [`Fused`]).
+struct SingleStage<'a> {
+    analyzer: &'a mut TerrainAnalyzer,
+    stage: TerrainStage,
+    depth: &'a DepthPanorama,
+}
+
+impl pulp::WithSimd for SingleStage<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        self.analyzer.run_stage_inline(self.stage, self.depth);
     }
 }

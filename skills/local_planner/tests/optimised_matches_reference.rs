@@ -11,7 +11,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use spomp_core::{DepthPanorama, PanoramaGeometry};
 use spomp_local_planner::synthetic::{Scene, add_noise};
-use spomp_local_planner::{TerrainAnalyzer, TerrainOutput, TerrainParams};
+use spomp_local_planner::{InstructionSet, TerrainAnalyzer, TerrainOutput, TerrainParams};
 
 /// Every buffer the reference computes, in the analyzer's layout.
 struct ReferenceOutput {
@@ -128,6 +128,16 @@ fn check(depth: &DepthPanorama, params: TerrainParams) {
     assert_same(analyzer.analyze_observed(depth, |_| {}).unwrap(), &reference);
     // Buffers reused across panoramas: a second run gives the same again.
     assert_same(analyzer.analyze(depth).unwrap(), &reference);
+    // Every instruction set this processor has (the baseline always).
+    let mut checked = 0;
+    for set in InstructionSet::ALL {
+        if analyzer.select_instruction_set(set) {
+            assert_same(analyzer.analyze(depth).unwrap(), &reference);
+            assert_same(analyzer.analyze_observed(depth, |_| {}).unwrap(), &reference);
+            checked += 1;
+        }
+    }
+    assert!(checked >= 1);
 }
 
 #[test]
@@ -180,5 +190,10 @@ proptest! {
         let mut analyzer = TerrainAnalyzer::new(g, params).unwrap();
         assert_same(analyzer.analyze(&depth).unwrap(), &reference);
         assert_same(analyzer.analyze_observed(&depth, |_| {}).unwrap(), &reference);
+        for set in InstructionSet::ALL {
+            if analyzer.select_instruction_set(set) {
+                assert_same(analyzer.analyze(&depth).unwrap(), &reference);
+            }
+        }
     }
 }
