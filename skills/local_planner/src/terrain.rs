@@ -412,13 +412,14 @@ impl TerrainAnalyzer {
 
     /// Stages 1–6 with 1–5 fused ([`Self::analyze`] without the checks).
     #[inline(always)]
-    fn run_all_fused(&mut self, depth: &DepthPanorama) {
-        self.run_fused(depth);
-        self.run_stage_inline(TerrainStage::Reachability, depth);
+    fn run_all_fused(&mut self, depth: &DepthPanorama, wide_registers: bool) {
+        self.run_fused(depth, wide_registers);
+        self.run_stage_inline(TerrainStage::Reachability, depth, wide_registers);
     }
 
     #[inline(always)]
-    fn run_fused(&mut self, depth: &DepthPanorama) {
+    /// `wide_registers`: compiled for AVX2 or AVX-512 (some stages pick their loops by it).
+    fn run_fused(&mut self, depth: &DepthPanorama, wide_registers: bool) {
         let TerrainAnalyzer { geometry, params: p, tables, gradient_scratch, distance_scratch, output: out, .. } = self;
         let (rows, cols) = (geometry.rows, geometry.cols);
         let window = GradientWindow {
@@ -432,16 +433,17 @@ impl TerrainAnalyzer {
         for row in 0..rows {
             let span = row * cols..(row + 1) * cols;
             let (sin_e, cos_e) = (tables.row_sin[row], tables.row_cos[row]);
-            stages::fill_holes(
+            stages::fill_holes_with(
                 &depth.range_m[span.clone()],
                 &mut out.ranges_m[span.clone()],
                 cols,
                 p.hole_fill_max_m as f32,
+                wide_registers,
             );
             let rho = &out.ranges_m[span.clone()];
             stages::project_row(rho, sin_e, cos_e, &mut out.z_m[span.clone()], &mut out.r_m[span.clone()]);
             let gradient = &mut out.gradient[span.clone()];
-            stages::gradient_row(row, &out.z_m, &out.r_m, tables, window, gradient_scratch, gradient);
+            stages::gradient_row(row, &out.z_m, &out.r_m, tables, window, gradient_scratch, gradient, wide_registers);
             let obstacle = &mut out.obstacle[span.clone()];
             stages::obstacles(gradient, rho, cols, p.slope_threshold as f32, p.min_obstacle_run_px, obstacle);
             let d_a = &mut out.column_distance_m[span.clone()];
@@ -506,16 +508,20 @@ impl TerrainAnalyzer {
     }
 
     #[inline(always)]
-    fn run_stage_inline(&mut self, stage: TerrainStage, depth: &DepthPanorama) {
+    fn run_stage_inline(&mut self, stage: TerrainStage, depth: &DepthPanorama, wide_registers: bool) {
         let cols = self.geometry.cols;
         let p = &self.params;
         let out = &mut self.output;
         match stage {
-            TerrainStage::FillHoles => {
-                stages::fill_holes(&depth.range_m, &mut out.ranges_m, cols, p.hole_fill_max_m as f32)
-            }
+            TerrainStage::FillHoles => stages::fill_holes_with(
+                &depth.range_m,
+                &mut out.ranges_m,
+                cols,
+                p.hole_fill_max_m as f32,
+                wide_registers,
+            ),
             TerrainStage::Project => stages::project(&out.ranges_m, &self.tables, &mut out.z_m, &mut out.r_m),
-            TerrainStage::Gradients => stages::gradients(
+            TerrainStage::Gradients => stages::gradients_with(
                 &out.z_m,
                 &out.r_m,
                 &self.tables,
@@ -525,6 +531,7 @@ impl TerrainAnalyzer {
                 },
                 &mut self.gradient_scratch,
                 &mut out.gradient,
+                wide_registers,
             ),
             TerrainStage::Obstacles => stages::obstacles(
                 &out.gradient,
@@ -576,7 +583,7 @@ impl pulp::WithSimd for Fused<'_> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) {
-        self.analyzer.run_all_fused(self.depth);
+        self.analyzer.run_all_fused(self.depth, !S::IS_SCALAR);
     }
 }
 
@@ -593,6 +600,6 @@ impl pulp::WithSimd for SingleStage<'_> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) {
-        self.analyzer.run_stage_inline(self.stage, self.depth);
+        self.analyzer.run_stage_inline(self.stage, self.depth, !S::IS_SCALAR);
     }
 }
