@@ -631,9 +631,9 @@ fn lanes_of(chunk: &[f32]) -> Lanes {
 /// On ground and walls w_a changes slowly along a row, so most runs of [`LANES`] columns share
 /// one w_a: their neighbours at ±w_a are then two vector loads instead of a gather. Runs with
 /// mixed w_a take the scalar loop. (Selecting among the loads of each distinct w_a of a run was
-/// measured slower: mixed runs mostly spread widely. Its own function: inlined, the surrounding
-/// vector code leaves too few registers for the scalar loop.)
-#[inline(never)]
+/// measured slower: mixed runs mostly spread widely; so were a gather loop on AVX2 and
+/// AVX-512, and keeping this function out of line.)
+#[inline(always)]
 fn azimuth_rise(padded: &[f32], pad: usize, half: &[u32], rise: &mut [f32]) {
     let cols = rise.len().min(half.len()).min(padded.len().saturating_sub(2 * pad));
     let (half, rise) = (&half[..cols], &mut rise[..cols]);
