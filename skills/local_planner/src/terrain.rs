@@ -417,8 +417,9 @@ impl TerrainAnalyzer {
         self.run_stage_inline(TerrainStage::Reachability, depth, wide_registers);
     }
 
+    /// Stages 1–5, fused row by row; `wide_registers`: compiled for AVX2 or AVX-512 (some stages
+    /// pick their loops by it).
     #[inline(always)]
-    /// `wide_registers`: compiled for AVX2 or AVX-512 (some stages pick their loops by it).
     fn run_fused(&mut self, depth: &DepthPanorama, wide_registers: bool) {
         let TerrainAnalyzer { geometry, params: p, tables, gradient_scratch, distance_scratch, output: out, .. } = self;
         let (rows, cols) = (geometry.rows, geometry.cols);
@@ -507,6 +508,8 @@ impl TerrainAnalyzer {
         self.simd.dispatch(SingleStage { analyzer: self, stage, depth });
     }
 
+    /// [`Self::run_stage`] inside the dispatched function (`wide_registers` as for
+    /// [`Self::run_fused`]).
     #[inline(always)]
     fn run_stage_inline(&mut self, stage: TerrainStage, depth: &DepthPanorama, wide_registers: bool) {
         let cols = self.geometry.cols;
