@@ -32,8 +32,10 @@ pub enum NavigationProfile {
     /// The paper's real-robot values (terrain slope threshold 0.3, inflation 0.5 m).
     #[default]
     Robot,
-    /// The paper's simulation values (slope threshold 0.25, inflation 0.75 m): what the built-in
-    /// simulator's robots were tuned with.
+    /// The paper's simulation values (slope threshold 0.25, inflation 0.75 m) with a 0.5 m
+    /// reachability gap and no floor under a bin's safe range (both measured on the shipped team
+    /// mission; `TerrainParams::simulation`): what the built-in simulator's robots were tuned
+    /// with.
     Simulation,
 }
 

@@ -27,7 +27,7 @@ pub use dwa::{Dwa, DwaParams};
 pub use error::{ParamsError, RegionError, TerrainError};
 pub use local_goal::{LocalGoalParams, local_goal_cost, select_local_goal};
 pub use region::SafeRegion;
-pub use terrain::{TerrainAnalyzer, TerrainOutput, TerrainParams, TerrainStage};
+pub use terrain::{InstructionSet, TerrainAnalyzer, TerrainOutput, TerrainParams, TerrainStage};
 
 /// All parameters of the local planner, as a mission sets them (`local_planner: { ... }`).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]

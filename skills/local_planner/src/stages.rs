@@ -36,9 +36,12 @@ pub struct Tables {
     pub col_cos: Vec<f32>,
     /// sin φ per column.
     pub col_sin: Vec<f32>,
-    /// Elevation gradient window w_e per row (0: no row above is far enough, no elevation term).
+    /// Elevation gradient window w_e per row: below the horizon the paper's flat-ground rule,
+    /// at and above it 1 (the next row up); 0 for row 0 (no elevation term).
     pub elevation_window: Vec<u32>,
-    /// η_z = η·|sin θ| per row, metres.
+    /// |η_z| = η·|sin θ| per row, metres: subtracted from height differences, so the gradient is
+    /// the smallest one noise of order η could hide (the paper's stated intent; see the README's
+    /// rule 2).
     pub noise_z_m: Vec<f32>,
     /// η_xy = η·cos θ per row, metres.
     pub noise_xy_m: Vec<f32>,
@@ -60,8 +63,14 @@ impl Tables {
         let cot: Vec<f64> = elevations.iter().map(|t| t.cos() / t.sin()).collect();
         let elevation_window = (0..rows)
             .map(|row| {
-                // Smallest δ whose flat-ground ranges h_s/tan θ differ by at least W. Without
-                // one inside the field of view, use the top row, the farthest available.
+                // At and above the horizon there is no flat ground to predict ranges from: the
+                // next row up (the authors' rule; row 0 has none).
+                if elevations[row] >= 0.0 || elevations[row].is_nan() {
+                    return row.min(1) as u32;
+                }
+                // Smallest δ whose flat-ground ranges h_s/tan θ differ by at least W (a row
+                // above the horizon always does). Without one inside the field of view, use
+                // the top row, the farthest available.
                 let found = (1..=row).find(|&delta| {
                     let gap = sensor_height_m * (cot[row] - cot[row - delta]).abs();
                     gap >= window_m || gap.is_nan()
@@ -157,14 +166,27 @@ fn sanitize(range: f32) -> f32 {
 /// and fills, along each row with wrap in azimuth, every run of missing pixels whose arc length
 /// is at most `max_gap_m` (the paper's D_m; D_px = D_m / s with s = (2π/A)·ρ, ρ the larger of the
 /// two ranges bounding the run) by linear interpolation between its ends.
+#[inline(always)]
 pub fn fill_holes(input: &[f32], out: &mut [f32], cols: usize, max_gap_m: f32) {
+    fill_holes_with(input, out, cols, max_gap_m, false);
+}
+
+/// [`fill_holes`]; `wide_registers`: the caller is compiled for AVX2 or AVX-512, where filling
+/// the single missing pixels in one vectorised pass first pays (on the SSE2 baseline it was
+/// measured slower than the search alone).
+#[inline(always)]
+pub(crate) fn fill_holes_with(input: &[f32], out: &mut [f32], cols: usize, max_gap_m: f32, wide_registers: bool) {
     if cols == 0 {
         return;
     }
     let col_step = std::f32::consts::TAU / cols as f32;
     for (row_in, row) in input.chunks_exact(cols).zip(out.chunks_exact_mut(cols)) {
-        for (o, &i) in row.iter_mut().zip(row_in) {
-            *o = sanitize(i);
+        if wide_registers {
+            sanitize_and_fill_single_holes(row_in, row, col_step, max_gap_m);
+        } else {
+            for (o, &i) in row.iter_mut().zip(row_in) {
+                *o = sanitize(i);
+            }
         }
         let (Some(first), Some(last)) = (row.iter().position(|&r| r > 0.0), row.iter().rposition(|&r| r > 0.0)) else {
             continue;
@@ -186,6 +208,29 @@ pub fn fill_holes(input: &[f32], out: &mut [f32], cols: usize, max_gap_m: f32) {
             c = end;
         }
     }
+}
+
+/// `row` = the sanitised `row_in`, with each single missing pixel between two returns (not
+/// across the seam) filled as [`fill_gap`] does: most holes are single dropouts, and this pass
+/// fills them without a search or a branch (the compiler vectorises it). A filled pixel's
+/// neighbours are returns of the input, so the fill does not depend on the order of the holes.
+#[inline(always)]
+fn sanitize_and_fill_single_holes(row_in: &[f32], row: &mut [f32], col_step: f32, max_gap_m: f32) {
+    let cols = row.len().min(row_in.len());
+    if cols < 3 {
+        row.iter_mut().zip(row_in).for_each(|(o, &i)| *o = sanitize(i));
+        return;
+    }
+    let neighbours = row_in[..cols - 2].iter().zip(&row_in[1..cols - 1]).zip(&row_in[2..cols]);
+    for (o, ((&left, &centre), &right)) in row[1..cols - 1].iter_mut().zip(neighbours) {
+        let (left, centre, right) = (sanitize(left), sanitize(centre), sanitize(right));
+        let widest = if left > right { left } else { right };
+        // [`fill_gap`] for a gap of 1: 1·step = step exactly, and 1·(1/2) = ½.
+        let fill = (centre <= 0.0) & (left > 0.0) & (right > 0.0) & (col_step * widest <= max_gap_m);
+        *o = if fill { left + (right - left) * 0.5 } else { centre };
+    }
+    row[0] = sanitize(row_in[0]);
+    row[cols - 1] = sanitize(row_in[cols - 1]);
 }
 
 /// Fills the pixels strictly between returns at unwrapped columns `from` and `to` (`to` may be
@@ -216,6 +261,7 @@ fn fill_gap(row: &mut [f32], from: usize, to: usize, col_step: f32, max_gap_m: f
 /// Stage 2: projects ranges to height z (sensor frame, z up) and horizontal range r, from
 /// per-row trigonometry. Pixels without a return get NaN. (x and y = r·cos φ, r·sin φ are not
 /// stored — no stage needs them; [`crate::TerrainOutput::point_m`] gives them per pixel.)
+#[inline(always)]
 pub fn project(ranges: &[f32], tables: &Tables, z: &mut [f32], r: &mut [f32]) {
     let cols = tables.cols;
     if cols == 0 {
@@ -232,7 +278,7 @@ pub fn project(ranges: &[f32], tables: &Tables, z: &mut [f32], r: &mut [f32]) {
 }
 
 /// [`project`] for one row of elevation θ (`sin_e`, `cos_e`).
-#[inline]
+#[inline(always)]
 pub(crate) fn project_row(rho: &[f32], sin_e: f32, cos_e: f32, z: &mut [f32], r: &mut [f32]) {
     for ((&rho, z), r) in rho.iter().zip(z.iter_mut()).zip(r.iter_mut()) {
         // No return: NaN, so that later differences with it are NaN and drop out.
@@ -265,9 +311,13 @@ pub struct GradientScratch {
 
 /// Stage 3: gradient magnitude |∇| = sqrt(∇_a² + ∇_e²) per pixel, with the paper's metric
 /// windows w_a = ⌊min(W/s_xy, W_max)/2⌋ + 1 (azimuth, wrapping) and w_e (per row, from
-/// [`Tables`]), and the noise η_z subtracted from height differences and η_xy added to the
-/// horizontal-range difference. `z` and `r` come from [`project`] (NaN without a return); a term
-/// whose neighbour has no return is 0, and so is the gradient of a pixel without a return.
+/// [`Tables`]), and the noise |η_z| = η·|sin θ| subtracted from height differences and η_xy
+/// added to the horizontal-range difference: the minimum gradient noise of order η could hide,
+/// as the paper's text says (its formula's signed sin θ would add |η_z| below the horizon; see
+/// the README's rule 2). `z` and `r` come from [`project`] (NaN without a return); a term whose
+/// neighbour has no return is 0 (the other term stands alone), and the gradient of a pixel
+/// without a return is 0.
+#[inline(always)]
 pub fn gradients(
     z: &[f32],
     r: &[f32],
@@ -276,6 +326,20 @@ pub fn gradients(
     scratch: &mut GradientScratch,
     gradient: &mut [f32],
 ) {
+    gradients_with(z, r, tables, window, scratch, gradient, false);
+}
+
+/// [`gradients`]; `wide_registers` as for [`gradient_row`].
+#[inline(always)]
+pub(crate) fn gradients_with(
+    z: &[f32],
+    r: &[f32],
+    tables: &Tables,
+    window: GradientWindow,
+    scratch: &mut GradientScratch,
+    gradient: &mut [f32],
+    wide_registers: bool,
+) {
     let cols = tables.cols;
     if cols < 3 {
         gradient.iter_mut().for_each(|g| *g = 0.0);
@@ -283,13 +347,156 @@ pub fn gradients(
     }
     let rows = z.len().min(r.len()).min(gradient.len()) / cols;
     for (row, out) in gradient.chunks_exact_mut(cols).take(rows).enumerate() {
-        gradient_row(row, z, r, tables, window, scratch, out);
+        gradient_row(row, z, r, tables, window, scratch, out, wide_registers);
     }
 }
 
 /// [`gradients`] for one row: `z` and `r` are whole panoramas, of which this row and the row
-/// w_e above it are read; `out` is the row's gradient.
+/// w_e above it are read; `out` is the row's gradient. `wide_registers`: the caller is compiled
+/// for AVX2 or AVX-512 ([`gradient_row_columns`]), else for the baseline ([`gradient_row_lanes`]).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
 pub(crate) fn gradient_row(
+    row: usize,
+    z: &[f32],
+    r: &[f32],
+    tables: &Tables,
+    window: GradientWindow,
+    scratch: &mut GradientScratch,
+    out: &mut [f32],
+    wide_registers: bool,
+) {
+    if wide_registers {
+        gradient_row_columns(row, z, r, tables, window, scratch, out);
+    } else {
+        gradient_row_lanes(row, z, r, tables, window, scratch, out);
+    }
+}
+
+/// [`gradient_row`] as plain per-column loops.
+///
+/// The loops are plain per-column code the compiler vectorises for the instruction set the
+/// caller is compiled for (512-bit vectors under AVX-512: the divisions and square roots bound
+/// this stage). Every step is written as the x86 vector instruction it becomes ([`min_ps`],
+/// [`max_ps`]: the second operand where either is NaN), so that each width gives the same bits.
+#[inline(always)]
+fn gradient_row_columns(
+    row: usize,
+    z: &[f32],
+    r: &[f32],
+    tables: &Tables,
+    window: GradientWindow,
+    scratch: &mut GradientScratch,
+    out: &mut [f32],
+) {
+    let cols = tables.cols;
+    if cols < 3 || out.len() != cols || z.len() < (row + 1) * cols || r.len() < (row + 1) * cols {
+        out.iter_mut().for_each(|g| *g = 0.0);
+        return;
+    }
+    let step = tables.col_step_rad;
+    let (max_half, max_px) = (((cols - 1) / 2) as f32, window.max_window_px.max(0.0));
+    let w_over_step = window.window_m / step;
+    scratch.half_window.resize(cols, 1.0);
+    scratch.half_index.resize(cols, 1);
+    scratch.rise_a.resize(cols, 0.0);
+    let base = row * cols;
+    let z_row = &z[base..base + cols];
+    let r_row = &r[base..base + cols];
+    let noise_z = tables.noise_z_m.get(row).copied().unwrap_or(0.0);
+    let noise_xy = tables.noise_xy_m.get(row).copied().unwrap_or(0.0);
+    let half = &mut scratch.half_window[..cols];
+    let half_index = &mut scratch.half_index[..cols];
+    let rise_a = &mut scratch.rise_a[..cols];
+    // w_a from the arc length on the x–y plane, s_xy = (2π/A)·r, so W/s_xy = (W/step)/r;
+    // the denominator s·(2w_a + 1) uses the arc length s = (2π/A)·ρ = (2π/A)·r / cos θ.
+    let cos_e = tables.row_cos.get(row).copied().unwrap_or(1.0).max(1e-6);
+    let arc_per_r = step / cos_e;
+    // Without a return r is NaN and `min_ps` yields W_max (its second operand); that pixel's
+    // gradient is 0 anyway.
+    for ((&r, h), index) in r_row.iter().zip(half.iter_mut()).zip(half_index.iter_mut()) {
+        let px = max_ps(min_ps(w_over_step / r, max_px), 0.0);
+        let w_a = min_ps(floor_small(px * 0.5) + 1.0, max_half);
+        *h = w_a;
+        *index = small_to_u32(w_a);
+    }
+    // The row with `pad` ≥ max w_a columns of wrap-around on both sides: column c sits at
+    // c + pad, and c ± w_a needs no wrap test.
+    let pad = small_to_u32(min_ps(floor_small(max_px * 0.5) + 1.0, max_half)) as usize;
+    let padded = &mut scratch.z_padded;
+    padded.clear();
+    padded.extend_from_slice(&z_row[cols - pad..]);
+    padded.extend_from_slice(z_row);
+    padded.extend_from_slice(&z_row[..pad]);
+    azimuth_rise(padded, pad, half_index, rise_a);
+    let w_e = tables.elevation_window.get(row).copied().unwrap_or(0) as usize;
+    let above = (w_e > 0 && w_e <= row).then(|| (row - w_e) * cols);
+    // ∇_a's rise and run, clamped: a NaN rise (a neighbour without a return) gives 0, a NaN
+    // run (the pixel has no return) stays NaN so that the gradient is 0.
+    let azimuth = |r_c: f32, half: f32, rise: f32| {
+        let run_a = arc_per_r * r_c * (2.0 * half + 1.0);
+        (zero_unless_positive(rise - noise_z), clamp_run(run_a))
+    };
+    // NaN (no return) becomes 0; a gradient is NaN or ≥ +0, never −0.
+    match above {
+        Some(b) => {
+            let (z_up, r_up) = (&z[b..b + cols], &r[b..b + cols]);
+            let columns = (r_row.iter().zip(half.iter()))
+                .zip(rise_a.iter().zip(z_row))
+                .zip(z_up.iter().zip(r_up))
+                .zip(out.iter_mut());
+            for ((((&r_c, &h), (&rise, &z_c)), (&z_up, &r_up)), o) in columns {
+                let (rise_a, run_a) = azimuth(r_c, h, rise);
+                // sqrt(∇_a² + ∇_e²) with one division: sqrt((a·n_e)² + (e·n_a)²) / (n_a·n_e).
+                let rise_e = zero_unless_positive((z_c - z_up).abs() - noise_z);
+                let run_e = clamp_run((r_c - r_up).abs() + noise_xy);
+                // No return one window up: ∇_e = 0 (its rise is already 0) and the azimuth term
+                // stands alone; a run of 1 keeps the NaN out of the shared denominator.
+                #[allow(clippy::eq_op)]
+                let run_e = if r_up == r_up { run_e } else { 1.0 };
+                let (ta, te) = (rise_a * run_e, rise_e * run_a);
+                *o = zero_unless_positive((ta * ta + te * te).sqrt() / (run_a * run_e));
+            }
+        }
+        None => {
+            let columns = r_row.iter().zip(half.iter()).zip(rise_a.iter()).zip(out.iter_mut());
+            for (((&r_c, &h), &rise), o) in columns {
+                let (rise_a, run_a) = azimuth(r_c, h, rise);
+                *o = zero_unless_positive(rise_a / run_a);
+            }
+        }
+    }
+}
+
+/// `minps`: a where a < b, else b (so b where either is NaN, and b for ±0 against ∓0).
+#[inline(always)]
+fn min_ps(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// `maxps`: a where a > b, else b (so b where either is NaN, and b for ±0 against ∓0).
+#[inline(always)]
+fn max_ps(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// `v` where v > 0, else +0 (NaN and −0 included).
+#[inline(always)]
+fn zero_unless_positive(v: f32) -> f32 {
+    max_ps(v, 0.0)
+}
+
+/// max(run, 1e-12), NaN kept as NaN. (Runs are never negative here: horizontal ranges and
+/// η·cos θ are ≥ 0 for |θ| ≤ π/2; a negative run would be clamped too.)
+#[inline(always)]
+fn clamp_run(run: f32) -> f32 {
+    max_ps(1e-12, run)
+}
+
+/// [`gradient_row_columns`] with explicit [`LANES`]-wide vectors: faster than the compiler's own
+/// vectorisation for the SSE2 baseline (measured), the same bits.
+#[inline(always)]
+fn gradient_row_lanes(
     row: usize,
     z: &[f32],
     r: &[f32],
@@ -363,7 +570,7 @@ pub(crate) fn gradient_row(
     };
     // NaN (no return) becomes 0.
     // (A gradient is NaN or ≥ +0, never −0: the same as keeping it where g ≥ 0.)
-    let finish = zero_unless_positive;
+    let finish = zero_unless_positive_lanes;
     match above {
         Some(b) => {
             let (z_up, r_up) = (&z[b..b + cols], &r[b..b + cols]);
@@ -372,6 +579,9 @@ pub(crate) fn gradient_row(
                 // sqrt(∇_a² + ∇_e²) with one division: sqrt((a·n_e)² + (e·n_a)²) / (n_a·n_e).
                 let rise_e = (z_c - z_up).abs() - noise_z;
                 let (rise_e, run_e) = positive_part_lanes(rise_e, (r_c - r_up).abs() + noise_xy);
+                // No return one window up: ∇_e = 0 (its rise is already 0) and the azimuth term
+                // stands alone; a run of 1 keeps the NaN out of the shared denominator.
+                let run_e = r_up.simd_eq(r_up).select(run_e, one);
                 let (ta, te) = (rise_a * run_e, rise_e * run_a);
                 finish((ta * ta + te * te).sqrt() / (run_a * run_e))
             };
@@ -416,10 +626,37 @@ fn lanes_of(chunk: &[f32]) -> Lanes {
 }
 
 /// |z(c − w_a) − z(c + w_a)| per column c: `padded` is the row with `pad` ≥ every w_a columns of
-/// wrap-around on both sides, `half` holds w_a per column. (Its own function: inlined, the
-/// surrounding vector code leaves too few registers for this scalar loop.)
-#[inline(never)]
+/// wrap-around on both sides, `half` holds w_a per column.
+///
+/// On ground and walls w_a changes slowly along a row, so most runs of [`LANES`] columns share
+/// one w_a: their neighbours at ±w_a are then two vector loads instead of a gather. Runs with
+/// mixed w_a take the scalar loop. (Selecting among the loads of each distinct w_a of a run was
+/// measured slower: mixed runs mostly spread widely; so were a gather loop on AVX2 and
+/// AVX-512, and keeping this function out of line.)
+#[inline(always)]
 fn azimuth_rise(padded: &[f32], pad: usize, half: &[u32], rise: &mut [f32]) {
+    let cols = rise.len().min(half.len()).min(padded.len().saturating_sub(2 * pad));
+    let (half, rise) = (&half[..cols], &mut rise[..cols]);
+    let vectorised = cols / LANES * LANES;
+    let chunks = rise[..vectorised].chunks_exact_mut(LANES).zip(half[..vectorised].chunks_exact(LANES));
+    for ((rise, h), start) in chunks.zip((0..).step_by(LANES)) {
+        let first = h[0];
+        if h.iter().fold(true, |same, &x| same & (x == first)) {
+            let h = (first as usize).min(pad);
+            // Column c sits at c + pad in `padded`.
+            let left = lanes_of(&padded[start + pad - h..start + pad - h + LANES]);
+            let right = lanes_of(&padded[start + pad + h..start + pad + h + LANES]);
+            rise.copy_from_slice(&(left - right).abs().to_array());
+        } else {
+            azimuth_rise_scalar(&padded[start..start + 2 * pad + LANES], pad, h, rise);
+        }
+    }
+    azimuth_rise_scalar(&padded[vectorised..], pad, &half[vectorised..], &mut rise[vectorised..]);
+}
+
+/// [`azimuth_rise`] one column at a time (`padded` starts at the first column's window).
+#[inline(always)]
+fn azimuth_rise_scalar(padded: &[f32], pad: usize, half: &[u32], rise: &mut [f32]) {
     // Column c's window is padded[c..=c + 2·pad], centred on c + pad.
     for ((rise, &h), window) in rise.iter_mut().zip(half).zip(padded.windows(2 * pad + 1)) {
         let h = (h as usize).min(pad);
@@ -474,21 +711,21 @@ fn floor_small_lanes(v: Lanes) -> Lanes {
 /// gives rise 0, a NaN run (the pixel has no return) stays NaN so that the caller yields 0.
 #[inline(always)]
 fn positive_part_lanes(rise: Lanes, run: Lanes) -> (Lanes, Lanes) {
-    (zero_unless_positive(rise), clamp_run_lanes(run))
+    (zero_unless_positive_lanes(rise), clamp_run_lanes(run))
 }
 
 /// Per lane `v` where v > 0, else +0 (NaN and −0 included). With SSE one `maxps(v, 0)`, which
 /// returns its second operand (+0) when v is NaN or equal to it (±0).
 #[cfg(target_feature = "sse")]
 #[inline(always)]
-fn zero_unless_positive(v: Lanes) -> Lanes {
+fn zero_unless_positive_lanes(v: Lanes) -> Lanes {
     v.fast_max(Lanes::ZERO)
 }
 
 /// Per lane `v` where v > 0, else +0 (NaN and −0 included).
 #[cfg(not(target_feature = "sse"))]
 #[inline(always)]
-fn zero_unless_positive(v: Lanes) -> Lanes {
+fn zero_unless_positive_lanes(v: Lanes) -> Lanes {
     v.simd_gt(Lanes::ZERO) & v
 }
 
@@ -527,49 +764,29 @@ fn small_to_u32(v: f32) -> u32 {
     (v + SHIFT).to_bits().wrapping_sub(SHIFT.to_bits())
 }
 
-/// Stage 4: obstacle = gradient above `slope_threshold`; then, along each row with wrap, runs of
-/// obstacle pixels whose arc length Σ(2π/A)·ρ is below `min_run_m` are cleared as noise.
-pub fn obstacles(
-    gradient: &[f32],
-    ranges: &[f32],
-    cols: usize,
-    slope_threshold: f32,
-    min_run_m: f32,
-    obstacle: &mut [bool],
-) {
-    if cols == 0 {
-        return;
+/// Which obstacle runs along a row stage 4 clears as noise: a run is cleared when it has fewer
+/// than `min_px` pixels, or when `min_arc_m` is positive and its arc length (Σρ)·2π/A is below
+/// it. The authors count pixels; the arc rule is spomp's former rule, kept for the simulation
+/// profile (see [`crate::TerrainParams::min_obstacle_run_m`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RunFilter {
+    /// Shortest kept run, pixels (0 or 1 keeps every run by count).
+    pub min_px: u32,
+    /// Shortest kept run, metres of arc (0 disables the arc rule).
+    pub min_arc_m: f32,
+}
+
+impl RunFilter {
+    /// True when the filter can clear nothing.
+    fn keeps_all(self) -> bool {
+        self.min_px <= 1 && self.min_arc_m <= 0.0
     }
-    let step = std::f32::consts::TAU / cols as f32;
-    let rows = gradient.chunks_exact(cols).zip(ranges.chunks_exact(cols));
-    for ((grad, rho), obs) in rows.zip(obstacle.chunks_exact_mut(cols)) {
-        let mut any = false;
-        for ((o, &g), &rho) in obs.iter_mut().zip(grad).zip(rho) {
-            *o = (g > slope_threshold) & (rho > 0.0);
-            any |= *o;
-        }
-        if !any {
-            continue;
-        }
-        // A row that is all obstacle is one closed ring, at least as long as any run: kept.
-        let Some(first_free) = obs.iter().position(|&o| !o) else { continue };
-        let last_free = obs.iter().rposition(|&o| !o).unwrap_or(first_free);
-        // The run across the seam: (last_free, cols) then [0, first_free).
-        let seam = run_length(rho[last_free + 1..].iter().chain(&rho[..first_free]), step, min_run_m);
-        if seam > 0.0 && seam < min_run_m {
-            obs[last_free + 1..].iter_mut().for_each(|o| *o = false);
-            obs[..first_free].iter_mut().for_each(|o| *o = false);
-        }
-        let mut c = first_free;
-        while c < last_free {
-            let Some(offset) = first_equal(&obs[c..last_free], true) else { break };
-            let start = c + offset;
-            let end = first_equal(&obs[start..last_free], false).map_or(last_free, |o| start + o);
-            if run_length(rho[start..end].iter(), step, min_run_m) < min_run_m {
-                obs[start..end].iter_mut().for_each(|o| *o = false);
-            }
-            c = end;
-        }
+
+    /// True when the run of `len_px` pixels at `ranges` is cleared.
+    #[inline]
+    fn clears<'a>(self, len_px: usize, ranges: impl Iterator<Item = &'a f32>, step: f32) -> bool {
+        len_px < self.min_px as usize
+            || (self.min_arc_m > 0.0 && run_length(ranges, step, self.min_arc_m) < self.min_arc_m)
     }
 }
 
@@ -586,6 +803,53 @@ fn run_length<'a>(ranges: impl Iterator<Item = &'a f32>, step: f32, min_run_m: f
         }
     }
     sum * step
+}
+
+/// Stage 4: obstacle = gradient above `slope_threshold` (pixels with a return only); then,
+/// along each row with wrap in azimuth, the runs `filter` names are cleared as noise. A row
+/// that is obstacle all round is one closed ring and is kept.
+#[inline(always)]
+pub fn obstacles(
+    gradient: &[f32],
+    ranges: &[f32],
+    cols: usize,
+    slope_threshold: f32,
+    filter: RunFilter,
+    obstacle: &mut [bool],
+) {
+    if cols == 0 {
+        return;
+    }
+    let step = std::f32::consts::TAU / cols as f32;
+    let rows = gradient.chunks_exact(cols).zip(ranges.chunks_exact(cols));
+    for ((grad, rho), obs) in rows.zip(obstacle.chunks_exact_mut(cols)) {
+        let mut any = false;
+        for ((o, &g), &rho) in obs.iter_mut().zip(grad).zip(rho) {
+            *o = (g > slope_threshold) & (rho > 0.0);
+            any |= *o;
+        }
+        if !any || filter.keeps_all() {
+            continue;
+        }
+        let Some(first_free) = obs.iter().position(|&o| !o) else { continue };
+        let last_free = obs.iter().rposition(|&o| !o).unwrap_or(first_free);
+        // The run across the seam: (last_free, cols) then [0, first_free).
+        let seam = (cols - 1 - last_free) + first_free;
+        if seam > 0 && filter.clears(seam, rho[last_free + 1..].iter().chain(&rho[..first_free]), step) {
+            obs[last_free + 1..].iter_mut().for_each(|o| *o = false);
+            obs[..first_free].iter_mut().for_each(|o| *o = false);
+        }
+        let mut c = first_free;
+        while c < last_free {
+            let Some(offset) = first_equal(&obs[c..last_free], true) else { break };
+            let start = c + offset;
+            let end = first_equal(&obs[start..last_free], false).map_or(last_free, |o| start + o);
+            if filter.clears(end - start, rho[start..end].iter(), step) {
+                obs[start..end].iter_mut().for_each(|o| *o = false);
+            }
+            c = end;
+        }
+    }
 }
 
 /// Scratch space for [`distance_transform`]: one value per column and the row pass state.
@@ -620,6 +884,7 @@ pub(crate) struct RowBlockScratch {
 /// |p_a − p_last|·s(p_last), where p_last is the last column whose own D_a beat the propagated
 /// value; the passes wrap around in azimuth: after a pass reaches the end of a row it continues
 /// from the other end for as long as the propagated distance stays below `max_distance_m`.
+#[inline(always)]
 pub fn distance_transform(
     ranges: &[f32],
     obstacle: &[bool],
@@ -653,7 +918,7 @@ pub fn distance_transform(
 
 /// The column pass of Algorithm 1 for one row: `nearest` holds, per column, the smallest range
 /// of an obstacle in the rows above (∞ before any).
-#[inline]
+#[inline(always)]
 pub(crate) fn column_pass_row(rho: &[f32], obs: &[bool], nearest: &mut [f32], d_max: f32, d_a: &mut [f32]) {
     let n = rho.len().min(obs.len()).min(d_a.len()).min(nearest.len());
     let (rho, obs, nearest, d_a) = (&rho[..n], &obs[..n], &mut nearest[..n], &mut d_a[..n]);
@@ -698,6 +963,7 @@ impl DistanceScratch {
 /// Wherever the propagated distance has reached D_max and the columns ahead have D_a = D_max,
 /// the result is D_max and the state that follows is decided by the next column with
 /// D_a < D_max alone (it beats any propagated value ≥ D_max): such stretches are skipped.
+#[inline(always)]
 pub(crate) fn row_passes(rho: &[f32], d_a: &[f32], d: &mut [f32], step: f32, d_max: f32) {
     let cols = d.len().min(d_a.len()).min(rho.len());
     let (rho, d_a, d) = (&rho[..cols], &d_a[..cols], &mut d[..cols]);
@@ -717,6 +983,7 @@ pub(crate) fn row_passes(rho: &[f32], d_a: &[f32], d: &mut [f32], step: f32, d_m
 /// column where its own D_a < D_max exactly as the scalar pass does, so while every lane is
 /// there the block may jump to the next column where some lane has D_a < D_max, or not: the
 /// jump is only an optimisation, tried at columns where no lane has D_a < D_max.
+#[inline(always)]
 pub(crate) fn row_passes_block(
     rho: &[f32],
     d_a: &[f32],
@@ -758,6 +1025,7 @@ pub(crate) fn row_passes_block(
 
 /// Row l of the `BLOCK_ROWS × cols` block `rows` becomes lane l of `lanes` (`cols` entries),
 /// 4 × 4 tiles at a time.
+#[inline(always)]
 fn transpose_to_lanes(rows: &[f32], cols: usize, lanes: &mut [BlockLanes]) {
     let quads: &mut [f32x4] = bytemuck::cast_slice_mut(lanes);
     let tiled = cols / 4 * 4;
@@ -784,6 +1052,7 @@ fn transpose_to_lanes(rows: &[f32], cols: usize, lanes: &mut [BlockLanes]) {
 }
 
 /// The inverse of [`transpose_to_lanes`].
+#[inline(always)]
 fn transpose_from_lanes(lanes: &[BlockLanes], cols: usize, rows: &mut [f32]) {
     let quads: &[f32x4] = bytemuck::cast_slice(lanes);
     let tiled = cols / 4 * 4;
@@ -1005,6 +1274,7 @@ fn row_pass<const FORWARD: bool>(rho: &[f32], d_a: &[f32], d: &mut [f32], step: 
 }
 
 /// Traversable: a return, not an obstacle, and at least `inflation_m` from the nearest obstacle.
+#[inline(always)]
 pub fn traversable(ranges: &[f32], distance: &[f32], inflation_m: f32, out: &mut [bool]) {
     for ((o, &rho), &d) in out.iter_mut().zip(ranges).zip(distance) {
         // `&` rather than `&&`: no short-circuit branch, so the loop vectorises.
@@ -1043,8 +1313,9 @@ impl ReachLanes {
         let live = self.active & has_return;
         let jump = self.last_r.simd_ge(Lanes::ZERO) & (horizontal - self.last_r).abs().simd_gt(gap);
         let accept = live & !jump & trav;
-        // A jump ends the walk (unknown beyond), an obstacle ends it (known obstacle).
-        self.blocked |= live & !jump & !trav;
+        // A non-traversable pixel ends the walk as a known obstacle, also beyond a gap (the
+        // authors' order); a jump onto traversable ground ends it as unknown.
+        self.blocked |= live & !trav;
         self.active &= !live | accept;
         self.last_r = accept.select(horizontal, self.last_r);
         // Accepted pixels have a return: `horizontal` is a positive number there.
@@ -1064,20 +1335,24 @@ fn load_lanes_or<T: Copy>(values: &[T], start: usize, pad: T, map: impl Fn(T) ->
 
 /// Stage 6: the reachability scan S(φ). Each column is walked up from the bottom row (nearest
 /// ground) over pixels with a return. The walk stops at the first non-traversable pixel (a known
-/// obstacle ends the safe stretch) or when the horizontal range jumps by more than `gap_m`
-/// between successive returns (the unknown begins). `range_m` gets the largest horizontal range
-/// of the safe pixels walked, `obstacle` whether an obstacle ended the walk, and `last_row` the
-/// last safe row (`rows` if none).
+/// obstacle ends the safe stretch, even when its range lies more than `gap_m` beyond the last
+/// safe pixel) or at a traversable pixel whose horizontal range jumps by more than `gap_m` from
+/// the last safe pixel's (the unknown begins). `range_m` gets the largest horizontal range of the
+/// safe pixels walked, at least `min_range_m` (the blind zone around the robot counts as safe),
+/// `obstacle` whether an obstacle ended the walk, and `last_row` the last safe row (`rows` if
+/// none).
 ///
 /// All columns advance together one row at a time, as SIMD lanes with masks for the per-column
 /// decisions; a vector of columns drops out of the walk once none of its columns is walking.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 pub fn reachability(
     r: &[f32],
     ranges: &[f32],
     traversable: &[bool],
     cols: usize,
     gap_m: f32,
+    min_range_m: f32,
     scratch: &mut ReachScratch,
     range_m: &mut [f32],
     obstacle: &mut [bool],
@@ -1139,7 +1414,8 @@ pub fn reachability(
     for (v, lanes) in state.iter().enumerate() {
         let (range, blocked, last) = (lanes.range.to_array(), lanes.blocked.to_array(), lanes.last_row.to_array());
         for (i, c) in (v * LANES..cols.min(v * LANES + LANES)).enumerate() {
-            range_m[c] = range[i];
+            // The floor also applies to a column that accepted nothing (range 0).
+            range_m[c] = range[i].max(min_range_m);
             obstacle[c] = blocked[i].to_bits() != 0;
             // An integer-valued row index below 2²³ (or `rows`): exact.
             last_row[c] = small_to_u32(last[i]);
@@ -1175,15 +1451,6 @@ mod tests {
         assert_eq!(floor_small(3.5), 3.0);
         for i in [0u32, 1, 2, 103, 511, 1 << 20] {
             assert_eq!(small_to_u32(i as f32), i);
-        }
-    }
-
-    #[test]
-    fn floor_small_lanes_is_floor() {
-        for i in 0..10_000 {
-            let v: [f32; LANES] = std::array::from_fn(|l| (i * LANES + l) as f32 * 0.013_7);
-            let floored = floor_small_lanes(Lanes::new(v)).to_array();
-            assert_eq!(floored, v.map(f32::floor));
         }
     }
 
@@ -1297,11 +1564,46 @@ mod tests {
         }
     }
 
-    /// The one-instruction SSE forms keep the semantics of the selects they replace.
+    /// The clamps written as the x86 instructions they become keep the semantics the gradient
+    /// needs: NaN and ±0 give +0, a NaN run stays NaN.
     #[test]
     fn clamps_keep_their_semantics() {
         let inputs = [f32::NAN, -0.0, 0.0, -1.0, 1e-13, 2.5, f32::INFINITY, f32::NEG_INFINITY];
-        let positive = zero_unless_positive(Lanes::new(inputs)).to_array();
+        for v in inputs {
+            let expected = if v > 0.0 { v } else { 0.0 };
+            assert_eq!(zero_unless_positive(v).to_bits(), expected.to_bits(), "{v}");
+        }
+        for run in [f32::NAN, 0.0, 1e-13, 1e-12, 2.5, f32::INFINITY, 3.0e-10, 7.0] {
+            let clamped = clamp_run(run);
+            if run.is_nan() {
+                assert!(clamped.is_nan());
+            } else {
+                assert_eq!(clamped.to_bits(), run.max(1e-12).to_bits(), "{run}");
+            }
+        }
+        assert_eq!(min_ps(f32::NAN, 3.0), 3.0);
+        assert!(min_ps(3.0, f32::NAN).is_nan());
+        assert_eq!(max_ps(-0.0, 0.0).to_bits(), 0.0f32.to_bits());
+        let large = [4_194_303.5f32, 4_194_304.0, 0.999_999_9, 1.0, 0.0, 102.4, 7.5];
+        for v in large {
+            assert_eq!(floor_small(v), v.floor(), "{v}");
+        }
+    }
+
+    #[test]
+    fn floor_small_lanes_is_floor() {
+        for i in 0..10_000 {
+            let v: [f32; LANES] = std::array::from_fn(|l| (i * LANES + l) as f32 * 0.013_7);
+            let floored = floor_small_lanes(Lanes::new(v)).to_array();
+            assert_eq!(floored, v.map(f32::floor));
+        }
+    }
+
+    /// The one-instruction SSE forms keep the semantics of the selects they replace.
+    #[test]
+    fn lane_clamps_keep_their_semantics() {
+        let inputs = [f32::NAN, -0.0, 0.0, -1.0, 1e-13, 2.5, f32::INFINITY, f32::NEG_INFINITY];
+        let positive = zero_unless_positive_lanes(Lanes::new(inputs)).to_array();
         let expected_positive = inputs.map(|v| if v > 0.0 { v } else { 0.0 });
         assert_eq!(positive.map(f32::to_bits), expected_positive.map(f32::to_bits));
         let runs = [f32::NAN, 0.0, 1e-13, 1e-12, 2.5, f32::INFINITY, 3.0e-10, 7.0];
@@ -1371,22 +1673,23 @@ mod tests {
 
     #[test]
     fn short_obstacle_runs_are_removed_long_ones_kept() {
-        // One row at 2 m: a pixel spans 2π/16·2 ≈ 0.785 m, so use a wider ring for short runs.
         let cols = 256;
-        let ranges = vec![2.0f32; cols]; // 0.049 m per pixel
+        let ranges = vec![2.0f32; cols];
         let mut gradient = vec![0.0f32; cols];
         for c in (10..14).chain(100..120).chain((0..3).chain(cols - 3..cols)) {
             gradient[c] = 1.0;
         }
         let mut obstacle = vec![false; cols];
-        obstacles(&gradient, &ranges, cols, 0.3, 0.3, &mut obstacle);
-        // 4 px ≈ 0.2 m: removed; 20 px ≈ 0.98 m: kept; 6 px across the seam ≈ 0.29 m: removed.
+        obstacles(&gradient, &ranges, cols, 0.3, RunFilter { min_px: 5, min_arc_m: 0.0 }, &mut obstacle);
+        // Fewer than 5 px: removed; 20 px: kept; 6 px across the seam: kept.
         assert!(obstacle[10..14].iter().all(|&o| !o));
         assert!(obstacle[100..120].iter().all(|&o| o));
+        assert!(obstacle[..3].iter().chain(&obstacle[cols - 3..]).all(|&o| o));
+        // With 7 px: the seam run goes; with 4 px the 4-pixel run stays.
+        obstacles(&gradient, &ranges, cols, 0.3, RunFilter { min_px: 7, min_arc_m: 0.0 }, &mut obstacle);
         assert!(obstacle[..3].iter().chain(&obstacle[cols - 3..]).all(|&o| !o));
-        // 7 px across the seam ≈ 0.34 m: kept.
-        gradient[3] = 1.0;
-        obstacles(&gradient, &ranges, cols, 0.3, 0.3, &mut obstacle);
-        assert!(obstacle[..4].iter().chain(&obstacle[cols - 3..]).all(|&o| o));
+        assert!(obstacle[100..120].iter().all(|&o| o));
+        obstacles(&gradient, &ranges, cols, 0.3, RunFilter { min_px: 4, min_arc_m: 0.0 }, &mut obstacle);
+        assert!(obstacle[10..14].iter().all(|&o| o));
     }
 }

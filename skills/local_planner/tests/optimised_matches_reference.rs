@@ -11,7 +11,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use spomp_core::{DepthPanorama, PanoramaGeometry};
 use spomp_local_planner::synthetic::{Scene, add_noise};
-use spomp_local_planner::{TerrainAnalyzer, TerrainOutput, TerrainParams};
+use spomp_local_planner::{InstructionSet, TerrainAnalyzer, TerrainOutput, TerrainParams};
 
 /// Every buffer the reference computes, in the analyzer's layout.
 struct ReferenceOutput {
@@ -60,7 +60,7 @@ fn run_reference(depth: &DepthPanorama, p: &TerrainParams) -> ReferenceOutput {
     };
     let mut gradient_scratch = reference::GradientScratch::default();
     reference::gradients(&o.z, &o.r, &tables, window, &mut gradient_scratch, &mut o.gradient);
-    let (slope, run) = (p.slope_threshold as f32, p.min_obstacle_run_m as f32);
+    let (slope, run) = (p.slope_threshold as f32, (p.min_obstacle_run_px, p.min_obstacle_run_m as f32));
     reference::obstacles(&o.gradient, &o.ranges, cols, slope, run, &mut o.obstacle);
     let mut distance_scratch = reference::DistanceScratch::default();
     reference::distance_transform(
@@ -80,6 +80,7 @@ fn run_reference(depth: &DepthPanorama, p: &TerrainParams) -> ReferenceOutput {
         &o.traversable,
         cols,
         p.reach_gap_m as f32,
+        p.min_reach_range_m as f32,
         &mut reach_scratch,
         &mut o.reach_range,
         &mut o.reach_obstacle,
@@ -127,6 +128,16 @@ fn check(depth: &DepthPanorama, params: TerrainParams) {
     assert_same(analyzer.analyze_observed(depth, |_| {}).unwrap(), &reference);
     // Buffers reused across panoramas: a second run gives the same again.
     assert_same(analyzer.analyze(depth).unwrap(), &reference);
+    // Every instruction set this processor has (the baseline always).
+    let mut checked = 0;
+    for set in InstructionSet::ALL {
+        if analyzer.select_instruction_set(set) {
+            assert_same(analyzer.analyze(depth).unwrap(), &reference);
+            assert_same(analyzer.analyze_observed(depth, |_| {}).unwrap(), &reference);
+            checked += 1;
+        }
+    }
+    assert!(checked >= 1);
 }
 
 #[test]
@@ -179,5 +190,10 @@ proptest! {
         let mut analyzer = TerrainAnalyzer::new(g, params).unwrap();
         assert_same(analyzer.analyze(&depth).unwrap(), &reference);
         assert_same(analyzer.analyze_observed(&depth, |_| {}).unwrap(), &reference);
+        for set in InstructionSet::ALL {
+            if analyzer.select_instruction_set(set) {
+                assert_same(analyzer.analyze(&depth).unwrap(), &reference);
+            }
+        }
     }
 }

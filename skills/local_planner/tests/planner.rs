@@ -165,7 +165,9 @@ fn dwa_steers_around_an_obstacle_ahead() {
     let previous = Some(Point2::new(3.0, 1.5));
     let goal = select_local_goal(&region, Point2::new(8.0, 0.0), previous, &params, &mut rng).unwrap();
     assert!(goal.y > 0.8, "{goal:?}");
-    let path = drive(&region, goal, 60);
+    // With the 2 m reachability gap the known ground reaches past the box: the local goal lies
+    // beyond it, about 7 m away.
+    let path = drive(&region, goal, 100);
     for p in &path {
         // Never inside the box or within 0.2 m of it.
         let inside = p.x > 2.3 && p.x < 3.3 && p.y.abs() < 0.8;
@@ -173,7 +175,7 @@ fn dwa_steers_around_an_obstacle_ahead() {
         assert!(region.contains(p.position()), "left the safe region at {p:?}");
     }
     let end = path.last().unwrap().position();
-    assert!(end.distance(goal) < 0.6, "ended at {end:?}");
+    assert!(end.distance(goal) < 0.6, "ended at {end:?}, goal {goal:?}");
 }
 
 #[test]

@@ -42,10 +42,13 @@ fn flat_reach_limit(g: PanoramaGeometry, gap: f64) -> f64 {
 
 #[test]
 fn flat_plane_has_no_obstacles_and_reaches_the_gap_limit() {
-    let a = analyze(&Scene::flat(H), TerrainParams::default());
+    let params = TerrainParams::default();
+    let a = analyze(&Scene::flat(H), params.clone());
     let out = a.output();
     assert!(out.obstacle().iter().all(|&o| !o));
-    let limit = flat_reach_limit(geometry(), 0.5) as f32;
+    // With the 2 m gap of the defaults (decision 8) the flat ground is known out to ≈ 11 m.
+    let limit = flat_reach_limit(geometry(), params.reach_gap_m) as f32;
+    assert!(limit > 10.0, "{limit}");
     for (c, (&r, &o)) in out.reach_range_m().iter().zip(out.reach_obstacle()).enumerate() {
         assert!(!o, "column {c} claims an obstacle");
         assert!((r - limit).abs() < 1e-3 * limit, "column {c}: {r} vs {limit}");
@@ -65,7 +68,7 @@ fn wall_ends_reachability_in_its_columns_only() {
     let a = analyze(&scene, params.clone());
     let out = a.output();
     let g = geometry();
-    let limit = flat_reach_limit(g, 0.5) as f32;
+    let limit = flat_reach_limit(g, params.reach_gap_m) as f32;
     for c in 0..g.cols {
         let az = -g.azimuth_of_col(c).rem_euclid(std::f64::consts::TAU);
         let az = spomp_core::normalize_angle(-az);
@@ -185,8 +188,9 @@ fn wrong_geometry_is_an_error() {
 
 #[test]
 fn gradient_of_a_ramp_matches_the_noise_corrected_slope() {
-    // On a ramp of grade m along x, straight ahead: z differences are m times the r differences,
-    // the azimuth window is symmetric (no azimuth term), so |∇| = (m·Δr − η_z)/(Δr + η_xy).
+    // On a ramp of grade m along x, straight ahead: z differences are m times the r differences
+    // and the azimuth window is symmetric (no height difference across it, so ∇_a = 0), so
+    // |∇| = ∇_e = (m·Δr − η·|sin θ|)/(Δr + η_xy).
     let grade = 0.4;
     let params = TerrainParams::default();
     let scene = Scene::flat(H).with(Primitive::Ramp { start_x_m: 0.0, z_m: -H, grade });

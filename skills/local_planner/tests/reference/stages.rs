@@ -1,5 +1,7 @@
-//! The terrain stages as first written: straightforward scalar loops, kept verbatim as the reference
-//! that the optimised `spomp_local_planner::stages` must match bit for bit.
+//! The terrain stages as straightforward scalar loops: the readable specification that the
+//! optimised `spomp_local_planner::stages` must match bit for bit. First written before the
+//! optimisations; the rules decided for issue 20 (the local planner README's table) are written
+//! here the plain way too.
 
 #![allow(dead_code, clippy::all)]
 
@@ -18,9 +20,10 @@ pub struct Tables {
     pub col_cos: Vec<f32>,
     /// sin φ per column.
     pub col_sin: Vec<f32>,
-    /// Elevation gradient window w_e per row (0: no row above is far enough, no elevation term).
+    /// Elevation gradient window w_e per row: below the horizon the flat-ground rule, at and
+    /// above it 1; 0 for row 0 (no elevation term).
     pub elevation_window: Vec<u32>,
-    /// η_z = η·|sin θ| per row, metres.
+    /// |η_z| = η·|sin θ| per row, metres.
     pub noise_z_m: Vec<f32>,
     /// η_xy = η·cos θ per row, metres.
     pub noise_xy_m: Vec<f32>,
@@ -42,6 +45,10 @@ impl Tables {
         let cot: Vec<f64> = elevations.iter().map(|t| t.cos() / t.sin()).collect();
         let elevation_window = (0..rows)
             .map(|row| {
+                // At and above the horizon: the next row up (row 0 has none).
+                if elevations[row] >= 0.0 || elevations[row].is_nan() {
+                    return row.min(1) as u32;
+                }
                 // Smallest δ whose flat-ground ranges h_s/tan θ differ by at least W. Without
                 // one inside the field of view, use the top row, the farthest available.
                 let found = (1..=row).find(|&delta| {
@@ -249,8 +256,13 @@ pub fn gradient_row(
                 for c in 0..cols {
                     // sqrt(∇_a² + ∇_e²) with one division: sqrt((a·n_e)² + (e·n_a)²) / (n_a·n_e).
                     let (rise_a, run_a) = positive_part(rise_a[c] - noise_z, run_a[c]);
-                    let rise_e = (z_row[c] - z_up[c]).abs() - noise_z;
-                    let (rise_e, run_e) = positive_part(rise_e, (r_row[c] - r_up[c]).abs() + noise_xy);
+                    // No return one window up: no elevation term (rise 0 over any run, here 1).
+                    let (rise_e, run_e) = if r_up[c].is_nan() {
+                        (0.0, 1.0)
+                    } else {
+                        let rise_e = (z_row[c] - z_up[c]).abs() - noise_z;
+                        positive_part(rise_e, (r_row[c] - r_up[c]).abs() + noise_xy)
+                    };
                     let (ta, te) = (rise_a * run_e, rise_e * run_a);
                     let g = (ta * ta + te * te).sqrt() / (run_a * run_e);
                     out[c] = if g >= 0.0 { g } else { 0.0 };
@@ -292,49 +304,47 @@ fn positive_part(rise: f32, run: f32) -> (f32, f32) {
     (if rise > 0.0 { rise } else { 0.0 }, if run >= 0.0 { run.max(1e-12) } else { run })
 }
 
-/// Stage 4: obstacle = gradient above `slope_threshold`; then, along each row with wrap, runs of
-/// obstacle pixels whose arc length Σ(2π/A)·ρ is below `min_run_m` are cleared as noise.
+/// Stage 4: obstacle = gradient above `slope_threshold` (pixels with a return only); then,
+/// along each row with wrap, runs of fewer than `min_run_px` obstacle pixels, or (when
+/// `min_run_m` > 0) of arc length (Σρ)·2π/A below `min_run_m`, are cleared.
 pub fn obstacles(
     gradient: &[f32],
     ranges: &[f32],
     cols: usize,
     slope_threshold: f32,
-    min_run_m: f32,
+    (min_run_px, min_run_m): (u32, f32),
     obstacle: &mut [bool],
 ) {
     if cols == 0 {
         return;
     }
+    let min_run = min_run_px as usize;
     let step = std::f32::consts::TAU / cols as f32;
     let rows = gradient.chunks_exact(cols).zip(ranges.chunks_exact(cols));
     for ((grad, rho), obs) in rows.zip(obstacle.chunks_exact_mut(cols)) {
-        let mut any = false;
-        for ((o, &g), &rho) in obs.iter_mut().zip(grad).zip(rho) {
-            *o = (g > slope_threshold) & (rho > 0.0);
-            any |= *o;
+        for c in 0..cols {
+            obs[c] = grad[c] > slope_threshold && rho[c] > 0.0;
         }
-        if !any {
-            continue;
-        }
-        // A row that is all obstacle is one closed ring, at least as long as any run: kept.
+        // A row that is all obstacle is one closed ring: kept.
         let Some(first_free) = obs.iter().position(|&o| !o) else { continue };
-        let last_free = obs.iter().rposition(|&o| !o).unwrap_or(first_free);
-        // The run across the seam: (last_free, cols) then [0, first_free).
-        let seam: f32 = rho[last_free + 1..].iter().chain(&rho[..first_free]).sum::<f32>() * step;
-        if seam > 0.0 && seam < min_run_m {
-            obs[last_free + 1..].iter_mut().for_each(|o| *o = false);
-            obs[..first_free].iter_mut().for_each(|o| *o = false);
-        }
-        let mut c = first_free;
-        while c < last_free {
-            let Some(offset) = obs[c..last_free].iter().position(|&o| o) else { break };
-            let start = c + offset;
-            let end = obs[start..last_free].iter().position(|&o| !o).map_or(last_free, |o| start + o);
-            let length: f32 = rho[start..end].iter().sum::<f32>() * step;
-            if length < min_run_m {
-                obs[start..end].iter_mut().for_each(|o| *o = false);
+        // Walk the ring once from a free pixel, measuring each run of obstacle pixels.
+        let mut run_start = None;
+        for k in 1..=cols {
+            let c = (first_free + k) % cols;
+            match (obs[c], run_start) {
+                (true, None) => run_start = Some(k),
+                (false, Some(start)) => {
+                    // Summed in walk order: the same float sum as the optimised stage's.
+                    let arc = (start..k).map(|j| rho[(first_free + j) % cols]).sum::<f32>() * step;
+                    if k - start < min_run || (min_run_m > 0.0 && arc < min_run_m) {
+                        for j in start..k {
+                            obs[(first_free + j) % cols] = false;
+                        }
+                    }
+                    run_start = None;
+                }
+                _ => {}
             }
-            c = end;
         }
     }
 }
@@ -481,9 +491,10 @@ pub struct ReachScratch {
 /// Stage 6: the reachability scan S(φ). Each column is walked up from the bottom row (nearest
 /// ground) over pixels with a return. The walk stops at the first non-traversable pixel (a known
 /// obstacle ends the safe stretch) or when the horizontal range jumps by more than `gap_m`
-/// between successive returns (the unknown begins). `range_m` gets the largest horizontal range
-/// of the safe pixels walked, `obstacle` whether an obstacle ended the walk, and `last_row` the
-/// last safe row (`rows` if none).
+/// between successive returns onto traversable ground (the unknown begins); a non-traversable
+/// pixel beyond a gap is still a known obstacle. `range_m` gets the largest horizontal range of
+/// the safe pixels walked, at least `min_range_m`, `obstacle` whether an obstacle ended the walk,
+/// and `last_row` the last safe row (`rows` if none).
 #[allow(clippy::too_many_arguments)]
 pub fn reachability(
     r: &[f32],
@@ -491,6 +502,7 @@ pub fn reachability(
     traversable: &[bool],
     cols: usize,
     gap_m: f32,
+    min_range_m: f32,
     scratch: &mut ReachScratch,
     range_m: &mut [f32],
     obstacle: &mut [bool],
@@ -523,10 +535,11 @@ pub fn reachability(
             let live = is_active[c] & (rho_row[c] > 0.0);
             let horizontal = r_row[c];
             let jump = (last_r[c] >= 0.0) & ((horizontal - last_r[c]).abs() > gap_m);
-            let blocked = live & !jump & !trav_row[c];
+            // A non-traversable pixel ends the walk as a known obstacle, also beyond a gap; a
+            // jump onto traversable ground ends it as unknown.
+            let blocked = live & !trav_row[c];
             let accept = live & !jump & trav_row[c];
-            // A jump ends the walk (unknown beyond), an obstacle ends it (known obstacle).
-            is_active[c] &= !live | (!jump & trav_row[c]);
+            is_active[c] &= !live | accept;
             obstacle[c] |= blocked;
             last_r[c] = if accept { horizontal } else { last_r[c] };
             range_m[c] = if accept { range_m[c].max(horizontal) } else { range_m[c] };
@@ -534,5 +547,8 @@ pub fn reachability(
             still += is_active[c] as usize;
         }
         active = still;
+    }
+    for range in &mut range_m[..cols] {
+        *range = range.max(min_range_m);
     }
 }
