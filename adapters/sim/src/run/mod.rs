@@ -11,6 +11,10 @@
 //!    and bytes its range and bandwidth allow (every `sync_period_s`);
 //! 4. each robot whose tick is due ticks its tree; the nodes' commands are read back.
 //!
+//! Steps 2 (for the UGVs' own sensing and perception) and 4 touch one robot at a time: with
+//! [`SimOptions::parallel_robots`] they run on rayon's threads, and observers hear of them after,
+//! in robot order — the same run, summary and log as in order on one thread.
+//!
 //! Everything a run produces goes to a [`SimObserver`] (the CLI records it to MCAP) and into
 //! the [`RunSummary`].
 
