@@ -168,9 +168,10 @@ impl PanoramaRenderer {
             far_top_tan: top_dz / self.max_range_m,
             yaw_sin_cos: pose.yaw.sin_cos(),
         };
-        // Columns are marched a block at a time into a column-major scratch (each ray's rows
-        // contiguous), then copied out a row at a time: writing a column straight into the
-        // row-major image touches one cache line per row, all in the same cache set.
+        // Columns are marched a block at a time into a small scratch (a block's rows of
+        // `COLUMN_BLOCK` pixels, in L1), then each row piece is copied whole into the image:
+        // writing a column straight into the row-major image touches one cache line per row,
+        // all in the same cache set.
         let rows = g.rows;
         let cols = g.cols;
         let mut block_range = vec![0.0f32; rows * COLUMN_BLOCK];
@@ -178,28 +179,25 @@ impl PanoramaRenderer {
         let mut col0 = 0;
         while col0 < cols {
             let width = COLUMN_BLOCK.min(cols - col0);
-            let columns = block_range.chunks_exact_mut(rows).zip(block_class.chunks_exact_mut(rows));
-            for (k, (range, class)) in columns.take(width).enumerate() {
-                range.fill(0.0);
-                class.fill(UNKNOWN_CLASS);
-                self.march_column(world, &ray, col0 + k, range, class);
+            block_range.fill(0.0);
+            block_class.fill(UNKNOWN_CLASS);
+            for k in 0..width {
+                let mut column = BlockColumn { range: &mut block_range, class: &mut block_class, k };
+                self.march_column(world, &ray, col0 + k, &mut column);
             }
             let image_rows = out.range_m.chunks_exact_mut(cols).zip(out_sem.class.chunks_exact_mut(cols));
-            for (row, (range_row, class_row)) in image_rows.enumerate() {
-                let range_out = &mut range_row[col0..col0 + width];
-                let class_out = &mut class_row[col0..col0 + width];
-                for k in 0..width {
-                    range_out[k] = block_range[k * rows + row];
-                    class_out[k] = block_class[k * rows + row];
-                }
+            let block_rows = block_range.chunks_exact(COLUMN_BLOCK).zip(block_class.chunks_exact(COLUMN_BLOCK));
+            for ((range_row, class_row), (block_range_row, block_class_row)) in image_rows.zip(block_rows) {
+                range_row[col0..col0 + width].copy_from_slice(&block_range_row[..width]);
+                class_row[col0..col0 + width].copy_from_slice(&block_class_row[..width]);
             }
             col0 += width;
         }
     }
 
-    /// Marches column `col`'s ray across the height field from `ray`'s start, filling the
-    /// column's `range` and `class` (one entry per row, cleared by the caller).
-    fn march_column(&self, world: &World, ray: &RayStart, col: usize, range: &mut [f32], class: &mut [u8]) {
+    /// Marches column `col`'s ray across the height field from `ray`'s start, filling its
+    /// column of the block scratch (cleared by the caller).
+    fn march_column(&self, world: &World, ray: &RayStart, col: usize, column: &mut BlockColumn<'_>) {
         let spec = world.spec();
         let res = ray.res;
         let (w, h) = (spec.width as i64, spec.height as i64);
@@ -210,7 +208,7 @@ impl PanoramaRenderer {
         let (z_s, top_dz, far_top_tan) = (ray.z_s, ray.top_dz, ray.far_top_tan);
         let (sy, cy) = ray.yaw_sin_cos;
         let Some(&(ca, sa)) = self.col_dir.get(col) else { return };
-        let rows = range.len().min(class.len()).min(self.tan_row.len());
+        let rows = column.rows().min(self.tan_row.len());
         if rows == 0 {
             return;
         }
@@ -252,8 +250,7 @@ impl PanoramaRenderer {
                     row -= 1;
                     let r = t_in * self.sec_row[row];
                     if r <= max_range {
-                        range[row] = r;
-                        class[row] = label;
+                        column.set(row, r, label);
                     }
                 }
                 next_tan = if row > 0 { self.tan_row[row - 1] } else { f32::INFINITY };
@@ -266,8 +263,7 @@ impl PanoramaRenderer {
                     row -= 1;
                     let r = dz * self.csc_row[row];
                     if r <= max_range {
-                        range[row] = r;
-                        class[row] = label;
+                        column.set(row, r, label);
                     }
                 }
                 next_tan = if row > 0 { self.tan_row[row - 1] } else { f32::INFINITY };
@@ -302,6 +298,29 @@ impl PanoramaRenderer {
 /// Columns rendered together before being copied into the image: 16 ranges are one 64-byte
 /// cache line of an image row.
 const COLUMN_BLOCK: usize = 16;
+
+/// Column `k` of a block scratch: row-major, `COLUMN_BLOCK` pixels a row.
+struct BlockColumn<'a> {
+    range: &'a mut [f32],
+    class: &'a mut [u8],
+    k: usize,
+}
+
+impl BlockColumn<'_> {
+    /// Rows the scratch holds.
+    fn rows(&self) -> usize {
+        self.range.len().min(self.class.len()) / COLUMN_BLOCK
+    }
+
+    #[inline]
+    fn set(&mut self, row: usize, range: f32, class: u8) {
+        let i = row * COLUMN_BLOCK + self.k;
+        if let (Some(r), Some(c)) = (self.range.get_mut(i), self.class.get_mut(i)) {
+            *r = range;
+            *c = class;
+        }
+    }
+}
 
 /// Where every ray of one render starts, and what bounds how far it must go.
 struct RayStart {
