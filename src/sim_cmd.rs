@@ -249,6 +249,7 @@ pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         bar
     });
     let seeds: Vec<u64> = (0..u64::from(trials)).map(|k| first_seed + k).collect();
+    let parallel_robots = seeds.len() < rayon::current_num_threads();
     let results: Vec<Option<Result<RunSummary>>> = seeds
         .par_iter()
         .map(|&seed| {
@@ -261,7 +262,8 @@ pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
                     .unwrap_or_else(|_| ProgressStyle::default_bar()),
             );
             bar.set_prefix(seed.to_string());
-            let r = run_trial(Loaded { mission: &loaded, registry }, seed, args, &faults, &out_dir, &bar, &interrupted);
+            let inputs = Loaded { mission: &loaded, registry, parallel_robots };
+            let r = run_trial(inputs, seed, args, &faults, &out_dir, &bar, &interrupted);
             bar.finish_and_clear();
             progress.remove(&bar);
             if let Some(o) = &overall {
@@ -393,6 +395,9 @@ fn cli_faults(args: &SimArgs) -> Faults {
 struct Loaded<'a> {
     mission: &'a LoadedMission,
     registry: &'a NodeRegistry<RobotRuntime>,
+    /// Step each trial's robots in parallel: fewer trials than threads, so threads would idle
+    /// otherwise (with more, a waiting step could pick up another whole trial meanwhile).
+    parallel_robots: bool,
 }
 
 fn run_trial(
@@ -404,7 +409,7 @@ fn run_trial(
     bar: &ProgressBar,
     interrupted: &AtomicBool,
 ) -> Result<RunSummary> {
-    let Loaded { mission: loaded, registry } = inputs;
+    let Loaded { mission: loaded, registry, parallel_robots } = inputs;
     let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
     let trial_dir = output_path(out_dir, &format!("trial-{seed}"))?;
     // Serving before the world is built, so a viewer can connect while the run is set up.
@@ -430,6 +435,7 @@ fn run_trial(
         time_limit_s: args.time_limit_s,
         faults: faults.clone(),
         skill_latency: args.skill_latency,
+        parallel_robots,
         ..SimOptions::default()
     };
     let run_info = if args.replayable {

@@ -5,6 +5,7 @@
 use spomp_behaviors::mission::MissionFile;
 use spomp_behaviors::mission::schema::LocalizationMode;
 use spomp_core::{AerialMap, ClassTable, GridSpec, Pose2, RobotId, RobotKind};
+use spomp_localization::LocalizationParams;
 use spomp_mapping::{CompressionParams, GoalDetectionParams, PngLevel};
 use spomp_teamstate::TeamStateParams;
 
@@ -118,7 +119,12 @@ impl RobotSetup {
             }
             (RobotKind::Ugv, l) => (
                 LocalizationSetup::CrossView {
-                    params: Box::default(),
+                    params: Box::new(LocalizationParams {
+                        kld_sampling: l
+                            .and_then(|l| l.kld_sampling)
+                            .unwrap_or_else(|| LocalizationParams::default().kld_sampling),
+                        ..LocalizationParams::default()
+                    }),
                     prior_sigma_m: l.map(|l| l.prior_sigma_m).unwrap_or(2.0),
                     prior_sigma_rad: l.map(|l| l.prior_sigma_deg).unwrap_or(5.0).to_radians(),
                     schedule: UpdateSchedule::default(),
@@ -168,5 +174,51 @@ pub fn team_params(mission: &MissionFile) -> TeamStateParams {
         claim_lease_s: goals.and_then(|g| g.claim_lease_s).unwrap_or(defaults.claim_lease_s),
         scan_min_spacing_m: 0.0,
         ..defaults
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
+
+    use super::*;
+    use spomp_core::Point2;
+
+    fn mission_with_localization(localization: &str) -> MissionFile {
+        let text = format!(
+            "mission: kld\n\
+             team:\n  - {{ id: ugv1, kind: ugv, role: idle, priority: 1, start: {{ x_m: 5, y_m: 5 }}, localization: {localization} }}\n\
+             roles:\n  idle: {{ tree: {{ wait: {{ duration_s: 10 }} }} }}\n\
+             complete_when: time_limit\ntime_limit_s: 10\n"
+        );
+        let loaded = spomp_behaviors::mission::load_mission_str(
+            &text,
+            std::path::Path::new("kld.yaml"),
+            &crate::registry(),
+            &Default::default(),
+        );
+        assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
+        loaded.mission.unwrap()
+    }
+
+    fn kld_of(mission: &MissionFile) -> bool {
+        let area = OperatingArea {
+            classes: ClassTable::default_table(),
+            grid: GridSpec::new(Point2::new(0.0, 0.0), 0.5, 40, 40),
+            prior_map: None,
+        };
+        let setup = RobotSetup::from_mission(mission, "ugv1", &area, 1).unwrap();
+        match setup.config.localization {
+            LocalizationSetup::CrossView { params, .. } => params.kld_sampling,
+            LocalizationSetup::External => panic!("a cross-view robot"),
+        }
+    }
+
+    #[test]
+    fn kld_sampling_follows_the_mission_else_the_localizer_default() {
+        assert!(kld_of(&mission_with_localization("{ mode: cross_view, kld_sampling: true }")));
+        assert!(!kld_of(&mission_with_localization("{ mode: cross_view, kld_sampling: false }")));
+        let default = LocalizationParams::default().kld_sampling;
+        assert_eq!(kld_of(&mission_with_localization("{ mode: cross_view }")), default);
     }
 }

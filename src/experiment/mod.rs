@@ -318,6 +318,8 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
     );
     let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build().context("starting the trial threads")?;
+    // Fewer trials than threads: each trial steps its robots in parallel too (same results).
+    let parallel_robots = pending.len() < jobs;
     let start = Instant::now();
     let failures: Mutex<Vec<String>> = Mutex::new(Vec::new());
     let written = std::sync::atomic::AtomicUsize::new(0);
@@ -327,7 +329,7 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
                 return;
             }
             let configuration = &loaded.configurations[t.configuration];
-            let outcome = run_trial(t, configuration, &hashes[t.index], registry, &interrupted);
+            let outcome = run_trial(t, configuration, &hashes[t.index], registry, parallel_robots, &interrupted);
             match outcome {
                 Ok(Some(row)) => {
                     let appended = sink
@@ -406,13 +408,14 @@ fn run_trial(
     configuration: &ResolvedConfiguration,
     hash: &str,
     registry: &NodeRegistry<RobotRuntime>,
+    parallel_robots: bool,
     interrupted: &AtomicBool,
 ) -> Result<Option<TrialRow>> {
     let loaded = &configuration.loaded;
     let Some(mission) = loaded.mission.as_ref() else { bail!("the mission did not load") };
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), trial.seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
-    let options = SimOptions { seed: trial.seed, ..SimOptions::default() };
+    let options = SimOptions { seed: trial.seed, parallel_robots, ..SimOptions::default() };
     let sim = Simulation::new(loaded, registry, Arc::new(world), options)
         .with_context(|| format!("setting up `{}`", mission.mission))?;
     let mut bytes = ByteCounter::default();

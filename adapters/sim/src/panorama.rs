@@ -50,7 +50,7 @@ impl SensorParams {
 }
 
 /// Renders panoramas; holds the per-row and per-column trigonometry so a render allocates
-/// nothing.
+/// only a small scratch (16 columns).
 #[derive(Clone, Debug)]
 pub struct PanoramaRenderer {
     geometry: PanoramaGeometry,
@@ -115,7 +115,7 @@ impl PanoramaRenderer {
     }
 
     /// Renders from a robot at map-frame `pose` standing on the ground of its cell.
-    /// Buffers of another geometry are resized (the only case that allocates).
+    /// Buffers of another geometry are resized.
     pub fn render(&self, world: &World, pose: Pose2, out: &mut DepthPanorama, out_sem: &mut SemanticPanorama) {
         let base = world.elevation_at(pose.position()).unwrap_or(0.0);
         self.render_from(world, pose, base, out, out_sem);
@@ -140,115 +140,206 @@ impl PanoramaRenderer {
             out_sem.geometry = g;
             out_sem.class.resize(g.len(), UNKNOWN_CLASS);
         }
-        out.range_m.fill(0.0);
-        out_sem.class.fill(UNKNOWN_CLASS);
+        let blank = |out: &mut DepthPanorama, out_sem: &mut SemanticPanorama| {
+            out.range_m.fill(0.0);
+            out_sem.class.fill(UNKNOWN_CLASS);
+        };
         if !(pose.x.is_finite() && pose.y.is_finite() && pose.yaw.is_finite() && base_m.is_finite()) {
-            return;
+            return blank(out, out_sem);
         }
         let spec = world.spec();
         let res = spec.resolution_m;
         let gx = (pose.x - spec.origin.x) / res;
         let gy = (pose.y - spec.origin.y) / res;
-        let (w, h) = (spec.width as i64, spec.height as i64);
         let (ci0, cj0) = (gx.floor() as i64, gy.floor() as i64);
-        if ci0 < 0 || cj0 < 0 || ci0 >= w || cj0 >= h {
-            return;
+        if ci0 < 0 || cj0 < 0 || ci0 >= spec.width as i64 || cj0 >= spec.height as i64 {
+            return blank(out, out_sem);
         }
         let z_s = base_m + self.sensor_height_m as f32;
         let top_dz = world.max_elevation_m() - z_s;
-        let far_top_tan = top_dz / self.max_range_m;
-        let width = spec.width as usize;
-        let (sy, cy) = pose.yaw.sin_cos();
-        let elev = &world.map().elevation;
-        let class = &world.map().class;
+        let ray = RayStart {
+            gx,
+            gy,
+            ci0,
+            cj0,
+            res,
+            z_s,
+            top_dz,
+            far_top_tan: top_dz / self.max_range_m,
+            yaw_sin_cos: pose.yaw.sin_cos(),
+        };
+        // Columns are marched a block at a time into a small scratch (a block's rows of
+        // `COLUMN_BLOCK` pixels, in L1), then each row piece is copied whole into the image:
+        // writing a column straight into the row-major image touches one cache line per row,
+        // all in the same cache set.
+        let rows = g.rows;
         let cols = g.cols;
-        let max_range = self.max_range_m;
-
-        for (col, &(ca, sa)) in self.col_dir.iter().enumerate() {
-            // World direction of this column's ray.
-            let dx = cy * ca - sy * sa;
-            let dy = sy * ca + cy * sa;
-            let (mut ci, mut cj) = (ci0, cj0);
-            let step_i: i64 = if dx > 0.0 { 1 } else { -1 };
-            let step_j: i64 = if dy > 0.0 { 1 } else { -1 };
-            // Horizontal distance (metres) to the next vertical / horizontal cell boundary.
-            let mut t_next_i = if dx.abs() < 1e-12 {
-                f32::INFINITY
-            } else {
-                let edge = if dx > 0.0 { ci as f64 + 1.0 } else { ci as f64 };
-                ((edge - gx) / dx * res) as f32
-            };
-            let mut t_next_j = if dy.abs() < 1e-12 {
-                f32::INFINITY
-            } else {
-                let edge = if dy > 0.0 { cj as f64 + 1.0 } else { cj as f64 };
-                ((edge - gy) / dy * res) as f32
-            };
-            let dt_i = if dx.abs() < 1e-12 { f32::INFINITY } else { (res / dx.abs()) as f32 };
-            let dt_j = if dy.abs() < 1e-12 { f32::INFINITY } else { (res / dy.abs()) as f32 };
-
-            // Lowest row not yet hit (rows grow downward; we fill from the bottom up) and the
-            // tangent of the row above it. Tests are `tan · t <= Δz` (t > 0): no division.
-            let mut row = g.rows;
-            let mut next_tan = self.tan_row[row - 1];
-            let mut t_in = 0.0f32;
-            let mut idx = cj as usize * width + ci as usize;
-            loop {
-                let dz = elev[idx] - z_s;
-                let t_out = t_next_i.min(t_next_j);
-                // The cell's vertical face where the ray enters it.
-                if t_in > 0.0 && next_tan * t_in <= dz {
-                    let label = class[idx];
-                    while row > 0 && self.tan_row[row - 1] * t_in <= dz {
-                        row -= 1;
-                        let r = t_in * self.sec_row[row];
-                        if r <= max_range {
-                            out.range_m[row * cols + col] = r;
-                            out_sem.class[row * cols + col] = label;
-                        }
-                    }
-                    next_tan = if row > 0 { self.tan_row[row - 1] } else { f32::INFINITY };
-                }
-                // Its top, seen from above only (a sensor exactly on a cell edge may leave
-                // its first cell at once: nothing to see there).
-                if dz < 0.0 && t_out > 0.0 && next_tan * t_out <= dz {
-                    let label = class[idx];
-                    while row > 0 && self.tan_row[row - 1] * t_out <= dz {
-                        row -= 1;
-                        let r = dz * self.csc_row[row];
-                        if r <= max_range {
-                            out.range_m[row * cols + col] = r;
-                            out_sem.class[row * cols + col] = label;
-                        }
-                    }
-                    next_tan = if row > 0 { self.tan_row[row - 1] } else { f32::INFINITY };
-                }
-                // Done when every row is hit, out of range, or nothing beyond can rise into
-                // view: the steepest view of anything further is the tallest cell's face right
-                // behind this one if it stands above the sensor, else its top at the end of
-                // the range.
-                if row == 0 || t_out > max_range {
-                    break;
-                }
-                if t_out > 0.0 && if top_dz > 0.0 { top_dz < next_tan * t_out } else { far_top_tan < next_tan } {
-                    break;
-                }
-                if t_next_i < t_next_j {
-                    ci += step_i;
-                    idx = idx.wrapping_add_signed(step_i as isize);
-                    t_next_i += dt_i;
-                } else {
-                    cj += step_j;
-                    idx = idx.wrapping_add_signed(if step_j > 0 { width as isize } else { -(width as isize) });
-                    t_next_j += dt_j;
-                }
-                if ci < 0 || cj < 0 || ci >= w || cj >= h {
-                    break;
-                }
-                t_in = t_out;
+        let mut block_range = vec![0.0f32; rows * COLUMN_BLOCK];
+        let mut block_class = vec![UNKNOWN_CLASS; rows * COLUMN_BLOCK];
+        let mut col0 = 0;
+        while col0 < cols {
+            let width = COLUMN_BLOCK.min(cols - col0);
+            block_range.fill(0.0);
+            block_class.fill(UNKNOWN_CLASS);
+            for k in 0..width {
+                let mut column = BlockColumn { range: &mut block_range, class: &mut block_class, k };
+                self.march_column(world, &ray, col0 + k, &mut column);
             }
+            let image_rows = out.range_m.chunks_exact_mut(cols).zip(out_sem.class.chunks_exact_mut(cols));
+            let block_rows = block_range.chunks_exact(COLUMN_BLOCK).zip(block_class.chunks_exact(COLUMN_BLOCK));
+            for ((range_row, class_row), (block_range_row, block_class_row)) in image_rows.zip(block_rows) {
+                range_row[col0..col0 + width].copy_from_slice(&block_range_row[..width]);
+                class_row[col0..col0 + width].copy_from_slice(&block_class_row[..width]);
+            }
+            col0 += width;
         }
     }
+
+    /// Marches column `col`'s ray across the height field from `ray`'s start, filling its
+    /// column of the block scratch (cleared by the caller).
+    fn march_column(&self, world: &World, ray: &RayStart, col: usize, column: &mut BlockColumn<'_>) {
+        let spec = world.spec();
+        let res = ray.res;
+        let (w, h) = (spec.width as i64, spec.height as i64);
+        let width = spec.width as usize;
+        let elev = &world.map().elevation;
+        let labels = &world.map().class;
+        let max_range = self.max_range_m;
+        let (z_s, top_dz, far_top_tan) = (ray.z_s, ray.top_dz, ray.far_top_tan);
+        let (sy, cy) = ray.yaw_sin_cos;
+        let Some(&(ca, sa)) = self.col_dir.get(col) else { return };
+        let rows = column.rows().min(self.tan_row.len());
+        if rows == 0 {
+            return;
+        }
+        // World direction of this column's ray.
+        let dx = cy * ca - sy * sa;
+        let dy = sy * ca + cy * sa;
+        let (mut ci, mut cj) = (ray.ci0, ray.cj0);
+        let step_i: i64 = if dx > 0.0 { 1 } else { -1 };
+        let step_j: i64 = if dy > 0.0 { 1 } else { -1 };
+        // Horizontal distance (metres) to the next vertical / horizontal cell boundary.
+        let mut t_next_i = if dx.abs() < 1e-12 {
+            f32::INFINITY
+        } else {
+            let edge = if dx > 0.0 { ci as f64 + 1.0 } else { ci as f64 };
+            ((edge - ray.gx) / dx * res) as f32
+        };
+        let mut t_next_j = if dy.abs() < 1e-12 {
+            f32::INFINITY
+        } else {
+            let edge = if dy > 0.0 { cj as f64 + 1.0 } else { cj as f64 };
+            ((edge - ray.gy) / dy * res) as f32
+        };
+        let dt_i = if dx.abs() < 1e-12 { f32::INFINITY } else { (res / dx.abs()) as f32 };
+        let dt_j = if dy.abs() < 1e-12 { f32::INFINITY } else { (res / dy.abs()) as f32 };
+
+        // Lowest row not yet hit (rows grow downward; we fill from the bottom up) and the
+        // tangent of the row above it. Tests are `tan · t <= Δz` (t > 0): no division.
+        let mut row = rows;
+        let mut next_tan = self.tan_row[row - 1];
+        let mut t_in = 0.0f32;
+        let mut idx = cj as usize * width + ci as usize;
+        loop {
+            let dz = elev[idx] - z_s;
+            let t_out = t_next_i.min(t_next_j);
+            // The cell's vertical face where the ray enters it.
+            if t_in > 0.0 && next_tan * t_in <= dz {
+                let label = labels[idx];
+                while row > 0 && self.tan_row[row - 1] * t_in <= dz {
+                    row -= 1;
+                    let r = t_in * self.sec_row[row];
+                    if r <= max_range {
+                        column.set(row, r, label);
+                    }
+                }
+                next_tan = if row > 0 { self.tan_row[row - 1] } else { f32::INFINITY };
+            }
+            // Its top, seen from above only (a sensor exactly on a cell edge may leave
+            // its first cell at once: nothing to see there).
+            if dz < 0.0 && t_out > 0.0 && next_tan * t_out <= dz {
+                let label = labels[idx];
+                while row > 0 && self.tan_row[row - 1] * t_out <= dz {
+                    row -= 1;
+                    let r = dz * self.csc_row[row];
+                    if r <= max_range {
+                        column.set(row, r, label);
+                    }
+                }
+                next_tan = if row > 0 { self.tan_row[row - 1] } else { f32::INFINITY };
+            }
+            // Done when every row is hit, out of range, or nothing beyond can rise into
+            // view: the steepest view of anything further is the tallest cell's face right
+            // behind this one if it stands above the sensor, else its top at the end of
+            // the range.
+            if row == 0 || t_out > max_range {
+                break;
+            }
+            if t_out > 0.0 && if top_dz > 0.0 { top_dz < next_tan * t_out } else { far_top_tan < next_tan } {
+                break;
+            }
+            if t_next_i < t_next_j {
+                ci += step_i;
+                idx = idx.wrapping_add_signed(step_i as isize);
+                t_next_i += dt_i;
+            } else {
+                cj += step_j;
+                idx = idx.wrapping_add_signed(if step_j > 0 { width as isize } else { -(width as isize) });
+                t_next_j += dt_j;
+            }
+            if ci < 0 || cj < 0 || ci >= w || cj >= h {
+                break;
+            }
+            t_in = t_out;
+        }
+    }
+}
+
+/// Columns rendered together before being copied into the image: 16 ranges are one 64-byte
+/// cache line of an image row.
+const COLUMN_BLOCK: usize = 16;
+
+/// Column `k` of a block scratch: row-major, `COLUMN_BLOCK` pixels a row.
+struct BlockColumn<'a> {
+    range: &'a mut [f32],
+    class: &'a mut [u8],
+    k: usize,
+}
+
+impl BlockColumn<'_> {
+    /// Rows the scratch holds.
+    fn rows(&self) -> usize {
+        self.range.len().min(self.class.len()) / COLUMN_BLOCK
+    }
+
+    #[inline]
+    fn set(&mut self, row: usize, range: f32, class: u8) {
+        let i = row * COLUMN_BLOCK + self.k;
+        if let (Some(r), Some(c)) = (self.range.get_mut(i), self.class.get_mut(i)) {
+            *r = range;
+            *c = class;
+        }
+    }
+}
+
+/// Where every ray of one render starts, and what bounds how far it must go.
+struct RayStart {
+    /// Sensor position in grid units (fractional cell coordinates).
+    gx: f64,
+    gy: f64,
+    /// The cell the sensor stands in.
+    ci0: i64,
+    cj0: i64,
+    /// Grid resolution, metres per cell.
+    res: f64,
+    /// Sensor elevation, metres.
+    z_s: f32,
+    /// Height of the world's tallest cell above the sensor, metres.
+    top_dz: f32,
+    /// Tangent of the elevation at which that cell's top shows at the end of the range.
+    far_top_tan: f32,
+    /// Sine and cosine of the robot's yaw.
+    yaw_sin_cos: (f64, f64),
 }
 
 impl PanoramaRenderer {
@@ -450,7 +541,8 @@ mod tests {
     #[test]
     fn flat_plane_gives_analytic_ranges_below_the_horizon_and_nothing_above() {
         let world = flat_world();
-        let g = PanoramaGeometry { rows: 64, cols: 256, v_fov_rad: std::f64::consts::FRAC_PI_2 };
+        // Columns not a multiple of the render's column block: the last block is partial.
+        let g = PanoramaGeometry { rows: 64, cols: 250, v_fov_rad: std::f64::consts::FRAC_PI_2 };
         let max_range = 40.0;
         let r = PanoramaRenderer::new(g, 0.4, max_range).unwrap();
         let (mut depth, mut sem) = buffers(g);

@@ -121,6 +121,11 @@ pub struct LocalizationSpec {
     /// Noise added to ground truth in `ground_truth` mode, metres (1σ).
     #[serde(default)]
     pub noise_m: f64,
+    /// `cross_view` only: KLD-adaptive particle counts (AMCL's rule: few particles while
+    /// tracking, all of them when lost); unset: the localizer's default (`kld_sampling` in
+    /// spomp-localization's parameters).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kld_sampling: Option<bool>,
 }
 
 fn default_prior_position() -> f64 {

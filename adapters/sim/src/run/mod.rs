@@ -11,6 +11,10 @@
 //!    and bytes its range and bandwidth allow (every `sync_period_s`);
 //! 4. each robot whose tick is due ticks its tree; the nodes' commands are read back.
 //!
+//! Steps 2 (for the UGVs' own sensing and perception) and 4 touch one robot at a time: with
+//! [`SimOptions::parallel_robots`] they run on rayon's threads, and observers hear of them after,
+//! in robot order — the same run, summary and log as in order on one thread.
+//!
 //! Everything a run produces goes to a [`SimObserver`] (the CLI records it to MCAP) and into
 //! the [`RunSummary`].
 
@@ -24,6 +28,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::Instant;
 
+use rayon::prelude::*;
 use serde::Serialize;
 use spomp_behaviors::NodeRegistry;
 use spomp_behaviors::mission::schema::CompleteWhen;
@@ -82,6 +87,10 @@ pub struct SimOptions {
     /// Run the robots' heavy skills as background work that takes this long, as `spomp run`
     /// does on its worker threads; `None`: inline, within the step (the default).
     pub skill_latency: Option<SkillLatency>,
+    /// Step the robots' sensing, perception and ticks on rayon's threads (when it has more than
+    /// one). Results are the same either way: each robot's work touches only that robot, and
+    /// observers are told in robot order after it.
+    pub parallel_robots: bool,
 }
 
 /// Modelled compute time of the heavy skills when they run in the background
@@ -125,6 +134,7 @@ impl Default for SimOptions {
             uav: UavParams::default(),
             odometry_noise: OdometryNoiseParams::default(),
             skill_latency: None,
+            parallel_robots: true,
         }
     }
 }
@@ -289,6 +299,8 @@ struct SimRobot {
     work_out: Vec<(Time, FinishedWork)>,
     /// The last map version this robot published that observers were shown.
     map_shown: Option<u64>,
+    /// The other UGVs' bodies this step, as obstacles for this one (a UGV's; reused).
+    other_bodies: Vec<Obstacle>,
 }
 
 impl SimRobot {
@@ -356,8 +368,6 @@ pub struct Simulation {
     problems: BTreeMap<(String, String), ProblemCount>,
     outcome: Option<Outcome>,
     obstacles: Vec<Obstacle>,
-    /// Scratch: the obstacles other than one robot's own body.
-    others: Vec<Obstacle>,
     /// What drives the robots driven from outside, if any are.
     drivers: Option<Box<dyn ExternalDrivers>>,
     /// Messages driven robots sent, waiting for the next radio period.
@@ -390,6 +400,79 @@ fn note_claim(r: &mut SimRobot, held: Option<GoalId>, now: Time, dt: f64, observ
 fn others_than(all: &[Obstacle], own: usize, out: &mut Vec<Obstacle>) {
     out.clear();
     out.extend(all.iter().enumerate().filter(|(k, _)| *k != own).map(|(_, o)| *o));
+}
+
+/// What a UGV's sensors gave its robot in one step, for the observers.
+struct SensedUgv {
+    odometry: Odometry,
+    /// The pose given as an external input (GPS or noisy truth), if the mission asks for one.
+    external_pose: Option<PoseEstimate>,
+    /// The panorama, when one was due.
+    panorama: Option<Arc<PanoramaFrame>>,
+}
+
+/// A live UGV's sensing of one step, fed to its own robot (nothing for other robots, dead ones
+/// and those driven from outside). Touches only `r`: robots may be sensed in parallel.
+fn sense_ugv(r: &mut SimRobot, world: &World, now: Time) -> Option<SensedUgv> {
+    if !r.alive() || r.external {
+        return None;
+    }
+    let truth = r.truth();
+    let Body::Ugv { ugv, odometry, sensor, truth_source, .. } = &mut r.body else { return None };
+    let odom = odometry.update(now, truth, ugv.twist());
+    r.robot.on_odometry(odom);
+    let external_pose = truth_source.as_mut().map(|src| src.estimate(now, truth));
+    if let Some(estimate) = external_pose {
+        r.robot.on_external_pose(estimate);
+    }
+    let panorama =
+        sensor.poll_among(now, world, truth, ugv.base_elevation_m(), odom.pose, &r.other_bodies).map(Arc::new);
+    if let Some(frame) = &panorama {
+        r.robot.on_panorama(Arc::clone(frame));
+        if let Some(est) = r.robot.pose() {
+            let error = est.pose.position().distance(truth.position());
+            r.localization_errors.push(error);
+            let t = now.as_secs_f64();
+            if r.localization_error_series.last().is_none_or(|&(last, _)| t - last >= 1.0 - 1e-9) {
+                r.localization_error_series.push((t, error));
+            }
+        }
+    }
+    Some(SensedUgv { odometry: odom, external_pose, panorama })
+}
+
+/// What a robot's tick of one step left for the observers.
+struct TickedRobot {
+    transitions: Recorder,
+}
+
+/// Runs the robot's upkeep and tree tick if due (not for dead robots or those driven from
+/// outside). Touches only `r`: robots may be ticked in parallel.
+fn tick_robot(r: &mut SimRobot, now: Time) -> Option<TickedRobot> {
+    if !r.alive() || r.external || now < r.next_tick {
+        return None;
+    }
+    r.next_tick = Time::from_nanos(now.nanos + r.tick_period_ns - 1);
+    let mut transitions = Recorder::default();
+    r.robot.maintain(now);
+    r.robot.tick(now, Some(&mut transitions));
+    r.command = r.robot.command().unwrap_or(Twist2::ZERO);
+    Some(TickedRobot { transitions })
+}
+
+/// `work` applied to every robot, in parallel (rayon's pool) when `parallel`, else in order;
+/// the results in robot order. `work` must touch nothing but its robot, so that both ways give
+/// the same robots and results.
+fn for_each_robot<T, F>(parallel: bool, robots: &mut [SimRobot], work: F) -> Vec<T>
+where
+    T: Send,
+    F: Fn(&mut SimRobot) -> T + Sync + Send,
+{
+    if parallel && robots.len() > 1 && rayon::current_num_threads() > 1 {
+        robots.par_iter_mut().map(work).collect()
+    } else {
+        robots.iter_mut().map(work).collect()
+    }
 }
 
 /// Most bytes a link can bank for later (a few full map versions).
@@ -495,6 +578,7 @@ impl Simulation {
                 trajectory: vec![start.position()],
                 external: false,
                 map_shown: None,
+                other_bodies: Vec::new(),
             });
         }
         let time_limit_s = options.time_limit_s.unwrap_or(mission.time_limit_s);
@@ -523,7 +607,6 @@ impl Simulation {
             problems: BTreeMap::new(),
             outcome: None,
             obstacles: Vec::new(),
-            others: Vec::new(),
             drivers: None,
             driven_outbox: Vec::new(),
             pacer: None,
@@ -746,8 +829,8 @@ impl Simulation {
                     let own = ugv_index;
                     ugv_index += 1;
                     let cmd = if alive { r.command } else { Twist2::ZERO };
-                    others_than(&self.obstacles, own, &mut self.others);
-                    ugv.step_among(world, cmd, dt, &self.others);
+                    others_than(&self.obstacles, own, &mut r.other_bodies);
+                    ugv.step_among(world, cmd, dt, &r.other_bodies);
                 }
                 Body::Uav { uav, flying_to, .. } => {
                     if !alive {
@@ -812,58 +895,49 @@ impl Simulation {
 
     fn sense(&mut self, observer: &mut dyn SimObserver) {
         let now = self.now;
+        // Each UGV's own sensing and perception (odometry, panorama render, localization and
+        // terrain analysis) touches only that robot and reads the world: done per robot, in
+        // parallel when allowed; what observers see is reported afterwards in robot order, so
+        // a run and its log are the same either way.
+        let sensed = {
+            let world = &*self.world;
+            for_each_robot(self.options.parallel_robots, &mut self.robots, |r| sense_ugv(r, world, now))
+        };
         let world = &self.world;
-        let mut ugv_index = 0;
-        for r in &mut self.robots {
+        for (r, sensed) in self.robots.iter_mut().zip(sensed) {
             let alive = r.alive();
-            let truth = r.truth();
             match &mut r.body {
                 Body::Ugv { ugv, odometry, sensor, truth_source, last_scan_stamp } => {
-                    let own = ugv_index;
-                    ugv_index += 1;
                     if !alive {
                         continue;
                     }
-                    let odom = odometry.update(now, truth, ugv.twist());
-                    observer.on_odometry(&r.id, &odom);
-                    let driver = self.drivers.as_mut().filter(|_| r.external);
-                    others_than(&self.obstacles, own, &mut self.others);
-                    if let Some(d) = driver {
-                        d.odometry(&r.id, &odom);
-                        if let Some(src) = truth_source.as_mut() {
-                            d.pose(&r.id, &src.estimate(now, truth), ugv.base_elevation_m() as f64);
+                    if let Some(s) = sensed {
+                        observer.on_odometry(&r.id, &s.odometry);
+                        observer.on_seam(&r.id, now, SeamInput::Odometry(&s.odometry));
+                        if let Some(estimate) = &s.external_pose {
+                            observer.on_seam(&r.id, now, SeamInput::ExternalPose(estimate));
                         }
-                        if let Some(frame) =
-                            sensor.poll_among(now, world, truth, ugv.base_elevation_m(), odom.pose, &self.others)
-                        {
-                            observer.on_panorama(&r.id, &frame);
-                            d.panorama(&r.id, &frame);
+                        if let Some(frame) = &s.panorama {
+                            observer.on_panorama(&r.id, frame);
+                            observer.on_seam(&r.id, now, SeamInput::Panorama(frame));
+                            observe_scan(&r.id, &r.robot, last_scan_stamp, observer);
                         }
                         continue;
                     }
-                    observer.on_seam(&r.id, now, SeamInput::Odometry(&odom));
-                    r.robot.on_odometry(odom);
+                    // Driven from outside: its inputs go to the process that drives it.
+                    let Some(d) = self.drivers.as_mut().filter(|_| r.external) else { continue };
+                    let truth = ugv.pose();
+                    let odom = odometry.update(now, truth, ugv.twist());
+                    observer.on_odometry(&r.id, &odom);
+                    d.odometry(&r.id, &odom);
                     if let Some(src) = truth_source.as_mut() {
-                        let estimate = src.estimate(now, truth);
-                        observer.on_seam(&r.id, now, SeamInput::ExternalPose(&estimate));
-                        r.robot.on_external_pose(estimate);
+                        d.pose(&r.id, &src.estimate(now, truth), ugv.base_elevation_m() as f64);
                     }
                     if let Some(frame) =
-                        sensor.poll_among(now, world, truth, ugv.base_elevation_m(), odom.pose, &self.others)
+                        sensor.poll_among(now, world, truth, ugv.base_elevation_m(), odom.pose, &r.other_bodies)
                     {
-                        let frame = Arc::new(frame);
                         observer.on_panorama(&r.id, &frame);
-                        observer.on_seam(&r.id, now, SeamInput::Panorama(&frame));
-                        r.robot.on_panorama(frame);
-                        if let Some(est) = r.robot.pose() {
-                            let error = est.pose.position().distance(truth.position());
-                            r.localization_errors.push(error);
-                            let t = now.as_secs_f64();
-                            if r.localization_error_series.last().is_none_or(|&(last, _)| t - last >= 1.0 - 1e-9) {
-                                r.localization_error_series.push((t, error));
-                            }
-                        }
-                        observe_scan(&r.id, &r.robot, last_scan_stamp, observer);
+                        d.panorama(&r.id, &frame);
                     }
                 }
                 Body::Uav { uav, camera, .. } => {
@@ -982,8 +1056,10 @@ impl Simulation {
     fn tick_trees(&mut self, observer: &mut dyn SimObserver) {
         let now = self.now;
         let dt = self.options.dt_s;
-        let mut recorder = Recorder::default();
-        for r in &mut self.robots {
+        // Upkeep and ticks touch only their robot (parallel when allowed); observers hear of
+        // them afterwards, in robot order.
+        let ticked = for_each_robot(self.options.parallel_robots, &mut self.robots, |r| tick_robot(r, now));
+        for (r, ticked) in self.robots.iter_mut().zip(ticked) {
             if !r.alive() {
                 continue;
             }
@@ -997,19 +1073,14 @@ impl Simulation {
                 }
                 continue;
             }
-            if now >= r.next_tick {
-                r.next_tick = Time::from_nanos(now.nanos + r.tick_period_ns - 1);
-                r.robot.maintain(now);
-                r.robot.tick(now, Some(&mut recorder));
-                r.command = r.robot.command().unwrap_or(Twist2::ZERO);
-                if !recorder.records.is_empty() {
-                    for rec in &recorder.records {
+            if let Some(TickedRobot { transitions }) = ticked {
+                if !transitions.records.is_empty() {
+                    for rec in &transitions.records {
                         if let Some(t) = r.ticked.get_mut(rec.node_id as usize) {
                             *t = true;
                         }
                     }
-                    observer.on_transitions(&r.id, &recorder.records);
-                    recorder.records.clear();
+                    observer.on_transitions(&r.id, &transitions.records);
                 }
                 // After the transitions: a log cut after a tick's call holds all of that tick.
                 let tick = SeamInput::Tick { command: r.robot.command(), flight: r.robot.flight() };
