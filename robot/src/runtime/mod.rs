@@ -59,8 +59,8 @@ pub struct RuntimeConfig {
     /// PNG effort of the published map layers.
     pub map_compression: CompressionParams,
     /// An aerial map the robot starts with (surveyed before the mission); `None`: only what the
-    /// team maps.
-    pub prior_map: Option<AerialMap>,
+    /// team maps. Shared, not copied: robots of a team hold one prior map until they change it.
+    pub prior_map: Option<Arc<AerialMap>>,
 }
 
 impl RuntimeConfig {
@@ -233,7 +233,7 @@ impl RobotRuntime {
             rt.nav = Some(Box::new(NavStack::new(nav, &rt.classes)?));
         }
         if let Some(map) = config.prior_map {
-            rt.map = Some(Orthomap::from_map(map)?);
+            rt.map = Some(Orthomap::from_shared(map)?);
         } else if rt.kind == RobotKind::Uav
             && let Some(spec) = rt.map_spec
         {
@@ -696,7 +696,7 @@ mod tests {
         let mut config = RuntimeConfig::basic(RobotId::new("ugv1"), RobotKind::Ugv, 1, Pose2::new(5.0, 5.0, 0.0));
         config.map_spec = Some(road_map().spec);
         config.nav = Some(NavParams::default());
-        config.prior_map = prior_map;
+        config.prior_map = prior_map.map(Arc::new);
         RobotRuntime::from_config(config).unwrap()
     }
 

@@ -46,6 +46,29 @@ impl GlobalPlanner {
         sum / known as f64 * n
     }
 
+    /// [`Self::learned_cost`] over packed features ([`Features::pack`]): the same sum over the
+    /// same rows.
+    pub(super) fn learned_cost_packed(&mut self, packed: &[u8], n_samples: usize) -> f64 {
+        let n = n_samples.max(1) as f64;
+        let record = self.features.packed_len();
+        let known = packed.len() / record.max(1);
+        if !self.model.is_trained() || known == 0 {
+            return n * std::f64::consts::LN_2;
+        }
+        let floor = self.params.learning.probability_floor.clamp(1e-12, 0.5);
+        let mut row = std::mem::take(&mut self.feature_scratch);
+        row.resize(self.features.channels(), 0.0);
+        let mut sum = 0.0;
+        for cell in packed.chunks_exact(record) {
+            self.features.unpack(cell, &mut row);
+            let t = self.model.probability(&row) as f64;
+            let t = if t.is_finite() { t.clamp(floor, 1.0) } else { floor };
+            sum -= t.ln();
+        }
+        self.feature_scratch = row;
+        sum / known as f64 * n
+    }
+
     /// The learning-off ablation: W = 100^T_cls − 1 + D, T_cls the rank of the hardest class on
     /// the edge, D the least distance from a sample to the next harder class present.
     pub(super) fn class_rank_cost(&self, map: &AerialMap, samples: &[u32]) -> f64 {
@@ -95,10 +118,14 @@ impl GlobalPlanner {
                 self.base_cost(&samples)
             } else {
                 if map_changed || (feats.is_empty() && !samples.is_empty()) {
-                    self.base_cost(&samples);
-                    std::mem::swap(&mut feats, &mut self.segment_features);
+                    feats.clear();
+                    if let Some(map) = &self.map {
+                        for &s in &samples {
+                            self.features.pack(map, s as usize, &mut feats);
+                        }
+                    }
                 }
-                self.learned_cost(&feats, samples.len())
+                self.learned_cost_packed(&feats, samples.len())
             };
             if let Some(d) = self.graph.edge_weight_mut(e) {
                 std::mem::swap(&mut d.samples, &mut samples);
