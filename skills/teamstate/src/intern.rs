@@ -60,6 +60,24 @@ static SCANS: ProcessInterner<ReachabilityScan> = LazyLock::new(|| Mutex::new(In
 /// Compressed map versions by publisher and version.
 static MAP_BLOBS: ProcessInterner<Vec<u8>> = LazyLock::new(|| Mutex::new(Interner::new()));
 
+/// Every record key seen in the process, numbered in the order first seen: what a robot tracks
+/// per peer is then a dense table by number ([`crate::sync::DotsByKey`]) instead of a map of
+/// keys (8 bytes a record instead of about 60, for each peer of each robot: the team state's
+/// largest part in a large team, which every robot holds about every other).
+static KEY_NUMBERS: LazyLock<Mutex<HashMap<RecordKey, usize>>> = LazyLock::new(|| Mutex::new(HashMap::new()));
+
+/// The process-wide number of a record key (given one on first sight).
+pub(crate) fn key_number(key: &RecordKey) -> usize {
+    let mut numbers = KEY_NUMBERS.lock().unwrap_or_else(PoisonError::into_inner);
+    let next = numbers.len();
+    *numbers.entry(key.clone()).or_insert(next)
+}
+
+/// The number of a record key seen before; `None` for a key never seen in the process.
+pub(crate) fn known_key_number(key: &RecordKey) -> Option<usize> {
+    KEY_NUMBERS.lock().unwrap_or_else(PoisonError::into_inner).get(key).copied()
+}
+
 /// Replaces a scan or map body by the process's copy of it, if there is one (else files it).
 pub(crate) fn share_body(key: &RecordKey, body: &mut RecordBody) {
     match (key, body) {
@@ -92,6 +110,18 @@ mod tests {
         let after = Arc::new(vec![1u8, 2, 3]);
         // `a_again` is still alive and equal.
         assert_eq!(*interner.intern("k", &after), vec![1, 2, 3]);
+    }
+
+    #[test]
+    fn record_keys_keep_their_number() {
+        let a = RecordKey::Robot(RobotId::new("intern-test-a"));
+        let b = RecordKey::Map(RobotId::new("intern-test-a"));
+        assert_eq!(known_key_number(&a), None);
+        let na = key_number(&a);
+        let nb = key_number(&b);
+        assert_ne!(na, nb);
+        assert_eq!(key_number(&a.clone()), na);
+        assert_eq!(known_key_number(&b), Some(nb));
     }
 
     #[test]

@@ -694,7 +694,7 @@ impl TeamState {
         let unseen = self.changes.range(peer.change_cursor + 1..).map(|(_, k)| k);
         let held_by_peer = |key: &RecordKey| {
             let Some(rec) = self.records.get(key) else { return true };
-            let held = peer.confirmed.get(key).copied().unwrap_or(0);
+            let held = peer.confirmed.get(key);
             // Poses change every tick; any version counts, or a sync would never complete.
             match key {
                 RecordKey::Robot(_) => held > 0,
@@ -908,8 +908,7 @@ impl TeamState {
         state.session = msg.session;
         state.process_ack(msg.ack, max_in_flight);
         for rec in &msg.records {
-            let c = state.confirmed.entry(rec.key.clone()).or_insert(0);
-            *c = (*c).max(rec.dot);
+            state.confirmed.raise(&rec.key, rec.dot);
         }
         // A re-delivered message was acknowledged already (or will be with the original).
         let duplicate = state.received.covers(msg.seq);
