@@ -708,6 +708,27 @@ mod tests {
     }
 
     #[test]
+    fn robots_set_up_over_one_prior_map_hold_it_once() {
+        let prior = Arc::new(road_map());
+        let robot = |id: &str| {
+            let mut config = RuntimeConfig::basic(RobotId::new(id), RobotKind::Ugv, 1, Pose2::new(5.0, 5.0, 0.0));
+            config.map_spec = Some(prior.spec);
+            config.nav = Some(NavParams::default());
+            config.prior_map = Some(Arc::clone(&prior));
+            let mut rt = RobotRuntime::from_config(config).unwrap();
+            rt.maintain(Time::from_secs_f64(1.0));
+            rt
+        };
+        let (a, b) = (robot("ugv1"), robot("ugv2"));
+        assert!(a.nav().unwrap().has_graph() && b.nav().unwrap().has_graph());
+        for rt in [&a, &b] {
+            assert!(Arc::ptr_eq(&rt.map().unwrap().shared(), &prior), "{}: the map is the prior map", rt.id());
+        }
+        // Each robot's map and its planner's: four holders besides the test's.
+        assert_eq!(Arc::strong_count(&prior), 5, "no robot copied it");
+    }
+
+    #[test]
     fn planner_work_runs_on_a_copy_and_is_swapped_in_with_what_arrived_meanwhile() {
         let mut rt = ugv(None);
         rt.set_background_skills(true);
