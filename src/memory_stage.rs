@@ -64,8 +64,9 @@ const OTHER_FIXED_BYTES: f64 = 1.0e6;
 /// What every robot's team state holds about every other robot, per pair of robots and
 /// simulated second: the records of the scans others shared (the scans themselves are held
 /// once), and what each robot tracks of what its peers hold (measured: the part of the peak
-/// that grows with the square of the team, 1 to 50 UGVs in 300 s).
-const TEAM_STATE_BYTES_PER_PAIR_S: f64 = 550.0;
+/// that grows with the square of the team, 1 to 50 UGVs in 300 s and 50 UGVs in 600 s; it grows
+/// a little faster than the time, as the robots spread and share more).
+const TEAM_STATE_BYTES_PER_PAIR_S: f64 = 650.0;
 
 /// Terrain analysis and transient per-update scratch held at the peak by the robot being
 /// stepped (one at a time in the simulator).
@@ -361,13 +362,18 @@ mod tests {
     #[test]
     fn the_estimate_is_near_the_measured_peaks() {
         // Peak RSS of release builds (`/usr/bin/time -v spomp sim
-        // adapters/sim/benches/missions/team-1uav-{1,10,50}ugv.yaml --time-limit-s 300`),
-        // 800 × 600 cells, prior map: the estimate may be above (it is a bound for refusing)
-        // but within a sensible factor.
-        for (ugvs, measured_mb) in [(1, 60.0), (10, 154.0), (50, 732.0)] {
-            let e = estimate(&city_team(ugvs)).total_bytes / 1e6;
+        // adapters/sim/benches/missions/team-1uav-{1,10,50}ugv.yaml --time-limit-s 300`, and
+        // 600 s for 50), 800 × 600 cells, prior map: the estimate may be above (it is a bound
+        // for refusing) but within a sensible factor.
+        for (ugvs, duration_s, measured_mb) in
+            [(1, 300.0, 60.0), (10, 300.0, 154.0), (50, 300.0, 732.0), (50, 600.0, 1063.0)]
+        {
+            let e = estimate(&Sizes { duration_s, ..city_team(ugvs) }).total_bytes / 1e6;
             let ratio = e / measured_mb;
-            assert!((0.9..=1.5).contains(&ratio), "{ugvs} UGVs: estimate {e:.0} MB, measured {measured_mb} MB");
+            assert!(
+                (0.9..=1.5).contains(&ratio),
+                "{ugvs} UGVs, {duration_s} s: estimate {e:.0} MB, measured {measured_mb} MB"
+            );
         }
         // The shipped mission (`missions/visit-all-vehicle-clusters.yaml`, seed 1, 1800 s, no
         // prior map): 157 MB.
