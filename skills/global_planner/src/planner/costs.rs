@@ -193,6 +193,7 @@ impl GlobalPlanner {
         }
         let labels = self.train_y.len();
         if labels < l.min_labels.max(1) {
+            self.release_training_set();
             return TrainOutcome::NotEnoughLabels { labels };
         }
         let settings = TrainSettings {
@@ -204,10 +205,19 @@ impl GlobalPlanner {
             samples: l.samples_per_round,
         };
         let loss = self.model.train(&self.train_x, &self.train_y, settings, rng);
+        self.release_training_set();
         self.last_train = Some(now);
         self.training_rounds += 1;
         self.refresh_all_costs(false);
         TrainOutcome::Trained { labels, loss }
+    }
+
+    /// Gives back the training set: 52 bytes per labelled cell, and the labels grow with every
+    /// scan the team shares (tens of MB per robot over a long run of a large team), while a
+    /// round needs it only for its duration.
+    fn release_training_set(&mut self) {
+        self.train_x = Vec::new();
+        self.train_y = Vec::new();
     }
 
     /// Learned probability that the cell under `p` is traversable (0.5 before training); `None`
