@@ -362,10 +362,12 @@ mod tests {
     #[test]
     fn the_estimate_is_near_the_measured_peaks() {
         // Peak RSS of release builds (`/usr/bin/time -v spomp sim
-        // adapters/sim/benches/missions/team-1uav-{1,10,50}ugv.yaml --time-limit-s 300`),
-        // 800 × 600 cells, prior map: the estimate may be above (it is a bound for refusing)
-        // but within a sensible factor.
-        for (ugvs, duration_s, measured_mb) in [(1, 300.0, 59.0), (10, 300.0, 137.0), (50, 300.0, 641.0)] {
+        // adapters/sim/benches/missions/team-1uav-{1,10,50}ugv.yaml --time-limit-s 300`, and
+        // 600 s for 50), 800 × 600 cells, prior map: the estimate may be above (it is a bound
+        // for refusing) but within a sensible factor.
+        for (ugvs, duration_s, measured_mb) in
+            [(1, 300.0, 59.0), (10, 300.0, 137.0), (50, 300.0, 641.0), (50, 600.0, 818.0)]
+        {
             let e = estimate(&Sizes { duration_s, ..city_team(ugvs) }).total_bytes / 1e6;
             let ratio = e / measured_mb;
             assert!(
