@@ -73,6 +73,14 @@ pub fn wall_seconds(text: &str) -> Result<f64, String> {
     }
 }
 
+/// A memory budget in megabytes: positive and finite.
+pub fn memory_mb(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("expected a positive number of megabytes, got `{text}`")),
+    }
+}
+
 /// A real-time factor: simulated seconds per wall second, finite, 0.01 to 1000.
 pub fn rate(text: &str) -> Result<f64, String> {
     match text.trim().parse::<f64>() {

@@ -12,7 +12,8 @@ use spomp_core::{Point2, Pose2};
 use spomp_robot::RobotRuntime;
 
 use crate::{
-    args, commands, experiment, log_cmd, plan_cmd, replay_cmd, run_cmd, sim_cmd, terrain_cmd, world_cmd, world_import,
+    args, commands, experiment, log_cmd, memory_stage, plan_cmd, replay_cmd, run_cmd, sim_cmd, terrain_cmd, world_cmd,
+    world_import,
 };
 
 /// Mission framework for air–ground robot teams.
@@ -65,6 +66,14 @@ enum Command {
         /// (repeatable).
         #[arg(long = "allow-dir", value_name = "DIR")]
         allow_dirs: Vec<PathBuf>,
+        /// Hold the memory estimate of a simulated run against this many megabytes instead of
+        /// the memory this machine has available (`MemAvailable`).
+        #[arg(long, value_name = "MB", value_parser = args::memory_mb)]
+        memory_budget_mb: Option<f64>,
+        /// Skip the memory stage (a team estimated not to fit this machine is otherwise an
+        /// error).
+        #[arg(long, conflicts_with = "memory_budget_mb")]
+        ignore_memory: bool,
     },
     /// Run a mission in the built-in simulator: summary table, `summary.json`, `run.mcap` and
     /// plots per trial under the output folder.
@@ -398,10 +407,20 @@ where
         }
     };
     let result = match cli.command {
-        Command::Validate { files, json, dry_run, time_limit_s, max_wall_s, allow_dirs } => {
+        Command::Validate {
+            files,
+            json,
+            dry_run,
+            time_limit_s,
+            max_wall_s,
+            allow_dirs,
+            memory_budget_mb,
+            ignore_memory,
+        } => {
             let dry_run = dry_run.then_some(sim_cmd::DryRunLimits { time_limit_s, max_wall_s });
             let options = spomp_behaviors::mission::LoadOptions { allowed_dirs: allow_dirs };
-            commands::validate(&files, json, dry_run, &options, registry)
+            let memory = memory_stage::MemoryCheck::from_args(memory_budget_mb, ignore_memory);
+            commands::validate(&files, json, dry_run, memory, &options, registry)
         }
         Command::Log { action: LogCommand::Check { log, json } } => log_cmd::check(&log, json),
         Command::Log { action: LogCommand::Recover { log, out, json } } => log_cmd::recover(&log, &out, json),

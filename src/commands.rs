@@ -50,6 +50,7 @@ pub fn validate(
     files: &[PathBuf],
     json: bool,
     dry_run: Option<crate::sim_cmd::DryRunLimits>,
+    memory: crate::memory_stage::MemoryCheck,
     options: &LoadOptions,
     registry: &NodeRegistry<RobotRuntime>,
 ) -> Result<ExitCode> {
@@ -62,6 +63,9 @@ pub fn validate(
         // The world stage runs once the earlier stages pass (it needs a typed mission).
         let world = crate::world_stage::check(&loaded, options);
         loaded.diagnostics.extend(world);
+        // Then the memory a simulated run needs, against what the machine has.
+        let memory = crate::memory_stage::check(&loaded, memory);
+        loaded.diagnostics.extend(memory);
         if loaded.is_valid() {
             // Warnings only: shown, and the mission is valid.
             human.push_str(&render_diagnostics(&loaded));

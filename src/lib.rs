@@ -30,6 +30,7 @@ pub mod experiment;
 mod farm_cmd;
 mod live;
 mod log_cmd;
+mod memory_stage;
 mod plan_cmd;
 mod replay_cmd;
 mod run_cmd;

@@ -44,7 +44,8 @@ pub struct SimArgs {
     /// replaced; a folder holding files `spomp sim` does not write is refused.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Run even when the outputs are estimated to need more than 20 GB of disk.
+    /// Run even when the outputs are estimated to need more than 20 GB of disk, or the trials
+    /// run side by side more memory than this machine has available.
     #[arg(long)]
     pub force: bool,
     /// Print the combined summary as JSON.
@@ -226,6 +227,16 @@ pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
             estimate / 1e9,
             DISK_LIMIT_BYTES / 1e9
         ));
+    }
+    if !args.force
+        && let Some(budget) = crate::memory_stage::machine_budget()
+        && let Ok(mut sizes) = crate::memory_stage::sizes_of(mission, &loaded.base_dir())
+    {
+        sizes.duration_s = time_limit;
+        let side_by_side = std::thread::available_parallelism().map_or(1, |n| n.get()).min(trials as usize);
+        if let Err(message) = crate::memory_stage::judge(&sizes, side_by_side, &budget) {
+            return usage(format!("{message}; give --force to run anyway"));
+        }
     }
     let out_dir = args.out.clone().unwrap_or_else(|| PathBuf::from("runs").join(&mission.mission));
     if let Err(message) = clean_previous_outputs(&out_dir) {

@@ -79,6 +79,52 @@ impl AerialMap {
         self.class.iter().filter(|&&c| c != UNKNOWN_CLASS).count()
     }
 
+    /// Visits the cells of a consistent tile that lie on a map of `spec` and are not unknown in
+    /// the tile: `(map index, tile index)`, row by row, until `visit` returns false.
+    fn for_each_tile_cell(spec: GridSpec, tile: &MapTile, mut visit: impl FnMut(usize, usize) -> bool) {
+        for tr in 0..tile.height {
+            let row = tile.row0 as u64 + tr as u64;
+            if row >= spec.height as u64 {
+                break;
+            }
+            for tc in 0..tile.width {
+                let col = tile.col0 as u64 + tc as u64;
+                if col >= spec.width as u64 {
+                    break;
+                }
+                let ti = tr as usize * tile.width as usize + tc as usize;
+                if tile.class[ti] == UNKNOWN_CLASS {
+                    continue;
+                }
+                if !visit(spec.index(Cell::new(col as u32, row as u32)), ti) {
+                    return;
+                }
+            }
+        }
+    }
+
+    /// Whether writing the tile's cell `ti` into map cell `mi` would change the map.
+    #[inline]
+    fn cell_differs(&self, tile: &MapTile, mi: usize, ti: usize) -> bool {
+        let elev = tile.elevation[ti];
+        let same_elev = self.elevation[mi] == elev || (elev.is_nan() && self.elevation[mi].is_nan());
+        self.class[mi] != tile.class[ti] || self.rgb[mi] != tile.rgb[ti] || !same_elev
+    }
+
+    /// Whether [`Self::apply_tile`] would change any cell: a map shared with others is only
+    /// copied when it would.
+    pub fn tile_changes_anything(&self, tile: &MapTile) -> bool {
+        if !tile.is_consistent() {
+            return false;
+        }
+        let mut differs = false;
+        Self::for_each_tile_cell(self.spec, tile, |mi, ti| {
+            differs = self.cell_differs(tile, mi, ti);
+            !differs
+        });
+        differs
+    }
+
     /// Writes a tile into the map, clipped to the map; returns the number of cells changed.
     /// The version increases when anything changed.
     pub fn apply_tile(&mut self, tile: &MapTile) -> usize {
@@ -86,34 +132,18 @@ impl AerialMap {
             return 0;
         }
         let mut changed = 0;
-        for tr in 0..tile.height {
-            let row = tile.row0 as u64 + tr as u64;
-            if row >= self.spec.height as u64 {
-                break;
-            }
-            for tc in 0..tile.width {
-                let col = tile.col0 as u64 + tc as u64;
-                if col >= self.spec.width as u64 {
-                    break;
-                }
-                let ti = tr as usize * tile.width as usize + tc as usize;
-                let class = tile.class[ti];
-                if class == UNKNOWN_CLASS {
-                    continue;
-                }
-                let mi = self.spec.index(Cell::new(col as u32, row as u32));
+        Self::for_each_tile_cell(self.spec, tile, |mi, ti| {
+            if self.cell_differs(tile, mi, ti) {
+                self.class[mi] = tile.class[ti];
+                self.rgb[mi] = tile.rgb[ti];
                 let elev = tile.elevation[ti];
-                let same_elev = self.elevation[mi] == elev || (elev.is_nan() && self.elevation[mi].is_nan());
-                if self.class[mi] != class || self.rgb[mi] != tile.rgb[ti] || !same_elev {
-                    self.class[mi] = class;
-                    self.rgb[mi] = tile.rgb[ti];
-                    if !elev.is_nan() {
-                        self.elevation[mi] = elev;
-                    }
-                    changed += 1;
+                if !elev.is_nan() {
+                    self.elevation[mi] = elev;
                 }
+                changed += 1;
             }
-        }
+            true
+        });
         if changed > 0 {
             self.version += 1;
         }
@@ -144,6 +174,30 @@ mod tests {
         assert_eq!(map.apply_tile(&tile), 0);
         assert_eq!(map.version, 1, "re-applying the same tile changes nothing");
         assert_eq!(map.known_cells(), 1);
+    }
+
+    #[test]
+    fn a_tile_changes_the_map_exactly_when_applying_it_would() {
+        let mut map = AerialMap::unknown(GridSpec::new(Point2::new(0.0, 0.0), 0.5, 4, 3));
+        let tile = MapTile {
+            col0: 1,
+            row0: 0,
+            width: 2,
+            height: 2,
+            class: vec![3, 3, UNKNOWN_CLASS, 3],
+            rgb: vec![[9, 9, 9]; 4],
+            elevation: vec![0.2, f32::NAN, 0.2, 0.2],
+        };
+        assert!(map.tile_changes_anything(&tile));
+        assert_eq!(map.apply_tile(&tile), 3);
+        assert!(!map.tile_changes_anything(&tile), "the same tile again changes nothing");
+        let mut recoloured = tile.clone();
+        recoloured.rgb[3] = [1, 1, 1];
+        assert!(map.tile_changes_anything(&recoloured));
+        let mut only_unknown = tile.clone();
+        only_unknown.class = vec![UNKNOWN_CLASS; 4];
+        only_unknown.rgb = vec![[0, 0, 0]; 4];
+        assert!(!map.tile_changes_anything(&only_unknown), "unknown tile cells are never applied");
     }
 
     #[test]

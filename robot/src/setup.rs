@@ -2,6 +2,8 @@
 //! operating area (class table, grid, an optional prior map — never a simulator world) become
 //! the robot's [`RuntimeConfig`]. Every adapter builds its robots through here.
 
+use std::sync::Arc;
+
 use spomp_behaviors::mission::MissionFile;
 use spomp_behaviors::mission::schema::LocalizationMode;
 use spomp_core::{AerialMap, ClassTable, GridSpec, Pose2, RobotId, RobotKind};
@@ -20,8 +22,9 @@ pub struct OperatingArea {
     /// Grid of the aerial map the team builds.
     pub grid: GridSpec,
     /// An aerial map the robots start with (surveyed before the mission); `None`: they know only
-    /// what the team maps.
-    pub prior_map: Option<AerialMap>,
+    /// what the team maps. Shared: every robot set up over the area holds this one map until it
+    /// changes its own copy.
+    pub prior_map: Option<Arc<AerialMap>>,
 }
 
 /// Where a robot's map-frame pose comes from, as the adapter must supply it.

@@ -15,6 +15,7 @@
 
 use std::collections::BTreeMap;
 use std::io::{Seek, Write};
+use std::sync::Arc;
 
 use byteorder::LittleEndian;
 use serde::de::DeserializeOwned;
@@ -226,8 +227,8 @@ pub struct AreaRecord {
     pub classes: ClassTable,
     /// The team map's grid.
     pub grid: GridSpec,
-    /// The map the robots start with, if any.
-    pub prior_map: Option<AerialMap>,
+    /// The map the robots start with, if any (shared with the robots replayed over it).
+    pub prior_map: Option<Arc<AerialMap>>,
 }
 
 /// The run's setup, as a replay needs it to build a fresh robot.

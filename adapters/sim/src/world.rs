@@ -1,6 +1,8 @@
 //! The simulated world: a 2.5D grid (class, elevation, colour) plus the class table and the
 //! ground truth a generator knows about it.
 
+use std::sync::Arc;
+
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use spomp_core::{AerialMap, Cell, ClassId, ClassTable, GridSpec, Point2, Pose2};
@@ -26,8 +28,10 @@ pub struct WorldMeta {
 /// exactly these layers. Elevations are finite (metres above the world's datum).
 #[derive(Clone, Debug, PartialEq)]
 pub struct World {
-    /// Class, colour and elevation layers (private: the highest elevation is cached).
-    map: AerialMap,
+    /// Class, colour and elevation layers (private: the highest elevation is cached). Shared:
+    /// robots that start with the whole map (`sim.prior_map`) hold these very layers until
+    /// they change their copy.
+    map: Arc<AerialMap>,
     /// The class table the class layer refers to.
     classes: ClassTable,
     /// Ground truth and start poses.
@@ -69,7 +73,7 @@ impl World {
             ));
         }
         let max_elevation_m = map.elevation.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        Ok(World { map, classes, meta, max_elevation_m })
+        Ok(World { map: Arc::new(map), classes, meta, max_elevation_m })
     }
 
     /// A world of one class at one elevation (tests, toy scenes).
@@ -89,6 +93,11 @@ impl World {
     #[inline]
     pub fn map(&self) -> &AerialMap {
         &self.map
+    }
+
+    /// The layers, shared (a prior map for the robots costs no copy).
+    pub fn shared_map(&self) -> Arc<AerialMap> {
+        Arc::clone(&self.map)
     }
 
     /// The class table of the class layer.
@@ -136,10 +145,11 @@ impl World {
     pub fn set_cell(&mut self, cell: Cell, class: ClassId, rgb: [u8; 3], elevation_m: f32) {
         let inside = cell.col < self.map.spec.width && cell.row < self.map.spec.height;
         if inside && elevation_m.is_finite() && self.classes.get(class).is_some() {
-            let i = self.map.spec.index(cell);
-            self.map.class[i] = class;
-            self.map.rgb[i] = rgb;
-            self.map.elevation[i] = elevation_m;
+            let map = Arc::make_mut(&mut self.map);
+            let i = map.spec.index(cell);
+            map.class[i] = class;
+            map.rgb[i] = rgb;
+            map.elevation[i] = elevation_m;
             self.max_elevation_m = self.max_elevation_m.max(elevation_m);
         }
     }

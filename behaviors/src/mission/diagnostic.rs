@@ -23,6 +23,9 @@ pub enum Stage {
     /// The world a mission names: it loads, start poses are usable, goals can exist, waypoints
     /// stay in it (run by `spomp validate`, which can load worlds).
     World,
+    /// The memory a simulated run of the mission needs, against what the machine has (run by
+    /// `spomp validate`, which knows the simulator's world).
+    Memory,
     /// Simulated dry run.
     DryRun,
 }
@@ -36,6 +39,7 @@ impl Stage {
             Stage::Wiring => "wiring",
             Stage::Team => "team",
             Stage::World => "world",
+            Stage::Memory => "memory",
             Stage::DryRun => "dry_run",
         }
     }

@@ -31,9 +31,10 @@ pub const MAX_TIME_LIMIT_S: f64 = 604_800.0;
 /// The longest mission name or robot id, characters.
 pub const MAX_IDENTIFIER_LEN: usize = 64;
 
-/// The most robots a team may have. Each simulated robot keeps its own aerial map, graph and
-/// team state (tens of MB on a generated city), so larger teams do not fit a workstation.
-pub const MAX_ROBOTS: usize = 64;
+/// The most robots a team may have: a bound of the language. Whether a team fits the machine
+/// is the memory stage's call (`spomp validate` estimates what a simulated run needs: about 10
+/// MB per UGV on a generated city, and refuses a team that cannot fit).
+pub const MAX_ROBOTS: usize = 1000;
 
 /// The largest mission, include or plan file, bytes (4 MiB).
 pub const MAX_SOURCE_BYTES: u64 = 4 * 1024 * 1024;

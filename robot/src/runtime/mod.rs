@@ -59,8 +59,8 @@ pub struct RuntimeConfig {
     /// PNG effort of the published map layers.
     pub map_compression: CompressionParams,
     /// An aerial map the robot starts with (surveyed before the mission); `None`: only what the
-    /// team maps.
-    pub prior_map: Option<AerialMap>,
+    /// team maps. Shared, not copied: robots of a team hold one prior map until they change it.
+    pub prior_map: Option<Arc<AerialMap>>,
 }
 
 impl RuntimeConfig {
@@ -233,7 +233,7 @@ impl RobotRuntime {
             rt.nav = Some(Box::new(NavStack::new(nav, &rt.classes)?));
         }
         if let Some(map) = config.prior_map {
-            rt.map = Some(Orthomap::from_map(map)?);
+            rt.map = Some(Orthomap::from_shared(map)?);
         } else if rt.kind == RobotKind::Uav
             && let Some(spec) = rt.map_spec
         {
@@ -696,7 +696,7 @@ mod tests {
         let mut config = RuntimeConfig::basic(RobotId::new("ugv1"), RobotKind::Ugv, 1, Pose2::new(5.0, 5.0, 0.0));
         config.map_spec = Some(road_map().spec);
         config.nav = Some(NavParams::default());
-        config.prior_map = prior_map;
+        config.prior_map = prior_map.map(Arc::new);
         RobotRuntime::from_config(config).unwrap()
     }
 
@@ -705,6 +705,27 @@ mod tests {
         let mut rt = ugv(Some(road_map()));
         rt.set_background_skills(true);
         assert!(rt.nav().unwrap().has_graph(), "the prior map's graph is built at setup");
+    }
+
+    #[test]
+    fn robots_set_up_over_one_prior_map_hold_it_once() {
+        let prior = Arc::new(road_map());
+        let robot = |id: &str| {
+            let mut config = RuntimeConfig::basic(RobotId::new(id), RobotKind::Ugv, 1, Pose2::new(5.0, 5.0, 0.0));
+            config.map_spec = Some(prior.spec);
+            config.nav = Some(NavParams::default());
+            config.prior_map = Some(Arc::clone(&prior));
+            let mut rt = RobotRuntime::from_config(config).unwrap();
+            rt.maintain(Time::from_secs_f64(1.0));
+            rt
+        };
+        let (a, b) = (robot("ugv1"), robot("ugv2"));
+        assert!(a.nav().unwrap().has_graph() && b.nav().unwrap().has_graph());
+        for rt in [&a, &b] {
+            assert!(Arc::ptr_eq(&rt.map().unwrap().shared(), &prior), "{}: the map is the prior map", rt.id());
+        }
+        // Each robot's map and its planner's: four holders besides the test's.
+        assert_eq!(Arc::strong_count(&prior), 5, "no robot copied it");
     }
 
     #[test]

@@ -4,11 +4,12 @@
 //! The driving nodes (`navigate_to`, `navigate_local`, `return_home`) use it.
 
 use std::collections::VecDeque;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, PoisonError};
 
 use rand_chacha::ChaCha8Rng;
 use spomp_core::{
-    AerialMap, ClassTable, DepthPanorama, PanoramaFrame, Point2, Pose2, PoseEstimate, ReachabilityScan, RobotId, Time,
+    AerialMap, ClassTable, DepthPanorama, PanoramaFrame, PanoramaGeometry, Point2, Pose2, PoseEstimate,
+    ReachabilityScan, RobotId, Time,
 };
 use spomp_global_planner::{
     GlobalPath, GlobalPlanner, GlobalPlannerParams, NodeId, PlanError, ScanSharer, TrainOutcome,
@@ -36,6 +37,38 @@ const MAX_BACKTRACK_ATTEMPTS: usize = 12;
 /// Graph nodes nearest a goal in unmapped territory tried as the end of the graph part of the
 /// path ([`NavStack::plan`]).
 const MAX_UNMAPPED_GOAL_ATTEMPTS: usize = 8;
+
+/// Terrain analyzers not lent to a job, for any robot of the process. An analyzer is scratch
+/// (tables and ≈ 26 bytes of buffers per panorama pixel: 6.8 MB at 256 × 1024) whose result
+/// depends on the panorama alone, so robots stepped one after another — a simulated team —
+/// share a few instead of each holding one between panoramas; robots on their own threads take
+/// one each.
+// Boxed as the jobs carry them: taking one out or giving it back moves a pointer.
+#[allow(clippy::vec_box)]
+static IDLE_ANALYZERS: Mutex<Vec<Box<TerrainAnalyzer>>> = Mutex::new(Vec::new());
+
+/// Idle analyzers kept for reuse (more are dropped when given back): enough for the robots of
+/// a process analysing panoramas at the same time on a many-core machine.
+const MAX_IDLE_ANALYZERS: usize = 16;
+
+/// An idle analyzer for this geometry and these parameters, or a new one.
+fn take_analyzer(geometry: PanoramaGeometry, params: &TerrainParams) -> Result<Box<TerrainAnalyzer>, String> {
+    {
+        let mut idle = IDLE_ANALYZERS.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(k) = idle.iter().position(|a| a.geometry() == geometry && a.params() == params) {
+            return Ok(idle.swap_remove(k));
+        }
+    }
+    TerrainAnalyzer::new(geometry, params.clone()).map(Box::new).map_err(|e| e.to_string())
+}
+
+/// Gives an analyzer back for any robot to use.
+fn give_back_analyzer(analyzer: Box<TerrainAnalyzer>) {
+    let mut idle = IDLE_ANALYZERS.lock().unwrap_or_else(PoisonError::into_inner);
+    if idle.len() < MAX_IDLE_ANALYZERS {
+        idle.push(analyzer);
+    }
+}
 
 /// Navigation parameters of a UGV.
 #[derive(Clone, Debug, Default)]
@@ -66,14 +99,15 @@ pub struct LocalView {
 pub struct NavStack {
     /// Parameters.
     pub params: NavParams,
-    /// Terrain analysis (created for the panorama geometry at the first panorama).
-    pub terrain: Option<Box<TerrainAnalyzer>>,
     /// The latest safe region.
     pub view: Option<LocalView>,
     /// The latest reachability scan (map frame).
     pub latest_scan: Option<Arc<ReachabilityScan>>,
     /// The depth image the latest analysis ran on.
     analyzed_depth: Option<Arc<DepthPanorama>>,
+    /// The obstacle mask of the latest analysis (row-major in its geometry), kept for
+    /// observers: the analyzer itself goes back to the process's idle ones.
+    latest_obstacles: Option<(PanoramaGeometry, Vec<bool>)>,
     /// The global planner.
     pub global: GlobalPlanner,
     /// The DWA controller.
@@ -160,7 +194,7 @@ impl PlannerJob {
         let map_version = self.new_map.as_ref().map(|(_, v)| *v);
         let mut result = Ok(false);
         if let Some((map, _)) = &self.new_map
-            && let Err(e) = self.planner.update_map(map)
+            && let Err(e) = self.planner.update_map_shared(Arc::clone(map))
         {
             result = Err(e.to_string());
         }
@@ -185,10 +219,10 @@ impl NavStack {
         let sharer = ScanSharer::new(params.global.sharing.clone());
         Ok(NavStack {
             params,
-            terrain: None,
             view: None,
             latest_scan: None,
             analyzed_depth: None,
+            latest_obstacles: None,
             global,
             dwa,
             sharer,
@@ -203,35 +237,35 @@ impl NavStack {
         })
     }
 
-    /// Prepares terrain analysis of `frame`: the analyzer (made for the frame's geometry if it
-    /// has none for it) leaves the stack for the job, or, when the depth image is the one
+    /// Prepares terrain analysis of `frame`: an analyzer for the frame's geometry (an idle one
+    /// of the process, else a new one) is lent to the job, or, when the depth image is the one
     /// analysed last (a sensor that re-sends its last frame, the simulator's still robot), the
     /// job reuses that analysis and only the stamp and pose are new.
     pub(crate) fn begin_analysis(&mut self, frame: &PanoramaFrame) -> Result<TerrainJob, String> {
-        let geometry = frame.depth.geometry;
-        if self.terrain.as_ref().is_none_or(|t| t.geometry() != geometry) {
-            let analyzer =
-                TerrainAnalyzer::new(geometry, self.params.local.terrain.clone()).map_err(|e| e.to_string())?;
-            self.terrain = Some(Box::new(analyzer));
-        }
         if let (Some(last), Some(view), Some(scan)) = (&self.analyzed_depth, &self.view, &self.latest_scan)
             && Arc::ptr_eq(last, &frame.depth)
         {
             return Ok(TerrainJob::Reuse { region: view.region.clone(), scan: (**scan).clone() });
         }
-        match self.terrain.take() {
-            Some(analyzer) => Ok(TerrainJob::Analyze { analyzer, params: self.params.local.terrain.clone() }),
-            None => Err("terrain analysis has no analyzer".into()),
+        let analyzer = take_analyzer(frame.depth.geometry, &self.params.local.terrain)?;
+        Ok(TerrainJob::Analyze { analyzer, params: self.params.local.terrain.clone() })
+    }
+
+    /// Takes back what [`Self::begin_analysis`] lent the job (the analyzer goes back to the
+    /// process's idle ones).
+    pub(crate) fn end_analysis(&mut self, job: TerrainJob) {
+        if let TerrainJob::Analyze { analyzer, .. } = job {
+            let (geometry, mask) = self.latest_obstacles.get_or_insert_with(|| (analyzer.geometry(), Vec::new()));
+            *geometry = analyzer.geometry();
+            mask.clear();
+            mask.extend_from_slice(analyzer.output().obstacle());
+            give_back_analyzer(analyzer);
         }
     }
 
-    /// Takes back what [`Self::begin_analysis`] lent the job.
-    pub(crate) fn end_analysis(&mut self, job: TerrainJob) {
-        if let TerrainJob::Analyze { analyzer, .. } = job
-            && self.terrain.is_none()
-        {
-            self.terrain = Some(analyzer);
-        }
+    /// The obstacle mask of the latest terrain analysis (row-major in its panorama geometry).
+    pub fn terrain_obstacles(&self) -> Option<(PanoramaGeometry, &[bool])> {
+        self.latest_obstacles.as_ref().map(|(g, mask)| (*g, mask.as_slice()))
     }
 
     /// The result of terrain analysis of `frame` taken at `pose`: updates the safe region,
@@ -274,7 +308,7 @@ impl NavStack {
     ) -> Result<(), String> {
         let Some(map) = map else { return Ok(()) };
         if self.map_version_seen != Some(map.version()) {
-            self.global.update_map(map.map()).map_err(|e| e.to_string())?;
+            self.global.update_map_shared(map.shared()).map_err(|e| e.to_string())?;
             self.map_version_seen = Some(map.version());
         }
         self.take_team_scans(team);

@@ -109,6 +109,13 @@ impl Coverage {
         Coverage { rays: RayTable::build(radius_cells), ..Default::default() }
     }
 
+    /// Gives back the map-sized scratch (distances, window, buckets: about 9 bytes a cell).
+    /// Coverage runs only when the map grows, while every UGV of a team holds a planner.
+    pub fn release_scratch(&mut self) {
+        let rays = std::mem::take(&mut self.rays);
+        *self = Coverage { rays, ..Default::default() };
+    }
+
     /// Covers every cell of the class set that `owner` does not cover yet. `place_node(cell)`
     /// creates a node at a cell and returns its id, which is written into `owner` for the cells
     /// it covers. Returns the number of nodes placed.

@@ -86,42 +86,65 @@ impl EdgeExperience {
 
 /// Per-cell votes from scans: +1 inside a safe region, −1 just beyond a known obstacle; each scan
 /// votes at most once per cell.
+///
+/// One byte a cell for the net votes and two bits a cell for the bookkeeping: every UGV of a
+/// team holds this over the whole map, while a scan touches a few thousand cells.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Votes {
     votes: Vec<i8>,
-    last_scan: Vec<u32>,
+    /// Cells that ever received a vote (bit per cell).
+    ever_voted: Vec<u64>,
+    /// Cells the current scan voted on (bit per cell), cleared through `voted_now`.
+    voted_this_scan: Vec<u64>,
+    /// The cells whose `voted_this_scan` bit is set.
+    voted_now: Vec<u32>,
+    /// Cells in the order of their first vote (the order labels come out in).
     touched: Vec<u32>,
-    scan_counter: u32,
+}
+
+/// Word and mask of a cell's bit.
+#[inline]
+fn bit(cell: usize) -> (usize, u64) {
+    (cell / 64, 1u64 << (cell % 64))
 }
 
 impl Votes {
     /// Sizes the rasters for `cells` cells (keeps votes when the size is unchanged).
     pub fn resize(&mut self, cells: usize) {
         if self.votes.len() != cells {
+            let words = cells.div_ceil(64);
             self.votes = vec![0; cells];
-            self.last_scan = vec![0; cells];
+            self.ever_voted = vec![0; words];
+            self.voted_this_scan = vec![0; words];
+            self.voted_now.clear();
             self.touched.clear();
         }
     }
 
     /// Starts a new scan.
     pub fn begin_scan(&mut self) {
-        self.scan_counter = self.scan_counter.wrapping_add(1).max(1);
+        for &cell in &self.voted_now {
+            let (word, _) = bit(cell as usize);
+            self.voted_this_scan[word] = 0;
+        }
+        self.voted_now.clear();
     }
 
     /// Casts this scan's vote on a cell; returns false when the scan already voted there.
     pub fn vote(&mut self, cell: usize, traversable: bool) -> bool {
-        let Some(stamp) = self.last_scan.get_mut(cell) else {
+        let Some(v) = self.votes.get_mut(cell) else {
             return false;
         };
-        if *stamp == self.scan_counter {
+        let (word, mask) = bit(cell);
+        if self.voted_this_scan[word] & mask != 0 {
             return false;
         }
-        if *stamp == 0 {
+        self.voted_this_scan[word] |= mask;
+        self.voted_now.push(cell as u32);
+        if self.ever_voted[word] & mask == 0 {
+            self.ever_voted[word] |= mask;
             self.touched.push(cell as u32);
         }
-        *stamp = self.scan_counter;
-        let v = &mut self.votes[cell];
         *v = if traversable { v.saturating_add(1) } else { v.saturating_sub(1) };
         true
     }
@@ -205,5 +228,23 @@ mod tests {
         let labels: Vec<_> = v.labels(3).collect();
         assert_eq!(labels, vec![(1, true)], "cell 2 has only 2 net votes");
         assert!(!v.vote(99, true));
+    }
+
+    #[test]
+    fn labels_keep_the_order_of_first_votes_across_word_boundaries() {
+        let mut v = Votes::default();
+        v.resize(200);
+        let cells = [130usize, 3, 64, 63, 199, 3];
+        for _ in 0..2 {
+            v.begin_scan();
+            for &c in &cells {
+                v.vote(c, c % 2 == 1);
+            }
+        }
+        let labels: Vec<_> = v.labels(2).collect();
+        assert_eq!(labels, vec![(130, false), (3, true), (64, false), (63, true), (199, true)]);
+        v.begin_scan();
+        assert!(v.vote(64, true), "a new scan may vote again on every cell");
+        assert_eq!(v.net(64), -1);
     }
 }

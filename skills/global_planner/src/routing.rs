@@ -34,7 +34,8 @@ fn walk_cells(p: (i32, i32), q: (i32, i32), mut visit: impl FnMut((i32, i32))) {
     }
 }
 
-/// Scratch buffers for routing, reused across edges.
+/// Scratch buffers for routing, reused across the edges of one map update and dropped after it
+/// (the planner replaces the router: clearance and components are map-sized).
 #[derive(Clone, Debug, Default)]
 pub(crate) struct EdgeRouter {
     /// Distance in cells (Chebyshev) from each map cell to the nearest cell beside a step,

@@ -83,7 +83,8 @@ pub struct GoalDetector {
     obstacle_lut: [bool; 256],
     /// Scratch: component statistics.
     components: Vec<Component>,
-    /// Scratch: the distance transform's buffers.
+    /// Scratch: the distance transform's buffers (map-sized; given back after each pass, since
+    /// a pass runs only when the map changes and every robot of a team holds a detector).
     edt: SquaredEdt,
 }
 
@@ -122,6 +123,12 @@ impl GoalDetector {
 
     /// Detects goals in `map`, dropping those within the deconfliction radius of `known_goals`.
     pub fn detect(&mut self, map: &AerialMap, known_goals: &[Point2]) -> Result<Detection, MappingError> {
+        let detection = self.detect_with_scratch(map, known_goals);
+        self.edt = SquaredEdt::default();
+        detection
+    }
+
+    fn detect_with_scratch(&mut self, map: &AerialMap, known_goals: &[Point2]) -> Result<Detection, MappingError> {
         let spec = map.spec;
         let (w, h) = (spec.width, spec.height);
         if map.class.len() != spec.len() {

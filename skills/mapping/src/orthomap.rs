@@ -253,8 +253,14 @@ impl Orthomap {
 
     /// Wraps an existing map (e.g. one received from a peer).
     pub fn from_map(map: AerialMap) -> Result<Self, MappingError> {
+        Self::from_shared(Arc::new(map))
+    }
+
+    /// Wraps a map others hold too (a team's prior map): no copy is made until this map
+    /// changes, so robots that start with the same map hold it once.
+    pub fn from_shared(map: Arc<AerialMap>) -> Result<Self, MappingError> {
         check_map(&map)?;
-        Ok(Orthomap { map: Arc::new(map), dirty: None })
+        Ok(Orthomap { map, dirty: None })
     }
 
     /// The map.
@@ -278,6 +284,11 @@ impl Orthomap {
     pub fn apply_tile(&mut self, tile: &MapTile) -> Result<usize, MappingError> {
         if !tile.is_consistent() {
             return Err(MappingError::InconsistentMap("tile layers do not match its size".into()));
+        }
+        // A tile that changes nothing (a camera passing over a prior map) must not copy a map
+        // shared with others.
+        if !self.map.tile_changes_anything(tile) {
+            return Ok(0);
         }
         let changed = Arc::make_mut(&mut self.map).apply_tile(tile);
         if changed > 0 && tile.col0 < self.map.spec.width && tile.row0 < self.map.spec.height {

@@ -80,6 +80,34 @@ fn regions_round_trip_into_another_orthomap() {
 }
 
 #[test]
+fn a_shared_map_is_copied_only_when_a_tile_changes_it() {
+    let shared = std::sync::Arc::new(city(60, 40));
+    let mut a = Orthomap::from_shared(shared.clone()).unwrap();
+    let b = Orthomap::from_shared(shared.clone()).unwrap();
+    // The camera passing over what the map already holds.
+    let spec = shared.spec;
+    let cells: Vec<usize> = (0..10).map(|c| spec.index(spomp_core::Cell::new(c, 3))).collect();
+    let same_tile = MapTile {
+        col0: 0,
+        row0: 3,
+        width: 10,
+        height: 1,
+        class: cells.iter().map(|&i| shared.class[i]).collect(),
+        rgb: cells.iter().map(|&i| shared.rgb[i]).collect(),
+        elevation: cells.iter().map(|&i| shared.elevation[i]).collect(),
+    };
+    assert_eq!(a.apply_tile(&same_tile).unwrap(), 0);
+    assert!(std::sync::Arc::ptr_eq(&a.shared(), &shared), "an unchanged map stays shared");
+    let mut new_tile = same_tile.clone();
+    new_tile.class[4] = if new_tile.class[4] == ROAD { GRASS } else { ROAD };
+    assert_eq!(a.apply_tile(&new_tile).unwrap(), 1);
+    assert!(!std::sync::Arc::ptr_eq(&a.shared(), &shared), "a change copies the map");
+    assert!(std::sync::Arc::ptr_eq(&b.shared(), &shared), "the other holder keeps the original");
+    assert_eq!(b.version(), shared.version);
+    assert_eq!(a.version(), shared.version + 1);
+}
+
+#[test]
 fn corrupt_blobs_are_rejected() {
     let m = city(60, 40);
     let blob = encode_layers(&m, &CompressionParams::default()).unwrap();

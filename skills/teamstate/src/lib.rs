@@ -29,6 +29,7 @@
 
 pub mod auth;
 mod error;
+mod intern;
 mod params;
 mod record;
 mod snapshot;

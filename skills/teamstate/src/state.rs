@@ -197,7 +197,8 @@ impl TeamState {
     }
 
     /// Inserts a record this robot wrote (or a mission record) and keeps derived state current.
-    fn put(&mut self, key: RecordKey, dot: u64, body: RecordBody) {
+    fn put(&mut self, key: RecordKey, dot: u64, mut body: RecordBody) {
+        crate::intern::share_body(&key, &mut body);
         let mut rec = Record { key: key.clone(), dot, body, sig: None };
         if let Some(security) = &self.security
             && key.writer() == &self.self_id
@@ -663,10 +664,11 @@ impl TeamState {
     }
 
     /// Takes a validated record from a snapshot (newer copies win, as in a merge).
-    pub(crate) fn insert_restored(&mut self, rec: Record) {
+    pub(crate) fn insert_restored(&mut self, mut rec: Record) {
         if self.records.get(&rec.key).is_some_and(|cur| crate::record::compare_copies(&rec, cur).is_le()) {
             return;
         }
+        crate::intern::share_body(&rec.key, &mut rec.body);
         if let RecordBody::Scan(s) = &rec.body {
             self.scan_log.push(s.clone());
         }
@@ -692,7 +694,7 @@ impl TeamState {
         let unseen = self.changes.range(peer.change_cursor + 1..).map(|(_, k)| k);
         let held_by_peer = |key: &RecordKey| {
             let Some(rec) = self.records.get(key) else { return true };
-            let held = peer.confirmed.get(key).copied().unwrap_or(0);
+            let held = peer.confirmed.get(key);
             // Poses change every tick; any version counts, or a sync would never complete.
             match key {
                 RecordKey::Robot(_) => held > 0,
@@ -871,6 +873,8 @@ impl TeamState {
             }
             report.records_changed += 1;
             goals_touched |= rec.key.goal().is_some() || matches!(rec.key, RecordKey::RetryEpoch(_));
+            let mut rec = rec.clone();
+            crate::intern::share_body(&rec.key, &mut rec.body);
             match &rec.body {
                 RecordBody::Scan(s) => {
                     self.scan_log.push(s.clone());
@@ -890,7 +894,7 @@ impl TeamState {
                 self.next_scan_seq = self.next_scan_seq.max(seq.saturating_add(1));
             }
             self.note_change(&rec.key);
-            self.records.insert(rec.key.clone(), rec.clone());
+            self.records.insert(rec.key.clone(), rec);
         }
         if goals_touched {
             self.rebuild_goals();
@@ -904,8 +908,7 @@ impl TeamState {
         state.session = msg.session;
         state.process_ack(msg.ack, max_in_flight);
         for rec in &msg.records {
-            let c = state.confirmed.entry(rec.key.clone()).or_insert(0);
-            *c = (*c).max(rec.dot);
+            state.confirmed.raise(&rec.key, rec.dot);
         }
         // A re-delivered message was acknowledged already (or will be with the original).
         let duplicate = state.received.covers(msg.seq);

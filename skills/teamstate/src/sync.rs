@@ -200,6 +200,29 @@ pub(crate) struct InFlight {
     pub records: Vec<(RecordKey, u64)>,
 }
 
+/// The highest dot of each record a peer is known to hold, by the key's process-wide number:
+/// 8 bytes a record seen, for each peer.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct DotsByKey {
+    dots: Vec<u64>,
+}
+
+impl DotsByKey {
+    /// The dot held for `key`; 0 for none.
+    pub fn get(&self, key: &RecordKey) -> u64 {
+        crate::intern::known_key_number(key).and_then(|n| self.dots.get(n).copied()).unwrap_or(0)
+    }
+
+    /// Raises the dot held for `key` to at least `dot`.
+    pub fn raise(&mut self, key: &RecordKey, dot: u64) {
+        let n = crate::intern::key_number(key);
+        if self.dots.len() <= n {
+            self.dots.resize(n + 1, 0);
+        }
+        self.dots[n] = self.dots[n].max(dot);
+    }
+}
+
 /// What this robot knows about one peer.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct PeerState {
@@ -208,7 +231,7 @@ pub(crate) struct PeerState {
     /// Sent messages with records, not yet acknowledged or presumed lost.
     pub in_flight: VecDeque<InFlight>,
     /// Record dots the peer is known to hold (acknowledged, or received from it).
-    pub confirmed: HashMap<RecordKey, u64>,
+    pub confirmed: DotsByKey,
     /// Record dots sent in messages still in flight, with the message's seq.
     pub sent: HashMap<RecordKey, (u64, u32)>,
     /// Records that may still have to go to the peer (changed since they were last considered,
@@ -239,7 +262,7 @@ pub(crate) struct PeerState {
 impl PeerState {
     /// Highest dot of `key` the peer holds or will hold if in-flight messages arrive.
     pub fn known_dot(&self, key: &RecordKey) -> u64 {
-        let confirmed = self.confirmed.get(key).copied().unwrap_or(0);
+        let confirmed = self.confirmed.get(key);
         let sent = self.sent.get(key).map_or(0, |s| s.0);
         confirmed.max(sent)
     }
@@ -274,8 +297,7 @@ impl PeerState {
     fn resolve(&mut self, msg: InFlight, delivered: bool) {
         for (key, dot) in msg.records {
             if delivered {
-                let c = self.confirmed.entry(key.clone()).or_insert(0);
-                *c = (*c).max(dot);
+                self.confirmed.raise(&key, dot);
             }
             if self.sent.get(&key).is_some_and(|s| s.1 == msg.seq) {
                 self.sent.remove(&key);

@@ -264,8 +264,8 @@ fn observe_scan(id: &RobotId, robot: &Robot, last_scan_stamp: &mut Option<Time>,
     {
         *last_scan_stamp = Some(scan.stamp);
         observer.on_scan(scan);
-        if let Some(t) = nav.terrain.as_ref() {
-            observer.on_terrain(id, scan.stamp, t.geometry(), t.output().obstacle());
+        if let Some((geometry, obstacle)) = nav.terrain_obstacles() {
+            observer.on_terrain(id, scan.stamp, geometry, obstacle);
         }
     }
 }

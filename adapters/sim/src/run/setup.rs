@@ -72,6 +72,6 @@ pub fn operating_area(mission: &MissionFile, world: &World) -> OperatingArea {
     OperatingArea {
         classes: world.classes().clone(),
         grid: *world.spec(),
-        prior_map: mission.sim.as_ref().is_some_and(|s| s.prior_map).then(|| world.map().clone()),
+        prior_map: mission.sim.as_ref().is_some_and(|s| s.prior_map).then(|| world.shared_map()),
     }
 }

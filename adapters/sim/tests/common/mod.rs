@@ -99,7 +99,7 @@ pub fn driver(world: &World, s: DriverSetup<'_>) -> (RobotRuntime, RobotExecutor
         watchdog: WatchdogParams::default(),
     });
     config.seed = 7;
-    config.prior_map = s.with_map.then(|| world.map().clone());
+    config.prior_map = s.with_map.then(|| world.shared_map());
     let rt = RobotRuntime::from_config(config).unwrap();
     let ex = build_executor(&loaded.roles["driver"], &registry, rt.id(), s.start, BuildOptions::default()).unwrap();
     (rt, ex)

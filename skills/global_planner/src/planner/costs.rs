@@ -46,6 +46,29 @@ impl GlobalPlanner {
         sum / known as f64 * n
     }
 
+    /// [`Self::learned_cost`] over packed features ([`Features::pack`]): the same sum over the
+    /// same rows.
+    pub(super) fn learned_cost_packed(&mut self, packed: &[u8], n_samples: usize) -> f64 {
+        let n = n_samples.max(1) as f64;
+        let record = self.features.packed_len();
+        let known = packed.len() / record.max(1);
+        if !self.model.is_trained() || known == 0 {
+            return n * std::f64::consts::LN_2;
+        }
+        let floor = self.params.learning.probability_floor.clamp(1e-12, 0.5);
+        let mut row = std::mem::take(&mut self.feature_scratch);
+        row.resize(self.features.channels(), 0.0);
+        let mut sum = 0.0;
+        for cell in packed.chunks_exact(record) {
+            self.features.unpack(cell, &mut row);
+            let t = self.model.probability(&row) as f64;
+            let t = if t.is_finite() { t.clamp(floor, 1.0) } else { floor };
+            sum -= t.ln();
+        }
+        self.feature_scratch = row;
+        sum / known as f64 * n
+    }
+
     /// The learning-off ablation: W = 100^T_cls − 1 + D, T_cls the rank of the hardest class on
     /// the edge, D the least distance from a sample to the next harder class present.
     pub(super) fn class_rank_cost(&self, map: &AerialMap, samples: &[u32]) -> f64 {
@@ -95,10 +118,14 @@ impl GlobalPlanner {
                 self.base_cost(&samples)
             } else {
                 if map_changed || (feats.is_empty() && !samples.is_empty()) {
-                    self.base_cost(&samples);
-                    std::mem::swap(&mut feats, &mut self.segment_features);
+                    feats.clear();
+                    if let Some(map) = &self.map {
+                        for &s in &samples {
+                            self.features.pack(map, s as usize, &mut feats);
+                        }
+                    }
                 }
-                self.learned_cost(&feats, samples.len())
+                self.learned_cost_packed(&feats, samples.len())
             };
             if let Some(d) = self.graph.edge_weight_mut(e) {
                 std::mem::swap(&mut d.samples, &mut samples);
@@ -166,6 +193,7 @@ impl GlobalPlanner {
         }
         let labels = self.train_y.len();
         if labels < l.min_labels.max(1) {
+            self.release_training_set();
             return TrainOutcome::NotEnoughLabels { labels };
         }
         let settings = TrainSettings {
@@ -177,10 +205,19 @@ impl GlobalPlanner {
             samples: l.samples_per_round,
         };
         let loss = self.model.train(&self.train_x, &self.train_y, settings, rng);
+        self.release_training_set();
         self.last_train = Some(now);
         self.training_rounds += 1;
         self.refresh_all_costs(false);
         TrainOutcome::Trained { labels, loss }
+    }
+
+    /// Gives back the training set: 52 bytes per labelled cell, and the labels grow with every
+    /// scan the team shares (tens of MB per robot over a long run of a large team), while a
+    /// round needs it only for its duration.
+    fn release_training_set(&mut self) {
+        self.train_x = Vec::new();
+        self.train_y = Vec::new();
     }
 
     /// Learned probability that the cell under `p` is traversable (0.5 before training); `None`

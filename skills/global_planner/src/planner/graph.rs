@@ -7,8 +7,14 @@ use super::*;
 impl GlobalPlanner {
     /// Takes in the current aerial map (the first map, or the same grid grown by tiles): covers
     /// newly mapped cells with new nodes, connects them, refreshes features and edge costs. Edge
-    /// states, removed edges and votes are kept.
+    /// states, removed edges and votes are kept. The planner keeps a copy of the map; a caller
+    /// that holds it in an [`Arc`] gives it with [`Self::update_map_shared`] instead.
     pub fn update_map(&mut self, map: &AerialMap) -> Result<MapUpdate, SetupError> {
+        self.update_map_shared(Arc::new(map.clone()))
+    }
+
+    /// [`Self::update_map`] with a map the caller shares: the planner holds this one, no copy.
+    pub fn update_map_shared(&mut self, map: Arc<AerialMap>) -> Result<MapUpdate, SetupError> {
         let n = map.spec.len();
         if map.class.len() != n || map.rgb.len() != n || map.elevation.len() != n {
             return Err(SetupError::InvalidMap(format!(
@@ -36,9 +42,7 @@ impl GlobalPlanner {
             });
         }
         if let Some(old) = &self.map
-            && old.version == map.version
-            && old.class == map.class
-            && old.rgb == map.rgb
+            && (Arc::ptr_eq(old, &map) || (old.version == map.version && old.class == map.class && old.rgb == map.rgb))
         {
             // Nothing new: keep the graph, features and costs as they are.
             return Ok(MapUpdate::default());
@@ -58,11 +62,8 @@ impl GlobalPlanner {
             self.owner = vec![NO_NODE; n];
             self.votes.resize(n);
         }
-        let changed_box = self.map.as_ref().map(|old| changed_class_box(old, map));
-        match &mut self.map {
-            Some(m) => m.clone_from(map),
-            None => self.map = Some(map.clone()),
-        }
+        let changed_box = self.map.as_ref().map(|old| changed_class_box(old, &map));
+        self.map = Some(map);
         let nodes_before = self.graph.node_count();
         self.cover_new_cells();
         let edges_added = self.connect_touching_regions();
@@ -75,6 +76,11 @@ impl GlobalPlanner {
             self.features.rebuild(m, &mut self.edt, self.params.learning.class_distance_cap_m, change);
         }
         self.refresh_all_costs(true);
+        // The coverage, routing and distance-transform scratch is map-sized (≈ 15 bytes a cell)
+        // and only needed during an update: give it back rather than hold it per robot.
+        self.coverage.release_scratch();
+        self.router = EdgeRouter::default();
+        self.edt = SquaredEdt::default();
         Ok(MapUpdate { nodes_added: self.graph.node_count() - nodes_before, edges_added })
     }
 

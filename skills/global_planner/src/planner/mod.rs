@@ -2,6 +2,7 @@
 //! states from experience, and graph search.
 
 use std::collections::{HashMap, HashSet};
+use std::sync::Arc;
 
 use petgraph::Undirected;
 use petgraph::stable_graph::{EdgeIndex, NodeIndex, StableGraph};
@@ -48,9 +49,9 @@ struct EdgeData {
     length_m: f64,
     /// Row-major cells sampled along the route, every `edge_sample_spacing_m`, ends included.
     samples: Vec<u32>,
-    /// Normalised features of the mapped samples, `channels` per sample (learning only):
-    /// reweighting after a training round only runs the network.
-    features: Vec<f32>,
+    /// Raw features of the mapped samples, packed ([`Features::pack`], learning only):
+    /// reweighting after a training round only unpacks them and runs the network.
+    features: Vec<u8>,
     /// Cost from the map alone (learned or class-rank).
     base_cost: f64,
     /// Cost used by the search (base cost overridden by experience).
@@ -202,7 +203,9 @@ pub struct GlobalPlanner {
     stages: usize,
     /// Rank of each class (unknown = impassable).
     rank_of_class: [u8; 256],
-    map: Option<AerialMap>,
+    /// The map the graph was built on: shared with the robot's own copy (and, for a prior
+    /// map, with the whole team), never copied here.
+    map: Option<Arc<AerialMap>>,
     graph: StableGraph<NodeData, EdgeData, Undirected, u32>,
     owner: Vec<u32>,
     edge_of_pair: HashMap<(u32, u32), EdgeIndex<u32>>,
