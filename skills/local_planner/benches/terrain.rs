@@ -7,31 +7,15 @@ use std::hint::black_box;
 
 use criterion::Criterion;
 use criterion::measurement::Measurement;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use spomp_core::PanoramaGeometry;
-use spomp_local_planner::synthetic::{Scene, add_noise};
 use spomp_local_planner::{SafeRegion, TerrainAnalyzer, TerrainParams, TerrainStage};
 
-fn street_panorama() -> spomp_core::DepthPanorama {
-    let mut pano = Scene::street(0.4).render(PanoramaGeometry::default_lidar());
-    add_noise(&mut pano, 0.01, 0.02, &mut ChaCha8Rng::seed_from_u64(7));
-    pano
-}
+#[path = "common/panoramas.rs"]
+mod panoramas;
 
-/// Metres per count of the stored panorama (the `spomp world pano` default).
-const SIM_RANGE_SCALE_M: f64 = 1.0 / 512.0;
+use panoramas::street_panorama;
 
 fn simulator_panorama() -> spomp_core::DepthPanorama {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/benches/data/sim-parking-lot.png");
-    let image = image::open(path).expect("benches/data/sim-parking-lot.png").into_luma16();
-    // Rows and columns from the image; the 90° vertical field of view the simulator renders.
-    let geometry = PanoramaGeometry {
-        rows: image.height() as usize,
-        cols: image.width() as usize,
-        ..PanoramaGeometry::default_lidar()
-    };
-    spomp_core::DepthPanorama::from_counts(geometry, image.as_raw(), SIM_RANGE_SCALE_M).expect("panorama size")
+    panoramas::simulator_panorama().unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn bench<M: Measurement + 'static>(c: &mut Criterion<M>) {

@@ -17,30 +17,12 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use spomp_core::{DepthPanorama, PanoramaGeometry};
-use spomp_local_planner::synthetic::{Scene, add_noise};
 use spomp_local_planner::{InstructionSet, TerrainAnalyzer, TerrainParams, TerrainStage};
 
-/// The terrain benchmark's synthetic panorama: a street, 1 cm noise, 2 % dropouts.
-fn street_panorama() -> DepthPanorama {
-    let mut pano = Scene::street(0.4).render(PanoramaGeometry::default_lidar());
-    add_noise(&mut pano, 0.01, 0.02, &mut ChaCha8Rng::seed_from_u64(7));
-    pano
-}
+#[path = "../benches/common/panoramas.rs"]
+mod panoramas;
 
-/// The terrain benchmark's simulator panorama (a parking lot of the default city).
-fn simulator_panorama() -> Result<DepthPanorama, String> {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/benches/data/sim-parking-lot.png");
-    let image = image::open(path).map_err(|e| format!("{path}: {e}"))?.into_luma16();
-    let geometry = PanoramaGeometry {
-        rows: image.height() as usize,
-        cols: image.width() as usize,
-        ..PanoramaGeometry::default_lidar()
-    };
-    DepthPanorama::from_counts(geometry, image.as_raw(), 1.0 / 512.0).ok_or_else(|| format!("{path}: wrong size"))
-}
+use panoramas::{simulator_panorama, street_panorama};
 
 fn main() -> Result<(), String> {
     let mut args = std::env::args().skip(1);

@@ -163,31 +163,23 @@ fn rule_4_the_azimuth_arc_length_is_the_3d_one() {
 /// former 0.3 m of arc kept a 2-pixel run at 40 m (0.49 m) and dropped a 3-pixel run at 1 m.
 #[test]
 fn rule_5_short_obstacle_runs_are_counted_in_pixels() {
-    let cols = 1024;
     let run_px = TerrainParams::default().min_obstacle_run_px;
     assert_eq!(run_px, 3);
-    let mut gradient = vec![0.0f32; 2 * cols];
-    let mut ranges = vec![40.0f32; cols];
-    ranges.extend(std::iter::repeat_n(1.0f32, cols));
-    // Row 0 (40 m): 2 pixels at 100, 1 pixel at 300, 3 pixels across the seam. Row 1 (1 m):
-    // 3 pixels at 100, 2 pixels at 500.
-    for i in [100, 101, 300, cols - 1, 0, 1, cols + 100, cols + 101, cols + 102, cols + 500, cols + 501] {
-        gradient[i] = 1.0;
-    }
-    let mut obstacle = vec![false; 2 * cols];
-    stages::obstacles(&gradient, &ranges, cols, 0.3, TerrainParams::default().run_filter(), &mut obstacle);
-    let set: Vec<usize> = (0..2 * cols).filter(|&i| obstacle[i]).collect();
-    assert_eq!(set, vec![0, 1, cols - 1, cols + 100, cols + 101, cols + 102]);
+    let cols = RUN_ROWS_COLS;
+    assert_eq!(
+        obstacles_left_in_run_rows(TerrainParams::default().run_filter()),
+        vec![0, 1, cols - 1, cols + 100, cols + 101, cols + 102]
+    );
 }
 
-/// Rule 5 in the simulation profile: runs are measured in metres of arc (0.3 m), spomp's former
-/// rule — the same rows as above keep the 2-pixel run at 40 m (0.49 m of arc) and the 1-pixel run
-/// there (0.25 m) goes, while every run at 1 m (3 pixels: 0.018 m) goes.
-#[test]
-fn rule_5_simulation_profile_counts_runs_in_metres_of_arc() {
-    let cols = 1024;
-    let filter = TerrainParams::simulation().run_filter();
-    assert_eq!((filter.min_px, filter.min_arc_m), (0, 0.3));
+/// Columns of [`obstacles_left_in_run_rows`]' rows.
+const RUN_ROWS_COLS: usize = 1024;
+
+/// Stage 4 with `filter` on two rows of obstacle runs, returning the pixels still obstacle.
+/// Row 0 (40 m): 2 pixels at 100, 1 pixel at 300, 3 pixels across the seam. Row 1 (1 m):
+/// 3 pixels at 100, 2 pixels at 500.
+fn obstacles_left_in_run_rows(filter: stages::RunFilter) -> Vec<usize> {
+    let cols = RUN_ROWS_COLS;
     let mut gradient = vec![0.0f32; 2 * cols];
     let mut ranges = vec![40.0f32; cols];
     ranges.extend(std::iter::repeat_n(1.0f32, cols));
@@ -196,8 +188,18 @@ fn rule_5_simulation_profile_counts_runs_in_metres_of_arc() {
     }
     let mut obstacle = vec![false; 2 * cols];
     stages::obstacles(&gradient, &ranges, cols, 0.3, filter, &mut obstacle);
-    let set: Vec<usize> = (0..2 * cols).filter(|&i| obstacle[i]).collect();
-    assert_eq!(set, vec![0, 1, 100, 101, cols - 1]);
+    (0..2 * cols).filter(|&i| obstacle[i]).collect()
+}
+
+/// Rule 5 in the simulation profile: runs are measured in metres of arc (0.3 m), spomp's former
+/// rule — the same rows as above keep the 2-pixel run at 40 m (0.49 m of arc) and the 1-pixel run
+/// there (0.25 m) goes, while every run at 1 m (3 pixels: 0.018 m) goes.
+#[test]
+fn rule_5_simulation_profile_counts_runs_in_metres_of_arc() {
+    let filter = TerrainParams::simulation().run_filter();
+    assert_eq!((filter.min_px, filter.min_arc_m), (0, 0.3));
+    let cols = RUN_ROWS_COLS;
+    assert_eq!(obstacles_left_in_run_rows(filter), vec![0, 1, 100, 101, cols - 1]);
 }
 
 /// One column of `rows` pixels for the reachability walk, bottom row last: horizontal ranges
