@@ -239,9 +239,16 @@ impl Robot {
         self.runtime.maintain(now);
     }
 
-    /// Ticks the tree once at `now`; transitions go to `observer`.
+    /// Ticks the tree once at `now`; transitions go to `observer`. A tree that has finished
+    /// (success or failure) stays finished: it is not ticked again and the robot commands
+    /// nothing, so a mission's `all_trees_done` sees every robot done together. A role that
+    /// should run again says so with `repeat`. Upkeep ([`Self::maintain`]) goes on.
     pub fn tick(&mut self, now: Time, observer: Option<&mut dyn TreeObserver>) -> Status {
         self.runtime.begin_tick();
+        let last = self.tree.status();
+        if last.is_done() {
+            return last;
+        }
         self.tree.tick(now, &mut self.runtime, observer)
     }
 

@@ -537,6 +537,9 @@ mod tests {
             bytes_sent: 100 * goals as u64,
             bytes_sent_full_links: 0,
             bytes_sent_small_links: 0,
+            bytes_sent_coordination: 0,
+            bytes_sent_scans: 0,
+            bytes_sent_maps: 0,
             wall_s: 1.0,
             robots: Vec::new(),
         }

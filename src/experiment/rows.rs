@@ -10,7 +10,7 @@ use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 use spomp_core::{RobotId, Time};
 use spomp_sim::run::{RunSummary, SeamInput, SimObserver};
-use spomp_teamstate::TierSet;
+use spomp_teamstate::{SyncMessage, TierSet};
 
 use super::spec::Metric;
 
@@ -40,6 +40,9 @@ pub struct RobotRow {
     pub localization_error_m: Option<f64>,
     /// Team-state bytes it sent.
     pub bytes_sent: u64,
+    /// Seconds from its first motion to its last (a robot sent on one trip: the trip).
+    #[serde(default)]
+    pub travel_time_s: Option<f64>,
     /// Its tree's status at the end (`success`, `failure`, `running`, …): whether a robot
     /// whose tree ends — a `navigate_to` — got there.
     #[serde(default)]
@@ -91,6 +94,15 @@ pub struct TrialRow {
     pub bytes_sent_full_links: u64,
     /// Of those, over links that carried coordination only (position range).
     pub bytes_sent_small_links: u64,
+    /// Of those, the coordination tier's (goals, claims, poses; with every message's header).
+    #[serde(default)]
+    pub bytes_sent_coordination: u64,
+    /// Of those, the scan tier's (shared reachability scans).
+    #[serde(default)]
+    pub bytes_sent_scans: u64,
+    /// Of those, the map tier's (aerial-map versions).
+    #[serde(default)]
+    pub bytes_sent_maps: u64,
     /// Wall-clock seconds of the trial (the only field that differs between equal runs).
     pub wall_s: f64,
     /// Each robot, in team order.
@@ -128,6 +140,7 @@ impl TrialRow {
                 Metric::GoalsVisited => Some(f64::from(r.goals_visited)),
                 Metric::TimeToGoalS => kth(&r.visit_times_s),
                 Metric::BytesSent => Some(r.bytes_sent as f64),
+                Metric::TravelTimeS => r.travel_time_s,
                 _ => None,
             };
         }
@@ -141,6 +154,8 @@ impl TrialRow {
             Metric::Collisions => Some(self.collisions as f64),
             Metric::LocalizationErrorM => self.localization_error_m,
             Metric::BytesSent => Some(self.bytes_sent as f64),
+            Metric::BytesSentScans => Some(self.bytes_sent_scans as f64),
+            Metric::TravelTimeS => mean(self.robots.iter().filter(|r| r.kind == "ugv").filter_map(|r| r.travel_time_s)),
             Metric::WallS => Some(self.wall_s),
         }
     }
@@ -153,6 +168,8 @@ pub struct ByteCounter {
     pub full: BTreeMap<String, u64>,
     /// Bytes per sender over coordination-only links.
     pub small: BTreeMap<String, u64>,
+    /// Bytes of all senders by sync tier (coordination, scans, maps).
+    pub by_tier: [u64; 3],
 }
 
 impl SimObserver for ByteCounter {
@@ -160,6 +177,12 @@ impl SimObserver for ByteCounter {
         if let SeamInput::TeamOut { tiers, sent: Some(bytes), .. } = call {
             let map = if tiers == TierSet::ALL { &mut self.full } else { &mut self.small };
             *map.entry(robot.to_string()).or_default() += bytes.len() as u64;
+            // The robot encoded this message itself: it decodes. Were it ever not to, its bytes
+            // still count, as coordination.
+            let split = SyncMessage::decode(bytes).map_or([bytes.len() as u64, 0, 0], |m| m.bytes_by_tier(bytes.len()));
+            for (total, b) in self.by_tier.iter_mut().zip(split) {
+                *total += b;
+            }
         }
     }
 
@@ -206,6 +229,7 @@ pub fn row_of(
                 localization_error_m: r.localization_error_m.map(|e| e.median),
                 bytes_sent: bytes.full.get(&r.id).copied().unwrap_or(0) + bytes.small.get(&r.id).copied().unwrap_or(0),
                 tree_status: r.tree_status.clone(),
+                travel_time_s: r.travel_time_s,
             }
         })
         .collect();
@@ -237,6 +261,9 @@ pub fn row_of(
         bytes_sent: full + small,
         bytes_sent_full_links: full,
         bytes_sent_small_links: small,
+        bytes_sent_coordination: bytes.by_tier[0],
+        bytes_sent_scans: bytes.by_tier[1],
+        bytes_sent_maps: bytes.by_tier[2],
         wall_s: summary.wall_s,
         robots,
     }
@@ -246,7 +273,8 @@ pub fn row_of(
 /// JSONL).
 pub const CSV_HEADER: &str = "trial,configuration,seed,config_hash,mission,outcome,end_s,time_limit_s,ugvs,\
 goals_total,goals_visited,clusters_total,clusters_visited,visit_times_s,distance_m,heading_to_goal_fraction,\
-collisions,localization_error_m,bytes_sent,bytes_sent_full_links,bytes_sent_small_links,wall_s";
+collisions,localization_error_m,bytes_sent,bytes_sent_full_links,bytes_sent_small_links,bytes_sent_coordination,\
+bytes_sent_scans,bytes_sent_maps,wall_s";
 
 /// A row as a CSV line (with its newline). Configuration and mission names are plain
 /// identifiers, so no field needs quoting.
@@ -254,7 +282,7 @@ pub fn csv_line(r: &TrialRow) -> String {
     let opt = |v: Option<usize>| v.map_or_else(String::new, |v| v.to_string());
     let times: Vec<String> = r.visit_times_s.iter().map(|t| format!("{t:.1}")).collect();
     format!(
-        "{},{},{},{},{},{},{:.1},{:.1},{},{},{},{},{},{},{:.1},{:.4},{},{},{},{},{},{:.2}\n",
+        "{},{},{},{},{},{},{:.1},{:.1},{},{},{},{},{},{},{:.1},{:.4},{},{},{},{},{},{},{},{},{:.2}\n",
         r.trial,
         r.configuration,
         r.seed,
@@ -276,6 +304,9 @@ pub fn csv_line(r: &TrialRow) -> String {
         r.bytes_sent,
         r.bytes_sent_full_links,
         r.bytes_sent_small_links,
+        r.bytes_sent_coordination,
+        r.bytes_sent_scans,
+        r.bytes_sent_maps,
         r.wall_s
     )
 }
@@ -400,6 +431,9 @@ mod tests {
             bytes_sent: 30,
             bytes_sent_full_links: 20,
             bytes_sent_small_links: 10,
+            bytes_sent_coordination: 24,
+            bytes_sent_scans: 6,
+            bytes_sent_maps: 0,
             wall_s: 1.5,
             robots: vec![RobotRow {
                 id: "ugv1".into(),
@@ -412,6 +446,7 @@ mod tests {
                 localization_error_m: Some(0.4),
                 bytes_sent: 30,
                 tree_status: "running".into(),
+                travel_time_s: Some(90.0),
             }],
         }
     }
@@ -425,6 +460,23 @@ mod tests {
         assert_eq!(r.metric(Metric::DistanceM, 1, Some("ugv1")), Some(80.0));
         assert_eq!(r.metric(Metric::DistanceM, 1, Some("ugv9")), None);
         assert_eq!(r.metric(Metric::LocalizationErrorM, 1, Some("ugv1")), None);
+        assert_eq!(r.metric(Metric::TravelTimeS, 1, Some("ugv1")), Some(90.0));
+        assert_eq!(r.metric(Metric::TravelTimeS, 1, None), Some(90.0), "the mean over the one UGV");
+        assert_eq!(r.metric(Metric::BytesSentScans, 1, None), Some(6.0));
+    }
+
+    /// Rows written before the per-tier byte counts and trip times existed still read (a study
+    /// resumed across the upgrade), with those figures at zero / absent.
+    #[test]
+    fn rows_without_the_newer_fields_still_read() {
+        let mut old = serde_json::to_value(row(0)).unwrap();
+        let o = old.as_object_mut().unwrap();
+        for k in ["bytes_sent_coordination", "bytes_sent_scans", "bytes_sent_maps"] {
+            o.remove(k);
+        }
+        o["robots"][0].as_object_mut().unwrap().remove("travel_time_s");
+        let back: TrialRow = serde_json::from_value(old).unwrap();
+        assert_eq!((back.bytes_sent_scans, back.robots[0].travel_time_s), (0, None));
     }
 
     #[test]

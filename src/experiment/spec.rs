@@ -237,13 +237,18 @@ pub enum Metric {
     LocalizationErrorM,
     /// Team-state bytes sent (sum over robots).
     BytesSent,
+    /// Of those, the scan tier's: shared reachability scans (sum over robots).
+    BytesSentScans,
+    /// Seconds from a robot's first motion to its last: for a robot sent on one trip, the trip
+    /// (mean over UGVs; a robot's own with `robot`).
+    TravelTimeS,
     /// Wall-clock seconds of the trial.
     WallS,
 }
 
 impl Metric {
     /// Every metric, in report order.
-    pub const ALL: [Metric; 10] = [
+    pub const ALL: [Metric; 12] = [
         Metric::GoalsVisited,
         Metric::VisitedFraction,
         Metric::TimeToGoalS,
@@ -253,6 +258,8 @@ impl Metric {
         Metric::Collisions,
         Metric::LocalizationErrorM,
         Metric::BytesSent,
+        Metric::BytesSentScans,
+        Metric::TravelTimeS,
         Metric::WallS,
     ];
 
@@ -268,6 +275,8 @@ impl Metric {
             Metric::Collisions => "collisions",
             Metric::LocalizationErrorM => "localization_error_m",
             Metric::BytesSent => "bytes_sent",
+            Metric::BytesSentScans => "bytes_sent_scans",
+            Metric::TravelTimeS => "travel_time_s",
             Metric::WallS => "wall_s",
         }
     }
@@ -282,6 +291,7 @@ impl Metric {
                 | Metric::GoalsVisited
                 | Metric::TimeToGoalS
                 | Metric::BytesSent
+                | Metric::TravelTimeS
         )
     }
 }

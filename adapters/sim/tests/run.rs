@@ -223,3 +223,96 @@ fn robots_stepped_in_parallel_give_the_serial_run() {
     }
     assert_eq!(ra.summary.deterministic_part(), rb.summary.deterministic_part());
 }
+
+/// Regression (issue 19, the study's `relay-sharing-all` trials): a robot's tree that finished
+/// used to be ticked again, so a `sequence` restarted on the next tick and was done for one tick
+/// in every run of it. `all_trees_done`, checked once a simulated second, saw every tree done
+/// together only by chance and the trial ran to its time limit. Here the second robot's tree is
+/// done at 0.4 s and, restarted, would be done again at 0.9, 1.4, 1.9 s ... never on a whole
+/// second.
+#[test]
+fn a_finished_tree_stays_finished_and_all_trees_done_ends_the_run() {
+    let text = r#"
+mission: finished-trees
+team:
+  - { id: base, kind: basestation, role: quick, start: { x_m: 10, y_m: 50 } }
+  - { id: uav1, kind: uav, role: twice, start: { x_m: 20, y_m: 50 } }
+roles:
+  quick: { tree: { succeed: } }
+  twice:
+    tree:
+      sequence:
+        - wait: { duration_s: 0.35 }
+        - succeed:
+complete_when: all_trees_done
+time_limit_s: 30
+sim: { world: { generate: { size_m: [120, 100], vehicle_clusters: 1, roadblocks: 0, seed: 3 } } }
+"#;
+    let loaded = load(&write_mission("finished-trees", text));
+    let mut sim = simulation(&loaded, SimOptions::default());
+    run_for(&mut sim, 30.0);
+    assert_eq!(sim.outcome(), Some(Outcome::Complete));
+    // Completion is checked once a simulated second: the first check after 0.4 s ends it.
+    assert!(sim.now().as_secs_f64() < 2.0, "ended at {:.1} s", sim.now().as_secs_f64());
+}
+
+/// A basestation waiting with `wait_for_robot_at` for a UAV flying to `target`: the
+/// `holder` robot's role, the UAV's waypoint, and the wait's settings.
+fn rally_mission(target: (f64, f64), timeout: &str) -> String {
+    format!(
+        r#"
+mission: rally
+team:
+  - {{ id: base, kind: basestation, role: holder, start: {{ x_m: 10, y_m: 50 }} }}
+  - {{ id: uav1, kind: uav, role: flier, start: {{ x_m: 20, y_m: 50 }} }}
+roles:
+  holder:
+    tree:
+      sequence:
+        - wait_for_robot_at: {{ robot: uav1, target: {{ x: {x}, y: {y} }}, within_m: 3{timeout} }}
+        - succeed:
+  flier:
+    tree:
+      sequence:
+        - follow_waypoints: {{ waypoints: [{{ x: 60, y: 50 }}], speed_mps: 10, altitude_m: 20, progress: "{{next}}" }}
+        - wait: {{ duration_s: 1000 }}
+    blackboard: {{ next: 0 }}
+complete_when: all_trees_done
+time_limit_s: 40
+comms: {{ position_range_m: 500, data_range_m: 500 }}
+sim: {{ world: {{ generate: {{ size_m: [120, 100], vehicle_clusters: 1, roadblocks: 0, seed: 3 }} }} }}
+"#,
+        x = target.0,
+        y = target.1
+    )
+}
+
+/// The first simulated time the robot's tree reported `status`, stepping to the time limit.
+fn first_time_tree_is(sim: &mut Simulation, robot: &str, status: spomp_behaviors::Status) -> Option<f64> {
+    while sim.outcome().is_none() {
+        sim.step(&mut NoObserver);
+        if sim.robot(robot).map(|r| r.tree().status()) == Some(status) {
+            return Some(sim.now().as_secs_f64());
+        }
+    }
+    None
+}
+
+#[test]
+fn wait_for_robot_at_succeeds_once_the_team_state_has_the_teammate_there() {
+    let loaded = load(&write_mission("rally", &rally_mission((60.0, 50.0), "")));
+    let mut sim = simulation(&loaded, SimOptions::default());
+    let done = first_time_tree_is(&mut sim, "base", spomp_behaviors::Status::Success).expect("the wait never ended");
+    // 40 m at 10 m/s after a climb: not before 4 s; and it ended because the UAV is there.
+    assert!(done > 4.0, "the wait ended at {done:.1} s, before the UAV could be there");
+    let uav = sim.true_pose("uav1").unwrap().position();
+    assert!(uav.distance(spomp_core::Point2::new(60.0, 50.0)) < 6.0, "the UAV was at {uav:?} at {done:.1} s");
+}
+
+#[test]
+fn wait_for_robot_at_fails_after_its_timeout_when_the_teammate_never_comes() {
+    let loaded = load(&write_mission("rally-timeout", &rally_mission((100.0, 90.0), ", timeout_s: 5")));
+    let mut sim = simulation(&loaded, SimOptions::default());
+    let failed = first_time_tree_is(&mut sim, "base", spomp_behaviors::Status::Failure).expect("the wait never failed");
+    assert!((5.0..6.0).contains(&failed), "failed at {failed:.1} s");
+}

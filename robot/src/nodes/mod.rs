@@ -1,11 +1,13 @@
 //! The domain nodes of the paper's missions, acting on a [`RobotRuntime`]: driving
 //! (`navigate_to`, `navigate_local`, `return_home`), the UAV's time-sharing (`follow_waypoints`,
-//! `seek_robot`, `wait_for_sync`), goal coordination (`detect_goals`, `claim_goal`, …).
+//! `seek_robot`, `wait_for_sync`), goal coordination (`detect_goals`, `claim_goal`, …), team-wide triggers
+//! (`wait_for_robot_at`).
 
 mod aerial;
 mod coordination;
 mod navigation;
 mod qgc_plan;
+mod teammates;
 
 use std::sync::Arc;
 
@@ -13,6 +15,7 @@ pub use aerial::register_aerial;
 pub use coordination::register_coordination;
 pub use navigation::register_navigation;
 pub use qgc_plan::plan_waypoints;
+pub use teammates::register_teammates;
 
 use spomp_behaviors::{NodeRegistry, TickContext, engine_registry};
 
@@ -30,6 +33,7 @@ pub fn registry() -> NodeRegistry<RobotRuntime> {
     register_navigation(&mut r);
     register_aerial(&mut r);
     register_coordination(&mut r);
+    register_teammates(&mut r);
     r.set_robot_checks(Arc::new(MissionRobotChecks));
     r
 }

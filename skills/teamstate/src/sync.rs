@@ -17,7 +17,7 @@ use spomp_core::RobotId;
 
 use crate::auth::{SIGNATURE_BYTES, Signature};
 use crate::error::SyncError;
-use crate::record::{Record, RecordKey};
+use crate::record::{Record, RecordKey, Tier};
 
 const MAGIC: &[u8; 4] = b"SPTS";
 /// The bare message.
@@ -180,6 +180,23 @@ impl SyncMessage {
             return Err(SyncError::Malformed(format!("{} trailing bytes", rest.len())));
         }
         Ok(msg)
+    }
+}
+
+impl SyncMessage {
+    /// How many of `encoded_len` bytes (this message's encoding) each sync tier's records take,
+    /// indexed by [`Tier`] (coordination, scans, maps); the header, acknowledgement and trailer
+    /// count with coordination. For reporting what a link carried, e.g. how much a scan-sharing
+    /// setting costs.
+    pub fn bytes_by_tier(&self, encoded_len: usize) -> [u64; 3] {
+        let mut by_tier = [0u64; 3];
+        for r in &self.records {
+            // A record that cannot be measured is counted with the header below.
+            by_tier[r.tier() as usize] += postcard::experimental::serialized_size(r).unwrap_or(0) as u64;
+        }
+        let records: u64 = by_tier.iter().sum();
+        by_tier[Tier::Coordination as usize] += (encoded_len as u64).saturating_sub(records);
+        by_tier
     }
 }
 

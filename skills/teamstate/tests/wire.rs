@@ -71,3 +71,20 @@ fn invalid_params_are_rejected() {
     assert_eq!((p.deconfliction_radius_m, p.scan_min_spacing_m), (12.0, 2.0));
     assert!(serde_json::from_str::<TeamStateParams>(r#"{"radius": 1}"#).is_err());
 }
+
+#[test]
+fn bytes_by_tier_split_the_whole_message_by_what_its_records_are() {
+    let (_, _, m) = populated();
+    let bytes = encode(&m);
+    let [coordination, scans, maps] = m.bytes_by_tier(bytes.len());
+    assert_eq!(coordination + scans + maps, bytes.len() as u64, "every byte is counted once");
+    // The map version carries 40 bytes of raster, the scan its ranges; the goal and the pose
+    // records and the header are coordination.
+    assert!(maps >= 40, "maps {maps}");
+    assert!(scans > 0 && coordination > 0, "scans {scans}, coordination {coordination}");
+    // Without the scan and the map, everything is coordination.
+    let mut only_goals = m.clone();
+    only_goals.records.retain(|r| r.tier() == spomp_teamstate::Tier::Coordination);
+    let len = encode(&only_goals).len();
+    assert_eq!(only_goals.bytes_by_tier(len), [len as u64, 0, 0]);
+}

@@ -441,6 +441,16 @@ fn sense_ugv(r: &mut SimRobot, world: &World, now: Time) -> Option<SensedUgv> {
     Some(SensedUgv { odometry: odom, external_pose, panorama })
 }
 
+/// Seconds from the first to the last second of a once-a-second trajectory in which the robot
+/// moved at least 5 cm (see [`RobotSummary::travel_time_s`]).
+fn travel_time_s(trajectory: &[Point2]) -> Option<f64> {
+    const STILL_M: f64 = 0.05;
+    let moved = |k: &usize| trajectory[*k].distance(trajectory[*k - 1]) >= STILL_M;
+    let first = (1..trajectory.len()).find(moved)?;
+    let last = (1..trajectory.len()).rev().find(moved)?;
+    Some((last - first + 1) as f64)
+}
+
 /// What a robot's tick of one step left for the observers.
 struct TickedRobot {
     transitions: Recorder,
@@ -1356,6 +1366,7 @@ impl Simulation {
                     kind: r.kind.to_string(),
                     distance_m,
                     heading_to_goal_fraction: if end_s > 0.0 { heading / end_s } else { 0.0 },
+                    travel_time_s: travel_time_s(&r.trajectory),
                     collisions,
                     localization: match r.kind {
                         RobotKind::Ugv => r.pose_input.name().to_string(),

@@ -88,6 +88,11 @@ pub struct RobotSummary {
     /// Fraction of the mission time spent holding a claim on a goal it eventually visited (the
     /// paper's "time heading to a goal").
     pub heading_to_goal_fraction: f64,
+    /// Seconds from the first second in which it moved to the last (sampled once a simulated
+    /// second; slower than 5 cm/s counts as still): for a robot sent on one trip, how long the
+    /// trip took. `None` if it never moved.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub travel_time_s: Option<f64>,
     /// Times it drove into an obstacle.
     pub collisions: u64,
     /// Where its pose came from: `cross_view`, `ground_truth` or `gps`.
