@@ -304,10 +304,9 @@ const COLUMN_BLOCK: usize = 16;
 /// piece was a call to `memmove` (an eighth of the render's time in the team profile).
 #[inline]
 fn copy_block_piece<T: Copy>(dst: &mut [T], src: &[T]) {
-    if let (Ok(whole_dst), Some(Ok(whole_src))) = (
-        <&mut [T; COLUMN_BLOCK]>::try_from(&mut *dst),
-        src.get(..COLUMN_BLOCK).map(<&[T; COLUMN_BLOCK]>::try_from),
-    ) {
+    if let (Ok(whole_dst), Some(Ok(whole_src))) =
+        (<&mut [T; COLUMN_BLOCK]>::try_from(&mut *dst), src.get(..COLUMN_BLOCK).map(<&[T; COLUMN_BLOCK]>::try_from))
+    {
         *whole_dst = *whole_src;
         return;
     }
