@@ -188,8 +188,8 @@ impl PanoramaRenderer {
             let image_rows = out.range_m.chunks_exact_mut(cols).zip(out_sem.class.chunks_exact_mut(cols));
             let block_rows = block_range.chunks_exact(COLUMN_BLOCK).zip(block_class.chunks_exact(COLUMN_BLOCK));
             for ((range_row, class_row), (block_range_row, block_class_row)) in image_rows.zip(block_rows) {
-                range_row[col0..col0 + width].copy_from_slice(&block_range_row[..width]);
-                class_row[col0..col0 + width].copy_from_slice(&block_class_row[..width]);
+                copy_block_piece(&mut range_row[col0..col0 + width], block_range_row);
+                copy_block_piece(&mut class_row[col0..col0 + width], block_class_row);
             }
             col0 += width;
         }
@@ -298,6 +298,21 @@ impl PanoramaRenderer {
 /// Columns rendered together before being copied into the image: 16 ranges are one 64-byte
 /// cache line of an image row.
 const COLUMN_BLOCK: usize = 16;
+
+/// Copies a block row's first `dst.len()` pixels into `dst`. A whole block's piece is copied as
+/// one fixed-size array (a few vector moves in place): through `copy_from_slice` each 64-byte
+/// piece was a call to `memmove` (an eighth of the render's time in the team profile).
+#[inline]
+fn copy_block_piece<T: Copy>(dst: &mut [T], src: &[T]) {
+    if let (Ok(whole_dst), Some(Ok(whole_src))) =
+        (<&mut [T; COLUMN_BLOCK]>::try_from(&mut *dst), src.get(..COLUMN_BLOCK).map(<&[T; COLUMN_BLOCK]>::try_from))
+    {
+        *whole_dst = *whole_src;
+        return;
+    }
+    let n = dst.len().min(src.len());
+    dst[..n].copy_from_slice(&src[..n]);
+}
 
 /// Column `k` of a block scratch: row-major, `COLUMN_BLOCK` pixels a row.
 struct BlockColumn<'a> {

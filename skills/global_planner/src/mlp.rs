@@ -15,6 +15,10 @@ pub(crate) struct TrainSettings {
     pub samples: usize,
 }
 
+/// Hidden layers up to this wide run the first layer on fixed-width rows
+/// ([`Mlp::forward_lanes`]).
+const LANES: usize = 16;
+
 /// Parameters (and their RMSProp accumulators) laid out flat:
 /// `w1[inputs][hidden]`, `b1[hidden]`, `w2[2][hidden]`, `b2[2]`.
 #[derive(Clone, Debug)]
@@ -27,6 +31,14 @@ pub(crate) struct Mlp {
     hidden_act: Vec<f32>,
     back: Vec<f32>,
     trained: bool,
+    /// `w1`'s rows padded with zeros to [`LANES`] hidden units (a hidden layer at most that
+    /// wide): the per-input loop of the first layer is then a few whole vector operations,
+    /// where a row of 10 was two vectors and a scalar tail. Rebuilt from `params` when stale.
+    lanes_w1: Vec<[f32; LANES]>,
+    /// `b1` padded the same way.
+    lanes_b1: [f32; LANES],
+    /// Whether `lanes_w1` and `lanes_b1` match `params`.
+    lanes_fresh: bool,
 }
 
 impl Mlp {
@@ -43,6 +55,9 @@ impl Mlp {
             hidden_act: vec![0.0; hidden],
             back: vec![0.0; hidden],
             trained: false,
+            lanes_w1: Vec::new(),
+            lanes_b1: [0.0; LANES],
+            lanes_fresh: false,
         }
     }
 
@@ -72,6 +87,67 @@ impl Mlp {
         }
         self.params[b2..].fill(0.0);
         self.mean_sq.fill(0.0);
+        self.lanes_fresh = false;
+    }
+
+    /// Copies the first layer out of `params` into the padded rows (hidden layers at most
+    /// [`LANES`] wide).
+    fn refresh_lanes(&mut self) {
+        let nh = self.hidden;
+        if nh > LANES {
+            return;
+        }
+        let (b1, w2, _) = self.offsets();
+        self.lanes_w1.clear();
+        self.lanes_w1.extend(self.params[..b1].chunks_exact(nh).map(|row| {
+            let mut lane = [0.0; LANES];
+            lane[..nh].copy_from_slice(row);
+            lane
+        }));
+        self.lanes_b1 = [0.0; LANES];
+        self.lanes_b1[..nh].copy_from_slice(&self.params[b1..w2]);
+        self.lanes_fresh = true;
+    }
+
+    /// [`Mlp::forward`] with the current parameters: the padded first layer when the hidden
+    /// layer fits [`LANES`], the same sums in the same order, so the same bits.
+    fn logit(&mut self, x: &[f32]) -> f32 {
+        if self.hidden > LANES {
+            return Self::forward(&self.params, self.inputs, x, &mut self.hidden_act);
+        }
+        if !self.lanes_fresh {
+            self.refresh_lanes();
+        }
+        let (_, w2, b2) = self.offsets();
+        Self::forward_lanes(&self.lanes_w1, &self.lanes_b1, &self.params[w2..], b2 - w2, x, &mut self.hidden_act)
+    }
+
+    /// [`Mlp::forward`] over padded first-layer rows `w1` and biases `b1`; `out` is the
+    /// parameters from `w2` on (`w2[2][hidden]` then `b2[2]`, `b2` at `b2_at`). Every hidden
+    /// unit's pre-activation is its bias plus the inputs' products added in input order, as
+    /// in [`Mlp::forward`]; the padding lanes are computed and never read.
+    fn forward_lanes(
+        w1: &[[f32; LANES]],
+        b1: &[f32; LANES],
+        out: &[f32],
+        b2_at: usize,
+        x: &[f32],
+        hidden: &mut [f32],
+    ) -> f32 {
+        let nh = hidden.len();
+        let mut acc = *b1;
+        for (row, &xi) in w1.iter().zip(x) {
+            for (a, w) in acc.iter_mut().zip(row) {
+                *a += w * xi;
+            }
+        }
+        let (w_not, w_trav) = out[..b2_at].split_at(nh);
+        let mut z = out[b2_at + 1] - out[b2_at];
+        for (((h, a), wn), wt) in hidden.iter_mut().zip(&acc).zip(w_not).zip(w_trav) {
+            *h = sigmoid(*a);
+            z += (wt - wn) * *h;
+        }
+        z
     }
 
     /// Logit difference z_trav − z_not (the softmax of two logits is the sigmoid of this); the
@@ -102,7 +178,7 @@ impl Mlp {
         if !self.trained || x.len() < self.inputs {
             return 0.5;
         }
-        sigmoid(Self::forward(&self.params, self.inputs, x, &mut self.hidden_act))
+        sigmoid(self.logit(x))
     }
 
     /// One training round over `samples` rows of `features` (`inputs` wide) with labels
@@ -128,7 +204,7 @@ impl Mlp {
             for _ in 0..batch {
                 let r = rng.random_range(0..rows);
                 let x = &features[r * self.inputs..(r + 1) * self.inputs];
-                let dz = Self::forward(&self.params, self.inputs, x, &mut self.hidden_act);
+                let dz = self.logit(x);
                 let p_trav = sigmoid(dz);
                 let target = if labels[r] { 1.0 } else { 0.0 };
                 let p_label = if labels[r] { p_trav } else { 1.0 - p_trav };
@@ -163,6 +239,7 @@ impl Mlp {
                 *m = settings.decay * *m + (1.0 - settings.decay) * g * g;
                 *p -= settings.step_size * g / (m.sqrt() + settings.epsilon);
             }
+            self.lanes_fresh = false;
             if (batches - batch_index) * batch <= rows.max(batch) {
                 loss_sum += batch_loss;
                 loss_count += batch;
@@ -185,6 +262,49 @@ mod tests {
 
     fn settings(samples: usize) -> TrainSettings {
         TrainSettings { l2: 0.01, step_size: 0.01, decay: 0.99, epsilon: 1e-8, batch_size: 32, samples }
+    }
+
+    #[test]
+    fn padded_first_layer_gives_the_same_bits_as_the_flat_one() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        for hidden in [1, 7, 10, 16, 17] {
+            let mut m = Mlp::new(11, hidden);
+            m.initialise(&mut rng);
+            // Non-zero biases too, as after training.
+            for p in &mut m.params {
+                *p += rng.random_range(-0.5..0.5);
+            }
+            m.trained = true;
+            let mut flat_hidden = vec![0.0; hidden];
+            for _ in 0..50 {
+                let x: Vec<f32> = (0..11).map(|_| rng.random_range(-3.0..3.0)).collect();
+                let flat = sigmoid(Mlp::forward(&m.params, 11, &x, &mut flat_hidden));
+                let padded = m.probability(&x);
+                assert_eq!(flat.to_bits(), padded.to_bits(), "{hidden} hidden units");
+                assert_eq!(flat_hidden, m.hidden_act);
+            }
+            // A parameter change is picked up.
+            m.params[0] += 1.0;
+            m.lanes_fresh = false;
+            let x = [1.0f32; 11];
+            let flat = sigmoid(Mlp::forward(&m.params, 11, &x, &mut flat_hidden));
+            assert_eq!(flat.to_bits(), m.probability(&x).to_bits());
+        }
+    }
+
+    #[test]
+    fn training_leaves_no_stale_padded_layer() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut m = Mlp::new(2, 10);
+        let features = [1.0f32, 0.0, 0.0, 1.0, 0.9, 0.1, 0.1, 0.9];
+        let labels = [true, false, true, false];
+        m.train(&features, &labels, settings(64), &mut rng);
+        let before = m.probability(&[1.0, 0.0]);
+        m.train(&features, &labels, settings(64), &mut rng);
+        let mut h = vec![0.0; 10];
+        let flat = sigmoid(Mlp::forward(&m.params, 2, &[1.0, 0.0], &mut h));
+        assert_eq!(m.probability(&[1.0, 0.0]).to_bits(), flat.to_bits());
+        assert_ne!(before.to_bits(), flat.to_bits(), "the second round moved the network");
     }
 
     #[test]

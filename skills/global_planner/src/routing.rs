@@ -49,6 +49,11 @@ pub(crate) struct EdgeRouter {
     parent: Vec<u32>,
     heap: BinaryHeap<Reverse<(u32, u32)>>,
     cells: Vec<(i32, i32)>,
+    /// The search box with a one-cell border, row-major (`bw + 2` wide): whether each cell is
+    /// covered (the border never is), so the search's neighbour tests need no bounds checks.
+    box_owned: Vec<bool>,
+    /// The elevations of the same padded box (NaN on the border, never read there).
+    box_elev: Vec<f32>,
 }
 
 /// Octile move costs in tenths of a cell.
@@ -205,6 +210,25 @@ impl EdgeRouter {
             let (dx, dy) = ((c - bc).unsigned_abs(), (r - br).unsigned_abs());
             ORTHOGONAL * dx.max(dy) + (DIAGONAL - ORTHOGONAL) * dx.min(dy)
         };
+        // The box copied once, padded by a cell that is never covered: the eight neighbours of
+        // any covered cell are then in range, and a move is tested on two small arrays.
+        let pw = bw + 2;
+        self.box_owned.clear();
+        self.box_owned.resize(pw * (bh + 2), false);
+        self.box_elev.clear();
+        self.box_elev.resize(pw * (bh + 2), f32::NAN);
+        for r in r0..=r1 {
+            let row_start = global(c0, r);
+            let owners = &owner[row_start..row_start + bw];
+            let elevations = &map.elevation[row_start..row_start + bw];
+            let padded = (r - r0 + 1) as usize * pw + 1;
+            for (k, (&o, &e)) in owners.iter().zip(elevations).enumerate() {
+                self.box_owned[padded + k] = o != NO_NODE;
+                self.box_elev[padded + k] = e;
+            }
+        }
+        let (box_owned, box_elev) = (&self.box_owned, &self.box_elev);
+        let step_between = |p: usize, q: usize| step_ok(box_elev[p], box_elev[q], max_step_m);
         self.cost[local(ac, ar)] = 0;
         self.heap.push(Reverse((heuristic(ac, ar), local(ac, ar) as u32)));
         let goal = local(bc, br) as u32;
@@ -214,18 +238,21 @@ impl EdgeRouter {
                 found = true;
                 break;
             }
-            let (c, r) = ((i as usize % bw) as i32 + c0, (i as usize / bw) as i32 + r0);
+            let (lc, lr) = (i as usize % bw, i as usize / bw);
+            let (c, r) = (lc as i32 + c0, lr as i32 + r0);
+            let here = (lr + 1) * pw + lc + 1;
             let g = self.cost[i as usize];
             for (dc, dr) in [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)] {
-                let (nc, nr) = (c + dc, r + dr);
-                if !owned(nc, nr) || !can_step((c, r), (nc, nr)) {
+                // Padded index of the cell `(dc, dr)` away: `here` is inside the border.
+                let at = |dc: i32, dr: i32| here.wrapping_add_signed(dr as isize * pw as isize + dc as isize);
+                let there = at(dc, dr);
+                if !box_owned[there] || !step_between(here, there) {
                     continue;
                 }
                 let step = if dc != 0 && dr != 0 {
                     // No cutting a corner: both cells beside the diagonal must be drivable too.
-                    let side_a = (c + dc, r);
-                    let side_b = (c, r + dr);
-                    let clear = |s: (i32, i32)| owned(s.0, s.1) && can_step((c, r), s) && can_step(s, (nc, nr));
+                    let (side_a, side_b) = (at(dc, 0), at(0, dr));
+                    let clear = |s: usize| box_owned[s] && step_between(here, s) && step_between(s, there);
                     if !(clear(side_a) && clear(side_b)) {
                         continue;
                     }
@@ -233,6 +260,7 @@ impl EdgeRouter {
                 } else {
                     ORTHOGONAL
                 };
+                let (nc, nr) = (c + dc, r + dr);
                 let j = local(nc, nr);
                 let ng = g + step + penalty(nc, nr);
                 if ng < self.cost[j] {

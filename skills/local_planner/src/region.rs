@@ -145,16 +145,27 @@ impl SafeRegion {
         // Each column's safe stretch, bottom row up to its last safe row, visited row by row.
         let ncols = cols.min(last_row.len());
         let top = last_row[..ncols].iter().copied().min().unwrap_or(rows as u32) as usize;
+        // Row slices zipped with the per-column limits: no index checks in the per-pixel loop
+        // (the hottest of this function) but the one on the table slot.
+        let last_cell: Vec<u32> = bin_cells[..ncols].iter().map(|&n| n - 1).collect();
         for row in (top..rows).rev() {
             let base = row * cols;
-            for c in 0..ncols {
-                let i = base + c;
-                if ((row as u32) < last_row[c]) | (rho[i] <= 0.0) {
+            let (Some(rho_row), Some(r_row), Some(d_row)) =
+                (rho.get(base..base + ncols), r_m.get(base..base + ncols), d.get(base..base + ncols))
+            else {
+                continue;
+            };
+            let row_u32 = row as u32;
+            let pixels = rho_row.iter().zip(r_row).zip(d_row).zip(&last_row[..ncols]).zip(&last_cell);
+            for (c, ((((&rho_px, &r_px), &d_px), &last), &max_cell)) in pixels.enumerate() {
+                if (row_u32 < last) | (rho_px <= 0.0) {
                     continue;
                 }
-                let cell = ((r_m[i] * inv_cell) as u32).min(bin_cells[c] - 1) as usize;
-                let slot = &mut values[cell * cols + c];
-                *slot = if slot.is_nan() { d[i] } else { slot.min(d[i]) };
+                let cell = ((r_px * inv_cell) as u32).min(max_cell) as usize;
+                if let Some(slot) = values.get_mut(cell * cols + c) {
+                    // `min` takes the other operand of a NaN: an empty slot takes the pixel's D.
+                    *slot = slot.min(d_px);
+                }
             }
         }
         // Empty cells take the value of the nearest filled cell towards the robot, cells before

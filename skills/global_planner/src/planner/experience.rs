@@ -4,7 +4,31 @@
 #[allow(clippy::wildcard_imports)]
 use super::*;
 
+/// Slack of the box test that rules out edges far from a scan, metres: far more than the
+/// rounding of a point-to-polyline distance on any map, far less than any scan range.
+const FAR_EDGE_MARGIN_M: f64 = 1e-6;
+
 impl GlobalPlanner {
+    /// Whether edge `e`'s bounding box (its ends and interior vertices) lies more than `reach`
+    /// from `p` along x or along y: then every point of the edge is farther than `reach` from
+    /// `p`. False for edges that are not live and for a `p` or `reach` that is not a number
+    /// (vertices are cell centres, always finite).
+    fn edge_box_beyond(&self, e: EdgeIndex<u32>, p: Point2, reach: f64) -> bool {
+        let (Some((a, b)), Some(d)) = (self.graph.edge_endpoints(e), self.graph.edge_weight(e)) else {
+            return false;
+        };
+        let (pa, pb) = (self.graph[a].position, self.graph[b].position);
+        let (mut x0, mut x1) = (pa.x.min(pb.x), pa.x.max(pb.x));
+        let (mut y0, mut y1) = (pa.y.min(pb.y), pa.y.max(pb.y));
+        for v in &d.via {
+            x0 = x0.min(v.x);
+            x1 = x1.max(v.x);
+            y0 = y0.min(v.y);
+            y1 = y1.max(v.y);
+        }
+        p.x < x0 - reach || p.x > x1 + reach || p.y < y0 - reach || p.y > y1 + reach
+    }
+
     /// Takes in a reachability scan: its cells vote for training labels, and (with graph updates
     /// on) every edge near it is judged trav / not_trav / unk_trav. `own` is true for the robot's
     /// own scans; other robots' scans can never remove an edge.
@@ -73,7 +97,15 @@ impl GlobalPlanner {
         let mut changed = std::mem::take(&mut self.judged);
         changed.clear();
         let mut points = Vec::new();
+        // Every scan (the robot's own and each one a peer shares) meets every edge: most edges
+        // lie far away, and a box test rules them out before the exact distance (a square root
+        // per piece). The margin covers the rounding of that distance, so the same edges are
+        // judged as without the test.
+        let reach = region.max_range_m + FAR_EDGE_MARGIN_M;
         for e in self.graph.edge_indices() {
+            if self.edge_box_beyond(e, region.origin, reach) {
+                continue;
+            }
             if !self.edge_points(e, &mut points) {
                 continue;
             }
