@@ -174,9 +174,31 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>, json: bool) -> Result<ExitCo
     rows::write_synced(&out_dir.join("merged-trials.csv"), csv.as_bytes())?;
     let table = stats_table(&meta, &rows);
     let claims: Vec<ClaimResult> = meta.claims.iter().map(|c| check_claim(c, &rows)).collect();
-    goals_over_time_plot(&meta, &rows, &plots.join("goals_over_time.png"))?;
+    let everything = format!("{}: goals visited over time (mean ± sd over seeds)", meta.experiment);
+    goals_over_time_plot(&everything, &meta.configurations, &rows, &plots.join("goals_over_time.png"))?;
+    let groups = claim_groups(&meta, &rows);
+    for (i, group) in groups.iter().enumerate() {
+        let title = format!("goals visited over time: {}", group.join(" / "));
+        goals_over_time_plot(&title, group, &rows, &plots.join(group_plot_name(i)))?;
+    }
     metrics_plot(&meta, &table, &plots.join("metrics.png"))?;
-    let md = markdown(&meta, &rows, &table, &claims);
+    let mut md = markdown(&meta, &rows, &table, &claims);
+    if !groups.is_empty() {
+        let _ = writeln!(
+            md,
+            "## Goals visited over time, per compared set
+"
+        );
+        for (i, group) in groups.iter().enumerate() {
+            let _ = writeln!(
+                md,
+                "![{}](plots/{})
+",
+                group.join(" / "),
+                group_plot_name(i)
+            );
+        }
+    }
     rows::write_synced(&out_dir.join("report.md"), md.as_bytes())?;
     let expected = meta.configurations.len() * meta.seeds.len();
     if json {
@@ -386,10 +408,37 @@ const COLOURS: [RGBColor; 8] = [
     RGBColor(0, 0, 0),
 ];
 
-/// Goals visited over time: per configuration the mean over seeds with a band of ± one
-/// standard deviation (the paper's figure style).
-fn goals_over_time_plot(meta: &ExperimentMeta, rows: &[TrialRow], path: &Path) -> Result<()> {
+/// The sets of configurations the claims compare, one plot each (the paper's one figure per
+/// ablation): consecutive claims that share a configuration are one set (a study writes the
+/// claims of one ablation together), and a set in whose trials no goal was visited is left out
+/// (its plot would be empty).
+fn claim_groups(meta: &ExperimentMeta, rows: &[TrialRow]) -> Vec<Vec<String>> {
+    let mut groups: Vec<Vec<String>> = Vec::new();
+    for c in &meta.claims {
+        match groups.last_mut() {
+            Some(last) if c.over.iter().any(|name| last.contains(name)) => {
+                for name in &c.over {
+                    if !last.contains(name) {
+                        last.push(name.clone());
+                    }
+                }
+            }
+            _ => groups.push(c.over.clone()),
+        }
+    }
+    groups.retain(|g| rows.iter().any(|r| g.contains(&r.configuration) && !r.visit_times_s.is_empty()));
+    groups
+}
+
+fn group_plot_name(index: usize) -> String {
+    format!("goals_over_time_{}.png", index + 1)
+}
+
+/// Goals visited over time for `configurations`: per configuration the mean over seeds with a
+/// band of ± one standard deviation (the paper's figure style).
+fn goals_over_time_plot(title: &str, configurations: &[String], rows: &[TrialRow], path: &Path) -> Result<()> {
     crate::sim_plots::ensure_font()?;
+    let rows: Vec<&TrialRow> = rows.iter().filter(|r| configurations.contains(&r.configuration)).collect();
     let t_max = rows.iter().map(|r| r.end_s.max(r.time_limit_s.min(r.end_s))).fold(1.0, f64::max);
     let y_max = rows.iter().map(|r| r.goals_visited).max().unwrap_or(1).max(1) as f64 * 1.1;
     const STEPS: usize = 200;
@@ -397,14 +446,14 @@ fn goals_over_time_plot(meta: &ExperimentMeta, rows: &[TrialRow], path: &Path) -
     let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
         root.fill(&WHITE)?;
         let mut chart = ChartBuilder::on(&root)
-            .caption(format!("{}: goals visited over time (mean ± sd over seeds)", meta.experiment), ("sans-serif", 18))
+            .caption(title, ("sans-serif", 18))
             .margin(15)
             .x_label_area_size(35)
             .y_label_area_size(45)
             .build_cartesian_2d(0.0..t_max, 0.0..y_max)?;
         chart.configure_mesh().x_desc("time (s)").y_desc("goals visited").draw()?;
-        for (i, c) in meta.configurations.iter().enumerate() {
-            let runs: Vec<&TrialRow> = rows.iter().filter(|r| &r.configuration == c).collect();
+        for (i, c) in configurations.iter().enumerate() {
+            let runs: Vec<&&TrialRow> = rows.iter().filter(|r| &r.configuration == c).collect();
             if runs.is_empty() {
                 continue;
             }
@@ -563,6 +612,24 @@ mod tests {
         assert_eq!((s.n, s.mean, s.min, s.max), (4, 2.5, 1.0, 4.0));
         assert!((s.sd - 1.290_994_448_7).abs() < 1e-9);
         assert!(Stats::of(&[]).is_none());
+    }
+
+    #[test]
+    fn claims_of_one_ablation_share_a_plot_and_sets_without_visits_get_none() {
+        let meta = ExperimentMeta {
+            claims: vec![
+                claim(Expect::Increasing, Metric::GoalsVisited, &["a1", "a3"]),
+                claim(Expect::Decreasing, Metric::TimeToGoalS, &["a1", "a3", "a5"]),
+                claim(Expect::Increasing, Metric::GoalsVisited, &["off", "on"]),
+                claim(Expect::Decreasing, Metric::EndS, &["relay-none", "relay-all"]),
+            ],
+            experiment: "e".into(),
+            configurations: ["a1", "a3", "a5", "off", "on", "relay-none", "relay-all"].map(String::from).to_vec(),
+            seeds: vec![1],
+        };
+        let mut rows: Vec<TrialRow> = ["a1", "a3", "a5", "off", "on"].iter().map(|c| row(c, 1, 2)).collect();
+        rows.extend(["relay-none", "relay-all"].iter().map(|c| row(c, 1, 0)));
+        assert_eq!(claim_groups(&meta, &rows), vec![vec!["a1", "a3", "a5"], vec!["off", "on"]]);
     }
 
     #[test]
