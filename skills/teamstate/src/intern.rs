@@ -60,22 +60,38 @@ static SCANS: ProcessInterner<ReachabilityScan> = LazyLock::new(|| Mutex::new(In
 /// Compressed map versions by publisher and version.
 static MAP_BLOBS: ProcessInterner<Vec<u8>> = LazyLock::new(|| Mutex::new(Interner::new()));
 
-/// Every record key seen in the process, numbered in the order first seen: what a robot tracks
-/// per peer is then a dense table by number ([`crate::sync::DotsByKey`]) instead of a map of
-/// keys (8 bytes a record instead of about 60, for each peer of each robot: the team state's
-/// largest part in a large team, which every robot holds about every other).
-static KEY_NUMBERS: LazyLock<Mutex<HashMap<RecordKey, usize>>> = LazyLock::new(|| Mutex::new(HashMap::new()));
+/// Every record key seen in the process, numbered in the order first seen, immutable keys and
+/// mutable ones each from 0: what a robot tracks per peer is then a dense table by number
+/// ([`crate::sync::DotsByKey`]) instead of a map of keys (for each peer of each robot: the
+/// team state's largest part in a large team, which every robot holds about every other). The
+/// immutable records (scans, goals, visits: nearly all of them) need one bit there, the mutable
+/// ones a dot.
+struct KeyNumbers {
+    numbers: HashMap<RecordKey, usize>,
+    immutable: usize,
+    mutable: usize,
+}
 
-/// The process-wide number of a record key (given one on first sight).
+static KEY_NUMBERS: LazyLock<Mutex<KeyNumbers>> =
+    LazyLock::new(|| Mutex::new(KeyNumbers { numbers: HashMap::new(), immutable: 0, mutable: 0 }));
+
+/// The process-wide number of a record key among the keys of its mutability (given one on
+/// first sight).
 pub(crate) fn key_number(key: &RecordKey) -> usize {
-    let mut numbers = KEY_NUMBERS.lock().unwrap_or_else(PoisonError::into_inner);
-    let next = numbers.len();
-    *numbers.entry(key.clone()).or_insert(next)
+    let mut table = KEY_NUMBERS.lock().unwrap_or_else(PoisonError::into_inner);
+    if let Some(&n) = table.numbers.get(key) {
+        return n;
+    }
+    let counter = if key.is_immutable() { &mut table.immutable } else { &mut table.mutable };
+    let n = *counter;
+    *counter += 1;
+    table.numbers.insert(key.clone(), n);
+    n
 }
 
 /// The number of a record key seen before; `None` for a key never seen in the process.
 pub(crate) fn known_key_number(key: &RecordKey) -> Option<usize> {
-    KEY_NUMBERS.lock().unwrap_or_else(PoisonError::into_inner).get(key).copied()
+    KEY_NUMBERS.lock().unwrap_or_else(PoisonError::into_inner).numbers.get(key).copied()
 }
 
 /// Replaces a scan or map body by the process's copy of it, if there is one (else files it).
@@ -122,6 +138,11 @@ mod tests {
         assert_ne!(na, nb);
         assert_eq!(key_number(&a.clone()), na);
         assert_eq!(known_key_number(&b), Some(nb));
+        // Immutable keys are numbered apart, and as tightly.
+        let s0 = key_number(&RecordKey::Scan { robot: RobotId::new("intern-test-a"), seq: 0 });
+        let s1 = key_number(&RecordKey::Scan { robot: RobotId::new("intern-test-a"), seq: 1 });
+        assert_ne!(s0, s1);
+        assert_eq!(known_key_number(&RecordKey::Scan { robot: RobotId::new("intern-test-a"), seq: 1 }), Some(s1));
     }
 
     #[test]

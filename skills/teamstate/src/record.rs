@@ -136,6 +136,11 @@ impl RecordKey {
         }
     }
 
+    /// Whether records of this key are immutable (only ever written once, dot 1).
+    pub fn is_immutable(&self) -> bool {
+        matches!(self, RecordKey::Goal(_) | RecordKey::Visit { .. } | RecordKey::Scan { .. })
+    }
+
     /// The goal a goal-status record refers to.
     pub fn goal(&self) -> Option<&GoalId> {
         match self {
@@ -237,8 +242,10 @@ pub enum RecordBody {
     Unreachable(UnreachableRecord),
     /// For [`RecordKey::RetryEpoch`]: the robot's current epoch.
     RetryEpoch(u64),
-    /// For [`RecordKey::Robot`].
-    Robot(RobotRecord),
+    /// For [`RecordKey::Robot`]. Boxed: it is the largest body, and every robot holds a record
+    /// of every other record kind for each scan of the team, so the body's size is paid per
+    /// record per robot.
+    Robot(Box<RobotRecord>),
     /// For [`RecordKey::Scan`].
     Scan(Arc<ReachabilityScan>),
     /// For [`RecordKey::Map`].
@@ -256,8 +263,10 @@ pub struct Record {
     pub body: RecordBody,
     /// The writer's signature over key, dot and body (a secured team; see [`crate::auth`]).
     /// Not part of the record's encoding: a signed sync message carries it in its trailer.
+    /// Boxed: most teams sign nothing, and an inline signature would add 64 bytes to every
+    /// record every robot holds.
     #[serde(skip)]
-    pub sig: Option<Signature>,
+    pub sig: Option<Box<Signature>>,
 }
 
 /// Largest dot accepted from a peer. A writer that wrote a million records a second would need
@@ -305,7 +314,7 @@ impl Record {
 
     /// Whether the record is immutable (only ever written once, dot 1).
     pub fn is_immutable(&self) -> bool {
-        matches!(self.key, RecordKey::Goal(_) | RecordKey::Visit { .. } | RecordKey::Scan { .. })
+        self.key.is_immutable()
     }
 
     /// Checks that key and body agree and that values are sane.

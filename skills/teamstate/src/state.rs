@@ -94,6 +94,7 @@ pub struct TeamState {
     /// Local change log: change number → key, one entry per key (its latest change), so a peer
     /// only looks at what changed since it last looked.
     changes: BTreeMap<u64, RecordKey>,
+    /// The change number of each mutable record (immutable ones change once: see `note_change`).
     change_of: HashMap<RecordKey, u64>,
     change_seq: u64,
     /// The latest time given to [`TeamState::advance_clock`] (claim leases are judged by it).
@@ -148,7 +149,7 @@ impl TeamState {
         }
         for rec in self.records.values_mut() {
             if rec.key.writer() == &self.self_id {
-                rec.sig = Some(security.sign_record(&record_bytes(rec)));
+                rec.sig = Some(Box::new(security.sign_record(&record_bytes(rec))));
             }
         }
         self.security = Some(security);
@@ -203,7 +204,7 @@ impl TeamState {
         if let Some(security) = &self.security
             && key.writer() == &self.self_id
         {
-            rec.sig = Some(security.sign_record(&record_bytes(&rec)));
+            rec.sig = Some(Box::new(security.sign_record(&record_bytes(&rec))));
         }
         let goal_related = key.goal().is_some() || matches!(key, RecordKey::RetryEpoch(_));
         if let RecordBody::Scan(s) = &rec.body {
@@ -216,9 +217,21 @@ impl TeamState {
         }
     }
 
+    /// Logs a change of `key`; called before the record is stored.
     fn note_change(&mut self, key: &RecordKey) {
         self.change_seq += 1;
-        if let Some(old) = self.change_of.insert(key.clone(), self.change_seq) {
+        let earlier = if key.is_immutable() {
+            // Written once, except by a writer that lost its counter (a different body under
+            // the same key): the rare replacement finds its earlier entry by walking the log,
+            // so the scans, most of what a robot holds, need no index entry.
+            match self.records.contains_key(key) {
+                true => self.changes.iter().find(|(_, k)| *k == key).map(|(seq, _)| *seq),
+                false => None,
+            }
+        } else {
+            self.change_of.insert(key.clone(), self.change_seq)
+        };
+        if let Some(old) = earlier {
             self.changes.remove(&old);
         }
         self.changes.insert(self.change_seq, key.clone());
@@ -281,7 +294,7 @@ impl TeamState {
 
     fn own_robot_record(&self) -> RobotRecord {
         match self.records.get(&RecordKey::Robot(self.self_id.clone())).map(|r| &r.body) {
-            Some(RecordBody::Robot(r)) => r.clone(),
+            Some(RecordBody::Robot(r)) => (**r).clone(),
             _ => RobotRecord {
                 pose: None,
                 stamp: Time::ZERO,
@@ -296,7 +309,7 @@ impl TeamState {
         let mut rec = self.own_robot_record();
         update(&mut rec);
         let dot = self.tick();
-        self.put(RecordKey::Robot(self.self_id.clone()), dot, RecordBody::Robot(rec));
+        self.put(RecordKey::Robot(self.self_id.clone()), dot, RecordBody::Robot(Box::new(rec)));
     }
 
     /// Records a goal this robot identified (detected in the aerial map, or entered at the
@@ -580,7 +593,7 @@ impl TeamState {
     /// The last known state (pose, stamp, current goal, path end) of a robot.
     pub fn robot_status(&self, id: &RobotId) -> Option<&RobotStatus> {
         match self.records.get(&RecordKey::Robot(id.clone())).map(|r| &r.body) {
-            Some(RecordBody::Robot(r)) => Some(r),
+            Some(RecordBody::Robot(r)) => Some(r.as_ref()),
             _ => None,
         }
     }
@@ -595,7 +608,7 @@ impl TeamState {
         self.records
             .values()
             .filter_map(|r| match (&r.key, &r.body) {
-                (RecordKey::Robot(id), RecordBody::Robot(s)) => Some((id, s)),
+                (RecordKey::Robot(id), RecordBody::Robot(s)) => Some((id, s.as_ref())),
                 _ => None,
             })
             .collect()

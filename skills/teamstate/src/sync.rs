@@ -121,7 +121,7 @@ impl SyncMessage {
         let header = out.clone();
         let Ok(mut out) = postcard::to_extend(self, out) else { return header };
         if trailer {
-            let record_sigs = signed.then(|| self.records.iter().map(|r| r.sig).collect());
+            let record_sigs = signed.then(|| self.records.iter().map(|r| r.sig.as_deref().copied()).collect());
             match postcard::to_extend(&Trailer { session: self.session, record_sigs }, out) {
                 Ok(o) => out = o,
                 Err(_) => return header,
@@ -164,7 +164,7 @@ impl SyncMessage {
                         )));
                     }
                     for (rec, sig) in msg.records.iter_mut().zip(sigs) {
-                        rec.sig = sig;
+                        rec.sig = sig.map(Box::new);
                     }
                     let (sig, rest) = rest
                         .split_first_chunk::<SIGNATURE_BYTES>()
@@ -200,26 +200,48 @@ pub(crate) struct InFlight {
     pub records: Vec<(RecordKey, u64)>,
 }
 
-/// The highest dot of each record a peer is known to hold, by the key's process-wide number:
-/// 8 bytes a record seen, for each peer.
+/// The highest dot of each record a peer is known to hold, by the key's process-wide number
+/// ([`crate::intern::key_number`]): for each peer, 8 bytes a mutable record and one bit an
+/// immutable one (its only dot is 1). Every robot of a team holds every scan, so in a large
+/// team this table, one per peer, would otherwise outweigh the records themselves.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct DotsByKey {
+    /// Dots of mutable records.
     dots: Vec<u64>,
+    /// Bit n: the immutable record number n is held.
+    held: Vec<u64>,
 }
 
 impl DotsByKey {
     /// The dot held for `key`; 0 for none.
     pub fn get(&self, key: &RecordKey) -> u64 {
-        crate::intern::known_key_number(key).and_then(|n| self.dots.get(n).copied()).unwrap_or(0)
+        let Some(n) = crate::intern::known_key_number(key) else { return 0 };
+        if key.is_immutable() {
+            self.held.get(n / 64).map_or(0, |word| word >> (n % 64) & 1)
+        } else {
+            self.dots.get(n).copied().unwrap_or(0)
+        }
     }
 
     /// Raises the dot held for `key` to at least `dot`.
     pub fn raise(&mut self, key: &RecordKey, dot: u64) {
-        let n = crate::intern::key_number(key);
-        if self.dots.len() <= n {
-            self.dots.resize(n + 1, 0);
+        if dot == 0 {
+            return;
         }
-        self.dots[n] = self.dots[n].max(dot);
+        let n = crate::intern::key_number(key);
+        if key.is_immutable() {
+            // Validated records and own writes of immutable keys all have dot 1.
+            debug_assert_eq!(dot, 1, "immutable record with dot {dot}");
+            if self.held.len() <= n / 64 {
+                self.held.resize(n / 64 + 1, 0);
+            }
+            self.held[n / 64] |= 1 << (n % 64);
+        } else {
+            if self.dots.len() <= n {
+                self.dots.resize(n + 1, 0);
+            }
+            self.dots[n] = self.dots[n].max(dot);
+        }
     }
 }
 
@@ -291,6 +313,11 @@ impl PeerState {
             if let Some(msg) = self.in_flight.pop_front() {
                 self.resolve(msg, false);
             }
+        }
+        // A first exchange puts a whole state in flight at once; once it is resolved, give the
+        // room back, or every pair that ever met keeps room for the whole state.
+        if self.sent.capacity() > 64 && self.sent.len() * 4 < self.sent.capacity() {
+            self.sent.shrink_to(self.sent.len() * 2);
         }
     }
 
