@@ -17,7 +17,8 @@ use spomp_core::RobotId;
 
 use crate::auth::{SIGNATURE_BYTES, Signature};
 use crate::error::SyncError;
-use crate::record::{Record, RecordKey};
+use crate::intern::KeyNo;
+use crate::record::Record;
 
 const MAGIC: &[u8; 4] = b"SPTS";
 /// The bare message.
@@ -197,13 +198,13 @@ pub fn decode(bytes: &[u8]) -> Result<SyncMessage, SyncError> {
 #[derive(Clone, Debug)]
 pub(crate) struct InFlight {
     pub seq: u32,
-    pub records: Vec<(RecordKey, u64)>,
+    pub records: Vec<(KeyNo, u64)>,
 }
 
 /// The highest dot of each record a peer is known to hold, by the key's process-wide number
-/// ([`crate::intern::key_number`]): for each peer, 8 bytes a mutable record and one bit an
-/// immutable one (its only dot is 1). Every robot of a team holds every scan, so in a large
-/// team this table, one per peer, would otherwise outweigh the records themselves.
+/// ([`KeyNo`]): for each peer, 8 bytes a mutable record and one bit an immutable one (its only
+/// dot is 1). Every robot of a team holds every scan, so in a large team this table, one per
+/// peer, would otherwise outweigh the records themselves.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct DotsByKey {
     /// Dots of mutable records.
@@ -213,23 +214,23 @@ pub(crate) struct DotsByKey {
 }
 
 impl DotsByKey {
-    /// The dot held for `key`; 0 for none.
-    pub fn get(&self, key: &RecordKey) -> u64 {
-        let Some(n) = crate::intern::known_key_number(key) else { return 0 };
-        if key.is_immutable() {
+    /// The dot held for the key numbered `no`; 0 for none.
+    pub fn get(&self, no: KeyNo) -> u64 {
+        let n = no.index();
+        if no.is_immutable() {
             self.held.get(n / 64).map_or(0, |word| word >> (n % 64) & 1)
         } else {
             self.dots.get(n).copied().unwrap_or(0)
         }
     }
 
-    /// Raises the dot held for `key` to at least `dot`.
-    pub fn raise(&mut self, key: &RecordKey, dot: u64) {
+    /// Raises the dot held for the key numbered `no` to at least `dot`.
+    pub fn raise(&mut self, no: KeyNo, dot: u64) {
         if dot == 0 {
             return;
         }
-        let n = crate::intern::key_number(key);
-        if key.is_immutable() {
+        let n = no.index();
+        if no.is_immutable() {
             // Validated records and own writes of immutable keys all have dot 1.
             debug_assert_eq!(dot, 1, "immutable record with dot {dot}");
             if self.held.len() <= n / 64 {
@@ -255,10 +256,11 @@ pub(crate) struct PeerState {
     /// Record dots the peer is known to hold (acknowledged, or received from it).
     pub confirmed: DotsByKey,
     /// Record dots sent in messages still in flight, with the message's seq.
-    pub sent: HashMap<RecordKey, (u64, u32)>,
+    pub sent: HashMap<KeyNo, (u64, u32)>,
     /// Records that may still have to go to the peer (changed since they were last considered,
-    /// skipped for tier or budget, or in a lost message).
-    pub pending: BTreeSet<RecordKey>,
+    /// skipped for tier or budget, or in a lost message): the key numbers, as a peer on a
+    /// link that carries only coordination collects every scan here.
+    pub pending: BTreeSet<KeyNo>,
     /// Position in the local change log up to which changes were moved into `pending`.
     pub change_cursor: u64,
     /// Receipts of the peer's messages.
@@ -283,9 +285,9 @@ pub(crate) struct PeerState {
 
 impl PeerState {
     /// Highest dot of `key` the peer holds or will hold if in-flight messages arrive.
-    pub fn known_dot(&self, key: &RecordKey) -> u64 {
-        let confirmed = self.confirmed.get(key);
-        let sent = self.sent.get(key).map_or(0, |s| s.0);
+    pub fn known_dot(&self, no: KeyNo) -> u64 {
+        let confirmed = self.confirmed.get(no);
+        let sent = self.sent.get(&no).map_or(0, |s| s.0);
         confirmed.max(sent)
     }
 
@@ -322,14 +324,14 @@ impl PeerState {
     }
 
     fn resolve(&mut self, msg: InFlight, delivered: bool) {
-        for (key, dot) in msg.records {
+        for (no, dot) in msg.records {
             if delivered {
-                self.confirmed.raise(&key, dot);
+                self.confirmed.raise(no, dot);
             }
-            if self.sent.get(&key).is_some_and(|s| s.1 == msg.seq) {
-                self.sent.remove(&key);
+            if self.sent.get(&no).is_some_and(|s| s.1 == msg.seq) {
+                self.sent.remove(&no);
                 if !delivered {
-                    self.pending.insert(key);
+                    self.pending.insert(no);
                 }
             }
         }
