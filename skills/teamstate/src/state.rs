@@ -11,8 +11,8 @@ use crate::error::{SyncError, TeamStateError};
 use crate::intern::{KeyNo, key_no, with_keys};
 use crate::params::TeamStateParams;
 use crate::record::{
-    ClaimRecord, GoalOrigin, GoalRecord, Limits, MapVersion, Record, RecordBody, RecordKey, RobotRecord, TierSet,
-    UnreachableRecord, VisitRecord, check_scan, finite_pose, record_stamp,
+    ClaimRecord, GoalOrigin, GoalRecord, Limits, MapVersion, Record, RecordBody, RecordKey, RecordSet, RobotRecord,
+    TierSet, UnreachableRecord, VisitRecord, check_scan, finite_pose, record_stamp,
 };
 use crate::sync::{HEADER_BYTES, InFlight, PeerState, SyncMessage};
 use crate::view::{GoalIndex, GoalView, Lease, build_goal_index};
@@ -85,7 +85,7 @@ pub struct TeamState {
     clock: u64,
     next_goal_seq: u32,
     next_scan_seq: u64,
-    records: BTreeMap<RecordKey, Record>,
+    records: RecordSet,
     goal_index: GoalIndex,
     /// Scans in local arrival order, for `scans_since`.
     scan_log: Vec<Arc<ReachabilityScan>>,
@@ -121,7 +121,7 @@ impl TeamState {
             clock: 0,
             next_goal_seq: 0,
             next_scan_seq: 0,
-            records: BTreeMap::new(),
+            records: RecordSet::default(),
             goal_index: GoalIndex::default(),
             scan_log: Vec::new(),
             own_scan_positions: Vec::new(),
@@ -148,11 +148,12 @@ impl TeamState {
                 self.self_id
             )));
         }
-        for rec in self.records.values_mut() {
-            if rec.key.writer() == &self.self_id {
+        let me = &self.self_id;
+        self.records.update_all(|rec| {
+            if rec.key.writer() == me {
                 rec.sig = Some(Box::new(security.sign_record(&record_bytes(rec))));
             }
-        }
+        });
         self.security = Some(security);
         Ok(())
     }
@@ -212,7 +213,7 @@ impl TeamState {
             self.scan_log.push(s.clone());
         }
         self.note_change(&key);
-        self.records.insert(key, rec);
+        self.records.insert(rec);
         if goal_related {
             self.rebuild_goals();
         }
@@ -639,7 +640,7 @@ impl TeamState {
     /// The robots whose map records are held, in key order (the order of [`Self::records`]),
     /// without walking the other records.
     pub fn map_writers(&self) -> impl Iterator<Item = &RobotId> + '_ {
-        self.records.range(RecordKey::Map(RobotId::new(""))..).map_while(|(key, _)| match key {
+        self.records.starting_at(RecordKey::Map(RobotId::new(""))).map_while(|r| match &r.key {
             RecordKey::Map(robot) => Some(robot),
             _ => None,
         })
@@ -688,7 +689,7 @@ impl TeamState {
             self.scan_log.push(s.clone());
         }
         self.note_change(&rec.key);
-        self.records.insert(rec.key.clone(), rec);
+        self.records.insert(rec);
     }
 
     /// Sets the counters after a restore (never below what they are) and rebuilds the goals.
@@ -918,7 +919,7 @@ impl TeamState {
                 self.next_scan_seq = self.next_scan_seq.max(seq.saturating_add(1));
             }
             self.note_change(&rec.key);
-            self.records.insert(rec.key.clone(), rec);
+            self.records.insert(rec);
         }
         if goals_touched {
             self.rebuild_goals();
