@@ -367,7 +367,7 @@ mod tests {
         // the full 1800 s for 50), 800 × 600 cells, prior map: the estimate may be above (it is
         // a bound for refusing) but within a sensible factor.
         for (ugvs, duration_s, measured_mb) in
-            [(1, 300.0, 77.0), (10, 300.0, 161.0), (50, 300.0, 556.0), (50, 1800.0, 734.0)]
+            [(1, 300.0, 77.0), (10, 300.0, 165.0), (50, 300.0, 540.0), (50, 1800.0, 734.0)]
         {
             let e = estimate(&Sizes { duration_s, ..city_team(ugvs) }).total_bytes / 1e6;
             let ratio = e / measured_mb;
