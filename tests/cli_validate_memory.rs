@@ -121,3 +121,32 @@ fn spomp_sim_refuses_a_team_that_cannot_fit_before_it_starts() {
     assert!(needed_mb(&stderr) > 100_000.0, "{stderr}");
     assert!(!dir.path().join("runs").exists(), "nothing is written before the check");
 }
+
+#[test]
+fn spomp_experiment_refuses_a_configuration_that_cannot_fit_before_it_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    team_mission(dir.path(), 999, [5000, 5000]);
+    let experiment = dir.path().join("huge.yaml");
+    std::fs::write(
+        &experiment,
+        "experiment: huge\nmission: big-team.yaml\nseeds: [1, 2]\ntime_limit_s: 60\n\
+         configurations:\n  - name: small\n    ugvs: 1\n    \
+         world: { generate: { size_m: [100, 100], vehicle_clusters: 3, roadblocks: 0 } }\n  - name: everyone\n",
+    )
+    .unwrap();
+    let out_dir = dir.path().join("runs");
+    let out = Command::cargo_bin("spomp")
+        .unwrap()
+        .args(["experiment", experiment.to_str().unwrap(), "--json", "--out"])
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    // The small configuration fits; the check goes on to the one that does not, and names it.
+    assert!(stderr.contains("configuration `everyone`: "), "the configuration is named: {stderr}");
+    assert!(stderr.contains("999 UGV(s) × "), "{stderr}");
+    assert!(stderr.contains("cannot fit") && stderr.contains("give --force"), "{stderr}");
+    assert!(needed_mb(&stderr) > 100_000.0, "{stderr}");
+    assert!(!out_dir.exists(), "nothing is written before the check");
+}

@@ -66,6 +66,10 @@ pub struct ExperimentArgs {
     /// Print a JSON summary instead of the progress bar and table.
     #[arg(long)]
     pub json: bool,
+    /// Run even when a configuration's trials, run side by side, are estimated to need more
+    /// memory than this machine has available.
+    #[arg(long)]
+    pub force: bool,
     /// A folder besides the experiment's own that its missions and worlds may be in
     /// (repeatable).
     #[arg(long = "allow-dir", value_name = "DIR")]
@@ -216,7 +220,6 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
     let Some(spec_file) = loaded.file.as_ref() else { bail!("the experiment did not load") };
     let out_dir =
         args.out.clone().unwrap_or_else(|| PathBuf::from("runs").join("experiments").join(&spec_file.experiment));
-    std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let meta = ExperimentMeta {
         experiment: spec_file.experiment.clone(),
         configurations: loaded.configurations.iter().map(|c| c.name.clone()).collect(),
@@ -297,12 +300,20 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
         );
         return Ok(ExitCode::from(1));
     }
-    rows::write_synced(&out_dir.join(META), serde_json::to_string_pretty(&meta)?.as_bytes())?;
     let pending: Vec<Trial> = selected
         .iter()
         .filter(|t| !done.contains_key(&(loaded.configurations[t.configuration].name.clone(), t.seed)))
         .cloned()
         .collect();
+    let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize);
+    if !args.force
+        && let Some(budget) = crate::memory_stage::machine_budget()
+        && let Err(message) = check_memory(&loaded.configurations, &pending, jobs, &budget)
+    {
+        return usage(format!("{message}; give --force to run anyway"));
+    }
+    std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    rows::write_synced(&out_dir.join(META), serde_json::to_string_pretty(&meta)?.as_bytes())?;
     let skipped = selected.len() - pending.len();
     let existing_owned: Vec<TrialRow> = existing.clone();
     let sink = Mutex::new(RowSink::open(&out_dir, &existing_owned)?);
@@ -316,7 +327,6 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
         ProgressStyle::with_template("trials {bar:30} {pos}/{len} [{elapsed_precise}, ~{eta} left] {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build().context("starting the trial threads")?;
     // Fewer trials than threads: each trial steps its robots in parallel too (same results).
     let parallel_robots = pending.len() < jobs;
@@ -400,6 +410,31 @@ fn push(list: &Mutex<Vec<String>>, message: String) {
     if let Ok(mut l) = list.lock() {
         l.push(message);
     }
+}
+
+/// Holds each configuration with trials to run against the memory `budget`, as `spomp sim`
+/// does before it starts: a configuration's trials run up to `jobs` side by side (and trials of
+/// other configurations may share the machine with them, so the figure is a floor). The first
+/// configuration that cannot fit is an error naming it.
+fn check_memory(
+    configurations: &[ResolvedConfiguration],
+    pending: &[Trial],
+    jobs: usize,
+    budget: &crate::memory_stage::Budget,
+) -> Result<(), String> {
+    let side_by_side = jobs.min(pending.len()).max(1);
+    for (index, configuration) in configurations.iter().enumerate() {
+        if !pending.iter().any(|t| t.configuration == index) {
+            continue;
+        }
+        let loaded = &configuration.loaded;
+        let Some(mission) = loaded.mission.as_ref() else { continue };
+        // A world that does not load fails the trial with its own message.
+        let Ok(sizes) = crate::memory_stage::sizes_of(mission, &loaded.base_dir()) else { continue };
+        crate::memory_stage::judge(&sizes, side_by_side, budget)
+            .map_err(|message| format!("configuration `{}`: {message}", configuration.name))?;
+    }
+    Ok(())
 }
 
 /// Runs one trial; `None` when a signal cut it short.

@@ -9,7 +9,7 @@
 
 use std::collections::HashMap;
 use std::hash::Hash;
-use std::sync::{Arc, LazyLock, Mutex, PoisonError, Weak};
+use std::sync::{Arc, LazyLock, Mutex, PoisonError, RwLock, Weak};
 
 use spomp_core::{ReachabilityScan, RobotId};
 
@@ -60,22 +60,73 @@ static SCANS: ProcessInterner<ReachabilityScan> = LazyLock::new(|| Mutex::new(In
 /// Compressed map versions by publisher and version.
 static MAP_BLOBS: ProcessInterner<Vec<u8>> = LazyLock::new(|| Mutex::new(Interner::new()));
 
-/// Every record key seen in the process, numbered in the order first seen: what a robot tracks
-/// per peer is then a dense table by number ([`crate::sync::DotsByKey`]) instead of a map of
-/// keys (8 bytes a record instead of about 60, for each peer of each robot: the team state's
-/// largest part in a large team, which every robot holds about every other).
-static KEY_NUMBERS: LazyLock<Mutex<HashMap<RecordKey, usize>>> = LazyLock::new(|| Mutex::new(HashMap::new()));
+/// A record key's process-wide number ([`key_no`]). Immutable keys and mutable ones are
+/// numbered apart, each from 0, so a per-peer table holds a bit for the first (their only dot
+/// is 1) and a dot for the second, and what a robot keeps per record and per peer (its change
+/// log, the records pending for each peer) is a number instead of a key.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub(crate) struct KeyNo(u64);
 
-/// The process-wide number of a record key (given one on first sight).
-pub(crate) fn key_number(key: &RecordKey) -> usize {
-    let mut numbers = KEY_NUMBERS.lock().unwrap_or_else(PoisonError::into_inner);
-    let next = numbers.len();
-    *numbers.entry(key.clone()).or_insert(next)
+/// Set in the number of a mutable key.
+const MUTABLE_BIT: u64 = 1 << 63;
+
+impl KeyNo {
+    /// Whether the key's records are immutable.
+    pub fn is_immutable(self) -> bool {
+        self.0 & MUTABLE_BIT == 0
+    }
+
+    /// The key's index among the keys of its mutability.
+    pub fn index(self) -> usize {
+        (self.0 & !MUTABLE_BIT) as usize
+    }
 }
 
-/// The number of a record key seen before; `None` for a key never seen in the process.
-pub(crate) fn known_key_number(key: &RecordKey) -> Option<usize> {
-    KEY_NUMBERS.lock().unwrap_or_else(PoisonError::into_inner).get(key).copied()
+/// Every record key seen in the process, numbered in the order first seen (see [`KeyNo`]).
+#[derive(Default)]
+pub(crate) struct KeyTable {
+    numbers: HashMap<RecordKey, KeyNo>,
+    immutable: Vec<RecordKey>,
+    mutable: Vec<RecordKey>,
+}
+
+impl KeyTable {
+    /// The key numbered `no`.
+    pub fn key(&self, no: KeyNo) -> Option<&RecordKey> {
+        let keys = if no.is_immutable() { &self.immutable } else { &self.mutable };
+        keys.get(no.index())
+    }
+}
+
+/// Read-mostly: a key is numbered once, then only looked up (by every robot of every trial run
+/// side by side in the process, which must not wait for each other).
+static KEY_NUMBERS: LazyLock<RwLock<KeyTable>> = LazyLock::new(|| RwLock::new(KeyTable::default()));
+
+/// The process-wide number of a record key (given one on first sight).
+pub(crate) fn key_no(key: &RecordKey) -> KeyNo {
+    if let Some(&no) = KEY_NUMBERS.read().unwrap_or_else(PoisonError::into_inner).numbers.get(key) {
+        return no;
+    }
+    let mut table = KEY_NUMBERS.write().unwrap_or_else(PoisonError::into_inner);
+    // Numbered by another thread between the two locks?
+    if let Some(&no) = table.numbers.get(key) {
+        return no;
+    }
+    let no = if key.is_immutable() {
+        table.immutable.push(key.clone());
+        KeyNo(table.immutable.len() as u64 - 1)
+    } else {
+        table.mutable.push(key.clone());
+        KeyNo((table.mutable.len() as u64 - 1) | MUTABLE_BIT)
+    };
+    table.numbers.insert(key.clone(), no);
+    no
+}
+
+/// Runs `f` with the table of numbered keys (one lock for many look-ups; `f` must not number
+/// keys itself).
+pub(crate) fn with_keys<R>(f: impl FnOnce(&KeyTable) -> R) -> R {
+    f(&KEY_NUMBERS.read().unwrap_or_else(PoisonError::into_inner))
 }
 
 /// Replaces a scan or map body by the process's copy of it, if there is one (else files it).
@@ -116,12 +167,23 @@ mod tests {
     fn record_keys_keep_their_number() {
         let a = RecordKey::Robot(RobotId::new("intern-test-a"));
         let b = RecordKey::Map(RobotId::new("intern-test-a"));
-        assert_eq!(known_key_number(&a), None);
-        let na = key_number(&a);
-        let nb = key_number(&b);
+        let na = key_no(&a);
+        let nb = key_no(&b);
         assert_ne!(na, nb);
-        assert_eq!(key_number(&a.clone()), na);
-        assert_eq!(known_key_number(&b), Some(nb));
+        assert_eq!(key_no(&a.clone()), na);
+        assert!(!na.is_immutable() && !nb.is_immutable());
+        // Immutable keys are numbered apart.
+        let scan = |seq| RecordKey::Scan { robot: RobotId::new("intern-test-a"), seq };
+        let (s0, s1) = (key_no(&scan(0)), key_no(&scan(1)));
+        assert!(s0.is_immutable() && s1.is_immutable());
+        assert_ne!(s0, s1);
+        assert_eq!(key_no(&scan(1)), s1);
+        // Numbers give their keys back.
+        with_keys(|table| {
+            assert_eq!(table.key(na), Some(&a));
+            assert_eq!(table.key(nb), Some(&b));
+            assert_eq!(table.key(s1), Some(&scan(1)));
+        });
     }
 
     #[test]

@@ -136,6 +136,11 @@ impl RecordKey {
         }
     }
 
+    /// Whether records of this key are immutable (only ever written once, dot 1).
+    pub fn is_immutable(&self) -> bool {
+        matches!(self, RecordKey::Goal(_) | RecordKey::Visit { .. } | RecordKey::Scan { .. })
+    }
+
     /// The goal a goal-status record refers to.
     pub fn goal(&self) -> Option<&GoalId> {
         match self {
@@ -237,8 +242,10 @@ pub enum RecordBody {
     Unreachable(UnreachableRecord),
     /// For [`RecordKey::RetryEpoch`]: the robot's current epoch.
     RetryEpoch(u64),
-    /// For [`RecordKey::Robot`].
-    Robot(RobotRecord),
+    /// For [`RecordKey::Robot`]. Boxed: it is the largest body, and every robot holds a record
+    /// of every other record kind for each scan of the team, so the body's size is paid per
+    /// record per robot.
+    Robot(Box<RobotRecord>),
     /// For [`RecordKey::Scan`].
     Scan(Arc<ReachabilityScan>),
     /// For [`RecordKey::Map`].
@@ -256,8 +263,10 @@ pub struct Record {
     pub body: RecordBody,
     /// The writer's signature over key, dot and body (a secured team; see [`crate::auth`]).
     /// Not part of the record's encoding: a signed sync message carries it in its trailer.
+    /// Boxed: most teams sign nothing, and an inline signature would add 64 bytes to every
+    /// record every robot holds.
     #[serde(skip)]
-    pub sig: Option<Signature>,
+    pub sig: Option<Box<Signature>>,
 }
 
 /// Largest dot accepted from a peer. A writer that wrote a million records a second would need
@@ -305,7 +314,7 @@ impl Record {
 
     /// Whether the record is immutable (only ever written once, dot 1).
     pub fn is_immutable(&self) -> bool {
-        matches!(self.key, RecordKey::Goal(_) | RecordKey::Visit { .. } | RecordKey::Scan { .. })
+        self.key.is_immutable()
     }
 
     /// Checks that key and body agree and that values are sane.
@@ -361,6 +370,88 @@ pub(crate) fn record_stamp(body: &RecordBody) -> Option<Time> {
         RecordBody::Robot(r) => Some(r.stamp),
         RecordBody::Map(m) => Some(m.stamp),
         RecordBody::RetryEpoch(_) | RecordBody::Scan(_) => None,
+    }
+}
+
+/// A record filed in a [`RecordSet`]: ordered, compared and looked up by its key alone.
+#[derive(Clone, Debug)]
+struct Filed(Record);
+
+impl PartialEq for Filed {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.key == other.0.key
+    }
+}
+
+impl Eq for Filed {}
+
+impl PartialOrd for Filed {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Filed {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.0.key.cmp(&other.0.key)
+    }
+}
+
+impl std::borrow::Borrow<RecordKey> for Filed {
+    fn borrow(&self) -> &RecordKey {
+        &self.0.key
+    }
+}
+
+/// The records a robot holds, one per key, in key order. A set of records ordered by their
+/// own key rather than a map from key to record: the key is held once, not twice (48 bytes of
+/// each record every robot holds, for every scan of the team).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct RecordSet(std::collections::BTreeSet<Filed>);
+
+impl RecordSet {
+    /// The record of `key`.
+    pub fn get(&self, key: &RecordKey) -> Option<&Record> {
+        self.0.get(key).map(|f| &f.0)
+    }
+
+    /// Whether a record of `key` is held.
+    pub fn contains_key(&self, key: &RecordKey) -> bool {
+        self.0.contains(key)
+    }
+
+    /// Stores `rec`, replacing the record of its key.
+    pub fn insert(&mut self, rec: Record) {
+        self.0.replace(Filed(rec));
+    }
+
+    /// Every record, in key order.
+    pub fn values(&self) -> impl Iterator<Item = &Record> {
+        self.0.iter().map(|f| &f.0)
+    }
+
+    /// The records from `key` on, in key order.
+    pub fn starting_at(&self, key: RecordKey) -> impl Iterator<Item = &Record> {
+        self.0.range::<RecordKey, _>(key..).map(|f| &f.0)
+    }
+
+    /// Changes every record with `update` (keys unchanged).
+    pub fn update_all(&mut self, mut update: impl FnMut(&mut Record)) {
+        let records = std::mem::take(&mut self.0);
+        self.0 = records
+            .into_iter()
+            .map(|mut f| {
+                update(&mut f.0);
+                f
+            })
+            .collect();
+    }
+}
+
+impl PartialEq for RecordSet {
+    /// The same records, bodies, dots and signatures included.
+    fn eq(&self, other: &Self) -> bool {
+        self.0.len() == other.0.len() && self.values().eq(other.values())
     }
 }
 

@@ -83,7 +83,7 @@ impl TeamState {
             next_scan_seq: self.counters().2,
             // (counters: this robot's dot, next goal number, next scan number)
             own_scan_positions: self.own_scan_positions().to_vec(),
-            sigs: records.iter().map(|r| r.sig).collect(),
+            sigs: records.iter().map(|r| r.sig.as_deref().copied()).collect(),
             records,
         };
         // Plain data into a Vec does not fail; if it ever did, the bare magic is refused on
@@ -122,7 +122,7 @@ impl TeamState {
         for (index, (mut rec, sig)) in snap.records.into_iter().zip(snap.sigs).enumerate() {
             let bad = |reason: String| SnapshotError::BadRecord { index, reason };
             rec.validate(&limits).map_err(bad)?;
-            rec.sig = sig;
+            rec.sig = sig.map(Box::new);
             if let Some(security) = self.security() {
                 let writer = rec.key.writer();
                 let mission = writer.as_str() == crate::state::MISSION_WRITER;

@@ -8,10 +8,11 @@ use spomp_core::{GoalId, Point2, Pose2, ReachabilityScan, RobotId, Time};
 use crate::auth::SIGNATURE_BYTES;
 use crate::auth::TeamSecurity;
 use crate::error::{SyncError, TeamStateError};
+use crate::intern::{KeyNo, key_no, with_keys};
 use crate::params::TeamStateParams;
 use crate::record::{
-    ClaimRecord, GoalOrigin, GoalRecord, Limits, MapVersion, Record, RecordBody, RecordKey, RobotRecord, TierSet,
-    UnreachableRecord, VisitRecord, check_scan, finite_pose, record_stamp,
+    ClaimRecord, GoalOrigin, GoalRecord, Limits, MapVersion, Record, RecordBody, RecordKey, RecordSet, RobotRecord,
+    TierSet, UnreachableRecord, VisitRecord, check_scan, finite_pose, record_stamp,
 };
 use crate::sync::{HEADER_BYTES, InFlight, PeerState, SyncMessage};
 use crate::view::{GoalIndex, GoalView, Lease, build_goal_index};
@@ -84,17 +85,18 @@ pub struct TeamState {
     clock: u64,
     next_goal_seq: u32,
     next_scan_seq: u64,
-    records: BTreeMap<RecordKey, Record>,
+    records: RecordSet,
     goal_index: GoalIndex,
     /// Scans in local arrival order, for `scans_since`.
     scan_log: Vec<Arc<ReachabilityScan>>,
     /// Positions of the scans this robot shared, for the spacing rule.
     own_scan_positions: Vec<Point2>,
     peers: HashMap<RobotId, PeerState>,
-    /// Local change log: change number → key, one entry per key (its latest change), so a peer
-    /// only looks at what changed since it last looked.
-    changes: BTreeMap<u64, RecordKey>,
-    change_of: HashMap<RecordKey, u64>,
+    /// Local change log: change number → key number, one entry per key (its latest change), so
+    /// a peer only looks at what changed since it last looked.
+    changes: BTreeMap<u64, KeyNo>,
+    /// The change number of each mutable record (immutable ones change once: see `note_change`).
+    change_of: HashMap<KeyNo, u64>,
     change_seq: u64,
     /// The latest time given to [`TeamState::advance_clock`] (claim leases are judged by it).
     now: Time,
@@ -119,7 +121,7 @@ impl TeamState {
             clock: 0,
             next_goal_seq: 0,
             next_scan_seq: 0,
-            records: BTreeMap::new(),
+            records: RecordSet::default(),
             goal_index: GoalIndex::default(),
             scan_log: Vec::new(),
             own_scan_positions: Vec::new(),
@@ -146,11 +148,12 @@ impl TeamState {
                 self.self_id
             )));
         }
-        for rec in self.records.values_mut() {
-            if rec.key.writer() == &self.self_id {
-                rec.sig = Some(security.sign_record(&record_bytes(rec)));
+        let me = &self.self_id;
+        self.records.update_all(|rec| {
+            if rec.key.writer() == me {
+                rec.sig = Some(Box::new(security.sign_record(&record_bytes(rec))));
             }
-        }
+        });
         self.security = Some(security);
         Ok(())
     }
@@ -203,25 +206,38 @@ impl TeamState {
         if let Some(security) = &self.security
             && key.writer() == &self.self_id
         {
-            rec.sig = Some(security.sign_record(&record_bytes(&rec)));
+            rec.sig = Some(Box::new(security.sign_record(&record_bytes(&rec))));
         }
         let goal_related = key.goal().is_some() || matches!(key, RecordKey::RetryEpoch(_));
         if let RecordBody::Scan(s) = &rec.body {
             self.scan_log.push(s.clone());
         }
         self.note_change(&key);
-        self.records.insert(key, rec);
+        self.records.insert(rec);
         if goal_related {
             self.rebuild_goals();
         }
     }
 
+    /// Logs a change of `key`; called before the record is stored.
     fn note_change(&mut self, key: &RecordKey) {
         self.change_seq += 1;
-        if let Some(old) = self.change_of.insert(key.clone(), self.change_seq) {
+        let no = key_no(key);
+        let earlier = if no.is_immutable() {
+            // Written once, except by a writer that lost its counter (a different body under
+            // the same key): the rare replacement finds its earlier entry by walking the log,
+            // so the scans, most of what a robot holds, need no index entry.
+            match self.records.contains_key(key) {
+                true => self.changes.iter().find(|(_, k)| **k == no).map(|(seq, _)| *seq),
+                false => None,
+            }
+        } else {
+            self.change_of.insert(no, self.change_seq)
+        };
+        if let Some(old) = earlier {
             self.changes.remove(&old);
         }
-        self.changes.insert(self.change_seq, key.clone());
+        self.changes.insert(self.change_seq, no);
     }
 
     fn rebuild_goals(&mut self) {
@@ -281,7 +297,7 @@ impl TeamState {
 
     fn own_robot_record(&self) -> RobotRecord {
         match self.records.get(&RecordKey::Robot(self.self_id.clone())).map(|r| &r.body) {
-            Some(RecordBody::Robot(r)) => r.clone(),
+            Some(RecordBody::Robot(r)) => (**r).clone(),
             _ => RobotRecord {
                 pose: None,
                 stamp: Time::ZERO,
@@ -296,7 +312,7 @@ impl TeamState {
         let mut rec = self.own_robot_record();
         update(&mut rec);
         let dot = self.tick();
-        self.put(RecordKey::Robot(self.self_id.clone()), dot, RecordBody::Robot(rec));
+        self.put(RecordKey::Robot(self.self_id.clone()), dot, RecordBody::Robot(Box::new(rec)));
     }
 
     /// Records a goal this robot identified (detected in the aerial map, or entered at the
@@ -580,7 +596,7 @@ impl TeamState {
     /// The last known state (pose, stamp, current goal, path end) of a robot.
     pub fn robot_status(&self, id: &RobotId) -> Option<&RobotStatus> {
         match self.records.get(&RecordKey::Robot(id.clone())).map(|r| &r.body) {
-            Some(RecordBody::Robot(r)) => Some(r),
+            Some(RecordBody::Robot(r)) => Some(r.as_ref()),
             _ => None,
         }
     }
@@ -595,7 +611,7 @@ impl TeamState {
         self.records
             .values()
             .filter_map(|r| match (&r.key, &r.body) {
-                (RecordKey::Robot(id), RecordBody::Robot(s)) => Some((id, s)),
+                (RecordKey::Robot(id), RecordBody::Robot(s)) => Some((id, s.as_ref())),
                 _ => None,
             })
             .collect()
@@ -624,7 +640,7 @@ impl TeamState {
     /// The robots whose map records are held, in key order (the order of [`Self::records`]),
     /// without walking the other records.
     pub fn map_writers(&self) -> impl Iterator<Item = &RobotId> + '_ {
-        self.records.range(RecordKey::Map(RobotId::new(""))..).map_while(|(key, _)| match key {
+        self.records.starting_at(RecordKey::Map(RobotId::new(""))).map_while(|r| match &r.key {
             RecordKey::Map(robot) => Some(robot),
             _ => None,
         })
@@ -673,7 +689,7 @@ impl TeamState {
             self.scan_log.push(s.clone());
         }
         self.note_change(&rec.key);
-        self.records.insert(rec.key.clone(), rec);
+        self.records.insert(rec);
     }
 
     /// Sets the counters after a restore (never below what they are) and rebuilds the goals.
@@ -691,17 +707,19 @@ impl TeamState {
     fn peer_has_all(&self, peer: &PeerState) -> bool {
         // Only records changed since the peer's cursor, pending ones and in-flight ones can be
         // missing at the peer.
-        let unseen = self.changes.range(peer.change_cursor + 1..).map(|(_, k)| k);
-        let held_by_peer = |key: &RecordKey| {
-            let Some(rec) = self.records.get(key) else { return true };
-            let held = peer.confirmed.get(key);
-            // Poses change every tick; any version counts, or a sync would never complete.
-            match key {
-                RecordKey::Robot(_) => held > 0,
-                _ => held >= rec.dot,
-            }
-        };
-        unseen.chain(&peer.pending).chain(peer.sent.keys()).all(held_by_peer)
+        let unseen = self.changes.range(peer.change_cursor + 1..).map(|(_, no)| no);
+        with_keys(|table| {
+            let held_by_peer = |no: &KeyNo| {
+                let Some(rec) = table.key(*no).and_then(|key| self.records.get(key)) else { return true };
+                let held = peer.confirmed.get(*no);
+                // Poses change every tick; any version counts, or a sync would never complete.
+                match rec.key {
+                    RecordKey::Robot(_) => held > 0,
+                    _ => held >= rec.dot,
+                }
+            };
+            unseen.chain(&peer.pending).chain(peer.sent.keys()).all(held_by_peer)
+        })
     }
 
     /// Builds the next message for `peer`: records of the allowed tiers the peer is not known to
@@ -713,18 +731,24 @@ impl TeamState {
             return None;
         }
         let state = self.peers.entry(peer.clone()).or_default();
-        for (_, key) in self.changes.range(state.change_cursor + 1..) {
-            state.pending.insert(key.clone());
+        for (_, &no) in self.changes.range(state.change_cursor + 1..) {
+            state.pending.insert(no);
         }
         state.change_cursor = self.change_seq;
-        // Drop pending records the peer holds (or will, from in-flight messages).
         let records = &self.records;
         let mut pending = std::mem::take(&mut state.pending);
-        pending.retain(|k| records.get(k).is_some_and(|r| r.dot > state.known_dot(k)));
+        let mut candidates: Vec<(KeyNo, &Record)> = with_keys(|table| {
+            let held = |no: KeyNo| table.key(no).and_then(|key| records.get(key));
+            // Drop pending records the peer holds (or will, from in-flight messages).
+            pending.retain(|&no| held(no).is_some_and(|r| r.dot > state.known_dot(no)));
+            pending
+                .iter()
+                .filter_map(|&no| Some((no, held(no)?)))
+                .filter(|(_, r)| allowed_tiers.contains(r.tier()))
+                .collect()
+        });
         state.pending = pending;
-        let mut candidates: Vec<&Record> =
-            state.pending.iter().filter_map(|k| records.get(k)).filter(|r| allowed_tiers.contains(r.tier())).collect();
-        candidates.sort_by(|a, b| {
+        candidates.sort_by(|(_, a), (_, b)| {
             (a.tier(), a.key.send_rank()).cmp(&(b.tier(), b.key.send_rank())).then_with(|| a.key.cmp(&b.key))
         });
 
@@ -751,11 +775,13 @@ impl TeamState {
         };
         let per_record = if signed { 1 + SIGNATURE_BYTES } else { 0 };
         let mut used = HEADER_BYTES + postcard::experimental::serialized_size(&msg).unwrap_or(0) + 5 + trailer;
-        for rec in candidates {
+        let mut sent: Vec<(KeyNo, u64)> = Vec::new();
+        for (no, rec) in candidates {
             let size = postcard::experimental::serialized_size(rec).unwrap_or(usize::MAX).saturating_add(per_record);
             if used.saturating_add(size) <= byte_budget {
                 used += size;
                 msg.records.push(rec.clone());
+                sent.push((no, rec.dot));
             }
         }
         let flag = {
@@ -777,10 +803,9 @@ impl TeamState {
             state.flag_confirmed = false;
         }
         if !msg.records.is_empty() {
-            let sent: Vec<(RecordKey, u64)> = msg.records.iter().map(|r| (r.key.clone(), r.dot)).collect();
-            for (k, d) in &sent {
-                state.sent.insert(k.clone(), (*d, msg.seq));
-                state.pending.remove(k);
+            for &(no, dot) in &sent {
+                state.sent.insert(no, (dot, msg.seq));
+                state.pending.remove(&no);
             }
             state.in_flight.push_back(InFlight { seq: msg.seq, records: sent });
             state.trim(self.params.max_in_flight_messages);
@@ -894,7 +919,7 @@ impl TeamState {
                 self.next_scan_seq = self.next_scan_seq.max(seq.saturating_add(1));
             }
             self.note_change(&rec.key);
-            self.records.insert(rec.key.clone(), rec);
+            self.records.insert(rec);
         }
         if goals_touched {
             self.rebuild_goals();
@@ -908,7 +933,7 @@ impl TeamState {
         state.session = msg.session;
         state.process_ack(msg.ack, max_in_flight);
         for rec in &msg.records {
-            state.confirmed.raise(&rec.key, rec.dot);
+            state.confirmed.raise(key_no(&rec.key), rec.dot);
         }
         // A re-delivered message was acknowledged already (or will be with the original).
         let duplicate = state.received.covers(msg.seq);

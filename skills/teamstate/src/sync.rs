@@ -17,7 +17,8 @@ use spomp_core::RobotId;
 
 use crate::auth::{SIGNATURE_BYTES, Signature};
 use crate::error::SyncError;
-use crate::record::{Record, RecordKey, Tier};
+use crate::intern::KeyNo;
+use crate::record::{Record, Tier};
 
 const MAGIC: &[u8; 4] = b"SPTS";
 /// The bare message.
@@ -121,7 +122,7 @@ impl SyncMessage {
         let header = out.clone();
         let Ok(mut out) = postcard::to_extend(self, out) else { return header };
         if trailer {
-            let record_sigs = signed.then(|| self.records.iter().map(|r| r.sig).collect());
+            let record_sigs = signed.then(|| self.records.iter().map(|r| r.sig.as_deref().copied()).collect());
             match postcard::to_extend(&Trailer { session: self.session, record_sigs }, out) {
                 Ok(o) => out = o,
                 Err(_) => return header,
@@ -164,7 +165,7 @@ impl SyncMessage {
                         )));
                     }
                     for (rec, sig) in msg.records.iter_mut().zip(sigs) {
-                        rec.sig = sig;
+                        rec.sig = sig.map(Box::new);
                     }
                     let (sig, rest) = rest
                         .split_first_chunk::<SIGNATURE_BYTES>()
@@ -214,29 +215,51 @@ pub fn decode(bytes: &[u8]) -> Result<SyncMessage, SyncError> {
 #[derive(Clone, Debug)]
 pub(crate) struct InFlight {
     pub seq: u32,
-    pub records: Vec<(RecordKey, u64)>,
+    pub records: Vec<(KeyNo, u64)>,
 }
 
-/// The highest dot of each record a peer is known to hold, by the key's process-wide number:
-/// 8 bytes a record seen, for each peer.
+/// The highest dot of each record a peer is known to hold, by the key's process-wide number
+/// ([`KeyNo`]): for each peer, 8 bytes a mutable record and one bit an immutable one (its only
+/// dot is 1). Every robot of a team holds every scan, so in a large team this table, one per
+/// peer, would otherwise outweigh the records themselves.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct DotsByKey {
+    /// Dots of mutable records.
     dots: Vec<u64>,
+    /// Bit n: the immutable record number n is held.
+    held: Vec<u64>,
 }
 
 impl DotsByKey {
-    /// The dot held for `key`; 0 for none.
-    pub fn get(&self, key: &RecordKey) -> u64 {
-        crate::intern::known_key_number(key).and_then(|n| self.dots.get(n).copied()).unwrap_or(0)
+    /// The dot held for the key numbered `no`; 0 for none.
+    pub fn get(&self, no: KeyNo) -> u64 {
+        let n = no.index();
+        if no.is_immutable() {
+            self.held.get(n / 64).map_or(0, |word| word >> (n % 64) & 1)
+        } else {
+            self.dots.get(n).copied().unwrap_or(0)
+        }
     }
 
-    /// Raises the dot held for `key` to at least `dot`.
-    pub fn raise(&mut self, key: &RecordKey, dot: u64) {
-        let n = crate::intern::key_number(key);
-        if self.dots.len() <= n {
-            self.dots.resize(n + 1, 0);
+    /// Raises the dot held for the key numbered `no` to at least `dot`.
+    pub fn raise(&mut self, no: KeyNo, dot: u64) {
+        if dot == 0 {
+            return;
         }
-        self.dots[n] = self.dots[n].max(dot);
+        let n = no.index();
+        if no.is_immutable() {
+            // Validated records and own writes of immutable keys all have dot 1.
+            debug_assert_eq!(dot, 1, "immutable record with dot {dot}");
+            if self.held.len() <= n / 64 {
+                self.held.resize(n / 64 + 1, 0);
+            }
+            self.held[n / 64] |= 1 << (n % 64);
+        } else {
+            if self.dots.len() <= n {
+                self.dots.resize(n + 1, 0);
+            }
+            self.dots[n] = self.dots[n].max(dot);
+        }
     }
 }
 
@@ -250,10 +273,11 @@ pub(crate) struct PeerState {
     /// Record dots the peer is known to hold (acknowledged, or received from it).
     pub confirmed: DotsByKey,
     /// Record dots sent in messages still in flight, with the message's seq.
-    pub sent: HashMap<RecordKey, (u64, u32)>,
+    pub sent: HashMap<KeyNo, (u64, u32)>,
     /// Records that may still have to go to the peer (changed since they were last considered,
-    /// skipped for tier or budget, or in a lost message).
-    pub pending: BTreeSet<RecordKey>,
+    /// skipped for tier or budget, or in a lost message): the key numbers, as a peer on a
+    /// link that carries only coordination collects every scan here.
+    pub pending: BTreeSet<KeyNo>,
     /// Position in the local change log up to which changes were moved into `pending`.
     pub change_cursor: u64,
     /// Receipts of the peer's messages.
@@ -278,9 +302,9 @@ pub(crate) struct PeerState {
 
 impl PeerState {
     /// Highest dot of `key` the peer holds or will hold if in-flight messages arrive.
-    pub fn known_dot(&self, key: &RecordKey) -> u64 {
-        let confirmed = self.confirmed.get(key);
-        let sent = self.sent.get(key).map_or(0, |s| s.0);
+    pub fn known_dot(&self, no: KeyNo) -> u64 {
+        let confirmed = self.confirmed.get(no);
+        let sent = self.sent.get(&no).map_or(0, |s| s.0);
         confirmed.max(sent)
     }
 
@@ -309,17 +333,22 @@ impl PeerState {
                 self.resolve(msg, false);
             }
         }
+        // A first exchange puts a whole state in flight at once; once it is resolved, give the
+        // room back, or every pair that ever met keeps room for the whole state.
+        if self.sent.capacity() > 64 && self.sent.len() * 4 < self.sent.capacity() {
+            self.sent.shrink_to(self.sent.len() * 2);
+        }
     }
 
     fn resolve(&mut self, msg: InFlight, delivered: bool) {
-        for (key, dot) in msg.records {
+        for (no, dot) in msg.records {
             if delivered {
-                self.confirmed.raise(&key, dot);
+                self.confirmed.raise(no, dot);
             }
-            if self.sent.get(&key).is_some_and(|s| s.1 == msg.seq) {
-                self.sent.remove(&key);
+            if self.sent.get(&no).is_some_and(|s| s.1 == msg.seq) {
+                self.sent.remove(&no);
                 if !delivered {
-                    self.pending.insert(key);
+                    self.pending.insert(no);
                 }
             }
         }

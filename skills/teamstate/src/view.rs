@@ -9,11 +9,11 @@
 //! same records see the same goals. Claims, visits and unreachable marks on any alias count for
 //! the canonical goal.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 
 use spomp_core::{GoalId, Point2, RobotId, Time};
 
-use crate::record::{GoalOrigin, Record, RecordBody, RecordKey};
+use crate::record::{GoalOrigin, RecordBody, RecordKey, RecordSet};
 
 /// Status of a goal as the team sees it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
@@ -105,7 +105,7 @@ impl Lease<'_> {
     }
 }
 
-pub(crate) fn build_goal_index(records: &BTreeMap<RecordKey, Record>, radius_m: f64, lease: &Lease<'_>) -> GoalIndex {
+pub(crate) fn build_goal_index(records: &RecordSet, radius_m: f64, lease: &Lease<'_>) -> GoalIndex {
     let mut goals: Vec<(&GoalId, &crate::record::GoalRecord)> = records
         .values()
         .filter_map(|r| match (&r.key, &r.body) {

@@ -53,7 +53,7 @@ fn forged(from: &str, to: &str, records: Vec<Record>, signer: Option<u8>) -> Vec
         // Well-formed signatures that no member's key made.
         msg.signature = Some(Signature([seed; 64]));
         for r in &mut msg.records {
-            r.sig = Some(Signature([seed; 64]));
+            r.sig = Some(Box::new(Signature([seed; 64])));
         }
     }
     msg.encode()
