@@ -69,21 +69,26 @@ fn literal_f64(p: &PortBindings, port: &str) -> Option<f64> {
     }
 }
 
-/// A positive finite number from a port (its default when unset), or a report and `None`.
-fn positive(binding: &Binding, ctx: &mut Ctx<'_>, port: &str, default: Option<f64>) -> Option<Option<f64>> {
-    let v = match (binding, default) {
-        (Binding::Unset, d) => return Some(d),
-        (b, _) => b.get::<f64>(ctx.blackboard),
-    };
-    match v {
-        Some(v) if v.is_finite() && v > 0.0 => Some(Some(v)),
+/// An optional positive-number port: `Ok(default)` when unset, `Ok(Some(v))` for a positive
+/// finite value; anything else is reported on the blackboard and is `Err`.
+fn optional_positive(
+    binding: &Binding,
+    ctx: &mut Ctx<'_>,
+    port: &str,
+    default: Option<f64>,
+) -> Result<Option<f64>, ()> {
+    if matches!(binding, Binding::Unset) {
+        return Ok(default);
+    }
+    match binding.get::<f64>(ctx.blackboard) {
+        Some(v) if v.is_finite() && v > 0.0 => Ok(Some(v)),
         Some(v) => {
             ctx.blackboard.report(format!("{WAIT_AT}: `{port}` must be a positive number, got {v}"));
-            None
+            Err(())
         }
         None => {
             ctx.blackboard.report(format!("{WAIT_AT}: `{port}` is not set"));
-            None
+            Err(())
         }
     }
 }
@@ -105,10 +110,10 @@ impl Behavior<RobotRuntime> for WaitForRobotAt {
                 return Status::Failure;
             }
         };
-        let Some(Some(within_m)) = positive(&self.within, ctx, "within_m", Some(3.0)) else {
+        let Ok(Some(within_m)) = optional_positive(&self.within, ctx, "within_m", Some(3.0)) else {
             return Status::Failure;
         };
-        let Some(timeout_s) = positive(&self.timeout, ctx, "timeout_s", None) else { return Status::Failure };
+        let Ok(timeout_s) = optional_positive(&self.timeout, ctx, "timeout_s", None) else { return Status::Failure };
         let rt = &*ctx.env;
         if &robot == rt.id() {
             ctx.blackboard.report(format!("{WAIT_AT}: `{robot}` is this robot"));
