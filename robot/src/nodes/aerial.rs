@@ -14,8 +14,8 @@ use std::sync::Arc;
 use serde_json::json;
 use spomp_core::{FlightCommand, Point2, RobotId, RobotKind, Time};
 
-use super::Ctx;
 use super::qgc_plan::{Polygons, load_plan};
+use super::{Ctx, literal_number, number};
 use crate::runtime::RobotRuntime;
 use spomp_behaviors::Status;
 use spomp_behaviors::blackboard::{BbValue, Binding, PortType};
@@ -92,36 +92,6 @@ pub fn register_aerial(r: &mut NodeRegistry<RobotRuntime>) {
 }
 
 // ---------------------------------------------------------------------------------- ports
-
-/// A literal number on a port, checked at build time.
-fn literal_number(p: &PortBindings, port: &str, positive: bool) -> Result<(), String> {
-    let v = match p.literal(port) {
-        Some(BbValue::Float(f)) => *f,
-        Some(BbValue::Int(i)) => *i as f64,
-        _ => return Ok(()),
-    };
-    if !v.is_finite() || (positive && v <= 0.0) {
-        let what = if positive { "a positive number" } else { "a finite number" };
-        return Err(format!("`{port}` must be {what}, found {v}"));
-    }
-    Ok(())
-}
-
-/// Reads a number port at tick time; reports and returns None when it is missing or invalid.
-fn number(b: &Binding, ctx: &mut Ctx<'_>, node: &str, port: &str, positive: bool) -> Option<f64> {
-    match b.get::<f64>(ctx.blackboard) {
-        Some(v) if v.is_finite() && (!positive || v > 0.0) => Some(v),
-        Some(v) => {
-            let what = if positive { "a positive number" } else { "a finite number" };
-            ctx.blackboard.report(format!("{node}: `{port}` must be {what}, found {v}"));
-            None
-        }
-        None => {
-            ctx.blackboard.report(format!("{node}: no value on its `{port}` port"));
-            None
-        }
-    }
-}
 
 /// Altitude and speed of a flying node.
 fn flight_params(altitude: &Binding, speed: &Binding, ctx: &mut Ctx<'_>, node: &str) -> Option<(f64, f64)> {

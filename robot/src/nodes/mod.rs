@@ -17,6 +17,8 @@ pub use navigation::register_navigation;
 pub use qgc_plan::plan_waypoints;
 pub use teammates::register_teammates;
 
+use spomp_behaviors::blackboard::{BbValue, Binding};
+use spomp_behaviors::registry::PortBindings;
 use spomp_behaviors::{NodeRegistry, TickContext, engine_registry};
 
 use crate::checks::MissionRobotChecks;
@@ -24,6 +26,37 @@ use crate::runtime::RobotRuntime;
 
 /// What a domain node sees during a tick: the robot runtime, typed, as `ctx.env`.
 pub(crate) type Ctx<'a> = TickContext<'a, RobotRuntime>;
+
+/// A literal number on a port, checked at build time (a bound entry is checked when ticked,
+/// by [`number`]).
+pub(crate) fn literal_number(p: &PortBindings, port: &str, positive: bool) -> Result<(), String> {
+    let v = match p.literal(port) {
+        Some(BbValue::Float(f)) => *f,
+        Some(BbValue::Int(i)) => *i as f64,
+        _ => return Ok(()),
+    };
+    if !v.is_finite() || (positive && v <= 0.0) {
+        let what = if positive { "a positive number" } else { "a finite number" };
+        return Err(format!("`{port}` must be {what}, found {v}"));
+    }
+    Ok(())
+}
+
+/// Reads a number port at tick time; reports and returns None when it is missing or invalid.
+pub(crate) fn number(b: &Binding, ctx: &mut Ctx<'_>, node: &str, port: &str, positive: bool) -> Option<f64> {
+    match b.get::<f64>(ctx.blackboard) {
+        Some(v) if v.is_finite() && (!positive || v > 0.0) => Some(v),
+        Some(v) => {
+            let what = if positive { "a positive number" } else { "a finite number" };
+            ctx.blackboard.report(format!("{node}: `{port}` must be {what}, found {v}"));
+            None
+        }
+        None => {
+            ctx.blackboard.report(format!("{node}: no value on its `{port}` port"));
+            None
+        }
+    }
+}
 
 /// Every node type of a robot: the engine's (structural, generic leaves) and the domain nodes,
 /// with the robot layer's checks of robot settings. `spomp validate`, `sim`, `run`, `nodes` and

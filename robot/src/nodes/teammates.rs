@@ -6,11 +6,11 @@ use serde_json::json;
 use spomp_core::{Point2, RobotId, RobotKind, Time};
 
 use spomp_behaviors::Status;
-use spomp_behaviors::blackboard::{BbValue, Binding, PortType};
+use spomp_behaviors::blackboard::{Binding, PortType};
 use spomp_behaviors::node::Behavior;
 use spomp_behaviors::registry::{Category, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
 
-use super::Ctx;
+use super::{Ctx, literal_number, number};
 use crate::runtime::RobotRuntime;
 
 const WAIT_AT: &str = "wait_for_robot_at";
@@ -45,13 +45,8 @@ struct WaitForRobotAt {
 }
 
 fn build_wait_at(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, String> {
-    for port in ["within_m", "timeout_s"] {
-        if let Some(v) = literal_f64(p, port)
-            && !(v.is_finite() && v > 0.0)
-        {
-            return Err(format!("`{port}` must be a positive number, got {v}"));
-        }
-    }
+    literal_number(p, "within_m", true)?;
+    literal_number(p, "timeout_s", true)?;
     Ok(Box::new(WaitForRobotAt {
         robot: p.get("robot"),
         target: p.get("target"),
@@ -59,38 +54,6 @@ fn build_wait_at(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, St
         timeout: p.get("timeout_s"),
         started: Time::ZERO,
     }))
-}
-
-fn literal_f64(p: &PortBindings, port: &str) -> Option<f64> {
-    match p.literal(port) {
-        Some(BbValue::Float(f)) => Some(*f),
-        Some(BbValue::Int(i)) => Some(*i as f64),
-        _ => None,
-    }
-}
-
-/// An optional positive-number port: `Ok(default)` when unset, `Ok(Some(v))` for a positive
-/// finite value; anything else is reported on the blackboard and is `Err`.
-fn optional_positive(
-    binding: &Binding,
-    ctx: &mut Ctx<'_>,
-    port: &str,
-    default: Option<f64>,
-) -> Result<Option<f64>, ()> {
-    if matches!(binding, Binding::Unset) {
-        return Ok(default);
-    }
-    match binding.get::<f64>(ctx.blackboard) {
-        Some(v) if v.is_finite() && v > 0.0 => Ok(Some(v)),
-        Some(v) => {
-            ctx.blackboard.report(format!("{WAIT_AT}: `{port}` must be a positive number, got {v}"));
-            Err(())
-        }
-        None => {
-            ctx.blackboard.report(format!("{WAIT_AT}: `{port}` is not set"));
-            Err(())
-        }
-    }
 }
 
 impl Behavior<RobotRuntime> for WaitForRobotAt {
@@ -110,10 +73,14 @@ impl Behavior<RobotRuntime> for WaitForRobotAt {
                 return Status::Failure;
             }
         };
-        let Ok(Some(within_m)) = optional_positive(&self.within, ctx, "within_m", Some(3.0)) else {
-            return Status::Failure;
+        let Some(within_m) = number(&self.within, ctx, WAIT_AT, "within_m", true) else { return Status::Failure };
+        let timeout_s = match self.timeout {
+            Binding::Unset => None,
+            _ => match number(&self.timeout, ctx, WAIT_AT, "timeout_s", true) {
+                Some(t) => Some(t),
+                None => return Status::Failure,
+            },
         };
-        let Ok(timeout_s) = optional_positive(&self.timeout, ctx, "timeout_s", None) else { return Status::Failure };
         let rt = &*ctx.env;
         if &robot == rt.id() {
             ctx.blackboard.report(format!("{WAIT_AT}: `{robot}` is this robot"));
