@@ -2,6 +2,7 @@
 //! optionally with a polar table of the distance transform D for the controller's Φ lookup.
 
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI, TAU};
+use std::sync::Arc;
 
 use spomp_core::{Point2, ReachabilityScan};
 
@@ -14,6 +15,9 @@ const MAX_REGION_RANGE_M: f64 = 1.0e4;
 /// Range cells per bin of the clearance table at most (beyond, the last cell's value applies):
 /// bounds the table for garbage ranges (1024 bins × 1024 cells × 4 B = 4 MiB at worst).
 const MAX_CLEARANCE_CELLS: usize = 1024;
+
+/// Neighbouring columns whose safe stretches [`SafeRegion::from_terrain`] reads together.
+const CLEARANCE_BLOCK: usize = 16;
 
 /// tan(π/8): atan arguments above it are reduced through atan(t) = π/4 + atan((t − 1)/(t + 1)).
 const TAN_PI_8: f64 = 0.414_213_562_373_095_03;
@@ -43,13 +47,16 @@ pub(crate) fn fast_atan2(y: f64, x: f64) -> f64 {
 }
 
 /// Distance to the nearest obstacle on a polar grid (bin = scan column, cell = horizontal
-/// range / cell size), built from the terrain distance transform D. Stored cell-major
-/// (`values[cell · bins + bin]`) so that building it from panorama rows writes neighbouring
-/// memory; bin b uses its first `bin_cells[b]` cells (up to its own safe range).
+/// range / cell size), built from the terrain distance transform D. Bin b holds its first
+/// `bin_cells[b]` cells (up to its own safe range), stored bin after bin from `start[b]`: a
+/// table as long as the bins' ranges together, where a cell-major table as deep as the longest
+/// bin for every bin was 2 MB to fill and copy for one far-seeing column.
 #[derive(Clone, Debug, PartialEq)]
 struct Clearance {
     inv_cell_m: f64,
     bin_cells: Vec<u32>,
+    /// Where each bin's cells start in `values`.
+    start: Vec<u32>,
     values: Vec<f32>,
 }
 
@@ -64,7 +71,8 @@ pub struct SafeRegion {
     vertices: Vec<Point2>,
     /// Cumulative area of the fan triangles (origin, v_i, v_{i+1}), for uniform sampling.
     cumulative_area: Vec<f64>,
-    clearance: Option<Clearance>,
+    /// Shared: a region is cloned every control tick, the table is built once per panorama.
+    clearance: Option<Arc<Clearance>>,
     default_clearance_m: f32,
 }
 
@@ -137,62 +145,69 @@ impl SafeRegion {
                 (((range / cell_m) as u32).min(MAX_CLEARANCE_CELLS as u32 - 1)) + 1
             })
             .collect();
-        let cells = bin_cells.iter().copied().max().unwrap_or(1) as usize;
-        let mut values = vec![f32::NAN; cells * cols];
+        let mut start = Vec::with_capacity(cols);
+        let mut total = 0u32;
+        for &n in &bin_cells {
+            start.push(total);
+            total += n;
+        }
+        let mut values = vec![f32::NAN; total as usize];
         let inv_cell = (1.0 / cell_m) as f32;
         let last_row = output.reach_last_row();
         let (r_m, rho, d) = (output.r_m(), output.ranges_m(), output.distance_m());
-        // Each column's safe stretch, bottom row up to its last safe row, visited row by row.
+        // Each column's safe stretch, bottom row up to its last safe row, visited in blocks of
+        // neighbouring columns (whose stretches are alike): a block's rows are read a cache line
+        // at a time and its table cells stay in L1, where whole-panorama rows down to the highest
+        // stretch of all visited many pixels above their own column's stretch. (Taking the
+        // minimum does not depend on the order the pixels come in.)
         let ncols = cols.min(last_row.len());
-        let top = last_row[..ncols].iter().copied().min().unwrap_or(rows as u32) as usize;
-        // Row slices zipped with the per-column limits: no index checks in the per-pixel loop
-        // (the hottest of this function) but the one on the table slot.
         let last_cell: Vec<u32> = bin_cells[..ncols].iter().map(|&n| n - 1).collect();
-        for row in (top..rows).rev() {
-            let base = row * cols;
-            let (Some(rho_row), Some(r_row), Some(d_row)) =
-                (rho.get(base..base + ncols), r_m.get(base..base + ncols), d.get(base..base + ncols))
-            else {
-                continue;
-            };
-            let row_u32 = row as u32;
-            let pixels = rho_row.iter().zip(r_row).zip(d_row).zip(&last_row[..ncols]).zip(&last_cell);
-            for (c, ((((&rho_px, &r_px), &d_px), &last), &max_cell)) in pixels.enumerate() {
-                if (row_u32 < last) | (rho_px <= 0.0) {
+        for block in (0..ncols).step_by(CLEARANCE_BLOCK) {
+            let block = block..(block + CLEARANCE_BLOCK).min(ncols);
+            let (last_row, last_cell, start) =
+                (&last_row[block.clone()], &last_cell[block.clone()], &start[block.clone()]);
+            let top = last_row.iter().copied().min().unwrap_or(rows as u32) as usize;
+            for row in (top..rows).rev() {
+                let span = row * cols + block.start..row * cols + block.end;
+                let (Some(rho_row), Some(r_row), Some(d_row)) =
+                    (rho.get(span.clone()), r_m.get(span.clone()), d.get(span))
+                else {
                     continue;
-                }
-                let cell = ((r_px * inv_cell) as u32).min(max_cell) as usize;
-                if let Some(slot) = values.get_mut(cell * cols + c) {
-                    // `min` takes the other operand of a NaN: an empty slot takes the pixel's D.
-                    *slot = slot.min(d_px);
+                };
+                let row_u32 = row as u32;
+                let pixels = rho_row.iter().zip(r_row).zip(d_row).zip(last_row).zip(last_cell).zip(start);
+                for (((((&rho_px, &r_px), &d_px), &last), &max_cell), &first) in pixels {
+                    if (row_u32 < last) | (rho_px <= 0.0) {
+                        continue;
+                    }
+                    let cell = ((r_px * inv_cell) as u32).min(max_cell);
+                    if let Some(slot) = values.get_mut((first + cell) as usize) {
+                        // `min` takes the other operand of a NaN: an empty slot takes the pixel's D.
+                        *slot = slot.min(d_px);
+                    }
                 }
             }
         }
         // Empty cells take the value of the nearest filled cell towards the robot, cells before
         // the first filled one take its value, a bin with none the default: every lookup inside
         // the polygon is defined.
-        for cell in 1..cells {
-            let (below, here) = values.split_at_mut(cell * cols);
-            let below = &below[(cell - 1) * cols..];
-            for (v, &b) in here[..cols].iter_mut().zip(below) {
-                if v.is_nan() {
-                    *v = b;
-                }
-            }
-        }
         let fallback = region.default_clearance_m;
-        if let Some(last) = values.get_mut((cells - 1) * cols..) {
-            last.iter_mut().filter(|v| v.is_nan()).for_each(|v| *v = fallback);
-        }
-        for cell in (0..cells.saturating_sub(1)).rev() {
-            let (here, above) = values.split_at_mut((cell + 1) * cols);
-            for (v, &a) in here[cell * cols..].iter_mut().zip(&above[..cols]) {
+        for (&first, &n) in start.iter().zip(&bin_cells) {
+            let Some(bin) = values.get_mut(first as usize..(first + n) as usize) else { continue };
+            let Some(first_filled) = bin.iter().position(|v| !v.is_nan()) else {
+                bin.fill(fallback);
+                continue;
+            };
+            let mut last = bin[first_filled];
+            for v in bin.iter_mut() {
                 if v.is_nan() {
-                    *v = a;
+                    *v = last;
+                } else {
+                    last = *v;
                 }
             }
         }
-        region.clearance = Some(Clearance { inv_cell_m: 1.0 / cell_m, bin_cells, values });
+        region.clearance = Some(Arc::new(Clearance { inv_cell_m: 1.0 / cell_m, bin_cells, start, values }));
         Ok(region)
     }
 
@@ -277,10 +292,10 @@ impl SafeRegion {
         let bins = self.range_m.len();
         let bin = (t + 0.5) as u32 as usize;
         let bin = if bin >= bins { bin - bins } else { bin };
-        let bin_cells = *table.bin_cells.get(bin)?;
+        let (bin_cells, first) = (*table.bin_cells.get(bin)?, *table.start.get(bin)?);
         let distance = (p.x * p.x + p.y * p.y).sqrt();
-        let cell = ((distance * table.inv_cell_m) as u32).min(bin_cells.saturating_sub(1)) as usize;
-        table.values.get(cell * bins + bin).copied()
+        let cell = ((distance * table.inv_cell_m) as u32).min(bin_cells.saturating_sub(1));
+        table.values.get((first + cell) as usize).copied()
     }
 
     /// A point drawn uniformly from the polygon (fan triangle by area, then uniform in it), or
