@@ -181,17 +181,16 @@ impl GlobalPlanner {
         let Some(map) = &self.map else {
             return TrainOutcome::NotEnoughLabels { labels: 0 };
         };
-        let channels = self.features.channels();
-        self.train_x.clear();
-        self.train_y.clear();
-        self.feature_scratch.resize(channels, 0.0);
-        for (cell, label) in self.votes.labels(l.votes_to_label) {
-            if self.features.fill(map, cell, &mut self.feature_scratch) {
-                self.train_x.extend_from_slice(&self.feature_scratch);
-                self.train_y.push(label);
-            }
-        }
-        let labels = self.train_y.len();
+        // The labelled cells the map has features for, in label order; a round's features are
+        // built for the rows it draws only (8192 draws, where the team's scans label up to
+        // hundreds of thousands of cells).
+        self.train_cells.clear();
+        self.train_cells.extend(
+            self.votes
+                .labels(l.votes_to_label)
+                .filter(|&(cell, _)| map.class.get(cell).is_some_and(|&c| c != UNKNOWN_CLASS)),
+        );
+        let labels = self.train_cells.len();
         if labels < l.min_labels.max(1) {
             self.release_training_set();
             return TrainOutcome::NotEnoughLabels { labels };
@@ -204,7 +203,13 @@ impl GlobalPlanner {
             batch_size: l.batch_size.max(1),
             samples: l.samples_per_round,
         };
-        let loss = self.model.train(&self.train_x, &self.train_y, settings, rng);
+        let (features, cells) = (&self.features, &self.train_cells);
+        let row = |r: usize, x: &mut [f32]| {
+            let (cell, label) = cells[r];
+            features.fill(map, cell, x);
+            label
+        };
+        let loss = self.model.train_rows(labels, row, settings, rng);
         self.release_training_set();
         self.last_train = Some(now);
         self.training_rounds += 1;
@@ -212,12 +217,11 @@ impl GlobalPlanner {
         TrainOutcome::Trained { labels, loss }
     }
 
-    /// Gives back the training set: 52 bytes per labelled cell, and the labels grow with every
+    /// Gives back the training set: 16 bytes per labelled cell, and the labels grow with every
     /// scan the team shares (tens of MB per robot over a long run of a large team), while a
     /// round needs it only for its duration.
     fn release_training_set(&mut self) {
-        self.train_x = Vec::new();
-        self.train_y = Vec::new();
+        self.train_cells = Vec::new();
     }
 
     /// Learned probability that the cell under `p` is traversable (0.5 before training); `None`
