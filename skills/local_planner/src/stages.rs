@@ -894,6 +894,22 @@ pub fn distance_transform(
     along_column: &mut [f32],
     distance: &mut [f32],
 ) {
+    distance_transform_with(ranges, obstacle, cols, max_distance_m, scratch, along_column, distance, false);
+}
+
+/// [`distance_transform`]; `wide_registers` as for [`column_pass_row`].
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn distance_transform_with(
+    ranges: &[f32],
+    obstacle: &[bool],
+    cols: usize,
+    max_distance_m: f32,
+    scratch: &mut DistanceScratch,
+    along_column: &mut [f32],
+    distance: &mut [f32],
+    wide_registers: bool,
+) {
     if cols == 0 {
         return;
     }
@@ -902,7 +918,7 @@ pub fn distance_transform(
     let (nearest, block) = scratch.reset(cols);
     let rows = ranges.chunks_exact(cols).zip(obstacle.chunks_exact(cols));
     for ((rho, obs), d_a) in rows.zip(along_column.chunks_exact_mut(cols)) {
-        column_pass_row(rho, obs, nearest, d_max, d_a);
+        column_pass_row(rho, obs, nearest, d_max, d_a, wide_registers);
     }
     let width = BLOCK_ROWS * cols;
     let blocks = ranges.chunks_exact(width).zip(along_column.chunks_exact(width));
@@ -917,15 +933,51 @@ pub fn distance_transform(
 }
 
 /// The column pass of Algorithm 1 for one row: `nearest` holds, per column, the smallest range
-/// of an obstacle in the rows above (∞ before any).
+/// of an obstacle in the rows above (∞ before any). `wide_registers`: the caller is compiled for
+/// AVX2 or AVX-512, where plain per-column code vectorises best ([`column_pass_row_columns`]);
+/// on the baseline explicit [`LANES`]-wide vectors were measured faster
+/// ([`column_pass_row_lanes`]). The same bits either way.
 #[inline(always)]
-pub(crate) fn column_pass_row(rho: &[f32], obs: &[bool], nearest: &mut [f32], d_max: f32, d_a: &mut [f32]) {
+pub(crate) fn column_pass_row(
+    rho: &[f32],
+    obs: &[bool],
+    nearest: &mut [f32],
+    d_max: f32,
+    d_a: &mut [f32],
+    wide_registers: bool,
+) {
+    if wide_registers {
+        column_pass_row_columns(rho, obs, nearest, d_max, d_a);
+    } else {
+        column_pass_row_lanes(rho, obs, nearest, d_max, d_a);
+    }
+}
+
+/// [`column_pass_row`] as plain per-column code.
+#[inline(always)]
+fn column_pass_row_columns(rho: &[f32], obs: &[bool], nearest: &mut [f32], d_max: f32, d_a: &mut [f32]) {
+    let n = rho.len().min(obs.len()).min(d_a.len()).min(nearest.len());
+    let (rho, obs, nearest, d_a) = (&rho[..n], &obs[..n], &mut nearest[..n], &mut d_a[..n]);
+    // Plain per-column code with every store unconditional (a conditional store of `nearest`
+    // becomes a scalarised masked store): the compiler vectorises it at the width the caller is
+    // compiled for. No NaN reaches the `min_ps`s: ranges are finite and `nearest` is finite or
+    // ∞, so they are `min`.
+    let columns = rho.iter().zip(obs).zip(nearest.iter_mut().zip(d_a.iter_mut()));
+    for ((&range, &is_obstacle), (nearest, d_a)) in columns {
+        let near = *nearest;
+        *nearest = if is_obstacle { min_ps(range, near) } else { near };
+        let free = if range > 0.0 { min_ps((range - near).abs(), d_max) } else { d_max };
+        *d_a = if is_obstacle { 0.0 } else { free };
+    }
+}
+
+/// [`column_pass_row`] with explicit [`LANES`]-wide vectors.
+#[inline(always)]
+fn column_pass_row_lanes(rho: &[f32], obs: &[bool], nearest: &mut [f32], d_max: f32, d_a: &mut [f32]) {
     let n = rho.len().min(obs.len()).min(d_a.len()).min(nearest.len());
     let (rho, obs, nearest, d_a) = (&rho[..n], &obs[..n], &mut nearest[..n], &mut d_a[..n]);
     let vectorised = n / LANES * LANES;
-    // [`LANES`] columns per vector with explicit selects (as plain code the compiler turns
-    // the conditional update of `nearest` into a scalarised masked store). No NaN reaches the
-    // `fast_min`s: ranges are finite and `nearest` is finite or ∞.
+    // No NaN reaches the `fast_min`s: ranges are finite and `nearest` is finite or ∞.
     let d_max_lanes = Lanes::splat(d_max);
     let chunks = rho[..vectorised]
         .chunks_exact(LANES)

@@ -468,7 +468,7 @@ impl TerrainAnalyzer {
             let obstacle = &mut out.obstacle[span.clone()];
             stages::obstacles(gradient, rho, cols, p.slope_threshold as f32, p.run_filter(), obstacle);
             let d_a = &mut out.column_distance_m[span.clone()];
-            stages::column_pass_row(rho, obstacle, nearest, d_max, d_a);
+            stages::column_pass_row(rho, obstacle, nearest, d_max, d_a, wide_registers);
             // Algorithm 1's row passes run on blocks of rows, one per SIMD lane, as soon as a block
             // has its column pass; rows past the last full block run alone.
             if (row + 1) % stages::BLOCK_ROWS == 0 {
@@ -565,7 +565,7 @@ impl TerrainAnalyzer {
                 &mut out.obstacle,
             ),
             TerrainStage::DistanceTransform => {
-                stages::distance_transform(
+                stages::distance_transform_with(
                     &out.ranges_m,
                     &out.obstacle,
                     cols,
@@ -573,6 +573,7 @@ impl TerrainAnalyzer {
                     &mut self.distance_scratch,
                     &mut out.column_distance_m,
                     &mut out.distance_m,
+                    wide_registers,
                 );
                 stages::traversable(&out.ranges_m, &out.distance_m, p.inflation_m as f32, &mut out.traversable);
             }
