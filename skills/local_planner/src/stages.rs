@@ -184,7 +184,12 @@ pub(crate) fn fill_holes_with(input: &[f32], out: &mut [f32], cols: usize, max_g
     let col_step = std::f32::consts::TAU / cols as f32;
     for (row_in, row) in input.chunks_exact(cols).zip(out.chunks_exact_mut(cols)) {
         if wide_registers {
-            sanitize_and_fill_single_holes(row_in, row, col_step, max_gap_m);
+            let holes_left = sanitize_and_fill_single_holes(row_in, row, col_step, max_gap_m);
+            // No hole left inside the row and returns at both ends: nothing to search (the
+            // search below would find no hole, and the seam has none).
+            if !holes_left && row.first().is_some_and(|&r| r > 0.0) && row.last().is_some_and(|&r| r > 0.0) {
+                continue;
+            }
         } else {
             for (o, &i) in row.iter_mut().zip(row_in) {
                 *o = sanitize(i);
@@ -216,23 +221,29 @@ pub(crate) fn fill_holes_with(input: &[f32], out: &mut [f32], cols: usize, max_g
 /// across the seam) filled as [`fill_gap`] does: most holes are single dropouts, and this pass
 /// fills them without a search or a branch (the compiler vectorises it). A filled pixel's
 /// neighbours are returns of the input, so the fill does not depend on the order of the holes.
+/// Returns whether a pixel strictly inside the row is still missing (then, or without returns at
+/// both ends, the caller searches for the longer holes).
 #[inline(always)]
-fn sanitize_and_fill_single_holes(row_in: &[f32], row: &mut [f32], col_step: f32, max_gap_m: f32) {
+fn sanitize_and_fill_single_holes(row_in: &[f32], row: &mut [f32], col_step: f32, max_gap_m: f32) -> bool {
     let cols = row.len().min(row_in.len());
     if cols < 3 {
         row.iter_mut().zip(row_in).for_each(|(o, &i)| *o = sanitize(i));
-        return;
+        return true;
     }
     let neighbours = row_in[..cols - 2].iter().zip(&row_in[1..cols - 1]).zip(&row_in[2..cols]);
+    let mut holes_left = false;
     for (o, ((&left, &centre), &right)) in row[1..cols - 1].iter_mut().zip(neighbours) {
         let (left, centre, right) = (sanitize(left), sanitize(centre), sanitize(right));
         let widest = if left > right { left } else { right };
         // [`fill_gap`] for a gap of 1: 1·step = step exactly, and 1·(1/2) = ½.
-        let fill = (centre <= 0.0) & (left > 0.0) & (right > 0.0) & (col_step * widest <= max_gap_m);
+        let missing = centre <= 0.0;
+        let fill = missing & (left > 0.0) & (right > 0.0) & (col_step * widest <= max_gap_m);
+        holes_left |= missing & !fill;
         *o = if fill { left + (right - left) * 0.5 } else { centre };
     }
     row[0] = sanitize(row_in[0]);
     row[cols - 1] = sanitize(row_in[cols - 1]);
+    holes_left
 }
 
 /// Fills the pixels strictly between returns at unwrapped columns `from` and `to` (`to` may be
