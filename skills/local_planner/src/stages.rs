@@ -158,8 +158,10 @@ fn first_equal(values: &[bool], target: bool) -> Option<usize> {
 
 #[inline]
 fn sanitize(range: f32) -> f32 {
-    // `&` rather than `&&`: no short-circuit branch, so the loops using it vectorise.
-    if range.is_finite() & (range > 0.0) { range } else { 0.0 }
+    // Finite and positive, as two comparisons (NaN fails both): cheaper in vectors than
+    // `is_finite`'s bit tests. `&` rather than `&&`: no short-circuit branch, so the loops using
+    // it vectorise.
+    if (range > 0.0) & (range < f32::INFINITY) { range } else { 0.0 }
 }
 
 /// Stage 1: copies `input` to `out` (non-finite and non-positive ranges become 0 = no return)
@@ -182,7 +184,12 @@ pub(crate) fn fill_holes_with(input: &[f32], out: &mut [f32], cols: usize, max_g
     let col_step = std::f32::consts::TAU / cols as f32;
     for (row_in, row) in input.chunks_exact(cols).zip(out.chunks_exact_mut(cols)) {
         if wide_registers {
-            sanitize_and_fill_single_holes(row_in, row, col_step, max_gap_m);
+            let holes_left = sanitize_and_fill_single_holes(row_in, row, col_step, max_gap_m);
+            // No hole left inside the row and returns at both ends: nothing to search (the
+            // search below would find no hole, and the seam has none).
+            if !holes_left && row.first().is_some_and(|&r| r > 0.0) && row.last().is_some_and(|&r| r > 0.0) {
+                continue;
+            }
         } else {
             for (o, &i) in row.iter_mut().zip(row_in) {
                 *o = sanitize(i);
@@ -214,23 +221,29 @@ pub(crate) fn fill_holes_with(input: &[f32], out: &mut [f32], cols: usize, max_g
 /// across the seam) filled as [`fill_gap`] does: most holes are single dropouts, and this pass
 /// fills them without a search or a branch (the compiler vectorises it). A filled pixel's
 /// neighbours are returns of the input, so the fill does not depend on the order of the holes.
+/// Returns whether a pixel strictly inside the row is still missing (then, or without returns at
+/// both ends, the caller searches for the longer holes).
 #[inline(always)]
-fn sanitize_and_fill_single_holes(row_in: &[f32], row: &mut [f32], col_step: f32, max_gap_m: f32) {
+fn sanitize_and_fill_single_holes(row_in: &[f32], row: &mut [f32], col_step: f32, max_gap_m: f32) -> bool {
     let cols = row.len().min(row_in.len());
     if cols < 3 {
         row.iter_mut().zip(row_in).for_each(|(o, &i)| *o = sanitize(i));
-        return;
+        return true;
     }
     let neighbours = row_in[..cols - 2].iter().zip(&row_in[1..cols - 1]).zip(&row_in[2..cols]);
+    let mut holes_left = false;
     for (o, ((&left, &centre), &right)) in row[1..cols - 1].iter_mut().zip(neighbours) {
         let (left, centre, right) = (sanitize(left), sanitize(centre), sanitize(right));
         let widest = if left > right { left } else { right };
         // [`fill_gap`] for a gap of 1: 1·step = step exactly, and 1·(1/2) = ½.
-        let fill = (centre <= 0.0) & (left > 0.0) & (right > 0.0) & (col_step * widest <= max_gap_m);
+        let missing = centre <= 0.0;
+        let fill = missing & (left > 0.0) & (right > 0.0) & (col_step * widest <= max_gap_m);
+        holes_left |= missing & !fill;
         *o = if fill { left + (right - left) * 0.5 } else { centre };
     }
     row[0] = sanitize(row_in[0]);
     row[cols - 1] = sanitize(row_in[cols - 1]);
+    holes_left
 }
 
 /// Fills the pixels strictly between returns at unwrapped columns `from` and `to` (`to` may be
@@ -894,6 +907,24 @@ pub fn distance_transform(
     along_column: &mut [f32],
     distance: &mut [f32],
 ) {
+    let simd = pulp::Scalar::new();
+    distance_transform_with(ranges, obstacle, cols, max_distance_m, scratch, along_column, distance, simd);
+}
+
+/// [`distance_transform`] compiled for the instruction set of `simd` (see [`column_pass_row`]
+/// and [`row_passes_block_native`]).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn distance_transform_with<S: pulp::Simd>(
+    ranges: &[f32],
+    obstacle: &[bool],
+    cols: usize,
+    max_distance_m: f32,
+    scratch: &mut DistanceScratch,
+    along_column: &mut [f32],
+    distance: &mut [f32],
+    simd: S,
+) {
     if cols == 0 {
         return;
     }
@@ -902,13 +933,14 @@ pub fn distance_transform(
     let (nearest, block) = scratch.reset(cols);
     let rows = ranges.chunks_exact(cols).zip(obstacle.chunks_exact(cols));
     for ((rho, obs), d_a) in rows.zip(along_column.chunks_exact_mut(cols)) {
-        column_pass_row(rho, obs, nearest, d_max, d_a);
+        column_pass_row(rho, obs, nearest, d_max, d_a, !S::IS_SCALAR);
     }
-    let width = BLOCK_ROWS * cols;
+    let block_rows = native_block_rows::<S>();
+    let width = block_rows * cols;
     let blocks = ranges.chunks_exact(width).zip(along_column.chunks_exact(width));
-    let full_rows = blocks.len() * BLOCK_ROWS;
+    let full_rows = blocks.len() * block_rows;
     for ((rho, d_a), d) in blocks.zip(distance.chunks_exact_mut(width)) {
-        row_passes_block(rho, d_a, d, cols, step, d_max, block);
+        row_passes_block_native(simd, rho, d_a, d, cols, step, d_max, block);
     }
     let rows = ranges.chunks_exact(cols).zip(along_column.chunks_exact(cols)).skip(full_rows);
     for ((rho, d_a), d) in rows.zip(distance.chunks_exact_mut(cols).skip(full_rows)) {
@@ -917,15 +949,51 @@ pub fn distance_transform(
 }
 
 /// The column pass of Algorithm 1 for one row: `nearest` holds, per column, the smallest range
-/// of an obstacle in the rows above (∞ before any).
+/// of an obstacle in the rows above (∞ before any). `wide_registers`: the caller is compiled for
+/// AVX2 or AVX-512, where plain per-column code vectorises best ([`column_pass_row_columns`]);
+/// on the baseline explicit [`LANES`]-wide vectors were measured faster
+/// ([`column_pass_row_lanes`]). The same bits either way.
 #[inline(always)]
-pub(crate) fn column_pass_row(rho: &[f32], obs: &[bool], nearest: &mut [f32], d_max: f32, d_a: &mut [f32]) {
+pub(crate) fn column_pass_row(
+    rho: &[f32],
+    obs: &[bool],
+    nearest: &mut [f32],
+    d_max: f32,
+    d_a: &mut [f32],
+    wide_registers: bool,
+) {
+    if wide_registers {
+        column_pass_row_columns(rho, obs, nearest, d_max, d_a);
+    } else {
+        column_pass_row_lanes(rho, obs, nearest, d_max, d_a);
+    }
+}
+
+/// [`column_pass_row`] as plain per-column code.
+#[inline(always)]
+fn column_pass_row_columns(rho: &[f32], obs: &[bool], nearest: &mut [f32], d_max: f32, d_a: &mut [f32]) {
+    let n = rho.len().min(obs.len()).min(d_a.len()).min(nearest.len());
+    let (rho, obs, nearest, d_a) = (&rho[..n], &obs[..n], &mut nearest[..n], &mut d_a[..n]);
+    // Plain per-column code with every store unconditional (a conditional store of `nearest`
+    // becomes a scalarised masked store): the compiler vectorises it at the width the caller is
+    // compiled for. No NaN reaches the `min_ps`s: ranges are finite and `nearest` is finite or
+    // ∞, so they are `min`.
+    let columns = rho.iter().zip(obs).zip(nearest.iter_mut().zip(d_a.iter_mut()));
+    for ((&range, &is_obstacle), (nearest, d_a)) in columns {
+        let near = *nearest;
+        *nearest = if is_obstacle { min_ps(range, near) } else { near };
+        let free = if range > 0.0 { min_ps((range - near).abs(), d_max) } else { d_max };
+        *d_a = if is_obstacle { 0.0 } else { free };
+    }
+}
+
+/// [`column_pass_row`] with explicit [`LANES`]-wide vectors.
+#[inline(always)]
+fn column_pass_row_lanes(rho: &[f32], obs: &[bool], nearest: &mut [f32], d_max: f32, d_a: &mut [f32]) {
     let n = rho.len().min(obs.len()).min(d_a.len()).min(nearest.len());
     let (rho, obs, nearest, d_a) = (&rho[..n], &obs[..n], &mut nearest[..n], &mut d_a[..n]);
     let vectorised = n / LANES * LANES;
-    // [`LANES`] columns per vector with explicit selects (as plain code the compiler turns
-    // the conditional update of `nearest` into a scalarised masked store). No NaN reaches the
-    // `fast_min`s: ranges are finite and `nearest` is finite or ∞.
+    // No NaN reaches the `fast_min`s: ranges are finite and `nearest` is finite or ∞.
     let d_max_lanes = Lanes::splat(d_max);
     let chunks = rho[..vectorised]
         .chunks_exact(LANES)
@@ -1010,8 +1078,8 @@ pub(crate) fn row_passes_block(
     below.resize(cols, false);
     out.resize(cols, BlockLanes::ZERO);
     let (own, arc, below, out) = (&mut own[..cols], &mut arc[..cols], &mut below[..cols], &mut out[..cols]);
-    transpose_to_lanes(d_a, cols, own);
-    transpose_to_lanes(rho, cols, arc);
+    transpose_to_lanes(d_a, cols, QUADS_PER_BLOCK, bytemuck::cast_slice_mut(own));
+    transpose_to_lanes(rho, cols, QUADS_PER_BLOCK, bytemuck::cast_slice_mut(arc));
     let (step_lanes, d_max_lanes) = (BlockLanes::splat(step), BlockLanes::splat(d_max));
     // One sweep: s = (2π/A)·ρ, whether any row is below D_max, D initialised to D_max.
     for (((a, o), b), d) in arc.iter_mut().zip(own.iter()).zip(below.iter_mut()).zip(out.iter_mut()) {
@@ -1020,64 +1088,80 @@ pub(crate) fn row_passes_block(
         *d = d_max_lanes;
     }
     block_passes(own, arc, below, out, d_max);
-    transpose_from_lanes(out, cols, d);
+    transpose_from_lanes(bytemuck::cast_slice(out), cols, QUADS_PER_BLOCK, d);
 }
 
-/// Row l of the `BLOCK_ROWS × cols` block `rows` becomes lane l of `lanes` (`cols` entries),
-/// 4 × 4 tiles at a time.
+/// Row l of the `4·quads × cols` block `rows` becomes lane l of column c's `4·quads` values in
+/// `lanes` (column-major: `lanes[c·4·quads + l]`, `cols · quads` 4-lane vectors), 4 × 4 tiles at a
+/// time.
 #[inline(always)]
-fn transpose_to_lanes(rows: &[f32], cols: usize, lanes: &mut [BlockLanes]) {
-    let quads: &mut [f32x4] = bytemuck::cast_slice_mut(lanes);
+fn transpose_to_lanes(rows: &[f32], cols: usize, quads: usize, lanes: &mut [f32x4]) {
     let tiled = cols / 4 * 4;
-    for group in 0..QUADS_PER_BLOCK {
-        let row = |i: usize| &rows[(4 * group + i) * cols..(4 * group + i) * cols + tiled];
-        let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
-        let sources = r0.chunks_exact(4).zip(r1.chunks_exact(4)).zip(r2.chunks_exact(4).zip(r3.chunks_exact(4)));
-        // Four columns: four lane vectors, of which this group fills one quad each.
-        for (out, ((a, b), (c, d))) in quads.chunks_exact_mut(4 * QUADS_PER_BLOCK).zip(sources) {
-            // One unaligned 16-byte load per row.
-            let load = |s: &[f32]| bytemuck::pod_read_unaligned::<f32x4>(bytemuck::cast_slice(s));
-            let tile = f32x4::transpose([load(a), load(b), load(c), load(d)]);
-            for (j, column) in tile.into_iter().enumerate() {
-                out[j * QUADS_PER_BLOCK + group] = column;
+    // Strips of [`TRANSPOSE_STRIP`] columns, each group of 4 rows in turn: a strip's lane vectors
+    // stay in the first-level cache while the groups fill their quads.
+    for strip in (0..tiled).step_by(TRANSPOSE_STRIP) {
+        let end = (strip + TRANSPOSE_STRIP).min(tiled);
+        let strip_lanes = &mut lanes[strip * quads..end * quads];
+        for group in 0..quads {
+            let row = |i: usize| &rows[(4 * group + i) * cols + strip..(4 * group + i) * cols + end];
+            let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
+            let sources = r0.chunks_exact(4).zip(r1.chunks_exact(4)).zip(r2.chunks_exact(4).zip(r3.chunks_exact(4)));
+            // Four columns: four lane vectors, of which this group fills one quad each.
+            for (out, ((a, b), (c, d))) in strip_lanes.chunks_exact_mut(4 * quads).zip(sources) {
+                // One unaligned 16-byte load per row.
+                let load = |s: &[f32]| bytemuck::pod_read_unaligned::<f32x4>(bytemuck::cast_slice(s));
+                let tile = f32x4::transpose([load(a), load(b), load(c), load(d)]);
+                for (j, column) in tile.into_iter().enumerate() {
+                    out[j * quads + group] = column;
+                }
             }
         }
     }
     let flat: &mut [f32] = bytemuck::cast_slice_mut(lanes);
-    for (lane, row) in rows.chunks_exact(cols).enumerate() {
+    for (lane, row) in rows.chunks_exact(cols).take(4 * quads).enumerate() {
         for c in tiled..cols {
-            flat[c * BLOCK_ROWS + lane] = row[c];
+            flat[c * 4 * quads + lane] = row[c];
         }
     }
 }
 
+/// Columns per strip of [`transpose_to_lanes`] and [`transpose_from_lanes`] (a multiple of 4):
+/// a 16-row strip's lane vectors are 16 KiB. (Measured on the street panorama with 16-row
+/// blocks: whole rows at once, whose lane vectors leave the first-level cache between groups,
+/// 11 % slower over the distance transform; strips of 128–512 columns alike; 32 slower.)
+const TRANSPOSE_STRIP: usize = 256;
+
 /// The inverse of [`transpose_to_lanes`].
 #[inline(always)]
-fn transpose_from_lanes(lanes: &[BlockLanes], cols: usize, rows: &mut [f32]) {
-    let quads: &[f32x4] = bytemuck::cast_slice(lanes);
+fn transpose_from_lanes(lanes: &[f32x4], cols: usize, quads: usize, rows: &mut [f32]) {
     let tiled = cols / 4 * 4;
-    for group in 0..QUADS_PER_BLOCK {
-        let block = &mut rows[4 * group * cols..(4 * group + 4) * cols];
-        let (r0, rest) = block.split_at_mut(cols);
-        let (r1, rest) = rest.split_at_mut(cols);
-        let (r2, r3) = rest.split_at_mut(cols);
-        let targets = r0[..tiled]
-            .chunks_exact_mut(4)
-            .zip(r1[..tiled].chunks_exact_mut(4))
-            .zip(r2[..tiled].chunks_exact_mut(4).zip(r3[..tiled].chunks_exact_mut(4)));
-        for (lanes, ((a, b), (c, d))) in quads.chunks_exact(4 * QUADS_PER_BLOCK).zip(targets) {
-            let column = |j: usize| lanes[j * QUADS_PER_BLOCK + group];
-            let [t0, t1, t2, t3] = f32x4::transpose([column(0), column(1), column(2), column(3)]);
-            a.copy_from_slice(&t0.to_array());
-            b.copy_from_slice(&t1.to_array());
-            c.copy_from_slice(&t2.to_array());
-            d.copy_from_slice(&t3.to_array());
+    // Strips as [`transpose_to_lanes`].
+    for strip in (0..tiled).step_by(TRANSPOSE_STRIP) {
+        let end = (strip + TRANSPOSE_STRIP).min(tiled);
+        let strip_lanes = &lanes[strip * quads..end * quads];
+        for group in 0..quads {
+            let block = &mut rows[4 * group * cols..(4 * group + 4) * cols];
+            let (r0, rest) = block.split_at_mut(cols);
+            let (r1, rest) = rest.split_at_mut(cols);
+            let (r2, r3) = rest.split_at_mut(cols);
+            let targets = r0[strip..end]
+                .chunks_exact_mut(4)
+                .zip(r1[strip..end].chunks_exact_mut(4))
+                .zip(r2[strip..end].chunks_exact_mut(4).zip(r3[strip..end].chunks_exact_mut(4)));
+            for (lanes, ((a, b), (c, d))) in strip_lanes.chunks_exact(4 * quads).zip(targets) {
+                let column = |j: usize| lanes[j * quads + group];
+                let [t0, t1, t2, t3] = f32x4::transpose([column(0), column(1), column(2), column(3)]);
+                a.copy_from_slice(&t0.to_array());
+                b.copy_from_slice(&t1.to_array());
+                c.copy_from_slice(&t2.to_array());
+                d.copy_from_slice(&t3.to_array());
+            }
         }
     }
     let flat: &[f32] = bytemuck::cast_slice(lanes);
-    for (lane, row) in rows.chunks_exact_mut(cols).enumerate() {
+    for (lane, row) in rows.chunks_exact_mut(cols).take(4 * quads).enumerate() {
         for c in tiled..cols {
-            row[c] = flat[c * BLOCK_ROWS + lane];
+            row[c] = flat[c * 4 * quads + lane];
         }
     }
 }
@@ -1201,6 +1285,212 @@ fn block_passes(own: &[BlockLanes], arc: &[BlockLanes], below: &[bool], out: &mu
     let (own, arc, below, out) = (&own[..cols], &arc[..cols], &below[..cols], &mut out[..cols]);
     let d_max = BlockLanes::splat(d_max);
     let (mut forward, mut backward) = (BlockPass::<true>::new(), BlockPass::<false>::new());
+    while forward.k < cols && backward.k < cols {
+        forward.first_lap_step(own, arc, below, out, d_max);
+        backward.first_lap_step(own, arc, below, out, d_max);
+    }
+    while forward.k < cols {
+        forward.first_lap_step(own, arc, below, out, d_max);
+    }
+    while backward.k < cols {
+        backward.first_lap_step(own, arc, below, out, d_max);
+    }
+    while forward.k < 2 * cols && backward.k < 2 * cols {
+        forward.wrap_step(own, arc, out, d_max);
+        backward.wrap_step(own, arc, out, d_max);
+    }
+    while forward.k < 2 * cols {
+        forward.wrap_step(own, arc, out, d_max);
+    }
+    while backward.k < 2 * cols {
+        backward.wrap_step(own, arc, out, d_max);
+    }
+}
+
+/// Rows per block of [`row_passes_block_native`] for the instruction set `S`: one per lane of its
+/// native vector (AVX2: 8, AVX-512: 16); [`BLOCK_ROWS`] where that is not a multiple of 8 (the
+/// baseline, whose blocks [`row_passes_block`] runs).
+#[inline(always)]
+pub(crate) fn native_block_rows<S: pulp::Simd>() -> usize {
+    if S::F32_LANES.is_multiple_of(BLOCK_ROWS) { S::F32_LANES } else { BLOCK_ROWS }
+}
+
+/// [`row_passes_block`] for [`native_block_rows`] consecutive rows with the native vectors of
+/// `simd`, one row per lane: bit for bit the same result (each lane takes the same steps with the
+/// same operations: additions, multiplications, and `min`s that meet no NaN). Under AVX-512 a
+/// block is 16 rows in one register, where [`BlockLanes`] is two 4-lane halves: half the steps,
+/// each a quarter of the instructions. Without a native width that is a multiple of 8 it is
+/// [`row_passes_block`].
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn row_passes_block_native<S: pulp::Simd>(
+    simd: S,
+    rho: &[f32],
+    d_a: &[f32],
+    d: &mut [f32],
+    cols: usize,
+    step: f32,
+    d_max: f32,
+    scratch: &mut RowBlockScratch,
+) {
+    let rows = native_block_rows::<S>();
+    if rows != S::F32_LANES {
+        row_passes_block(rho, d_a, d, cols, step, d_max, scratch);
+        return;
+    }
+    let width = rows * cols;
+    if cols == 0 || rho.len() < width || d_a.len() < width || d.len() < width {
+        return;
+    }
+    let (rho, d_a, d) = (&rho[..width], &d_a[..width], &mut d[..width]);
+    // Nothing below D_max in any of the rows: D = D_max throughout.
+    let d_max_lanes = Lanes::splat(d_max);
+    if first_lanes(d_a, |v| v.simd_lt(d_max_lanes), |v| v < d_max).is_none() {
+        d.iter_mut().for_each(|v| *v = d_max);
+        return;
+    }
+    // Storage in [`BlockLanes`] (aligned), `rows / BLOCK_ROWS` of them per column.
+    let storage = cols * (rows / BLOCK_ROWS);
+    let RowBlockScratch { own, arc, below, out } = scratch;
+    own.resize(storage, BlockLanes::ZERO);
+    arc.resize(storage, BlockLanes::ZERO);
+    below.resize(cols, false);
+    out.resize(storage, BlockLanes::ZERO);
+    let (own_lanes, arc_lanes, below, out_lanes) =
+        (&mut own[..storage], &mut arc[..storage], &mut below[..cols], &mut out[..storage]);
+    transpose_to_lanes(d_a, cols, rows / 4, bytemuck::cast_slice_mut(own_lanes));
+    transpose_to_lanes(rho, cols, rows / 4, bytemuck::cast_slice_mut(arc_lanes));
+    {
+        let (own, _) = S::as_simd_f32s(bytemuck::cast_slice(own_lanes));
+        let (arc, _) = S::as_mut_simd_f32s(bytemuck::cast_slice_mut(arc_lanes));
+        let (out, _) = S::as_mut_simd_f32s(bytemuck::cast_slice_mut(out_lanes));
+        let n = cols.min(own.len()).min(arc.len()).min(out.len());
+        let (own, arc, below, out) = (&own[..n], &mut arc[..n], &mut below[..n], &mut out[..n]);
+        let (step_lanes, d_max_lanes) = (simd.splat_f32s(step), simd.splat_f32s(d_max));
+        // One sweep: s = (2π/A)·ρ, whether any row is below D_max, D initialised to D_max.
+        for (((a, &o), b), d) in arc.iter_mut().zip(own.iter()).zip(below.iter_mut()).zip(out.iter_mut()) {
+            *a = simd.mul_f32s(*a, step_lanes);
+            *b = simd.first_true_m32s(simd.less_than_f32s(o, d_max_lanes)) < rows;
+            *d = d_max_lanes;
+        }
+        native_block_passes(simd, own, arc, below, out, d_max);
+    }
+    transpose_from_lanes(bytemuck::cast_slice(out_lanes), cols, rows / 4, d);
+}
+
+/// [`BlockPass`] with the native vectors of `simd`: the same steps, lane for lane.
+struct NativeBlockPass<S: pulp::Simd, const FORWARD: bool> {
+    simd: S,
+    /// Unwrapped position in [0, 2·cols): the second lap is the wrap-around continuation.
+    k: usize,
+    offset: S::f32s,
+    anchor_value: S::f32s,
+    arc_last: S::f32s,
+    /// Wrap-around lap: lanes whose propagated value is still below D_max.
+    alive: S::m32s,
+}
+
+impl<S: pulp::Simd, const FORWARD: bool> NativeBlockPass<S, FORWARD> {
+    #[inline(always)]
+    fn new(simd: S) -> Self {
+        let zero = simd.splat_f32s(0.0);
+        NativeBlockPass {
+            simd,
+            k: 0,
+            offset: zero,
+            anchor_value: simd.splat_f32s(f32::INFINITY),
+            arc_last: zero,
+            alive: simd.equal_f32s(zero, zero),
+        }
+    }
+
+    /// True when some lane of `mask` is set.
+    #[inline(always)]
+    fn any(&self, mask: S::m32s) -> bool {
+        self.simd.first_true_m32s(mask) < S::F32_LANES
+    }
+
+    /// [`BlockPass::first_lap_step`].
+    #[inline(always)]
+    fn first_lap_step(
+        &mut self,
+        own: &[S::f32s],
+        arc: &[S::f32s],
+        below: &[bool],
+        out: &mut [S::f32s],
+        d_max: S::f32s,
+    ) {
+        let simd = self.simd;
+        let cols = out.len();
+        let c = if FORWARD { self.k } else { cols - 1 - self.k };
+        self.offset = simd.add_f32s(self.offset, simd.splat_f32s(1.0));
+        let candidate = simd.add_f32s(self.anchor_value, simd.mul_f32s(self.offset, self.arc_last));
+        // Every lane at or above D_max (no NaN here): no lane below it.
+        if !below[c] && !self.any(simd.less_than_f32s(candidate, d_max)) {
+            let k = self.k;
+            let next = if FORWARD {
+                first_where(&below[k..], |b| b).map(|o| k + o)
+            } else {
+                last_where(&below[..cols - k], |b| b).map(|i| cols - 1 - i)
+            };
+            match next {
+                Some(next) => {
+                    self.k = next;
+                    self.anchor_value = simd.splat_f32s(f32::INFINITY);
+                    self.arc_last = simd.splat_f32s(0.0);
+                    self.offset = simd.splat_f32s(0.0);
+                }
+                None => self.k = cols,
+            }
+            return;
+        }
+        let own_c = own[c];
+        let restart = simd.greater_than_f32s(candidate, own_c);
+        out[c] = simd.min_f32s(out[c], simd.min_f32s(candidate, own_c));
+        self.offset = simd.select_f32s(restart, simd.splat_f32s(0.0), self.offset);
+        self.anchor_value = simd.select_f32s(restart, own_c, self.anchor_value);
+        self.arc_last = simd.select_f32s(restart, arc[c], self.arc_last);
+        self.k += 1;
+    }
+
+    /// [`BlockPass::wrap_step`].
+    #[inline(always)]
+    fn wrap_step(&mut self, own: &[S::f32s], arc: &[S::f32s], out: &mut [S::f32s], d_max: S::f32s) {
+        let simd = self.simd;
+        let cols = out.len();
+        let c = BlockPass::<FORWARD>::col(self.k, cols);
+        self.offset = simd.add_f32s(self.offset, simd.splat_f32s(1.0));
+        let candidate = simd.add_f32s(self.anchor_value, simd.mul_f32s(self.offset, self.arc_last));
+        self.alive = simd.and_m32s(self.alive, simd.less_than_f32s(candidate, d_max));
+        if !self.any(self.alive) {
+            self.k = 2 * cols;
+            return;
+        }
+        let own_c = own[c];
+        let restart = simd.greater_than_f32s(candidate, own_c);
+        let value = simd.select_f32s(self.alive, simd.min_f32s(candidate, own_c), simd.splat_f32s(f32::INFINITY));
+        out[c] = simd.min_f32s(out[c], value);
+        self.offset = simd.select_f32s(restart, simd.splat_f32s(0.0), self.offset);
+        self.anchor_value = simd.select_f32s(restart, own_c, self.anchor_value);
+        self.arc_last = simd.select_f32s(restart, arc[c], self.arc_last);
+        self.k += 1;
+    }
+}
+
+/// [`block_passes`] with the native vectors of `simd`.
+#[inline(always)]
+fn native_block_passes<S: pulp::Simd>(
+    simd: S,
+    own: &[S::f32s],
+    arc: &[S::f32s],
+    below: &[bool],
+    out: &mut [S::f32s],
+    d_max: f32,
+) {
+    let cols = out.len().min(own.len()).min(arc.len()).min(below.len());
+    let (own, arc, below, out) = (&own[..cols], &arc[..cols], &below[..cols], &mut out[..cols]);
+    let d_max = simd.splat_f32s(d_max);
+    let (mut forward, mut backward) = (NativeBlockPass::<S, true>::new(simd), NativeBlockPass::<S, false>::new(simd));
     while forward.k < cols && backward.k < cols {
         forward.first_lap_step(own, arc, below, out, d_max);
         backward.first_lap_step(own, arc, below, out, d_max);
@@ -1465,7 +1755,7 @@ mod tests {
         for cols in [3usize, 4, 7, 8, 13, 33, 64, 101] {
             let step = std::f32::consts::TAU / cols as f32;
             for _ in 0..40 {
-                let n = BLOCK_ROWS * cols;
+                let n = MAX_NATIVE_ROWS * cols;
                 let rho: Vec<f32> =
                     (0..n).map(|_| [0.0, 1.0, 4.0, rng.random_range(0.5..20.0)][rng.random_range(0..4)]).collect();
                 let d_a: Vec<f32> =
@@ -1476,10 +1766,11 @@ mod tests {
                 {
                     row_passes(rho, d_a, d, step, d_max);
                 }
+                let n = BLOCK_ROWS * cols;
                 let mut got = vec![-1.0; n];
-                row_passes_block(&rho, &d_a, &mut got, cols, step, d_max, &mut block);
-                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                assert_eq!(bits(&got), bits(&expected), "cols {cols}");
+                row_passes_block(&rho[..n], &d_a[..n], &mut got, cols, step, d_max, &mut block);
+                assert_eq!(bits(&got), bits(&expected[..n]), "cols {cols}");
+                check_native_blocks(&rho, &d_a, &expected, cols, d_max, &mut block);
             }
         }
     }
@@ -1499,10 +1790,10 @@ mod tests {
         for cols in [5usize, 16, 64, 257, 1024] {
             let step = std::f32::consts::TAU / cols as f32;
             for _ in 0..30 {
-                let n = BLOCK_ROWS * cols;
+                let n = MAX_NATIVE_ROWS * cols;
                 let mut d_a = vec![d_max; n];
                 let mut rho = vec![0.0f32; n];
-                for row in 0..BLOCK_ROWS {
+                for row in 0..MAX_NATIVE_ROWS {
                     let near = rng.random_bool(0.3);
                     for c in 0..cols {
                         rho[row * cols + c] = match rng.random_range(0..10) {
@@ -1532,13 +1823,64 @@ mod tests {
                 {
                     row_passes(rho, d_a, d, step, d_max);
                 }
+                let n = BLOCK_ROWS * cols;
                 let mut got = vec![-1.0; n];
-                row_passes_block(&rho, &d_a, &mut got, cols, step, d_max, &mut block);
-                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                assert_eq!(bits(&got), bits(&expected), "cols {cols}");
+                row_passes_block(&rho[..n], &d_a[..n], &mut got, cols, step, d_max, &mut block);
+                assert_eq!(bits(&got), bits(&expected[..n]), "cols {cols}");
+                check_native_blocks(&rho, &d_a, &expected, cols, d_max, &mut block);
             }
         }
         assert!(jumps > 100, "{jumps}");
+    }
+
+    /// The most rows a block of [`row_passes_block_native`] has (AVX-512: 16 lanes).
+    const MAX_NATIVE_ROWS: usize = 16;
+
+    /// The bits of `values`, to compare results exactly.
+    fn bits(values: &[f32]) -> Vec<u32> {
+        values.iter().map(|x| x.to_bits()).collect()
+    }
+
+    /// Runs [`row_passes_block_native`] compiled for every instruction set this processor has
+    /// (the baseline, AVX2, AVX-512) on the first rows of the [`MAX_NATIVE_ROWS`]-row block
+    /// `rho`, `d_a`, and checks it bit for bit against `expected`, the rows one at a time.
+    fn check_native_blocks(
+        rho: &[f32],
+        d_a: &[f32],
+        expected: &[f32],
+        cols: usize,
+        d_max: f32,
+        block: &mut RowBlockScratch,
+    ) {
+        struct Run<'a> {
+            rho: &'a [f32],
+            d_a: &'a [f32],
+            expected: &'a [f32],
+            cols: usize,
+            d_max: f32,
+            block: &'a mut RowBlockScratch,
+        }
+        impl pulp::WithSimd for Run<'_> {
+            type Output = ();
+            fn with_simd<S: pulp::Simd>(self, simd: S) {
+                let Run { rho, d_a, expected, cols, d_max, block } = self;
+                let rows = native_block_rows::<S>();
+                assert!(rows <= MAX_NATIVE_ROWS && rows.is_multiple_of(BLOCK_ROWS), "{rows}");
+                let n = rows * cols;
+                let step = std::f32::consts::TAU / cols as f32;
+                let mut got = vec![-1.0; n];
+                row_passes_block_native(simd, &rho[..n], &d_a[..n], &mut got, cols, step, d_max, block);
+                assert_eq!(bits(&got), bits(&expected[..n]), "cols {cols}, {rows} rows");
+            }
+        }
+        let mut arches = vec![pulp::Arch::Scalar];
+        #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+        arches.extend(pulp::x86::V3::try_new().map(pulp::Arch::V3));
+        #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+        arches.extend(pulp::x86::V4::try_new().map(pulp::Arch::V4));
+        for arch in arches {
+            arch.dispatch(Run { rho, d_a, expected, cols, d_max, block: &mut *block });
+        }
     }
 
     /// The bit-mask searches agree with `position` at every offset and length (chunks and tails).

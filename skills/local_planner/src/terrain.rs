@@ -432,15 +432,17 @@ impl TerrainAnalyzer {
 
     /// Stages 1–6 with 1–5 fused ([`Self::analyze`] without the checks).
     #[inline(always)]
-    fn run_all_fused(&mut self, depth: &DepthPanorama, wide_registers: bool) {
-        self.run_fused(depth, wide_registers);
-        self.run_stage_inline(TerrainStage::Reachability, depth, wide_registers);
+    fn run_all_fused<S: pulp::Simd>(&mut self, depth: &DepthPanorama, simd: S) {
+        self.run_fused(depth, simd);
+        self.run_stage_inline(TerrainStage::Reachability, depth, simd);
     }
 
-    /// Stages 1–5, fused row by row; `wide_registers`: compiled for AVX2 or AVX-512 (some stages
-    /// pick their loops by it).
+    /// Stages 1–5, fused row by row, compiled for the instruction set of `simd` (with AVX2 or
+    /// AVX-512, `wide_registers`, some stages pick other loops; Algorithm 1's row passes run on
+    /// blocks of one row per lane of its native vector).
     #[inline(always)]
-    fn run_fused(&mut self, depth: &DepthPanorama, wide_registers: bool) {
+    fn run_fused<S: pulp::Simd>(&mut self, depth: &DepthPanorama, simd: S) {
+        let wide_registers = !S::IS_SCALAR;
         let TerrainAnalyzer { geometry, params: p, tables, gradient_scratch, distance_scratch, output: out, .. } = self;
         let (rows, cols) = (geometry.rows, geometry.cols);
         let window = GradientWindow {
@@ -450,7 +452,8 @@ impl TerrainAnalyzer {
         let step = std::f32::consts::TAU / cols as f32;
         let d_max = p.max_obstacle_distance_m as f32;
         let (nearest, block) = distance_scratch.reset(cols);
-        let block_width = stages::BLOCK_ROWS * cols;
+        let block_rows = stages::native_block_rows::<S>();
+        let block_width = block_rows * cols;
         for row in 0..rows {
             let span = row * cols..(row + 1) * cols;
             let (sin_e, cos_e) = (tables.row_sin[row], tables.row_cos[row]);
@@ -468,16 +471,16 @@ impl TerrainAnalyzer {
             let obstacle = &mut out.obstacle[span.clone()];
             stages::obstacles(gradient, rho, cols, p.slope_threshold as f32, p.run_filter(), obstacle);
             let d_a = &mut out.column_distance_m[span.clone()];
-            stages::column_pass_row(rho, obstacle, nearest, d_max, d_a);
+            stages::column_pass_row(rho, obstacle, nearest, d_max, d_a, wide_registers);
             // Algorithm 1's row passes run on blocks of rows, one per SIMD lane, as soon as a block
             // has its column pass; rows past the last full block run alone.
-            if (row + 1) % stages::BLOCK_ROWS == 0 {
+            if (row + 1) % block_rows == 0 {
                 let block_span = (row + 1) * cols - block_width..(row + 1) * cols;
                 let (rho, d_a) = (&out.ranges_m[block_span.clone()], &out.column_distance_m[block_span.clone()]);
                 let distance = &mut out.distance_m[block_span.clone()];
-                stages::row_passes_block(rho, d_a, distance, cols, step, d_max, block);
+                stages::row_passes_block_native(simd, rho, d_a, distance, cols, step, d_max, block);
                 stages::traversable(rho, distance, p.inflation_m as f32, &mut out.traversable[block_span]);
-            } else if row >= rows / stages::BLOCK_ROWS * stages::BLOCK_ROWS {
+            } else if row >= rows / block_rows * block_rows {
                 let distance = &mut out.distance_m[span.clone()];
                 stages::row_passes(rho, d_a, distance, step, d_max);
                 stages::traversable(rho, distance, p.inflation_m as f32, &mut out.traversable[span]);
@@ -528,10 +531,10 @@ impl TerrainAnalyzer {
         self.simd.dispatch(SingleStage { analyzer: self, stage, depth });
     }
 
-    /// [`Self::run_stage`] inside the dispatched function (`wide_registers` as for
-    /// [`Self::run_fused`]).
+    /// [`Self::run_stage`] inside the dispatched function (`simd` as for [`Self::run_fused`]).
     #[inline(always)]
-    fn run_stage_inline(&mut self, stage: TerrainStage, depth: &DepthPanorama, wide_registers: bool) {
+    fn run_stage_inline<S: pulp::Simd>(&mut self, stage: TerrainStage, depth: &DepthPanorama, simd: S) {
+        let wide_registers = !S::IS_SCALAR;
         let cols = self.geometry.cols;
         let p = &self.params;
         let out = &mut self.output;
@@ -565,7 +568,7 @@ impl TerrainAnalyzer {
                 &mut out.obstacle,
             ),
             TerrainStage::DistanceTransform => {
-                stages::distance_transform(
+                stages::distance_transform_with(
                     &out.ranges_m,
                     &out.obstacle,
                     cols,
@@ -573,6 +576,7 @@ impl TerrainAnalyzer {
                     &mut self.distance_scratch,
                     &mut out.column_distance_m,
                     &mut out.distance_m,
+                    simd,
                 );
                 stages::traversable(&out.ranges_m, &out.distance_m, p.inflation_m as f32, &mut out.traversable);
             }
@@ -605,8 +609,8 @@ impl pulp::WithSimd for Fused<'_> {
     type Output = ();
 
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _simd: S) {
-        self.analyzer.run_all_fused(self.depth, !S::IS_SCALAR);
+    fn with_simd<S: pulp::Simd>(self, simd: S) {
+        self.analyzer.run_all_fused(self.depth, simd);
     }
 }
 
@@ -622,7 +626,7 @@ impl pulp::WithSimd for SingleStage<'_> {
     type Output = ();
 
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _simd: S) {
-        self.analyzer.run_stage_inline(self.stage, self.depth, !S::IS_SCALAR);
+    fn with_simd<S: pulp::Simd>(self, simd: S) {
+        self.analyzer.run_stage_inline(self.stage, self.depth, simd);
     }
 }
