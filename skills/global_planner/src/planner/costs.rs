@@ -181,9 +181,9 @@ impl GlobalPlanner {
         let Some(map) = &self.map else {
             return TrainOutcome::NotEnoughLabels { labels: 0 };
         };
-        // The labelled cells the map has features for, in label order; a round's features are
-        // built for the rows it draws only (8192 draws, where the team's scans label up to
-        // hundreds of thousands of cells).
+        // The labelled cells the map has features for, in label order. With more of them than
+        // a round draws (8192 draws, where the team's scans label up to hundreds of thousands
+        // of cells), features are built for the drawn rows only.
         self.train_cells.clear();
         self.train_cells.extend(
             self.votes
@@ -204,12 +204,27 @@ impl GlobalPlanner {
             samples: l.samples_per_round,
         };
         let (features, cells) = (&self.features, &self.train_cells);
-        let row = |r: usize, x: &mut [f32]| {
-            let (cell, label) = cells[r];
-            features.fill(map, cell, x);
-            label
+        let loss = if labels <= settings.samples {
+            // Fewer rows than draws: each row's features built once, in label order (a row
+            // drawn again is read back, not rebuilt from scattered map cells).
+            let channels = features.channels();
+            let mut rows = vec![0.0f32; labels * channels];
+            for (x, &(cell, _)) in rows.chunks_exact_mut(channels).zip(cells) {
+                features.fill(map, cell, x);
+            }
+            let row = |r: usize, x: &mut [f32]| {
+                x.copy_from_slice(&rows[r * channels..(r + 1) * channels]);
+                cells[r].1
+            };
+            self.model.train_rows(labels, row, settings, rng)
+        } else {
+            let row = |r: usize, x: &mut [f32]| {
+                let (cell, label) = cells[r];
+                features.fill(map, cell, x);
+                label
+            };
+            self.model.train_rows(labels, row, settings, rng)
         };
-        let loss = self.model.train_rows(labels, row, settings, rng);
         self.release_training_set();
         self.last_train = Some(now);
         self.training_rounds += 1;
