@@ -227,6 +227,7 @@ impl Features {
 
     /// The normalised features of one packed cell into `out` (`channels()` long): exactly what
     /// [`Self::fill`] gives for that cell while the rasters are unchanged.
+    #[inline(always)]
     pub fn unpack(&self, packed: &[u8], out: &mut [f32]) {
         let slots = self.class_of_slot.len();
         if packed.len() < self.packed_len() || out.len() < self.channels() {

@@ -111,6 +111,7 @@ impl Mlp {
 
     /// [`Mlp::forward`] with the current parameters: the padded first layer when the hidden
     /// layer fits [`LANES`], the same sums in the same order, so the same bits.
+    #[inline(always)]
     fn logit(&mut self, x: &[f32]) -> f32 {
         if self.hidden > LANES {
             return Self::forward(&self.params, self.inputs, x, &mut self.hidden_act);
@@ -126,6 +127,7 @@ impl Mlp {
     /// parameters from `w2` on (`w2[2][hidden]` then `b2[2]`, `b2` at `b2_at`). Every hidden
     /// unit's pre-activation is its bias plus the inputs' products added in input order, as
     /// in [`Mlp::forward`]; the padding lanes are computed and never read.
+    #[inline(always)]
     fn forward_lanes(
         w1: &[[f32; LANES]],
         b1: &[f32; LANES],
@@ -179,6 +181,7 @@ impl Mlp {
     }
 
     /// P(traversable | x), 0.5 before training.
+    #[inline(always)]
     pub fn probability(&mut self, x: &[f32]) -> f32 {
         if !self.trained || x.len() < self.inputs {
             return 0.5;
@@ -277,7 +280,7 @@ impl Mlp {
 }
 
 /// The logistic function 1 / (1 + e^−x), with [`exp`] below.
-#[inline]
+#[inline(always)]
 fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + exp(-x))
 }
@@ -290,7 +293,7 @@ fn sigmoid(x: f32) -> f32 {
 ///
 /// Range reduction x = n·ln 2 + r with |r| ≤ ln 2 / 2 (ln 2 split in two parts so that n·ln2_hi
 /// is exact), a degree-6 polynomial for e^r, and 2^n put into the exponent bits.
-#[inline]
+#[inline(always)]
 fn exp(x: f32) -> f32 {
     const LN2_HI: f32 = 0.693_359_4;
     const LN2_LO: f32 = -2.121_944_4e-4;
