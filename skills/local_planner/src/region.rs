@@ -161,6 +161,8 @@ impl SafeRegion {
         // stretch of all visited many pixels above their own column's stretch. (Taking the
         // minimum does not depend on the order the pixels come in.)
         let ncols = cols.min(last_row.len());
+        // Each bin's last cell, kept apart from `bin_cells`: `n − 1` in the pixel loop measured
+        // 10 % slower (209 → 228 µs on the street panorama).
         let last_cell: Vec<u32> = bin_cells[..ncols].iter().map(|&n| n - 1).collect();
         for block in (0..ncols).step_by(CLEARANCE_BLOCK) {
             let block = block..(block + CLEARANCE_BLOCK).min(ncols);

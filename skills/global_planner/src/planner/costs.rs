@@ -60,7 +60,7 @@ impl GlobalPlanner {
         let floor = self.params.learning.probability_floor.clamp(1e-12, 0.5);
         let mut row = std::mem::take(&mut self.feature_scratch);
         row.resize(self.features.channels(), 0.0);
-        let sum = pulp::Arch::new().dispatch(PackedCost {
+        let sum = self.simd.dispatch(PackedCost {
             model: &mut self.model,
             features: &self.features,
             packed,

@@ -221,6 +221,8 @@ pub struct GlobalPlanner {
     feature_scratch: Vec<f32>,
     /// A training round's labelled cells (cell index, traversable).
     train_cells: Vec<(usize, bool)>,
+    /// The processor's widest instruction set, detected once (see [`Self::learned_cost_packed`]).
+    simd: pulp::Arch,
     region: StarRegion,
     judged: Vec<(EdgeIndex<u32>, EdgeObservation)>,
     edge_ids: Vec<EdgeIndex<u32>>,
@@ -324,6 +326,7 @@ impl GlobalPlanner {
             training_rounds: 0,
             min_cost_per_m: 0.0,
             train_cells: Vec::new(),
+            simd: pulp::Arch::new(),
             region: StarRegion::default(),
             judged: Vec::new(),
             edge_ids: Vec::new(),
