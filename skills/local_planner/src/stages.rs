@@ -1087,7 +1087,7 @@ pub(crate) fn row_passes_block(
         *b = o.simd_lt(d_max_lanes).to_bitmask() != 0;
         *d = d_max_lanes;
     }
-    block_passes(own, arc, below, out, d_max);
+    block_passes(WideOps, own, arc, below, out, d_max);
     transpose_from_lanes(bytemuck::cast_slice(out), cols, QUADS_PER_BLOCK, d);
 }
 
@@ -1173,24 +1173,149 @@ fn transpose_from_lanes(lanes: &[f32x4], cols: usize, quads: usize, rows: &mut [
 /// Each step depends on the previous one through a compare and a select (the pass is bound by
 /// that latency), so [`block_passes`] runs the two directions interleaved, step for step: their
 /// writes are combined with `min`, whose result does not depend on the order.
-struct BlockPass<const FORWARD: bool> {
+struct BlockPass<O: PassOps, const FORWARD: bool> {
+    ops: O,
     /// Unwrapped position in [0, 2·cols): the second lap is the wrap-around continuation.
     k: usize,
-    offset: BlockLanes,
-    anchor_value: BlockLanes,
-    arc_last: BlockLanes,
+    offset: O::V,
+    anchor_value: O::V,
+    arc_last: O::V,
     /// Wrap-around lap: lanes whose propagated value is still below D_max.
-    alive: BlockLanes,
+    alive: O::M,
 }
 
-impl<const FORWARD: bool> BlockPass<FORWARD> {
-    fn new() -> Self {
+/// The vector operations of [`BlockPass`], one row per lane: `wide`'s portable 8-lane vectors
+/// ([`WideOps`]) and the native vectors of a `pulp` instruction set ([`NativeOps`]) run the same
+/// steps, lane for lane.
+trait PassOps: Copy {
+    /// A vector of one value per row.
+    type V: Copy;
+    /// A mask of one flag per row.
+    type M: Copy;
+    fn splat(self, v: f32) -> Self::V;
+    fn add(self, a: Self::V, b: Self::V) -> Self::V;
+    fn mul(self, a: Self::V, b: Self::V) -> Self::V;
+    /// The lane-wise minimum (never meets a NaN here).
+    fn min(self, a: Self::V, b: Self::V) -> Self::V;
+    fn less(self, a: Self::V, b: Self::V) -> Self::M;
+    fn greater(self, a: Self::V, b: Self::V) -> Self::M;
+    /// `a` where `mask` is set, else `b`.
+    fn select(self, mask: Self::M, a: Self::V, b: Self::V) -> Self::V;
+    fn and(self, a: Self::M, b: Self::M) -> Self::M;
+    fn any(self, mask: Self::M) -> bool;
+    /// Every lane set.
+    fn all_set(self) -> Self::M;
+}
+
+/// [`PassOps`] on [`BlockLanes`] (the SSE2 baseline's blocks).
+#[derive(Clone, Copy)]
+struct WideOps;
+
+impl PassOps for WideOps {
+    type V = BlockLanes;
+    type M = BlockLanes;
+    #[inline(always)]
+    fn splat(self, v: f32) -> BlockLanes {
+        BlockLanes::splat(v)
+    }
+    #[inline(always)]
+    fn add(self, a: BlockLanes, b: BlockLanes) -> BlockLanes {
+        a + b
+    }
+    #[inline(always)]
+    fn mul(self, a: BlockLanes, b: BlockLanes) -> BlockLanes {
+        a * b
+    }
+    #[inline(always)]
+    fn min(self, a: BlockLanes, b: BlockLanes) -> BlockLanes {
+        a.fast_min(b)
+    }
+    #[inline(always)]
+    fn less(self, a: BlockLanes, b: BlockLanes) -> BlockLanes {
+        a.simd_lt(b)
+    }
+    #[inline(always)]
+    fn greater(self, a: BlockLanes, b: BlockLanes) -> BlockLanes {
+        a.simd_gt(b)
+    }
+    #[inline(always)]
+    fn select(self, mask: BlockLanes, a: BlockLanes, b: BlockLanes) -> BlockLanes {
+        mask.select(a, b)
+    }
+    #[inline(always)]
+    fn and(self, a: BlockLanes, b: BlockLanes) -> BlockLanes {
+        a & b
+    }
+    #[inline(always)]
+    fn any(self, mask: BlockLanes) -> bool {
+        mask.any()
+    }
+    #[inline(always)]
+    fn all_set(self) -> BlockLanes {
+        BlockLanes::splat(f32::from_bits(u32::MAX))
+    }
+}
+
+/// [`PassOps`] on the native vectors of `pulp`'s instruction set `S`.
+#[derive(Clone, Copy)]
+struct NativeOps<S>(S);
+
+impl<S: pulp::Simd> PassOps for NativeOps<S> {
+    type V = S::f32s;
+    type M = S::m32s;
+    #[inline(always)]
+    fn splat(self, v: f32) -> S::f32s {
+        self.0.splat_f32s(v)
+    }
+    #[inline(always)]
+    fn add(self, a: S::f32s, b: S::f32s) -> S::f32s {
+        self.0.add_f32s(a, b)
+    }
+    #[inline(always)]
+    fn mul(self, a: S::f32s, b: S::f32s) -> S::f32s {
+        self.0.mul_f32s(a, b)
+    }
+    #[inline(always)]
+    fn min(self, a: S::f32s, b: S::f32s) -> S::f32s {
+        self.0.min_f32s(a, b)
+    }
+    #[inline(always)]
+    fn less(self, a: S::f32s, b: S::f32s) -> S::m32s {
+        self.0.less_than_f32s(a, b)
+    }
+    #[inline(always)]
+    fn greater(self, a: S::f32s, b: S::f32s) -> S::m32s {
+        self.0.greater_than_f32s(a, b)
+    }
+    #[inline(always)]
+    fn select(self, mask: S::m32s, a: S::f32s, b: S::f32s) -> S::f32s {
+        self.0.select_f32s(mask, a, b)
+    }
+    #[inline(always)]
+    fn and(self, a: S::m32s, b: S::m32s) -> S::m32s {
+        self.0.and_m32s(a, b)
+    }
+    #[inline(always)]
+    fn any(self, mask: S::m32s) -> bool {
+        self.0.first_true_m32s(mask) < S::F32_LANES
+    }
+    #[inline(always)]
+    fn all_set(self) -> S::m32s {
+        let zero = self.0.splat_f32s(0.0);
+        self.0.equal_f32s(zero, zero)
+    }
+}
+
+impl<O: PassOps, const FORWARD: bool> BlockPass<O, FORWARD> {
+    #[inline(always)]
+    fn new(ops: O) -> Self {
         BlockPass {
+            ops,
             k: 0,
-            offset: BlockLanes::ZERO,
-            anchor_value: BlockLanes::splat(f32::INFINITY),
-            arc_last: BlockLanes::ZERO,
-            alive: BlockLanes::splat(f32::from_bits(u32::MAX)),
+            offset: ops.splat(0.0),
+            anchor_value: ops.splat(f32::INFINITY),
+            arc_last: ops.splat(0.0),
+            alive: ops.all_set(),
         }
     }
 
@@ -1204,22 +1329,16 @@ impl<const FORWARD: bool> BlockPass<FORWARD> {
     /// One column of the first lap (`self.k < cols`, slices of length `cols`); after the lap's
     /// last column `self.k` is `cols`.
     #[inline(always)]
-    fn first_lap_step(
-        &mut self,
-        own: &[BlockLanes],
-        arc: &[BlockLanes],
-        below: &[bool],
-        out: &mut [BlockLanes],
-        d_max: BlockLanes,
-    ) {
+    fn first_lap_step(&mut self, own: &[O::V], arc: &[O::V], below: &[bool], out: &mut [O::V], d_max: O::V) {
+        let ops = self.ops;
         let cols = out.len();
         // The first lap needs no wrap: the caller guarantees k < cols.
         let c = if FORWARD { self.k } else { cols - 1 - self.k };
-        self.offset += BlockLanes::splat(1.0);
-        let candidate = self.anchor_value + self.offset * self.arc_last;
+        self.offset = ops.add(self.offset, ops.splat(1.0));
+        let candidate = ops.add(self.anchor_value, ops.mul(self.offset, self.arc_last));
         // The skip is an optimisation only (see [`row_passes_block`]): it is tried only at columns
         // where no lane has D_a < D_max, which saves the test at all the others.
-        if !below[c] && candidate.simd_ge(d_max).all() {
+        if !below[c] && !ops.any(ops.less(candidate, d_max)) {
             // Every lane has reached D_max: until some lane has D_a < D_max nothing is written and
             // each lane restarts at that column (the propagated values only grow meanwhile).
             let k = self.k;
@@ -1232,9 +1351,9 @@ impl<const FORWARD: bool> BlockPass<FORWARD> {
                 // The next step's candidate is ∞ (∞ + offset·0): every lane restarts there.
                 Some(next) => {
                     self.k = next;
-                    self.anchor_value = BlockLanes::splat(f32::INFINITY);
-                    self.arc_last = BlockLanes::ZERO;
-                    self.offset = BlockLanes::ZERO;
+                    self.anchor_value = ops.splat(f32::INFINITY);
+                    self.arc_last = ops.splat(0.0);
+                    self.offset = ops.splat(0.0);
                 }
                 None => self.k = cols,
             }
@@ -1244,12 +1363,10 @@ impl<const FORWARD: bool> BlockPass<FORWARD> {
         // Beaten by the column's own D_a. Where the candidate has reached D_max the scalar pass
         // skips to the next column with D_a < D_max and restarts there; here the candidate only
         // grows until that column beats it, and no value written in between is below D_max.
-        let restart = candidate.simd_gt(own_c);
+        let restart = ops.greater(candidate, own_c);
         // The value is own where restarting, else the candidate: min(candidate, own).
-        out[c] = out[c].fast_min(candidate.fast_min(own_c));
-        self.offset = restart.select(BlockLanes::ZERO, self.offset);
-        self.anchor_value = restart.select(own_c, self.anchor_value);
-        self.arc_last = restart.select(arc[c], self.arc_last);
+        out[c] = ops.min(out[c], ops.min(candidate, own_c));
+        self.restart_where(restart, own_c, arc[c]);
         self.k += 1;
     }
 
@@ -1257,34 +1374,43 @@ impl<const FORWARD: bool> BlockPass<FORWARD> {
     /// its propagated value reaches D_max; when none is left, or after the lap, `self.k` is
     /// `2·cols`.
     #[inline(always)]
-    fn wrap_step(&mut self, own: &[BlockLanes], arc: &[BlockLanes], out: &mut [BlockLanes], d_max: BlockLanes) {
+    fn wrap_step(&mut self, own: &[O::V], arc: &[O::V], out: &mut [O::V], d_max: O::V) {
+        let ops = self.ops;
         let cols = out.len();
         let c = Self::col(self.k, cols);
-        self.offset += BlockLanes::splat(1.0);
-        let candidate = self.anchor_value + self.offset * self.arc_last;
-        self.alive &= candidate.simd_lt(d_max);
-        if !self.alive.any() {
+        self.offset = ops.add(self.offset, ops.splat(1.0));
+        let candidate = ops.add(self.anchor_value, ops.mul(self.offset, self.arc_last));
+        self.alive = ops.and(self.alive, ops.less(candidate, d_max));
+        if !ops.any(self.alive) {
             self.k = 2 * cols;
             return;
         }
         let own_c = own[c];
-        let restart = candidate.simd_gt(own_c);
-        out[c] = out[c].fast_min(self.alive.select(candidate.fast_min(own_c), BlockLanes::splat(f32::INFINITY)));
-        self.offset = restart.select(BlockLanes::ZERO, self.offset);
-        self.anchor_value = restart.select(own_c, self.anchor_value);
-        self.arc_last = restart.select(arc[c], self.arc_last);
+        let restart = ops.greater(candidate, own_c);
+        let value = ops.select(self.alive, ops.min(candidate, own_c), ops.splat(f32::INFINITY));
+        out[c] = ops.min(out[c], value);
+        self.restart_where(restart, own_c, arc[c]);
         self.k += 1;
+    }
+
+    /// Lanes of `restart` start propagating afresh from this column (own D_a, own arc step).
+    #[inline(always)]
+    fn restart_where(&mut self, restart: O::M, own_c: O::V, arc_c: O::V) {
+        let ops = self.ops;
+        self.offset = ops.select(restart, ops.splat(0.0), self.offset);
+        self.anchor_value = ops.select(restart, own_c, self.anchor_value);
+        self.arc_last = ops.select(restart, arc_c, self.arc_last);
     }
 }
 
 /// Both directions of [`row_passes_block`] over transposed columns (slices of equal length;
 /// `below[c]`: some lane of column c has D_a < D_max), interleaved step for step.
 #[inline(always)]
-fn block_passes(own: &[BlockLanes], arc: &[BlockLanes], below: &[bool], out: &mut [BlockLanes], d_max: f32) {
+fn block_passes<O: PassOps>(ops: O, own: &[O::V], arc: &[O::V], below: &[bool], out: &mut [O::V], d_max: f32) {
     let cols = out.len().min(own.len()).min(arc.len()).min(below.len());
     let (own, arc, below, out) = (&own[..cols], &arc[..cols], &below[..cols], &mut out[..cols]);
-    let d_max = BlockLanes::splat(d_max);
-    let (mut forward, mut backward) = (BlockPass::<true>::new(), BlockPass::<false>::new());
+    let d_max = ops.splat(d_max);
+    let (mut forward, mut backward) = (BlockPass::<O, true>::new(ops), BlockPass::<O, false>::new(ops));
     while forward.k < cols && backward.k < cols {
         forward.first_lap_step(own, arc, below, out, d_max);
         backward.first_lap_step(own, arc, below, out, d_max);
@@ -1373,147 +1499,11 @@ pub(crate) fn row_passes_block_native<S: pulp::Simd>(
             *b = simd.first_true_m32s(simd.less_than_f32s(o, d_max_lanes)) < rows;
             *d = d_max_lanes;
         }
-        native_block_passes(simd, own, arc, below, out, d_max);
+        block_passes(NativeOps(simd), own, arc, below, out, d_max);
     }
     transpose_from_lanes(bytemuck::cast_slice(out_lanes), cols, rows / 4, d);
 }
 
-/// [`BlockPass`] with the native vectors of `simd`: the same steps, lane for lane.
-struct NativeBlockPass<S: pulp::Simd, const FORWARD: bool> {
-    simd: S,
-    /// Unwrapped position in [0, 2·cols): the second lap is the wrap-around continuation.
-    k: usize,
-    offset: S::f32s,
-    anchor_value: S::f32s,
-    arc_last: S::f32s,
-    /// Wrap-around lap: lanes whose propagated value is still below D_max.
-    alive: S::m32s,
-}
-
-impl<S: pulp::Simd, const FORWARD: bool> NativeBlockPass<S, FORWARD> {
-    #[inline(always)]
-    fn new(simd: S) -> Self {
-        let zero = simd.splat_f32s(0.0);
-        NativeBlockPass {
-            simd,
-            k: 0,
-            offset: zero,
-            anchor_value: simd.splat_f32s(f32::INFINITY),
-            arc_last: zero,
-            alive: simd.equal_f32s(zero, zero),
-        }
-    }
-
-    /// True when some lane of `mask` is set.
-    #[inline(always)]
-    fn any(&self, mask: S::m32s) -> bool {
-        self.simd.first_true_m32s(mask) < S::F32_LANES
-    }
-
-    /// [`BlockPass::first_lap_step`].
-    #[inline(always)]
-    fn first_lap_step(
-        &mut self,
-        own: &[S::f32s],
-        arc: &[S::f32s],
-        below: &[bool],
-        out: &mut [S::f32s],
-        d_max: S::f32s,
-    ) {
-        let simd = self.simd;
-        let cols = out.len();
-        let c = if FORWARD { self.k } else { cols - 1 - self.k };
-        self.offset = simd.add_f32s(self.offset, simd.splat_f32s(1.0));
-        let candidate = simd.add_f32s(self.anchor_value, simd.mul_f32s(self.offset, self.arc_last));
-        // Every lane at or above D_max (no NaN here): no lane below it.
-        if !below[c] && !self.any(simd.less_than_f32s(candidate, d_max)) {
-            let k = self.k;
-            let next = if FORWARD {
-                first_where(&below[k..], |b| b).map(|o| k + o)
-            } else {
-                last_where(&below[..cols - k], |b| b).map(|i| cols - 1 - i)
-            };
-            match next {
-                Some(next) => {
-                    self.k = next;
-                    self.anchor_value = simd.splat_f32s(f32::INFINITY);
-                    self.arc_last = simd.splat_f32s(0.0);
-                    self.offset = simd.splat_f32s(0.0);
-                }
-                None => self.k = cols,
-            }
-            return;
-        }
-        let own_c = own[c];
-        let restart = simd.greater_than_f32s(candidate, own_c);
-        out[c] = simd.min_f32s(out[c], simd.min_f32s(candidate, own_c));
-        self.offset = simd.select_f32s(restart, simd.splat_f32s(0.0), self.offset);
-        self.anchor_value = simd.select_f32s(restart, own_c, self.anchor_value);
-        self.arc_last = simd.select_f32s(restart, arc[c], self.arc_last);
-        self.k += 1;
-    }
-
-    /// [`BlockPass::wrap_step`].
-    #[inline(always)]
-    fn wrap_step(&mut self, own: &[S::f32s], arc: &[S::f32s], out: &mut [S::f32s], d_max: S::f32s) {
-        let simd = self.simd;
-        let cols = out.len();
-        let c = BlockPass::<FORWARD>::col(self.k, cols);
-        self.offset = simd.add_f32s(self.offset, simd.splat_f32s(1.0));
-        let candidate = simd.add_f32s(self.anchor_value, simd.mul_f32s(self.offset, self.arc_last));
-        self.alive = simd.and_m32s(self.alive, simd.less_than_f32s(candidate, d_max));
-        if !self.any(self.alive) {
-            self.k = 2 * cols;
-            return;
-        }
-        let own_c = own[c];
-        let restart = simd.greater_than_f32s(candidate, own_c);
-        let value = simd.select_f32s(self.alive, simd.min_f32s(candidate, own_c), simd.splat_f32s(f32::INFINITY));
-        out[c] = simd.min_f32s(out[c], value);
-        self.offset = simd.select_f32s(restart, simd.splat_f32s(0.0), self.offset);
-        self.anchor_value = simd.select_f32s(restart, own_c, self.anchor_value);
-        self.arc_last = simd.select_f32s(restart, arc[c], self.arc_last);
-        self.k += 1;
-    }
-}
-
-/// [`block_passes`] with the native vectors of `simd`.
-#[inline(always)]
-fn native_block_passes<S: pulp::Simd>(
-    simd: S,
-    own: &[S::f32s],
-    arc: &[S::f32s],
-    below: &[bool],
-    out: &mut [S::f32s],
-    d_max: f32,
-) {
-    let cols = out.len().min(own.len()).min(arc.len()).min(below.len());
-    let (own, arc, below, out) = (&own[..cols], &arc[..cols], &below[..cols], &mut out[..cols]);
-    let d_max = simd.splat_f32s(d_max);
-    let (mut forward, mut backward) = (NativeBlockPass::<S, true>::new(simd), NativeBlockPass::<S, false>::new(simd));
-    while forward.k < cols && backward.k < cols {
-        forward.first_lap_step(own, arc, below, out, d_max);
-        backward.first_lap_step(own, arc, below, out, d_max);
-    }
-    while forward.k < cols {
-        forward.first_lap_step(own, arc, below, out, d_max);
-    }
-    while backward.k < cols {
-        backward.first_lap_step(own, arc, below, out, d_max);
-    }
-    while forward.k < 2 * cols && backward.k < 2 * cols {
-        forward.wrap_step(own, arc, out, d_max);
-        backward.wrap_step(own, arc, out, d_max);
-    }
-    while forward.k < 2 * cols {
-        forward.wrap_step(own, arc, out, d_max);
-    }
-    while backward.k < 2 * cols {
-        backward.wrap_step(own, arc, out, d_max);
-    }
-}
-
-/// One direction of [`row_passes`] (slices of equal length).
 #[inline(always)]
 fn row_pass<const FORWARD: bool>(rho: &[f32], d_a: &[f32], d: &mut [f32], step: f32, d_max: f32) {
     let cols = d.len();
