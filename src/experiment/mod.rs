@@ -18,7 +18,6 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use spomp_behaviors::NodeRegistry;
 use spomp_robot::RobotRuntime;
@@ -330,35 +329,49 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
     let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build().context("starting the trial threads")?;
     // Fewer trials than threads: each trial steps its robots in parallel too (same results).
     let parallel_robots = pending.len() < jobs;
+    let costs: Vec<f64> = loaded.configurations.iter().map(expected_cost).collect();
+    let order = longest_first(&pending, &costs);
     let start = Instant::now();
     let failures: Mutex<Vec<String>> = Mutex::new(Vec::new());
     let written = std::sync::atomic::AtomicUsize::new(0);
-    pool.install(|| {
-        pending.par_iter().for_each(|t| {
-            if interrupted.load(Ordering::Relaxed) {
-                return;
-            }
-            let configuration = &loaded.configurations[t.configuration];
-            let outcome = run_trial(t, configuration, &hashes[t.index], registry, parallel_robots, &interrupted);
-            match outcome {
-                Ok(Some(row)) => {
-                    let appended = sink
-                        .lock()
-                        .map_err(|_| anyhow::anyhow!("a trial thread panicked"))
-                        .and_then(|mut s| s.append(&row));
-                    match appended {
-                        Ok(()) => {
-                            written.fetch_add(1, Ordering::Relaxed);
-                            bar.set_message(format!("{} seed {}: {}", row.configuration, row.seed, row.outcome));
-                        }
-                        Err(e) => push(&failures, format!("{e:#}")),
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let run_one = |t: &Trial| {
+        if interrupted.load(Ordering::Relaxed) {
+            return;
+        }
+        let configuration = &loaded.configurations[t.configuration];
+        let outcome = run_trial(t, configuration, &hashes[t.index], registry, parallel_robots, &interrupted);
+        match outcome {
+            Ok(Some(row)) => {
+                let appended = sink
+                    .lock()
+                    .map_err(|_| anyhow::anyhow!("a trial thread panicked"))
+                    .and_then(|mut s| s.append(&row));
+                match appended {
+                    Ok(()) => {
+                        written.fetch_add(1, Ordering::Relaxed);
+                        bar.set_message(format!("{} seed {}: {}", row.configuration, row.seed, row.outcome));
                     }
+                    Err(e) => push(&failures, format!("{e:#}")),
                 }
-                Ok(None) => {} // cut short by a signal: not a finished trial
-                Err(e) => push(&failures, format!("configuration `{}` seed {}: {e:#}", configuration.name, t.seed)),
             }
-            bar.inc(1);
-        });
+            Ok(None) => {} // cut short by a signal: not a finished trial
+            Err(e) => push(&failures, format!("configuration `{}` seed {}: {e:#}", configuration.name, t.seed)),
+        }
+        bar.inc(1);
+    };
+    // One worker per job, each taking the next trial of one shared queue when it is free. (A
+    // `par_iter` over the trials splits them into fixed halves and quarters up front, and a
+    // quarter already started is never split again: the paper's study ran its first 60 trials
+    // on one thread while the other sat idle for the last 7 of its 17.5 minutes.)
+    pool.scope(|scope| {
+        for _ in 0..jobs.min(order.len()) {
+            scope.spawn(|_| {
+                while let Some(t) = order.get(next.fetch_add(1, Ordering::Relaxed)) {
+                    run_one(t);
+                }
+            });
+        }
     });
     bar.finish_and_clear();
     let failures = failures.into_inner().unwrap_or_default();
@@ -437,6 +450,26 @@ fn check_memory(
     Ok(())
 }
 
+/// What a trial of `configuration` is expected to cost, in UGV-seconds: its UGVs do nearly all
+/// of a run's work (panoramas, terrain, localization, planning), and a run lasts up to its time
+/// limit. Only the order of these figures matters.
+fn expected_cost(configuration: &ResolvedConfiguration) -> f64 {
+    configuration.loaded.mission.as_ref().map_or(0.0, |mission| {
+        let ugvs = mission.team.iter().filter(|r| r.kind == spomp_core::RobotKind::Ugv).count();
+        ugvs.max(1) as f64 * mission.time_limit_s
+    })
+}
+
+/// The `pending` trials in the order they are started: the costliest configurations' first
+/// (`costs` by configuration index), experiment order among equals. Short trials last keep the
+/// end of a run from waiting on one long trial while the other workers are idle.
+fn longest_first(pending: &[Trial], costs: &[f64]) -> Vec<Trial> {
+    let cost = |t: &Trial| costs.get(t.configuration).copied().unwrap_or(0.0);
+    let mut order = pending.to_vec();
+    order.sort_by(|a, b| cost(b).total_cmp(&cost(a)).then(a.index.cmp(&b.index)));
+    order
+}
+
 /// Runs one trial; `None` when a signal cut it short.
 fn run_trial(
     trial: &Trial,
@@ -459,4 +492,31 @@ fn run_trial(
         return Ok(None);
     }
     Ok(Some(rows::row_of(trial.index, &configuration.name, hash, &result.summary, &bytes)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn trial(index: usize, configuration: usize) -> Trial {
+        Trial { index, configuration, seed: index as u64 + 1 }
+    }
+
+    #[test]
+    fn trials_start_costliest_configuration_first_in_experiment_order_among_equals() {
+        // Configuration 0 is cheap, 1 dear, 2 as dear as 1, 3 has no estimate.
+        let costs = [1800.0, 9000.0, 9000.0];
+        let pending = [trial(0, 0), trial(1, 0), trial(2, 1), trial(3, 1), trial(4, 2), trial(5, 3)];
+        let order: Vec<usize> = longest_first(&pending, &costs).iter().map(|t| t.index).collect();
+        assert_eq!(order, vec![2, 3, 4, 0, 1, 5]);
+    }
+
+    #[test]
+    fn ordering_keeps_every_trial_once() {
+        let costs = [5.0, 1.0, 3.0];
+        let pending: Vec<Trial> = (0..30).map(|i| trial(i, i % 3)).collect();
+        let mut indices: Vec<usize> = longest_first(&pending, &costs).iter().map(|t| t.index).collect();
+        indices.sort_unstable();
+        assert_eq!(indices, (0..30).collect::<Vec<_>>());
+    }
 }

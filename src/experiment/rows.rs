@@ -501,6 +501,39 @@ mod tests {
         assert_eq!(csv.lines().nth(2).unwrap().split(',').count(), CSV_HEADER.split(',').count());
     }
 
+    /// Regression: serde_json's default float parser may be one ulp off, so a study's merged
+    /// report differed in the last bit of distances and fractions from the rows its trials
+    /// wrote (80 of the paper study's 120 rows). Rows must read back as written.
+    #[test]
+    fn floats_read_back_bit_for_bit() {
+        let mut written = row(0);
+        written.distance_m = 12488.037106661619;
+        written.heading_to_goal_fraction = 0.9235598022332241;
+        written.localization_error_m = Some(0.21496572595232258);
+        written.robots[0].distance_m = 2465.7009001515007;
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        written.visit_times_s = (0..2000)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 11) as f64 / (1u64 << 53) as f64 * 1800.0
+            })
+            .collect();
+        let dir = tempfile::tempdir().unwrap();
+        RowSink::open(dir.path(), &[]).unwrap().append(&written).unwrap();
+        let back = read_rows(dir.path()).unwrap();
+        let bits = |r: &TrialRow| {
+            let mut b = vec![r.distance_m.to_bits(), r.heading_to_goal_fraction.to_bits(), r.robots[0].distance_m.to_bits()];
+            b.extend(r.localization_error_m.map(f64::to_bits));
+            b.extend(r.visit_times_s.iter().map(|t| t.to_bits()));
+            b
+        };
+        let (got, want) = (bits(&back[0]), bits(&written));
+        let differing = got.iter().zip(&want).filter(|(a, b)| a != b).count();
+        assert_eq!((got.len(), differing), (want.len(), 0), "values that read back differently");
+    }
+
     #[test]
     fn a_broken_complete_line_is_an_error_that_names_it() {
         let dir = tempfile::tempdir().unwrap();

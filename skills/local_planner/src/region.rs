@@ -2,7 +2,7 @@
 //! optionally with a polar table of the distance transform D for the controller's Φ lookup.
 
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI, TAU};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use spomp_core::{Point2, ReachabilityScan};
 
@@ -18,6 +18,33 @@ const MAX_CLEARANCE_CELLS: usize = 1024;
 
 /// Neighbouring columns whose safe stretches [`SafeRegion::from_terrain`] reads together.
 const CLEARANCE_BLOCK: usize = 16;
+
+/// Bin counts whose direction tables [`bin_directions`] keeps (a team uses one or two: the
+/// panorama's columns and a downsampled scan's); other counts are computed each time.
+const KEPT_DIRECTION_TABLES: usize = 8;
+
+/// (sin, cos) of each bin's azimuth −i·2π/`bins`, one table per bin count for the process: a
+/// region is built for every panorama and every shared scan, and its 1024 `sin_cos` were about
+/// 1 % of a simulated team's run. The same calls as computing them in place, so the same bits.
+fn bin_directions(bins: usize) -> Arc<[(f64, f64)]> {
+    type Tables = Vec<(usize, Arc<[(f64, f64)]>)>;
+    static TABLES: OnceLock<Mutex<Tables>> = OnceLock::new();
+    let tables = TABLES.get_or_init(|| Mutex::new(Vec::new()));
+    if let Ok(kept) = tables.lock()
+        && let Some((_, table)) = kept.iter().find(|(n, _)| *n == bins)
+    {
+        return Arc::clone(table);
+    }
+    let step = TAU / bins as f64;
+    let table: Arc<[(f64, f64)]> = (0..bins).map(|i| (-(i as f64) * step).sin_cos()).collect();
+    if let Ok(mut kept) = tables.lock()
+        && kept.len() < KEPT_DIRECTION_TABLES
+        && !kept.iter().any(|(n, _)| *n == bins)
+    {
+        kept.push((bins, Arc::clone(&table)));
+    }
+    table
+}
 
 /// tan(π/8): atan arguments above it are reduced through atan(t) = π/4 + atan((t − 1)/(t + 1)).
 const TAN_PI_8: f64 = 0.414_213_562_373_095_03;
@@ -92,14 +119,8 @@ impl SafeRegion {
                 if r.is_finite() && r > 0.0 { r.min(MAX_REGION_RANGE_M) } else { 0.0 }
             })
             .collect();
-        let vertices: Vec<Point2> = ranges
-            .iter()
-            .enumerate()
-            .map(|(i, &r)| {
-                let (s, c) = (-(i as f64) * bin_step_rad).sin_cos();
-                Point2::new(r * c, r * s)
-            })
-            .collect();
+        let directions = bin_directions(bins);
+        let vertices: Vec<Point2> = ranges.iter().zip(directions.iter()).map(|(&r, &(s, c))| Point2::new(r * c, r * s)).collect();
         let half_sin = 0.5 * bin_step_rad.sin();
         let mut total = 0.0;
         let cumulative_area = (0..bins)
@@ -323,6 +344,24 @@ impl SafeRegion {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn vertices_lie_on_each_bins_azimuth_for_kept_and_unkept_bin_counts() {
+        // More bin counts than the process keeps tables of, each asked twice (built, then kept
+        // or rebuilt): every vertex is r·(cos, sin) of −i·2π/bins, bit for bit.
+        for round in 0..2 {
+            for bins in (3..3 + 2 * KEPT_DIRECTION_TABLES).chain([1024]) {
+                let ranges: Vec<f32> = (0..bins).map(|i| 1.0 + (i * 7 % 5) as f32 + round as f32).collect();
+                let region = SafeRegion::from_ranges(&ranges, &vec![false; bins], 1.0).expect("valid ranges");
+                let step = TAU / bins as f64;
+                for (i, v) in region.vertices().iter().enumerate() {
+                    let (s, c) = (-(i as f64) * step).sin_cos();
+                    let r = f64::from(ranges[i]);
+                    assert_eq!((v.x.to_bits(), v.y.to_bits()), ((r * c).to_bits(), (r * s).to_bits()), "bins {bins}, vertex {i}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn fast_atan2_matches_std() {

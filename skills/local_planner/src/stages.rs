@@ -1562,7 +1562,7 @@ pub fn traversable(ranges: &[f32], distance: &[f32], inflation_m: f32, out: &mut
     }
 }
 
-/// Per-column state of the reachability walk, [`LANES`] columns per vector (the last vector
+/// Per-column state of the reachability walk, eight columns per vector (the last vector
 /// padded with columns that are not walking), and the vectors still walking.
 #[derive(Clone, Debug, Default)]
 pub struct ReachScratch {
