@@ -26,6 +26,6 @@ pub mod setup;
 pub use checks::MissionRobotChecks;
 pub use nodes::registry;
 pub use robot::{ResumeError, Robot, RobotError};
-pub use runtime::RobotRuntime;
+pub use runtime::{JoinFn, RobotRuntime};
 pub use settings::{NavigationProfile, NavigationSettings, SettingsError, WatchdogParams};
 pub use setup::{OperatingArea, PoseInput, RobotSetup, SetupError, robot_seed};

@@ -266,6 +266,12 @@ impl Robot {
         self.runtime.set_background_skills(on);
     }
 
+    /// Lets a panorama's localization update and terrain analysis run side by side through
+    /// `join` (e.g. on rayon's threads); `None` (the default): one after the other. Same results.
+    pub fn set_perception_join(&mut self, join: Option<crate::JoinFn>) {
+        self.runtime.set_perception_join(join);
+    }
+
     /// The work due now (background skills; none otherwise): run each, then give it back with
     /// [`Self::finish_work`]. See `spomp_robot::runtime::SkillWork`.
     pub fn take_work(&mut self, now: Time) -> Vec<SkillWork> {

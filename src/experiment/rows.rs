@@ -524,7 +524,8 @@ mod tests {
         RowSink::open(dir.path(), &[]).unwrap().append(&written).unwrap();
         let back = read_rows(dir.path()).unwrap();
         let bits = |r: &TrialRow| {
-            let mut b = vec![r.distance_m.to_bits(), r.heading_to_goal_fraction.to_bits(), r.robots[0].distance_m.to_bits()];
+            let mut b =
+                vec![r.distance_m.to_bits(), r.heading_to_goal_fraction.to_bits(), r.robots[0].distance_m.to_bits()];
             b.extend(r.localization_error_m.map(f64::to_bits));
             b.extend(r.visit_times_s.iter().map(|t| t.to_bits()));
             b

@@ -23,7 +23,7 @@ use spomp_teamstate::{GoalOrigin, IdentifyOutcome, TeamState, TeamStateError, Te
 
 pub use localization::{Localization, LocalizationSetup, UpdateSchedule};
 pub use navigation::{NavParams, NavStack};
-pub use work::{FinishedWork, SkillWork, WorkKind};
+pub use work::{FinishedWork, JoinFn, SkillWork, WorkKind};
 
 use work::{FinishedParts, PerceptionJob, PerceptionResult};
 
@@ -160,6 +160,8 @@ pub struct RobotRuntime {
     next_work_id: u64,
     /// Panoramas replaced by a newer one before any work took them.
     superseded_panoramas: u64,
+    /// How a panorama's localization and terrain analysis may run side by side.
+    perception_join: Option<JoinFn>,
 }
 
 /// What one goal-detection pass did.
@@ -213,6 +215,7 @@ impl RobotRuntime {
             perception_out: false,
             next_work_id: 0,
             superseded_panoramas: 0,
+            perception_join: None,
         })
     }
 
@@ -330,6 +333,7 @@ impl RobotRuntime {
             terrain,
             robot: self.id.clone(),
             pose_before: self.pose,
+            join: self.perception_join,
             frame,
         }
     }
@@ -379,6 +383,13 @@ impl RobotRuntime {
         {
             self.problems.push(format!("navigation: {e}"));
         }
+    }
+
+    /// Lets a panorama's localization update and terrain analysis run side by side through
+    /// `join` (for example `rayon::join`), inline or as work; `None` (the default): one after the
+    /// other. The results are the same either way.
+    pub fn set_perception_join(&mut self, join: Option<JoinFn>) {
+        self.perception_join = join;
     }
 
     /// Whether the heavy skills run as work taken with [`Self::take_work`].

@@ -151,21 +151,21 @@ pub(crate) enum TerrainJob {
 }
 
 impl TerrainJob {
-    /// The safe region and the scan of `frame`, stamped with the frame's time and `pose`.
-    pub(crate) fn run(
+    /// The safe region and the scan of `frame`, stamped with the frame's time; the scan's pose
+    /// is left for the caller to set (the localization of the same frame gives it).
+    pub(crate) fn analyze(
         &mut self,
         robot: &RobotId,
         frame: &PanoramaFrame,
-        pose: Pose2,
     ) -> Result<(SafeRegion, ReachabilityScan), String> {
         match self {
             TerrainJob::Analyze { analyzer, params } => {
                 let output = analyzer.analyze(&frame.depth).map_err(|e| e.to_string())?;
                 let region = SafeRegion::from_terrain(output, params).map_err(|e| e.to_string())?;
-                Ok((region, output.to_scan(robot.clone(), frame.stamp, pose)))
+                Ok((region, output.to_scan(robot.clone(), frame.stamp, Pose2::default())))
             }
             TerrainJob::Reuse { region, scan } => {
-                Ok((region.clone(), ReachabilityScan { stamp: frame.stamp, pose, ..scan.clone() }))
+                Ok((region.clone(), ReachabilityScan { stamp: frame.stamp, ..scan.clone() }))
             }
         }
     }

@@ -28,6 +28,12 @@ use spomp_localization::LocalizationError;
 use super::localization::CrossView;
 use super::navigation::{PlannerDone, PlannerJob, TerrainJob};
 
+/// Runs two pieces of work, possibly at once, and returns when both have finished: how an
+/// adapter with spare cores lets a panorama's localization update and terrain analysis run side
+/// by side (the simulator passes `rayon::join`). The two touch disjoint state and neither draws
+/// from the other's inputs, so the results are those of running them one after the other.
+pub type JoinFn = fn(&mut (dyn FnMut() + Send), &mut (dyn FnMut() + Send));
+
 /// Which skill a piece of work runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum WorkKind {
@@ -146,6 +152,8 @@ pub(super) struct PerceptionJob {
     pub robot: RobotId,
     /// The pose when the work was taken: the scan's pose where no localizer gives one.
     pub pose_before: Option<PoseEstimate>,
+    /// Runs localization and terrain analysis side by side; `None`: one after the other.
+    pub join: Option<JoinFn>,
 }
 
 /// What processing a panorama gave.
@@ -159,18 +167,50 @@ pub(super) struct PerceptionResult {
 }
 
 impl PerceptionJob {
-    /// Localization first, then terrain analysis stamped with the pose it gave.
+    /// Localization and terrain analysis (side by side with a [`JoinFn`]), the analysis then
+    /// stamped with the pose the localization gave. Analysis never reads the pose, so only the
+    /// stamp waits for it.
     pub(super) fn run(&mut self, rng: &mut ChaCha8Rng) -> PerceptionResult {
         let map = self.map.as_ref().map(|(m, v)| (&**m, *v));
-        let estimate = match self.localizer.as_mut() {
-            Some(cv) => cv.on_panorama(&self.frame, map, &self.classes, rng).map(Some),
-            None => Ok(None),
+        let (frame, classes, robot) = (&*self.frame, &*self.classes, &self.robot);
+        let mut estimate = Ok(None);
+        let mut analysis = None;
+        let mut localize = || {
+            if let Some(cv) = self.localizer.as_mut() {
+                estimate = cv.on_panorama(frame, map, classes, rng).map(Some);
+            }
         };
-        let scan_pose = estimate.as_ref().ok().copied().flatten().or(self.pose_before);
-        let analysis = match (self.terrain.as_mut(), scan_pose) {
-            (Some(Ok(terrain)), Some(pose)) => Some(terrain.run(&self.robot, &self.frame, pose.pose)),
-            (Some(Err(e)), Some(_)) => Some(Err(e.clone())),
-            _ => None,
+        let mut analyze = || {
+            analysis = match self.terrain.as_mut() {
+                Some(Ok(terrain)) => Some(terrain.analyze(robot, frame)),
+                Some(Err(e)) => Some(Err(e.clone())),
+                None => None,
+            };
+        };
+        let pose_before = self.pose_before;
+        let scan_pose = match self.join {
+            Some(join) => {
+                join(&mut localize, &mut analyze);
+                estimate.as_ref().ok().copied().flatten().or(pose_before)
+            }
+            None => {
+                localize();
+                let scan_pose = estimate.as_ref().ok().copied().flatten().or(pose_before);
+                // No pose to stamp a scan with: no analysis (it would be dropped).
+                if scan_pose.is_some() {
+                    analyze();
+                }
+                scan_pose
+            }
+        };
+        let analysis = match scan_pose {
+            Some(pose) => analysis.map(|result| {
+                result.map(|(region, mut scan)| {
+                    scan.pose = pose.pose;
+                    (region, scan)
+                })
+            }),
+            None => None,
         };
         PerceptionResult { estimate, scan_pose, analysis }
     }

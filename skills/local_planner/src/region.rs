@@ -120,7 +120,8 @@ impl SafeRegion {
             })
             .collect();
         let directions = bin_directions(bins);
-        let vertices: Vec<Point2> = ranges.iter().zip(directions.iter()).map(|(&r, &(s, c))| Point2::new(r * c, r * s)).collect();
+        let vertices: Vec<Point2> =
+            ranges.iter().zip(directions.iter()).map(|(&r, &(s, c))| Point2::new(r * c, r * s)).collect();
         let half_sin = 0.5 * bin_step_rad.sin();
         let mut total = 0.0;
         let cumulative_area = (0..bins)
@@ -357,7 +358,11 @@ mod tests {
                 for (i, v) in region.vertices().iter().enumerate() {
                     let (s, c) = (-(i as f64) * step).sin_cos();
                     let r = f64::from(ranges[i]);
-                    assert_eq!((v.x.to_bits(), v.y.to_bits()), ((r * c).to_bits(), (r * s).to_bits()), "bins {bins}, vertex {i}");
+                    assert_eq!(
+                        (v.x.to_bits(), v.y.to_bits()),
+                        ((r * c).to_bits(), (r * s).to_bits()),
+                        "bins {bins}, vertex {i}"
+                    );
                 }
             }
         }

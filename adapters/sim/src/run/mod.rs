@@ -485,6 +485,19 @@ where
     }
 }
 
+/// A robot's localization update and terrain analysis side by side, when its perception already
+/// runs on one of rayon's threads (robots stepped in parallel): a thread left idle while the
+/// last robot's panorama is processed takes half of it. From any other thread, one after the
+/// other.
+fn join_on_rayon(a: &mut (dyn FnMut() + Send), b: &mut (dyn FnMut() + Send)) {
+    if rayon::current_thread_index().is_some() {
+        rayon::join(a, b);
+    } else {
+        a();
+        b();
+    }
+}
+
 /// Most bytes a link can bank for later (a few full map versions).
 const MAX_LINK_CREDIT_BYTES: u64 = 32 * 1024 * 1024;
 
@@ -522,6 +535,7 @@ impl Simulation {
             let id = setup.config.id.clone();
             let mut robot = Robot::from_setup(loaded, setup, registry).map_err(|e| robot_error(&e))?;
             robot.set_background_skills(options.skill_latency.is_some());
+            robot.set_perception_join(options.parallel_robots.then_some(join_on_rayon as spomp_robot::JoinFn));
             let pose_input = robot.pose_input();
             let seed = options.seed.wrapping_mul(31).wrapping_add(i as u64 * 7919 + 17);
             let body = match spec.kind {
