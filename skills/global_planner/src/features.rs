@@ -10,7 +10,7 @@
 
 use std::sync::{Arc, Mutex, PoisonError, Weak};
 
-use spomp_core::{AerialMap, ClassTable, GridSpec, UNKNOWN_CLASS};
+use spomp_core::{AerialMap, ClassTable, GridSpec, UNKNOWN_CLASS, fingerprint};
 
 use spomp_raster::{FAR, SquaredEdt};
 
@@ -52,25 +52,6 @@ impl RastersKey {
 
 /// Seeds of the two content fingerprints.
 const CONTENT_SEEDS: [u64; 2] = [0x4528_21E6_38D0_1377, 0xBE54_66CF_34E9_0C6C];
-
-/// A fast 64-bit fingerprint of bytes (four lanes so the multiplies overlap).
-fn fingerprint(bytes: &[u8], seed: u64) -> u64 {
-    const K: u64 = 0x9E37_79B9_7F4A_7C15;
-    let mut lanes = [K, K.rotate_left(16), K.rotate_left(32), K.rotate_left(48)].map(|l| l ^ seed ^ bytes.len() as u64);
-    let mut blocks = bytes.chunks_exact(32);
-    for block in &mut blocks {
-        for (lane, word) in lanes.iter_mut().zip(block.chunks_exact(8)) {
-            let mut w = [0u8; 8];
-            w.copy_from_slice(word);
-            *lane = (*lane ^ u64::from_le_bytes(w)).wrapping_mul(K).rotate_left(31);
-        }
-    }
-    let mut h = lanes.iter().fold(seed, |acc, &l| (acc ^ l).wrapping_mul(K).rotate_left(27));
-    for &b in blocks.remainder() {
-        h = (h ^ b as u64).wrapping_mul(K).rotate_left(5);
-    }
-    h
-}
 
 /// Fingerprint of a map's three layers (elevations by their bit patterns).
 fn map_fingerprint(map: &AerialMap, seed: u64) -> u64 {

@@ -177,25 +177,9 @@ pub(crate) fn fingerprint(classes: &[ClassId]) -> u64 {
     fingerprint_seeded(classes, 0)
 }
 
-/// [`fingerprint`] with its lanes started from `seed` (0: [`fingerprint`] itself).
+/// [`fingerprint`] under another seed.
 fn fingerprint_seeded(classes: &[ClassId], seed: u64) -> u64 {
-    const K: u64 = 0x9E37_79B9_7F4A_7C15;
-    // Four independent lanes so the multiplies overlap: this runs on every update.
-    let mut lanes =
-        [K ^ classes.len() as u64, K.rotate_left(16), K.rotate_left(32), K.rotate_left(48)].map(|l| l ^ seed);
-    let mut blocks = classes.chunks_exact(32);
-    for block in &mut blocks {
-        for (lane, word) in lanes.iter_mut().zip(block.chunks_exact(8)) {
-            let mut bytes = [0u8; 8];
-            bytes.copy_from_slice(word);
-            *lane = (*lane ^ u64::from_le_bytes(bytes)).wrapping_mul(K).rotate_left(31);
-        }
-    }
-    let mut h = lanes.iter().fold(0u64, |acc, &l| (acc ^ l).wrapping_mul(K).rotate_left(27));
-    for &b in blocks.remainder() {
-        h = (h ^ b as u64).wrapping_mul(K).rotate_left(5);
-    }
-    h
+    spomp_core::fingerprint(classes, seed)
 }
 
 /// Checks that a map is well formed.

@@ -20,7 +20,9 @@ use image::{GrayImage, Luma};
 use imageproc::distance_transform::Norm;
 use imageproc::morphology::{dilate, erode, open_mut};
 use imageproc::region_labelling::{Connectivity, connected_components};
-use spomp_core::{AerialMap, Cell, ClassId, ClassTable, Point2, UNKNOWN_CLASS};
+use std::sync::{Arc, Mutex, PoisonError, Weak};
+
+use spomp_core::{AerialMap, Cell, ClassId, ClassTable, GridSpec, Point2, UNKNOWN_CLASS};
 use spomp_raster::SquaredEdt;
 
 use crate::error::MappingError;
@@ -59,6 +61,44 @@ pub struct Detection {
     pub duplicates: usize,
 }
 
+/// The goals a map holds before deconfliction (steps 1–4), in raster order of their clusters:
+/// a pure function of the class layer, its placement and the detector's setup.
+#[derive(Debug, Default)]
+struct Candidates {
+    /// What they were found from (`None` while being found).
+    key: Option<CandidatesKey>,
+    goals: Vec<DetectedGoal>,
+    too_small: usize,
+    unplaceable: usize,
+}
+
+/// What a set of [`Candidates`] was found from: two sets with equal keys are equal.
+#[derive(Clone, Debug, PartialEq)]
+struct CandidatesKey {
+    spec: GridSpec,
+    /// Fingerprints of the class layer under [`CONTENT_SEEDS`].
+    content: [u64; 2],
+    setup: DetectorSetup,
+}
+
+/// A detector's setup: its parameters and what it resolved from the class table.
+#[derive(Clone, Debug, PartialEq)]
+struct DetectorSetup {
+    params: GoalDetectionParams,
+    target: ClassId,
+    placement_order: Vec<ClassId>,
+    obstacle_lut: [bool; 256],
+}
+
+/// Seeds of the two independent class-layer fingerprints of a [`CandidatesKey`].
+const CONTENT_SEEDS: [u64; 2] = [0x1F83_D9AB_FB41_BD6B, 0x5BE0_CD19_137E_2179];
+
+/// Every set of candidates alive in the process, found by what it was found from: the robots
+/// of a team (and trials run side by side) receive the same map versions from the UAV, and
+/// each ran the whole detection on each of them (about 3 % of a simulated team's run). The
+/// candidates are a pure function of the key, so sharing them changes no result.
+static SHARED_CANDIDATES: Mutex<Vec<Weak<Candidates>>> = Mutex::new(Vec::new());
+
 /// Per-component statistics gathered in one raster pass.
 #[derive(Clone, Copy, Debug)]
 struct Component {
@@ -83,9 +123,10 @@ pub struct GoalDetector {
     obstacle_lut: [bool; 256],
     /// Scratch: component statistics.
     components: Vec<Component>,
-    /// Scratch: the distance transform's buffers (map-sized; given back after each pass, since
-    /// a pass runs only when the map changes and every robot of a team holds a detector).
+    /// Scratch: the distance transform's buffers (map-sized; given back after each pass).
     edt: SquaredEdt,
+    /// The candidates of the last pass, kept so that other detectors can share them.
+    last: Option<Arc<Candidates>>,
 }
 
 impl GoalDetector {
@@ -113,6 +154,7 @@ impl GoalDetector {
             obstacle_lut,
             components: Vec::new(),
             edt: SquaredEdt::default(),
+            last: None,
         })
     }
 
@@ -121,14 +163,74 @@ impl GoalDetector {
         &self.params
     }
 
-    /// Detects goals in `map`, dropping those within the deconfliction radius of `known_goals`.
+    /// Detects goals in `map`, dropping those within the deconfliction radius of `known_goals`
+    /// (and of a goal detected before them in the same pass).
     pub fn detect(&mut self, map: &AerialMap, known_goals: &[Point2]) -> Result<Detection, MappingError> {
-        let detection = self.detect_with_scratch(map, known_goals);
-        self.edt = SquaredEdt::default();
-        detection
+        let candidates = self.shared_candidates(map)?;
+        let radius = self.params.deconfliction_radius_m;
+        let mut detection =
+            Detection { too_small: candidates.too_small, unplaceable: candidates.unplaceable, ..Detection::default() };
+        let mut accepted: Vec<Point2> = Vec::new();
+        for goal in &candidates.goals {
+            if known_goals.iter().chain(&accepted).any(|g| g.distance(goal.position) <= radius) {
+                detection.duplicates += 1;
+                continue;
+            }
+            accepted.push(goal.position);
+            detection.goals.push(goal.clone());
+        }
+        self.last = Some(candidates);
+        Ok(detection)
     }
 
-    fn detect_with_scratch(&mut self, map: &AerialMap, known_goals: &[Point2]) -> Result<Detection, MappingError> {
+    /// The candidates of `map`: those another detector in the process already found for the
+    /// same class layer with the same setup, or found now (then offered to the others).
+    fn shared_candidates(&mut self, map: &AerialMap) -> Result<Arc<Candidates>, MappingError> {
+        let key = CandidatesKey {
+            spec: map.spec,
+            content: CONTENT_SEEDS.map(|seed| spomp_core::fingerprint(&map.class, seed)),
+            setup: self.setup(),
+        };
+        let lock = || SHARED_CANDIDATES.lock().unwrap_or_else(PoisonError::into_inner);
+        {
+            let mut shared = lock();
+            shared.retain(|w| w.strong_count() > 0);
+            if let Some(found) = shared.iter().filter_map(Weak::upgrade).find(|c| c.key.as_ref() == Some(&key)) {
+                return Ok(found);
+            }
+        }
+        let found = self.find_candidates(map);
+        // The distance transform's buffers are map-sized; a pass runs only when the map
+        // changes, and every robot of a team holds a detector.
+        self.edt = SquaredEdt::default();
+        let candidates = Arc::new(Candidates { key: Some(key), ..found? });
+        let mut shared = lock();
+        // Another detector may have found the same meanwhile (robots stepped in parallel):
+        // keep one set, so that every holder shares it.
+        if let Some(first) = shared.iter().filter_map(Weak::upgrade).find(|c| c.key == candidates.key) {
+            return Ok(first);
+        }
+        shared.push(Arc::downgrade(&candidates));
+        Ok(candidates)
+    }
+
+    /// What, besides the map, the candidates depend on.
+    fn setup(&self) -> DetectorSetup {
+        DetectorSetup {
+            params: self.params.clone(),
+            target: self.target,
+            placement_order: self.placement_order.clone(),
+            obstacle_lut: self.obstacle_lut,
+        }
+    }
+
+    /// Whether this detector's last pass used the same candidates (found once) as `other`'s.
+    #[cfg(test)]
+    fn shares_last_candidates_with(&self, other: &GoalDetector) -> bool {
+        self.last.as_ref().zip(other.last.as_ref()).is_some_and(|(a, b)| Arc::ptr_eq(a, b))
+    }
+
+    fn find_candidates(&mut self, map: &AerialMap) -> Result<Candidates, MappingError> {
         let spec = map.spec;
         let (w, h) = (spec.width, spec.height);
         if map.class.len() != spec.len() {
@@ -138,11 +240,11 @@ impl GoalDetector {
         if !(res.is_finite() && res > 0.0) {
             return Err(MappingError::InconsistentMap(format!("resolution {res} m")));
         }
-        let mut detection = Detection::default();
+        let mut found = Candidates::default();
         // A goal is placed on a passable cell beside a cluster, so a one-cell map has none (and
         // imageproc's labelling indexes past its forest on a lone foreground pixel).
         if spec.is_empty() || spec.len() == 1 {
-            return Ok(detection);
+            return Ok(found);
         }
 
         // 1–2. Class mask, open, close.
@@ -200,7 +302,7 @@ impl GoalDetector {
             comp.sum_r += r as f64;
         }
         if self.components.iter().all(|c| c.cells == 0) {
-            return Ok(detection);
+            return Ok(found);
         }
 
         // Clearance: distance from every cell to the nearest obstacle.
@@ -211,8 +313,6 @@ impl GoalDetector {
         let region_px = self.params.placement_region_m / res;
         let margin = region_px.ceil() as i64 + 1;
         let min_clear_sq = (self.params.min_clearance_m / res).powi(2);
-        let radius = self.params.deconfliction_radius_m;
-        let mut accepted: Vec<Point2> = Vec::new();
 
         for (k, comp) in self.components.iter().enumerate() {
             if comp.cells == 0 {
@@ -220,7 +320,7 @@ impl GoalDetector {
             }
             let size_m = ((comp.max_c - comp.min_c).max(comp.max_r - comp.min_r) + 1) as f64 * res;
             if size_m < self.params.min_size_m {
-                detection.too_small += 1;
+                found.too_small += 1;
                 continue;
             }
             let label = k as u32 + 1;
@@ -269,17 +369,12 @@ impl GoalDetector {
                 .or_else(|| best.iter().flatten().max_by(|a, b| a.0.total_cmp(&b.0).then_with(|| b.1.total_cmp(&a.1))))
                 .copied();
             let Some((clear_sq, _, cell)) = chosen else {
-                detection.unplaceable += 1;
+                found.unplaceable += 1;
                 continue;
             };
             let position = spec.center(cell);
-            if known_goals.iter().chain(&accepted).any(|g| g.distance(position) <= radius) {
-                detection.duplicates += 1;
-                continue;
-            }
-            accepted.push(position);
             let class = map.class_at(cell);
-            detection.goals.push(DetectedGoal {
+            found.goals.push(DetectedGoal {
                 position,
                 cell,
                 class,
@@ -292,6 +387,83 @@ impl GoalDetector {
                 class_cells: comp.class_cells,
             });
         }
-        Ok(detection)
+        Ok(found)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::params::GoalDetectionParams;
+    use spomp_core::GridSpec;
+
+    /// A 100 × 60 m road map with two rows of four vehicles 50 m apart.
+    fn parking(table: &ClassTable) -> AerialMap {
+        let (road, vehicle) = (table.by_name("road").unwrap().index, table.by_name("vehicle").unwrap().index);
+        let mut map = AerialMap::unknown(GridSpec::new(Point2::new(0.0, 0.0), 0.5, 200, 120));
+        map.class.fill(road);
+        for x0 in [10.0, 60.0] {
+            for k in 0..4 {
+                let x = x0 + k as f64 * 6.0;
+                for r in 60..64 {
+                    for c in (x / 0.5) as usize..((x + 4.5) / 0.5) as usize {
+                        map.class[r * 200 + c] = vehicle;
+                    }
+                }
+            }
+        }
+        map.version = 3;
+        map
+    }
+
+    #[test]
+    fn detectors_share_the_candidates_of_one_map_and_deconflict_each_against_its_own_goals() {
+        let table = ClassTable::default_table();
+        let map = parking(&table);
+        let (mut a, mut b) = (
+            GoalDetector::new(GoalDetectionParams::default(), &table).unwrap(),
+            GoalDetector::new(GoalDetectionParams::default(), &table).unwrap(),
+        );
+        let all = a.detect(&map, &[]).unwrap();
+        assert_eq!(all.goals.len(), 2, "{all:?}");
+        // Another robot's copy of the same map, with one of the goals already known.
+        let copy = map.clone();
+        let known = [all.goals[0].position];
+        let some = b.detect(&copy, &known).unwrap();
+        assert!(a.shares_last_candidates_with(&b), "the second detection reused the first's candidates");
+        assert_eq!((some.goals.len(), some.duplicates), (1, 1));
+        assert_eq!(some.goals[0], all.goals[1]);
+        // The same result as a detector that found everything itself.
+        let mut fresh = GoalDetector::new(GoalDetectionParams::default(), &table).unwrap();
+        let own = fresh.find_candidates(&map).unwrap();
+        assert_eq!(own.goals, all.goals);
+    }
+
+    #[test]
+    fn another_class_layer_or_setup_is_never_served_shared_candidates() {
+        let table = ClassTable::default_table();
+        let map = parking(&table);
+        let mut a = GoalDetector::new(GoalDetectionParams::default(), &table).unwrap();
+        let before = a.detect(&map, &[]).unwrap();
+        // Same version, one vehicle paved over: one cluster's goal moves (or goes).
+        let mut changed = map.clone();
+        let road = table.by_name("road").unwrap().index;
+        for r in 60..64 {
+            for c in 20..80 {
+                changed.class[r * 200 + c] = road;
+            }
+        }
+        let mut b = GoalDetector::new(GoalDetectionParams::default(), &table).unwrap();
+        let after = b.detect(&changed, &[]).unwrap();
+        assert!(!a.shares_last_candidates_with(&b));
+        assert_ne!(after, before);
+        assert_eq!(after.goals, b.find_candidates(&changed).unwrap().goals);
+        // Same map, other parameters.
+        let wide = GoalDetectionParams { merge_distance_m: 60.0, ..GoalDetectionParams::default() };
+        let mut c = GoalDetector::new(wide, &table).unwrap();
+        let merged = c.detect(&map, &[]).unwrap();
+        assert!(!a.shares_last_candidates_with(&c));
+        assert_eq!(merged.goals.len(), 1, "the two rows are one cluster at a 60 m merge distance");
     }
 }
