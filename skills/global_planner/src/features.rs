@@ -10,9 +10,8 @@
 
 use std::sync::{Arc, Mutex, PoisonError, Weak};
 
-use spomp_core::{AerialMap, ClassTable, GridSpec, UNKNOWN_CLASS, fingerprint};
-
-use spomp_raster::{FAR, SquaredEdt};
+use spomp_core::{AerialMap, ClassTable, GridSpec, UNKNOWN_CLASS};
+use spomp_raster::{FAR, SquaredEdt, fingerprint};
 
 /// Where classes changed since the last rebuild.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

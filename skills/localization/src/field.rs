@@ -179,7 +179,7 @@ pub(crate) fn fingerprint(classes: &[ClassId]) -> u64 {
 
 /// [`fingerprint`] under another seed.
 fn fingerprint_seeded(classes: &[ClassId], seed: u64) -> u64 {
-    spomp_core::fingerprint(classes, seed)
+    spomp_raster::fingerprint(classes, seed)
 }
 
 /// Checks that a map is well formed.

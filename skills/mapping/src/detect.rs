@@ -188,7 +188,7 @@ impl GoalDetector {
     fn shared_candidates(&mut self, map: &AerialMap) -> Result<Arc<Candidates>, MappingError> {
         let key = CandidatesKey {
             spec: map.spec,
-            content: CONTENT_SEEDS.map(|seed| spomp_core::fingerprint(&map.class, seed)),
+            content: CONTENT_SEEDS.map(|seed| spomp_raster::fingerprint(&map.class, seed)),
             setup: self.setup(),
         };
         let lock = || SHARED_CANDIDATES.lock().unwrap_or_else(PoisonError::into_inner);
