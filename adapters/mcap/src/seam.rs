@@ -43,7 +43,7 @@ const CDR_MEDIA_TYPE: &str = "application/x-spomp-cdr";
 pub struct SeamCallMsg {
     /// Time of the call, nanoseconds.
     pub stamp_ns: i64,
-    /// Which call ([`SeamCall::name`]).
+    /// Which call ([`call_name`]: `odometry`, `panorama`, `team_in`, …).
     pub call: String,
     /// The peer of a team message (`team_in`: the sender, `team_out`: the receiver), else empty.
     pub peer: String,

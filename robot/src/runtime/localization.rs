@@ -118,7 +118,7 @@ impl Localization {
         }
     }
 
-    /// One panorama (see [`CrossView::on_panorama`]); `None` for externally localized robots
+    /// One panorama (see `CrossView::on_panorama`); `None` for externally localized robots
     /// and while the localizer is away.
     pub fn on_panorama(
         &mut self,

@@ -445,7 +445,7 @@ impl NavStack {
     }
 
     /// A path that backs out along the robot's trail to the newest trail point (at least
-    /// [`BACKTRACK_MIN_M`] away, not near a place the robot got stuck) from which the graph has
+    /// 6 m (`BACKTRACK_MIN_M`) away, not near a place the robot got stuck) from which the graph has
     /// a path to `to`, then follows that path; [`PlanError::NoPath`] when no trail point has one.
     pub fn plan_backtracking(&mut self, from: Point2, to: Point2) -> Result<GlobalPath, PlanError> {
         let avoid: &[(NodeId, NodeId)] =

@@ -77,7 +77,7 @@ impl GlobalPlanner {
     ///
     /// The start and the goal attach to the nodes whose regions cover them. When no path joins
     /// those two, the search is tried again from and to the nodes around each point (the nearest
-    /// within [`DETOUR_ATTACH_M`], by a straight leg over covered ground that the scans have not
+    /// within 15 m (`DETOUR_ATTACH_M`), by a straight leg over covered ground that the scans have not
     /// voted untraversable), and the cheapest path wins. Without this, a robot whose covering
     /// node lost all its edges (a parking lot whose straight edges the scans saw through parked
     /// vehicles) could plan nowhere, although it can drive to the next node.
