@@ -188,30 +188,27 @@ impl PerceptionJob {
             };
         };
         let pose_before = self.pose_before;
-        let scan_pose = match self.join {
-            Some(join) => {
-                join(&mut localize, &mut analyze);
-                estimate.as_ref().ok().copied().flatten().or(pose_before)
-            }
+        let pose_of =
+            |estimate: &Result<Option<PoseEstimate>, _>| estimate.as_ref().ok().copied().flatten().or(pose_before);
+        match self.join {
+            Some(join) => join(&mut localize, &mut analyze),
             None => {
                 localize();
-                let scan_pose = estimate.as_ref().ok().copied().flatten().or(pose_before);
                 // No pose to stamp a scan with: no analysis (it would be dropped).
-                if scan_pose.is_some() {
+                if pose_of(&estimate).is_some() {
                     analyze();
                 }
-                scan_pose
             }
-        };
-        let analysis = match scan_pose {
-            Some(pose) => analysis.map(|result| {
+        }
+        let scan_pose = pose_of(&estimate);
+        let analysis = scan_pose.and_then(|pose| {
+            analysis.map(|result| {
                 result.map(|(region, mut scan)| {
                     scan.pose = pose.pose;
                     (region, scan)
                 })
-            }),
-            None => None,
-        };
+            })
+        });
         PerceptionResult { estimate, scan_pose, analysis }
     }
 }

@@ -8,10 +8,10 @@
 //! each building and holding its own (one byte per cell and class: 4.3 MB for an 800 × 600
 //! map with nine classes).
 
-use std::sync::{Arc, Mutex, PoisonError, Weak};
+use std::sync::Arc;
 
 use spomp_core::{AerialMap, ClassTable, GridSpec, UNKNOWN_CLASS};
-use spomp_raster::{FAR, SquaredEdt, fingerprint};
+use spomp_raster::{FAR, SharedList, SquaredEdt, fingerprint};
 
 /// Where classes changed since the last rebuild.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -78,19 +78,7 @@ struct Rasters {
 
 /// Every set of rasters alive in the process (planners of a team, trials run side by side),
 /// found by what they were built from.
-static SHARED_RASTERS: Mutex<Vec<Weak<Rasters>>> = Mutex::new(Vec::new());
-
-/// A live set of rasters built from `key`, if some planner holds one.
-fn find_shared(key: &RastersKey) -> Option<Arc<Rasters>> {
-    let mut shared = SHARED_RASTERS.lock().unwrap_or_else(PoisonError::into_inner);
-    shared.retain(|w| w.strong_count() > 0);
-    shared.iter().filter_map(Weak::upgrade).find(|r| r.key.as_ref() == Some(key))
-}
-
-/// Offers a freshly built set to the other planners.
-fn offer_shared(rasters: &Arc<Rasters>) {
-    SHARED_RASTERS.lock().unwrap_or_else(PoisonError::into_inner).push(Arc::downgrade(rasters));
-}
+static SHARED_RASTERS: SharedList<Rasters> = SharedList::new();
 
 /// Feature rasters derived from the aerial map.
 #[derive(Clone, Debug, Default)]
@@ -137,7 +125,7 @@ impl Features {
         if self.rasters.key == Some(key) {
             return;
         }
-        if let Some(found) = find_shared(&key) {
+        if let Some(found) = SHARED_RASTERS.find(|r| r.key == Some(key)) {
             self.rasters = found;
             return;
         }
@@ -164,7 +152,7 @@ impl Features {
         // bytes a cell): give it back rather than hold it per robot between rebuilds.
         self.scratch = Vec::new();
         rasters.normalise(map, slots);
-        offer_shared(&self.rasters);
+        self.rasters = SHARED_RASTERS.share(Arc::clone(&self.rasters), |r| r.key == Some(key));
     }
 
     /// Normalised features of cell `i` into `out` (`channels()` long); false when the cell is

@@ -11,10 +11,10 @@
 //! 800 × 600 map is 480 kB and the per-particle loop stays in cache.
 
 use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex, Weak};
+use std::sync::Arc;
 
 use spomp_core::{AerialMap, ClassId, ClassTable, GridSpec, UNKNOWN_CLASS};
-use spomp_raster::SquaredEdt;
+use spomp_raster::{SharedList, SquaredEdt};
 
 use crate::error::LocalizationError;
 use crate::params::LocalizationParams;
@@ -140,7 +140,7 @@ const CHECK_SEED: u64 = 0x243F_6A88_85A3_08D3;
 /// instead of each building and holding its own: with a prior map, a team of UGVs starts with
 /// one map, and a UAV's broadcast gives several robots the same version. A field is a pure
 /// function of the map, the class table and [`FieldInputs`], so sharing changes no result.
-static SHARED_FIELDS: Mutex<Vec<Weak<MatchField>>> = Mutex::new(Vec::new());
+static SHARED_FIELDS: SharedList<MatchField> = SharedList::new();
 
 /// The match field of a map: one already alive somewhere in the process that was built from
 /// the same placement, version, contents (two 64-bit fingerprints), class table and
@@ -152,34 +152,21 @@ pub(crate) fn shared_field(
     fingerprint: u64,
 ) -> Result<Arc<MatchField>, LocalizationError> {
     check_map(map)?;
-    let check = fingerprint_seeded(&map.class, CHECK_SEED);
+    let check = spomp_raster::fingerprint(&map.class, CHECK_SEED);
     let inputs = FieldInputs::of(params);
-    let lock = || SHARED_FIELDS.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    {
-        let mut shared = lock();
-        shared.retain(|w| w.strong_count() > 0);
-        let found = shared
-            .iter()
-            .filter_map(Weak::upgrade)
-            .find(|f| f.matches_fingerprint(map, table, fingerprint) && f.check == check && f.inputs == inputs);
-        if let Some(field) = found {
-            return Ok(field);
-        }
+    let same =
+        |f: &MatchField| f.matches_fingerprint(map, table, fingerprint) && f.check == check && f.inputs == inputs;
+    if let Some(field) = SHARED_FIELDS.find(same) {
+        return Ok(field);
     }
     let field = Arc::new(MatchField::build_with_fingerprint(map, table, params, fingerprint)?);
-    lock().push(Arc::downgrade(&field));
-    Ok(field)
+    Ok(SHARED_FIELDS.share(field, same))
 }
 
 /// A fast fingerprint of the class layer, so that two maps with the same version number but
 /// different contents are told apart.
 pub(crate) fn fingerprint(classes: &[ClassId]) -> u64 {
-    fingerprint_seeded(classes, 0)
-}
-
-/// [`fingerprint`] under another seed.
-fn fingerprint_seeded(classes: &[ClassId], seed: u64) -> u64 {
-    spomp_raster::fingerprint(classes, seed)
+    spomp_raster::fingerprint(classes, 0)
 }
 
 /// Checks that a map is well formed.
@@ -517,7 +504,7 @@ impl MatchField {
             cells_of_slot,
             metres_per_level: (params.max_match_distance_m / MAX_KNOWN_LEVEL as f64) as f32,
             unknown_cost_m,
-            check: fingerprint_seeded(&map.class, CHECK_SEED),
+            check: spomp_raster::fingerprint(&map.class, CHECK_SEED),
             inputs: FieldInputs::of(params),
         })
     }

@@ -16,14 +16,14 @@
 //! 5. Goals within the deconfliction radius of a known goal, or of a goal detected before them
 //!    in the same pass, are dropped.
 
+use std::sync::Arc;
+
 use image::{GrayImage, Luma};
 use imageproc::distance_transform::Norm;
 use imageproc::morphology::{dilate, erode, open_mut};
 use imageproc::region_labelling::{Connectivity, connected_components};
-use std::sync::{Arc, Mutex, PoisonError, Weak};
-
 use spomp_core::{AerialMap, Cell, ClassId, ClassTable, GridSpec, Point2, UNKNOWN_CLASS};
-use spomp_raster::SquaredEdt;
+use spomp_raster::{SharedList, SquaredEdt};
 
 use crate::error::MappingError;
 use crate::params::GoalDetectionParams;
@@ -63,10 +63,16 @@ pub struct Detection {
 
 /// The goals a map holds before deconfliction (steps 1–4), in raster order of their clusters:
 /// a pure function of the class layer, its placement and the detector's setup.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 struct Candidates {
-    /// What they were found from (`None` while being found).
-    key: Option<CandidatesKey>,
+    /// What they were found from.
+    key: CandidatesKey,
+    found: Found,
+}
+
+/// What steps 1–4 found in a map.
+#[derive(Debug, Default)]
+struct Found {
     goals: Vec<DetectedGoal>,
     too_small: usize,
     unplaceable: usize,
@@ -97,7 +103,7 @@ const CONTENT_SEEDS: [u64; 2] = [0x1F83_D9AB_FB41_BD6B, 0x5BE0_CD19_137E_2179];
 /// of a team (and trials run side by side) receive the same map versions from the UAV, and
 /// each ran the whole detection on each of them (about 3 % of a simulated team's run). The
 /// candidates are a pure function of the key, so sharing them changes no result.
-static SHARED_CANDIDATES: Mutex<Vec<Weak<Candidates>>> = Mutex::new(Vec::new());
+static SHARED_CANDIDATES: SharedList<Candidates> = SharedList::new();
 
 /// Per-component statistics gathered in one raster pass.
 #[derive(Clone, Copy, Debug)]
@@ -168,10 +174,11 @@ impl GoalDetector {
     pub fn detect(&mut self, map: &AerialMap, known_goals: &[Point2]) -> Result<Detection, MappingError> {
         let candidates = self.shared_candidates(map)?;
         let radius = self.params.deconfliction_radius_m;
+        let found = &candidates.found;
         let mut detection =
-            Detection { too_small: candidates.too_small, unplaceable: candidates.unplaceable, ..Detection::default() };
+            Detection { too_small: found.too_small, unplaceable: found.unplaceable, ..Detection::default() };
         let mut accepted: Vec<Point2> = Vec::new();
-        for goal in &candidates.goals {
+        for goal in &found.goals {
             if known_goals.iter().chain(&accepted).any(|g| g.distance(goal.position) <= radius) {
                 detection.duplicates += 1;
                 continue;
@@ -191,27 +198,15 @@ impl GoalDetector {
             content: CONTENT_SEEDS.map(|seed| spomp_raster::fingerprint(&map.class, seed)),
             setup: self.setup(),
         };
-        let lock = || SHARED_CANDIDATES.lock().unwrap_or_else(PoisonError::into_inner);
-        {
-            let mut shared = lock();
-            shared.retain(|w| w.strong_count() > 0);
-            if let Some(found) = shared.iter().filter_map(Weak::upgrade).find(|c| c.key.as_ref() == Some(&key)) {
-                return Ok(found);
-            }
+        if let Some(shared) = SHARED_CANDIDATES.find(|c| c.key == key) {
+            return Ok(shared);
         }
         let found = self.find_candidates(map);
         // The distance transform's buffers are map-sized; a pass runs only when the map
         // changes, and every robot of a team holds a detector.
         self.edt = SquaredEdt::default();
-        let candidates = Arc::new(Candidates { key: Some(key), ..found? });
-        let mut shared = lock();
-        // Another detector may have found the same meanwhile (robots stepped in parallel):
-        // keep one set, so that every holder shares it.
-        if let Some(first) = shared.iter().filter_map(Weak::upgrade).find(|c| c.key == candidates.key) {
-            return Ok(first);
-        }
-        shared.push(Arc::downgrade(&candidates));
-        Ok(candidates)
+        let candidates = Arc::new(Candidates { key: key.clone(), found: found? });
+        Ok(SHARED_CANDIDATES.share(candidates, |c| c.key == key))
     }
 
     /// What, besides the map, the candidates depend on.
@@ -230,7 +225,7 @@ impl GoalDetector {
         self.last.as_ref().zip(other.last.as_ref()).is_some_and(|(a, b)| Arc::ptr_eq(a, b))
     }
 
-    fn find_candidates(&mut self, map: &AerialMap) -> Result<Candidates, MappingError> {
+    fn find_candidates(&mut self, map: &AerialMap) -> Result<Found, MappingError> {
         let spec = map.spec;
         let (w, h) = (spec.width, spec.height);
         if map.class.len() != spec.len() {
@@ -240,7 +235,7 @@ impl GoalDetector {
         if !(res.is_finite() && res > 0.0) {
             return Err(MappingError::InconsistentMap(format!("resolution {res} m")));
         }
-        let mut found = Candidates::default();
+        let mut found = Found::default();
         // A goal is placed on a passable cell beside a cluster, so a one-cell map has none (and
         // imageproc's labelling indexes past its forest on a lone foreground pixel).
         if spec.is_empty() || spec.len() == 1 {

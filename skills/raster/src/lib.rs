@@ -2,6 +2,8 @@
 
 mod edt;
 mod fingerprint;
+mod shared;
 
 pub use edt::{FAR, SquaredEdt};
 pub use fingerprint::fingerprint;
+pub use shared::SharedList;
