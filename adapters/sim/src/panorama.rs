@@ -463,6 +463,11 @@ impl PanoramaSensor {
         &self.renderer
     }
 
+    /// Whether a poll at `now` renders (or reuses) a frame.
+    pub fn due(&self, now: Time) -> bool {
+        self.next_due.is_none_or(|due| now >= due)
+    }
+
     /// A new frame if one is due at `now`: rendered at the true pose and base height, stamped
     /// with the odometry pose the robot believes it had.
     pub fn poll(
@@ -486,7 +491,7 @@ impl PanoramaSensor {
         odom_pose: Pose2,
         others: &[Obstacle],
     ) -> Option<PanoramaFrame> {
-        if self.next_due.is_some_and(|due| now < due) {
+        if !self.due(now) {
             return None;
         }
         self.next_due = Some(Time::from_nanos(now.nanos.saturating_add(self.period_ns)));

@@ -6,4 +6,4 @@ mod shared;
 
 pub use edt::{FAR, SquaredEdt};
 pub use fingerprint::fingerprint;
-pub use shared::SharedList;
+pub use shared::{SharedList, SharedMemo};

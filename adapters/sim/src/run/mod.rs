@@ -320,6 +320,11 @@ impl SimRobot {
         }
     }
 
+    /// Whether this robot is a UGV whose panorama is due at `now`.
+    fn panorama_due(&self, now: Time) -> bool {
+        matches!(&self.body, Body::Ugv { sensor, .. } if sensor.due(now))
+    }
+
     fn alive(&self) -> bool {
         self.killed_s.is_none()
     }
@@ -923,9 +928,13 @@ impl Simulation {
         // terrain analysis) touches only that robot and reads the world: done per robot, in
         // parallel when allowed; what observers see is reported afterwards in robot order, so
         // a run and its log are the same either way.
+        // Between panoramas a UGV's sensing is an odometry sample: waking rayon's threads for
+        // it cost more than it saved (0.6 s against 0.3 s serial over the bench mission).
+        let panorama_due = self.robots.iter().any(|r| r.alive() && !r.external && r.panorama_due(now));
         let sensed = {
             let world = &*self.world;
-            for_each_robot(self.options.parallel_robots, &mut self.robots, |r| sense_ugv(r, world, now))
+            let parallel = self.options.parallel_robots && panorama_due;
+            for_each_robot(parallel, &mut self.robots, |r| sense_ugv(r, world, now))
         };
         let world = &self.world;
         for (r, sensed) in self.robots.iter_mut().zip(sensed) {
