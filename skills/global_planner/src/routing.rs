@@ -81,6 +81,9 @@ pub(crate) struct EdgeRouter {
     box_elev: Vec<f32>,
     /// The bytes a route's key is fingerprinted from.
     key_bytes: Vec<u8>,
+    /// The step limit (bits) the clearance and components were computed for, once computed: a
+    /// router serves one map and coverage (the planner replaces it after each update).
+    prepared_for: Option<u32>,
 }
 
 /// Octile move costs in tenths of a cell.
@@ -116,8 +119,10 @@ impl EdgeRouter {
     }
 
     /// Computes the clearance and the step-free components of the covered ground for the map
-    /// and coverage `owner` as they are now; [`EdgeRouter::route`] relies on them.
+    /// and coverage `owner` as they are now. [`EdgeRouter::route`] calls it when it first needs
+    /// them; call it again (or take a fresh router) after the map or the coverage changed.
     pub fn prepare(&mut self, map: &AerialMap, owner: &[u32], max_step_m: f32) {
+        self.prepared_for = Some(max_step_m.to_bits());
         let (w, h) = (map.spec.width as usize, map.spec.height as usize);
         let n = w * h;
         let elev = &map.elevation;
@@ -215,17 +220,23 @@ impl EdgeRouter {
         if !owned(ac, ar) || !owned(bc, br) {
             return None;
         }
-        let component_of = |c: i32, r: i32| self.component.get(r as usize * w as usize + c as usize).copied();
-        if component_of(ac, ar).is_none_or(|k| k == NO_NODE) || component_of(ac, ar) != component_of(bc, br) {
-            return None;
-        }
-        // Past the components, the search reads only the box: robots that grew their graphs
-        // over the same map ask the same questions, and each answer is searched once.
+        // The search reads only the box: robots that grew their graphs over the same map ask
+        // the same questions, and each answer is searched once. (The components only spare a
+        // search that would fail: cells apart on the whole map are apart in the box.)
         let key = self.route_key(map, owner, a, b, reach, max_step_m);
         if let Some(known) = ROUTES.get(&key) {
             return known;
         }
-        let found = self.search(map, owner, a, b, reach, max_step_m);
+        if self.prepared_for != Some(max_step_m.to_bits()) {
+            self.prepare(map, owner, max_step_m);
+        }
+        let component_of = |c: i32, r: i32| self.component.get(r as usize * w as usize + c as usize).copied();
+        let found = if component_of(ac, ar).is_none_or(|k| k == NO_NODE) || component_of(ac, ar) != component_of(bc, br)
+        {
+            None
+        } else {
+            self.search(map, owner, a, b, reach, max_step_m)
+        };
         ROUTES.remember(key, found.clone());
         found
     }
@@ -539,10 +550,11 @@ mod tests {
         assert!(searched.is_some());
         let key = first.route_key(&map, &owner, a, b, 30, 0.1);
         assert_eq!(ROUTES.get(&key), Some(searched.clone()), "remembered");
-        // Another planner asking the same question gets the same answer.
+        // Another planner asking the same question gets the same answer, without computing its
+        // clearance and components.
         let mut second = EdgeRouter::default();
-        second.prepare(&map, &owner, 0.1);
         assert_eq!(second.route(&map, &owner, a, b, 30, 0.1), searched);
+        assert_eq!(second.prepared_for, None);
         // The ramp closed: a new question, searched anew (no route), not the remembered one.
         let mut closed = map.clone();
         for row in 10..13u32 {

@@ -136,8 +136,8 @@ impl GlobalPlanner {
         let max_step = self.params.graph.max_step_m.map(|s| s as f32);
         // Regions lie within the visibility range of their nodes.
         let reach = self.coverage.radius_cells() + 1;
-        // The router's clearance and components are computed once per update, when first needed.
-        let mut router_ready = false;
+        // The router computes its clearance and components once per update, when a route it
+        // is asked for is not remembered from another planner of the process.
         let mut added = 0;
         for (a, b) in pairs {
             if self.edge_of_pair.contains_key(&(a, b)) || self.removed_pairs.contains(&(a, b)) {
@@ -150,10 +150,6 @@ impl GlobalPlanner {
             let (pa, pb) = (pa.position, pb.position);
             let via = match (max_step, map.spec.cell_at(pa), map.spec.cell_at(pb)) {
                 (Some(step), Some(ca), Some(cb)) if EdgeRouter::crosses_step(map, ca, cb, step) => {
-                    if !router_ready {
-                        self.router.prepare(map, &self.owner, step);
-                        router_ready = true;
-                    }
                     self.router.route(map, &self.owner, ca, cb, reach, step).unwrap_or_default()
                 }
                 _ => Vec::new(),
