@@ -9,7 +9,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use spomp_core::{AerialMap, ClassTable, MapTile, Point2, Pose2, Time};
 use spomp_global_planner::synthetic::{self, CityLayout};
-use spomp_global_planner::{GlobalPlanner, GlobalPlannerParams, TrainOutcome};
+use spomp_global_planner::{GlobalPlanner, GlobalPlannerParams, TrainOutcome, forget_shared_routes};
 
 /// CPU time of this thread so far, seconds (user + system, from /proc; 10 ms resolution). The
 /// machine is shared, so wall-clock figures are inflated; CPU time is what one core spends.
@@ -44,10 +44,23 @@ fn construction(c: &mut Criterion) {
         let map = synthetic::city_map(w, h, CityLayout::default(), 1);
         let p = build(w, h);
         eprintln!("{w}×{h}: {:?}", p.graph_stats());
+        // Routes around steps are remembered process-wide (a team's robots search each once):
+        // the plain figure is a planner on its own, every route searched; `_routes_known` is
+        // the next robot of a team on the same map.
         cpu_per_iteration(&format!("update_map_{w}x{h}"), if w > 1000 { 3 } else { 10 }, || {
+            forget_shared_routes();
             black_box(build(w, h));
         });
         g.bench_function(format!("update_map_{w}x{h}"), |b| {
+            b.iter(|| {
+                forget_shared_routes();
+                let mut p =
+                    GlobalPlanner::new(GlobalPlannerParams::default(), ClassTable::default_table()).expect("params");
+                p.update_map(black_box(&map)).expect("map");
+                p
+            })
+        });
+        g.bench_function(format!("update_map_{w}x{h}_routes_known"), |b| {
             b.iter(|| {
                 let mut p =
                     GlobalPlanner::new(GlobalPlannerParams::default(), ClassTable::default_table()).expect("params");

@@ -35,5 +35,6 @@ pub use params::{
 pub use planner::{
     EdgeId, EdgeView, GlobalPath, GlobalPlanner, GraphStats, MapUpdate, NodeId, PathStatus, ScanUpdate, TrainOutcome,
 };
+pub use routing::forget_shared_routes;
 pub use sharing::ScanSharer;
 pub use star::EdgeObservation;

@@ -21,6 +21,12 @@ use crate::coverage::{NO_NODE, bresenham};
 /// answer; a 5-UGV run asks about 1 900 distinct questions, 5 200 in all).
 static ROUTES: SharedMemo<RouteKey, Option<Vec<Point2>>> = SharedMemo::new(16_384);
 
+/// Forgets the routes every planner of the process searched: the next map update searches its
+/// routes anew (for benchmarks of a planner on its own; results never depend on it).
+pub fn forget_shared_routes() {
+    ROUTES.clear();
+}
+
 /// Everything a route search reads (see [`EdgeRouter::route_key`]).
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 struct RouteKey {

@@ -70,6 +70,13 @@ impl<K: Eq + Hash, V: Clone> SharedMemo<K, V> {
         answers.insert(key, value);
     }
 
+    /// Forgets every answer (a benchmark that measures the search itself starts cold).
+    pub fn clear(&self) {
+        if let Some(answers) = self.answers.lock().unwrap_or_else(PoisonError::into_inner).as_mut() {
+            answers.clear();
+        }
+    }
+
     /// Answers remembered now.
     pub fn len(&self) -> usize {
         self.answers.lock().unwrap_or_else(PoisonError::into_inner).as_ref().map_or(0, HashMap::len)
@@ -95,6 +102,8 @@ mod tests {
         // Full: the third answer starts a fresh memo.
         memo.remember(3, "three");
         assert_eq!((memo.get(&1), memo.get(&3), memo.len()), (None, Some("three"), 1));
+        memo.clear();
+        assert!(memo.is_empty());
     }
 
     #[test]
