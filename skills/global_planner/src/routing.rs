@@ -37,14 +37,28 @@ struct RouteKey {
     contents: [u64; 2],
 }
 
-/// The cells a route between `a` and `b` may use: within `reach` of either, inside the map.
-fn search_box(map: &AerialMap, a: Cell, b: Cell, reach: i32) -> (i32, i32, i32, i32) {
-    let (w, h) = (map.spec.width as i32, map.spec.height as i32);
-    let c0 = (a.col.min(b.col) as i32 - reach).max(0);
-    let r0 = (a.row.min(b.row) as i32 - reach).max(0);
-    let c1 = (a.col.max(b.col) as i32 + reach).min(w - 1);
-    let r1 = (a.row.max(b.row) as i32 + reach).min(h - 1);
-    (c0, r0, c1, r1)
+/// One route asked for: from node cell `a` to node cell `b` within `reach` cells of the two,
+/// over steps of at most `max_step_m`.
+#[derive(Clone, Copy, Debug)]
+struct Question {
+    a: Cell,
+    b: Cell,
+    reach: i32,
+    max_step_m: f32,
+}
+
+impl Question {
+    /// The cells the route may use (first and last column and row): within `reach` of either
+    /// end, inside the map.
+    fn search_box(&self, map: &AerialMap) -> (i32, i32, i32, i32) {
+        let (a, b, reach) = (self.a, self.b, self.reach);
+        let (w, h) = (map.spec.width as i32, map.spec.height as i32);
+        let c0 = (a.col.min(b.col) as i32 - reach).max(0);
+        let r0 = (a.row.min(b.row) as i32 - reach).max(0);
+        let c1 = (a.col.max(b.col) as i32 + reach).min(w - 1);
+        let r1 = (a.row.max(b.row) as i32 + reach).min(h - 1);
+        (c0, r0, c1, r1)
+    }
 }
 
 /// Whether the step between two cells' elevations can be driven: unknown elevations are no
@@ -217,8 +231,9 @@ impl EdgeRouter {
         reach: i32,
         max_step_m: f32,
     ) -> Option<Vec<Point2>> {
+        let question = Question { a, b, reach, max_step_m };
         let w = map.spec.width as i32;
-        let (c0, r0, c1, r1) = search_box(map, a, b, reach);
+        let (c0, r0, c1, r1) = question.search_box(map);
         let owned = |c: i32, r: i32| {
             (c0..=c1).contains(&c) && (r0..=r1).contains(&r) && owner[r as usize * w as usize + c as usize] != NO_NODE
         };
@@ -237,11 +252,11 @@ impl EdgeRouter {
         // over the same map ask the same questions, and each answer is searched once. (Keyed
         // after the components test, which is nearly free: a planner alone pays for a key only
         // where it searches anyway.)
-        let key = self.route_key(map, owner, a, b, reach, max_step_m);
+        let key = self.route_key(map, owner, &question);
         if let Some(known) = ROUTES.get(&key) {
             return known;
         }
-        let found = self.search(map, owner, a, b, reach, max_step_m);
+        let found = self.search(map, owner, &question);
         ROUTES.remember(key, found.clone());
         found
     }
@@ -249,9 +264,10 @@ impl EdgeRouter {
     /// What [`Self::route`]'s search reads, as a key: the two cells, the box, the grid, and
     /// fingerprints of the box's coverage and of the elevations the search and the clearance
     /// inside the box depend on (the box widened by the clearance band and the cell beside it).
-    fn route_key(&mut self, map: &AerialMap, owner: &[u32], a: Cell, b: Cell, reach: i32, max_step_m: f32) -> RouteKey {
+    fn route_key(&mut self, map: &AerialMap, owner: &[u32], question: &Question) -> RouteKey {
+        let Question { a, b, reach, max_step_m } = *question;
         let (w, h) = (map.spec.width as i32, map.spec.height as i32);
-        let (c0, r0, c1, r1) = search_box(map, a, b, reach);
+        let (c0, r0, c1, r1) = question.search_box(map);
         let bytes = &mut self.key_bytes;
         bytes.clear();
         for r in r0..=r1 {
@@ -282,17 +298,10 @@ impl EdgeRouter {
     }
 
     /// The A* and string pulling of [`Self::route`], for two covered cells of one component.
-    fn search(
-        &mut self,
-        map: &AerialMap,
-        owner: &[u32],
-        a: Cell,
-        b: Cell,
-        reach: i32,
-        max_step_m: f32,
-    ) -> Option<Vec<Point2>> {
+    fn search(&mut self, map: &AerialMap, owner: &[u32], question: &Question) -> Option<Vec<Point2>> {
+        let Question { a, b, max_step_m, .. } = *question;
         let w = map.spec.width as i32;
-        let (c0, r0, c1, r1) = search_box(map, a, b, reach);
+        let (c0, r0, c1, r1) = question.search_box(map);
         let (bw, bh) = ((c1 - c0 + 1) as usize, (r1 - r0 + 1) as usize);
         self.cost.clear();
         self.cost.resize(bw * bh, UNSEEN);
@@ -553,7 +562,7 @@ mod tests {
         first.prepare(&map, &owner, 0.1);
         let searched = first.route(&map, &owner, a, b, 30, 0.1);
         assert!(searched.is_some());
-        let key = first.route_key(&map, &owner, a, b, 30, 0.1);
+        let key = first.route_key(&map, &owner, &Question { a, b, reach: 30, max_step_m: 0.1 });
         assert_eq!(ROUTES.get(&key), Some(searched.clone()), "remembered");
         // Another planner asking the same question gets the same answer.
         let mut second = EdgeRouter::default();
@@ -579,7 +588,8 @@ mod tests {
         let owner = vec![1u32; 60 * 20];
         let (a, b) = (Cell::new(3, 10), Cell::new(5, 10));
         let mut router = EdgeRouter::default();
-        let key = router.route_key(&map, &owner, a, b, 2, 0.1);
+        let question = |max_step_m| Question { a, b, reach: 2, max_step_m };
+        let key = router.route_key(&map, &owner, &question(0.1));
         let with_step_at = |col: u32| {
             let mut m = map.clone();
             m.elevation[spec.index(Cell::new(col, 10))] = 0.3;
@@ -588,14 +598,14 @@ mod tests {
         // A step within the clearance band (and the cell beside it) of the box may change the
         // clearance inside it: a new key.
         let near = with_step_at(7 + u32::from(CLEARANCE_CELLS) + 1);
-        assert_ne!(router.route_key(&near, &owner, a, b, 2, 0.1), key);
+        assert_ne!(router.route_key(&near, &owner, &question(0.1)), key);
         // Further out it cannot matter: the same key.
         let far = with_step_at(7 + u32::from(CLEARANCE_CELLS) + 3);
-        assert_eq!(router.route_key(&far, &owner, a, b, 2, 0.1), key);
+        assert_eq!(router.route_key(&far, &owner, &question(0.1)), key);
         // Coverage inside the box and the step limit count too.
         let mut walled = owner.clone();
         walled[10 * 60 + 4] = NO_NODE;
-        assert_ne!(router.route_key(&map, &walled, a, b, 2, 0.1), key);
-        assert_ne!(router.route_key(&map, &owner, a, b, 2, 0.2), key);
+        assert_ne!(router.route_key(&map, &walled, &question(0.1)), key);
+        assert_ne!(router.route_key(&map, &owner, &question(0.2)), key);
     }
 }
