@@ -51,23 +51,19 @@ fn construction(c: &mut Criterion) {
             forget_shared_routes();
             black_box(build(w, h));
         });
+        let fresh_planner_on = |map: &AerialMap| {
+            let mut p =
+                GlobalPlanner::new(GlobalPlannerParams::default(), ClassTable::default_table()).expect("params");
+            p.update_map(black_box(map)).expect("map");
+            p
+        };
         g.bench_function(format!("update_map_{w}x{h}"), |b| {
             b.iter(|| {
                 forget_shared_routes();
-                let mut p =
-                    GlobalPlanner::new(GlobalPlannerParams::default(), ClassTable::default_table()).expect("params");
-                p.update_map(black_box(&map)).expect("map");
-                p
+                fresh_planner_on(&map)
             })
         });
-        g.bench_function(format!("update_map_{w}x{h}_routes_known"), |b| {
-            b.iter(|| {
-                let mut p =
-                    GlobalPlanner::new(GlobalPlannerParams::default(), ClassTable::default_table()).expect("params");
-                p.update_map(black_box(&map)).expect("map");
-                p
-            })
-        });
+        g.bench_function(format!("update_map_{w}x{h}_routes_known"), |b| b.iter(|| fresh_planner_on(&map)));
     }
     g.finish();
 }
