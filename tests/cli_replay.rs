@@ -173,3 +173,40 @@ fn a_log_cut_short_replays_to_its_end_and_says_so() {
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("cut short"), "{text}");
 }
+
+/// A log holding only `info`, the run's setup.
+fn log_with_setup(info: &spomp_mcap::RunInfo, path: &Path) {
+    let mut rec = spomp_mcap::Recorder::new(std::fs::File::create(path).unwrap(), Default::default()).unwrap();
+    rec.run_info(info).unwrap();
+    rec.finish().unwrap();
+}
+
+/// Regression (issue 36, item 1): a log whose setup names a file outside the replay's scratch
+/// folder through a `..` after a name (`a/../../…/victim`) used to overwrite that file and still
+/// replay `identical`. It must be refused before anything is written, with exit 2.
+#[test]
+fn a_crafted_log_cannot_write_outside_the_replay_folder() {
+    let out = tempfile::tempdir().unwrap();
+    let log = record(Path::new("missions/visit-all-vehicle-clusters.yaml"), "5", "1", out.path());
+    let recorded = read_replay_log(&std::fs::read(&log).unwrap()).unwrap().info.unwrap();
+    let victim_dir = tempfile::tempdir().unwrap();
+    let victim = victim_dir.path().join("victim.txt");
+    std::fs::write(&victim, "precious").unwrap();
+    let absolute = victim.canonicalize().unwrap();
+    let below_root = absolute.strip_prefix("/").unwrap().to_string_lossy().into_owned();
+    let crafted = out.path().join("crafted.mcap");
+    // The escape through a name is refused as such; an include outside the mission's folder
+    // (leading `..` only) is legitimate and lands inside the scratch folder, deep enough.
+    for (path, refused) in [(format!("a/{}{below_root}", "../".repeat(64)), true), (format!("../../../{below_root}"), false)]
+    {
+        let mut info = recorded.clone();
+        info.files.push((path.clone(), "pwned".into()));
+        log_with_setup(&info, &crafted);
+        let o = spomp().args(["replay", "--robot", "ugv1"]).arg(&crafted).output().unwrap();
+        assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious", "{path}: the victim was overwritten");
+        // The log holds no seam calls: a replay that got past the setup stops there, exit 2 too.
+        assert_eq!(o.status.code(), Some(2), "{path}: {}", String::from_utf8_lossy(&o.stdout));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(err.contains("`..` after a name"), refused, "{path}: {err}");
+    }
+}

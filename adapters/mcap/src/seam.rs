@@ -242,8 +242,8 @@ pub struct RunInfo {
     pub run_seed: u64,
     /// Each robot's seed (of its random stream), by id.
     pub robot_seeds: BTreeMap<String, u64>,
-    /// The mission file and its includes: (path relative to the mission's folder, or absolute
-    /// when outside it; text). The mission comes first.
+    /// The mission file and its includes: (path relative to the mission's folder, with leading
+    /// `..` when outside it; text). The mission comes first. Replay refuses any other shape.
     pub files: Vec<(String, String)>,
     /// How often the mapping robot publishes its map, seconds.
     pub map_publish_period_s: f64,

@@ -130,34 +130,65 @@ pub fn run_info(
     })
 }
 
-/// The mission's files written back into `dir` (the mission deep enough that every `..` of an
-/// include stays inside), loaded and validated.
+/// A recorded file path, checked: some leading `..` (the file lies that many folders above the
+/// mission's) and then plain names only. Anything else (an absolute path, a `..` after a name,
+/// `.`, an empty path) is refused, so a crafted log cannot name a file outside the replay's
+/// folder: `a/../../victim` has the shape of a path inside and resolves outside.
+fn checked_relative(rel: &str) -> Result<(usize, PathBuf), ReplayError> {
+    let refuse = |why: &str| ReplayError::Log(format!("file path `{rel}` in the run metadata {why}"));
+    let mut ups = 0;
+    let mut names = PathBuf::new();
+    for c in Path::new(rel).components() {
+        match c {
+            Component::ParentDir if names.as_os_str().is_empty() => ups += 1,
+            Component::ParentDir => return Err(refuse("climbs out of a folder it named (`..` after a name)")),
+            Component::Normal(name) => names.push(name),
+            Component::CurDir => return Err(refuse("has a `.` component")),
+            Component::RootDir | Component::Prefix(_) => return Err(refuse("is absolute")),
+        }
+    }
+    if names.as_os_str().is_empty() {
+        return Err(refuse("names no file"));
+    }
+    Ok((ups, names))
+}
+
+/// The mission's files written back into `dir`, a fresh folder of the replay's own (the mission
+/// deep enough that every `..` of an include stays inside), loaded and validated. Every path is
+/// checked before anything is written, and each file is created new (never through a link,
+/// never over another).
 pub(crate) fn load_from_info(
     info: &RunInfo,
     dir: &Path,
     registry: &NodeRegistry<RobotRuntime>,
 ) -> Result<LoadedMission, ReplayError> {
-    let depth = info
-        .files
-        .iter()
-        .map(|(p, _)| Path::new(p).components().take_while(|c| *c == Component::ParentDir).count())
-        .max()
-        .unwrap_or(0);
+    let checked: Vec<(usize, PathBuf)> =
+        info.files.iter().map(|(rel, _)| checked_relative(rel)).collect::<Result<_, _>>()?;
+    let depth = checked.iter().map(|(ups, _)| *ups).max().unwrap_or(0);
     let mut mission_dir = dir.to_path_buf();
     for k in 0..depth {
         mission_dir.push(format!("d{k}"));
     }
     let mut mission_path = None;
-    for (rel, text) in &info.files {
-        let rel = Path::new(rel);
-        if rel.is_absolute() || rel.components().any(|c| matches!(c, Component::Prefix(_) | Component::RootDir)) {
-            return Err(ReplayError::Log(format!("file path `{}` in the run metadata is absolute", rel.display())));
+    for ((ups, names), (_, text)) in checked.iter().zip(&info.files) {
+        // `ups` ≤ `depth`: the file's folder is `ups` levels above the mission's, still in `dir`.
+        let mut path = dir.to_path_buf();
+        for k in 0..depth - ups {
+            path.push(format!("d{k}"));
         }
-        let path = mission_dir.join(rel);
+        path.push(names);
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent).map_err(|e| ReplayError::Io(format!("{}: {e}", parent.display())))?;
         }
-        std::fs::write(&path, text).map_err(|e| ReplayError::Io(format!("{}: {e}", path.display())))?;
+        let mut file = std::fs::OpenOptions::new().write(true).create_new(true).open(&path).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::AlreadyExists {
+                ReplayError::Log(format!("the run metadata names file `{}` twice", names.display()))
+            } else {
+                ReplayError::Io(format!("{}: {e}", path.display()))
+            }
+        })?;
+        std::io::Write::write_all(&mut file, text.as_bytes())
+            .map_err(|e| ReplayError::Io(format!("{}: {e}", path.display())))?;
         mission_path.get_or_insert(path);
     }
     let path = mission_path.ok_or_else(|| ReplayError::Log("the run metadata holds no mission file".into()))?;
@@ -170,4 +201,24 @@ pub(crate) fn load_from_info(
         )));
     }
     Ok(loaded)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::checked_relative;
+    use std::path::PathBuf;
+
+    #[test]
+    fn recorded_paths_inside_the_mission_tree_are_kept() {
+        assert_eq!(checked_relative("mission.yaml").unwrap(), (0, PathBuf::from("mission.yaml")));
+        assert_eq!(checked_relative("subtrees/a.yaml").unwrap(), (0, PathBuf::from("subtrees/a.yaml")));
+        assert_eq!(checked_relative("../../lib/x.yaml").unwrap(), (2, PathBuf::from("lib/x.yaml")));
+    }
+
+    #[test]
+    fn recorded_paths_that_could_leave_the_replay_folder_are_refused() {
+        for bad in ["a/../../victim", "a/../b", "x/y/../../../etc/passwd", "/etc/passwd", "./a", "..", ""] {
+            assert!(checked_relative(bad).is_err(), "{bad:?} must be refused");
+        }
+    }
 }
