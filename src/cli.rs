@@ -273,6 +273,10 @@ enum WorldCommand {
         /// Number of start poses.
         #[arg(long, default_value_t = 4)]
         starts: usize,
+        /// The class whose clusters are the world's vehicle clusters (the goals a detection
+        /// mission finds), as the table names it: a site's table may call it `car`.
+        #[arg(long, default_value = "vehicle", value_name = "NAME")]
+        vehicle_class: String,
         /// Import even if the resolution looks implausible or most colours match no class.
         #[arg(long)]
         force: bool,
@@ -333,6 +337,7 @@ fn run_world(action: WorldCommand) -> anyhow::Result<ExitCode> {
             colour_tolerance,
             start_near,
             starts,
+            vehicle_class,
             force,
             out,
             json,
@@ -351,6 +356,7 @@ fn run_world(action: WorldCommand) -> anyhow::Result<ExitCode> {
                 colour_tolerance,
                 start_near,
                 starts,
+                vehicle_class,
                 force,
                 out,
                 json,

@@ -101,6 +101,8 @@ pub struct ImportArgs {
     pub start_near: Option<Point2>,
     /// How many start poses to place.
     pub starts: usize,
+    /// The class whose clusters are the world's vehicle clusters.
+    pub vehicle_class: String,
     /// Import even when the resolution looks implausible or most colours match no class.
     pub force: bool,
     /// Output world folder.
@@ -518,9 +520,9 @@ fn resample(
 }
 
 /// Vehicle-cluster centres as the goal detector sees them with its defaults in the whole map;
-/// none when the table has no `vehicle` class.
-fn vehicle_clusters(map: &AerialMap, table: &ClassTable) -> Vec<Point2> {
-    let params = spomp_mapping::GoalDetectionParams::default();
+/// none when the table has no class `vehicle_class`.
+fn vehicle_clusters(map: &AerialMap, table: &ClassTable, vehicle_class: &str) -> Vec<Point2> {
+    let params = spomp_mapping::GoalDetectionParams { class: vehicle_class.to_string(), ..Default::default() };
     if table.by_name(&params.class).is_none() {
         return Vec::new();
     }
@@ -598,7 +600,7 @@ pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
         map.elevation[i] = classes.heights_m[class as usize];
     }
     map.version = 1;
-    let clusters = vehicle_clusters(&map, &classes.table);
+    let clusters = vehicle_clusters(&map, &classes.table, &a.vehicle_class);
     let mut world = World::new(map, classes.table, WorldMeta { vehicle_clusters: clusters, ..WorldMeta::default() })
         .context("building the world")?;
     let near = a.start_near.unwrap_or(spec.origin);
@@ -705,7 +707,7 @@ pub fn import(a: &ImportArgs) -> Result<ExitCode> {
         }
     }
     if world.meta.vehicle_clusters.is_empty()
-        && let Some(vehicle) = world.classes().by_name("vehicle")
+        && let Some(vehicle) = world.classes().by_name(&a.vehicle_class)
         && world.count_class(vehicle.index) > 0
     {
         eprintln!(

@@ -1,4 +1,4 @@
-//! The world stage of `spomp validate` (DESIGN.md §3: parse → schema → wiring → team → world),
+//! The world stage of `spomp validate` (parse → schema → wiring → team → world),
 //! for a mission that names a world folder (`sim: { world: { dir: … } } }`): the world loads;
 //! every robot's start pose is in it and, for a UGV, on ground it can use; a detection mission's
 //! world holds clusters of the goal class; the points a mission gives (manual goals, literal
@@ -6,10 +6,12 @@
 //!
 //! Errors (the mission cannot run as written): the world does not load; a start pose is off the
 //! map, or a UGV's is on an impassable class or where the simulator's UGV cannot stand; the
-//! detected class is not in the world's class table. Warnings (it runs, but probably not as
-//! meant): the world has no cluster of the goal class the detector would find, so a mission that
-//! ends when all goals are visited never completes; a point the mission names lies outside the
-//! world. Generated worlds (`generate:`) are left to `--dry-run`: they exist only per seed.
+//! detected class, or every ground class a cross-view robot localizes on, is not in the world's
+//! class table (after the mission's `classes:` mapping, which must name the table's classes).
+//! Warnings (it runs, but probably not as meant): some of a localizer's ground classes or
+//! weighted classes are not in the table (they are left out); the world has no cluster of the
+//! goal class the detector would find, so a mission that ends when all goals are visited never
+//! completes; a point the mission names lies outside the world. Generated worlds (`generate:`) are left to `--dry-run`: they exist only per seed.
 //!
 //! The stage lives in the command line, not in the mission language, because loading a world is
 //! the simulator's business and the language stays below the adapters.
@@ -24,6 +26,7 @@ use spomp_behaviors::mission::yaml::{self, Loc, Node};
 use spomp_behaviors::mission::{Diagnostic, LoadOptions, LoadedMission, Stage};
 use spomp_core::classes::IMPASSABLE_RANK;
 use spomp_core::{Point2, Pose2, RobotKind};
+use spomp_robot::class_names::ClassNames;
 use spomp_sim::{Ugv, UgvParams, World};
 
 /// One step of a path into the mission's YAML: a mapping key or a list index.
@@ -47,6 +50,36 @@ fn locate(root: Option<&Node>, path: &[Step<'_>]) -> Loc {
         }
     }
     node.loc
+}
+
+/// A step of a field path as [`ClassNote`](spomp_robot::class_names::ClassNote)s write them.
+enum OwnedStep {
+    Key(String),
+    Index(usize),
+}
+
+impl OwnedStep {
+    fn as_step(&self) -> Step<'_> {
+        match self {
+            OwnedStep::Key(k) => Step::Key(k),
+            OwnedStep::Index(i) => Step::Index(*i),
+        }
+    }
+}
+
+/// `team[1].localization.ground_classes` as steps into the YAML.
+fn field_steps(field: &str) -> Vec<OwnedStep> {
+    let mut steps = Vec::new();
+    for part in field.split('.') {
+        let (key, rest) = part.split_once('[').unwrap_or((part, ""));
+        steps.push(OwnedStep::Key(key.to_string()));
+        for index in rest.split('[') {
+            if let Ok(i) = index.trim_end_matches(']').parse() {
+                steps.push(OwnedStep::Index(i));
+            }
+        }
+    }
+    steps
 }
 
 /// Runs the world stage on a mission that passed the earlier stages; returns its diagnostics
@@ -129,53 +162,57 @@ pub fn check(loaded: &LoadedMission, options: &LoadOptions) -> Vec<Diagnostic> {
         }
     }
 
+    // Class names the robots' skills use, as the world's table spells them.
+    let names = ClassNames::new(mission, world.classes());
+    let mut notes = names.mapping_notes();
+    for i in 0..mission.team.len() {
+        for note in names.robot(mission, i).1 {
+            if !notes.contains(&note) {
+                notes.push(note);
+            }
+        }
+    }
+    for note in notes {
+        let steps = field_steps(&note.field);
+        let steps: Vec<Step<'_>> = steps.iter().map(|s| s.as_step()).collect();
+        let diagnostic = at(&steps, &note.field, note.message);
+        out.push(if note.error { diagnostic } else { diagnostic.into_warning() });
+    }
+
     // Goals the world can offer.
     if let Some(goals) = &mission.goals {
         if let Some(detect) = &goals.detect {
             let path = [Step::Key("goals"), Step::Key("detect")];
-            match world.classes().by_name(&detect.class) {
-                None => out.push(at(
-                    &path,
-                    "goals.detect.class",
-                    format!(
-                        "the world's class table has no class `{}` (it has: {})",
-                        detect.class,
-                        world.classes().names().join(", ")
-                    ),
-                )),
-                Some(class) => {
-                    let never = if mission.complete_when == CompleteWhen::AllGoalsVisited && goals.manual.is_empty() {
-                        "; the mission ends when all goals are visited, so it can never complete"
-                    } else {
-                        ""
-                    };
-                    let cells = world.count_class(class.index);
-                    if cells == 0 {
-                        out.push(
-                            at(
-                                &path,
-                                "goals.detect.class",
-                                format!(
-                                    "the world has no `{}` cells: detection will find no goal{never}",
-                                    detect.class
-                                ),
-                            )
-                            .into_warning(),
-                        );
-                    } else if detectable_clusters(&world, detect) == Some(0) {
-                        out.push(
-                            at(
-                                &path,
-                                "goals.detect",
-                                format!(
-                                    "the world has {cells} `{}` cells but no cluster the detector accepts (minimum \
-                                     size, placement region): detection will find no goal{never}",
-                                    detect.class
-                                ),
-                            )
-                            .into_warning(),
-                        );
-                    }
+            // A class the table lacks is a class note above.
+            if let Some(class) = names.resolve(&detect.class).and_then(|n| world.classes().by_name(&n)) {
+                let never = if mission.complete_when == CompleteWhen::AllGoalsVisited && goals.manual.is_empty() {
+                    "; the mission ends when all goals are visited, so it can never complete"
+                } else {
+                    ""
+                };
+                let cells = world.count_class(class.index);
+                if cells == 0 {
+                    out.push(
+                        at(
+                            &path,
+                            "goals.detect.class",
+                            format!("the world has no `{}` cells: detection will find no goal{never}", detect.class),
+                        )
+                        .into_warning(),
+                    );
+                } else if detectable_clusters(&world, detect, &class.name) == Some(0) {
+                    out.push(
+                        at(
+                            &path,
+                            "goals.detect",
+                            format!(
+                                "the world has {cells} `{}` cells but no cluster the detector accepts (minimum \
+                                 size, placement region): detection will find no goal{never}",
+                                detect.class
+                            ),
+                        )
+                        .into_warning(),
+                    );
                 }
             }
         }
@@ -246,10 +283,14 @@ fn collect_leaves<'a>(ir: &'a Ir, out: &mut Vec<&'a Ir>) {
 
 /// How many clusters the goal detector finds in the whole world with the mission's settings;
 /// `None` when the detector cannot be set up (its settings are checked by the team stage).
-fn detectable_clusters(world: &World, detect: &spomp_behaviors::mission::schema::DetectSpec) -> Option<usize> {
+fn detectable_clusters(
+    world: &World,
+    detect: &spomp_behaviors::mission::schema::DetectSpec,
+    class: &str,
+) -> Option<usize> {
     let defaults = spomp_mapping::GoalDetectionParams::default();
     let params = spomp_mapping::GoalDetectionParams {
-        class: detect.class.clone(),
+        class: class.to_string(),
         merge_distance_m: detect.merge_distance_m.unwrap_or(defaults.merge_distance_m),
         min_size_m: detect.min_size_m.unwrap_or(defaults.min_size_m),
         placement_region_m: detect.placement_region_m.unwrap_or(defaults.placement_region_m),

@@ -223,3 +223,83 @@ fn crc32(bytes: &[u8]) -> u32 {
     }
     !crc
 }
+
+/// Issue 33: a site's class table spells the classes its own way (`grass/sidewalk`, `car`). The
+/// mission maps what differs (`classes: { vehicle: car }`), spellings that differ only in case
+/// and punctuation match as they are, and the run is the run of the same site with the built-in
+/// names: cross-view localization works (it used to fail every update on `grass/sidewalk`), the
+/// same clusters are found and visited. Without the mapping, `validate` says where to add it.
+#[test]
+fn a_site_table_with_its_own_class_names_runs_as_the_built_in_names_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let builtin = std::fs::read_to_string(campus().join("campus-classes.yaml")).unwrap();
+    let site =
+        builtin.replace("name: grass_sidewalk,", "name: \"grass/sidewalk\",").replace("name: vehicle,", "name: car,");
+    assert_ne!(site, builtin);
+    let site_classes = dir.path().join("site-classes.yaml");
+    std::fs::write(&site_classes, &site).unwrap();
+    let import_as = |classes: &Path, out: &str, extra: &[&str]| {
+        let o = spomp()
+            .args(["world", "import"])
+            .arg(campus().join("campus.png"))
+            .arg("--classes")
+            .arg(classes)
+            .args(["--resolution-m", "0.5"])
+            .args(extra)
+            .arg("--out")
+            .arg(dir.path().join(out))
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    import_as(&campus().join("campus-classes.yaml"), "builtin", &[]);
+    import_as(&site_classes, "site", &["--vehicle-class", "car"]);
+    // The UGVs localize themselves (cross-view), which uses the class names most.
+    let mission = std::fs::read_to_string(campus().join("campus-mission.yaml"))
+        .unwrap()
+        .replace("localization: { mode: ground_truth, noise_m: 0.05 }", "localization: { mode: cross_view }");
+    assert!(mission.contains("mode: cross_view"));
+    let builtin_mission = dir.path().join("builtin.yaml");
+    std::fs::write(&builtin_mission, mission.replace("dir: world }", "dir: builtin }")).unwrap();
+    let unmapped = dir.path().join("unmapped.yaml");
+    std::fs::write(&unmapped, mission.replace("dir: world }", "dir: site }")).unwrap();
+    let site_mission = dir.path().join("site.yaml");
+    std::fs::write(
+        &site_mission,
+        format!("{}\nclasses: {{ vehicle: car }}\n", mission.replace("dir: world }", "dir: site }")),
+    )
+    .unwrap();
+
+    let v = spomp().args(["validate", "--json"]).arg(&unmapped).output().unwrap();
+    assert_eq!(v.status.code(), Some(1), "{}", String::from_utf8_lossy(&v.stdout));
+    let diags: Vec<serde_json::Value> = serde_json::from_slice(&v.stdout).unwrap();
+    let errors: Vec<&serde_json::Value> = diags.iter().filter(|d| d["severity"] == "error").collect();
+    assert_eq!(errors.len(), 1, "{diags:?}");
+    assert_eq!(errors[0]["node_path"], "goals.detect.class", "{diags:?}");
+    assert!(errors[0]["message"].as_str().unwrap().contains("map it in `classes:`"), "{diags:?}");
+    let v = spomp().args(["validate", "--json"]).arg(&site_mission).output().unwrap();
+    assert_eq!(v.status.code(), Some(0), "{}", String::from_utf8_lossy(&v.stdout));
+    let diags: Vec<serde_json::Value> = serde_json::from_slice(&v.stdout).unwrap();
+    assert!(diags.is_empty(), "every name resolves: {diags:?}");
+
+    let run = |m: &Path, out: &str| -> serde_json::Value {
+        let o = spomp()
+            .args(["sim", "--json", "--no-mcap", "--seed", "1", "--out"])
+            .arg(dir.path().join(out))
+            .arg(m)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+        let mut r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let run = r["runs"][0].take();
+        run
+    };
+    let (a, b) = (run(&builtin_mission, "out-builtin"), run(&site_mission, "out-site"));
+    assert_eq!(b["outcome"], "complete", "{b}");
+    assert_eq!(b["clusters"]["visited"], 3, "{b}");
+    for key in ["clusters", "goals", "goals_visited", "robots", "end_s", "problems"] {
+        assert_eq!(a[key], b[key], "`{key}` differs between the built-in names and the site's");
+    }
+    let ugv = b["robots"].as_array().unwrap().iter().find(|r| r["id"] == "ugv1").unwrap();
+    assert!(ugv["localization_error_m"]["median"].as_f64().unwrap() < 1.0, "{ugv}");
+}

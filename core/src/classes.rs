@@ -44,6 +44,24 @@ pub enum ClassTableError {
     Invalid(String),
 }
 
+/// The form of a class name that spellings of one name share: lower case, every run of
+/// characters other than letters and digits one `_`, none at either end (`Grass/Sidewalk ` →
+/// `grass_sidewalk`).
+pub fn class_key(name: &str) -> String {
+    let mut key = String::with_capacity(name.len());
+    for c in name.chars() {
+        if c.is_alphanumeric() {
+            key.extend(c.to_lowercase());
+        } else if !key.is_empty() && !key.ends_with('_') {
+            key.push('_');
+        }
+    }
+    while key.ends_with('_') {
+        key.pop();
+    }
+    key
+}
+
 /// The class table.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -100,9 +118,20 @@ impl ClassTable {
         self.classes.iter().find(|c| c.index == index)
     }
 
-    /// The class with this name.
+    /// The class with this name: the exact name, else the one class whose name has the same
+    /// [`class_key`] (so `grass/sidewalk`, `Grass Sidewalk` and `grass_sidewalk` are one name,
+    /// as mapping pipelines spell classes differently). Two classes with the same key and
+    /// neither exact: none, the name is ambiguous.
     pub fn by_name(&self, name: &str) -> Option<&ClassInfo> {
-        self.classes.iter().find(|c| c.name == name)
+        if let Some(exact) = self.classes.iter().find(|c| c.name == name) {
+            return Some(exact);
+        }
+        let key = class_key(name);
+        let mut same = self.classes.iter().filter(|c| class_key(&c.name) == key);
+        match (same.next(), same.next()) {
+            (Some(only), None) if !key.is_empty() => Some(only),
+            _ => None,
+        }
     }
 
     /// The class whose raster colour is `rgb`.
@@ -155,6 +184,32 @@ mod tests {
         assert_eq!(t.rank(UNKNOWN_CLASS), 5);
         assert!(t.is_ignored(5));
         assert_eq!(t.easiest_first()[..3], [0, 6, 3]);
+    }
+
+    #[test]
+    fn names_are_found_however_a_mapping_pipeline_spells_them() {
+        let t = ClassTable::from_yaml(
+            "classes:\n  - {index: 0, name: grass/sidewalk, rank: 2, color: [0,0,0]}\n  \
+             - {index: 1, name: Tree Trunk, rank: 5, color: [1,1,1]}\n  - {index: 2, name: road, rank: 0, color: [2,2,2]}\n",
+        )
+        .unwrap();
+        assert_eq!(t.by_name("grass_sidewalk").map(|c| c.index), Some(0));
+        assert_eq!(t.by_name("Grass Sidewalk").map(|c| c.index), Some(0));
+        assert_eq!(t.by_name("tree_trunk").map(|c| c.index), Some(1));
+        assert_eq!(t.by_name("road").map(|c| c.index), Some(2));
+        assert_eq!(t.by_name("sidewalk"), None);
+        assert_eq!(t.by_name("//"), None);
+        assert_eq!(class_key(" Grass/ Sidewalk- "), "grass_sidewalk");
+    }
+
+    #[test]
+    fn an_ambiguous_spelling_finds_no_class_but_an_exact_name_does() {
+        let t = ClassTable::from_yaml(
+            "classes:\n  - {index: 0, name: Road, rank: 0, color: [0,0,0]}\n  - {index: 1, name: road!, rank: 1, color: [1,1,1]}\n",
+        )
+        .unwrap();
+        assert_eq!(t.by_name("road"), None);
+        assert_eq!(t.by_name("road!").map(|c| c.index), Some(1));
     }
 
     #[test]

@@ -16,6 +16,7 @@
 //!   [`registry`], the engine's node types plus these.
 
 pub mod checks;
+pub mod class_names;
 pub mod nodes;
 mod robot;
 pub mod runtime;

@@ -105,6 +105,7 @@ impl Robot {
         let start = setup.config.start;
         let robot_id = setup.config.id.clone();
         let mut runtime = RobotRuntime::from_config(setup.config)?;
+        runtime.note_problems(setup.warnings);
         if let Some(goals) = &mission.goals {
             for (k, g) in goals.manual.iter().enumerate() {
                 runtime

@@ -11,6 +11,7 @@ use spomp_localization::LocalizationParams;
 use spomp_mapping::{CompressionParams, GoalDetectionParams, PngLevel};
 use spomp_teamstate::TeamStateParams;
 
+use crate::class_names::ClassNames;
 use crate::runtime::{LocalizationSetup, RuntimeConfig, UpdateSchedule};
 use crate::settings::{NavigationSettings, SettingsError};
 
@@ -68,6 +69,9 @@ pub struct RobotSetup {
     pub role: String,
     /// Tick rate of its tree, per second.
     pub tick_hz: f64,
+    /// What the setup had to leave out (class names the area's table lacks), each with the
+    /// mission field that named it: the robot reports them once as problems.
+    pub warnings: Vec<String>,
 }
 
 /// Why a mission's robot could not be set up.
@@ -79,6 +83,14 @@ pub enum SetupError {
     /// A setting is invalid (the skill's own validation).
     #[error(transparent)]
     Settings(#[from] SettingsError),
+    /// A class the robot's skills need is not in the area's class table.
+    #[error("{field}: {message}")]
+    Class {
+        /// The mission field that names it.
+        field: String,
+        /// What is wrong.
+        message: String,
+    },
 }
 
 /// The seed of one robot's random stream from a run's seed: distinct, reproducible streams per
@@ -104,11 +116,18 @@ impl RobotSetup {
         let start = Pose2::new(spec.start.x_m, spec.start.y_m, spec.start.yaw_deg.to_radians());
         let goals = mission.goals.as_ref();
         let team = team_params(mission);
+        let names = ClassNames::new(mission, &area.classes);
+        let (classes, mut notes) = names.robot(mission, index);
+        notes.extend(names.mapping_notes());
+        if let Some(e) = notes.iter().find(|n| n.error) {
+            return Err(SetupError::Class { field: e.field.clone(), message: e.message.clone() });
+        }
+        let warnings = notes.iter().map(|n| format!("{}: {}", n.field, n.message)).collect();
         let detection = goals.and_then(|g| g.detect.as_ref()).and_then(|d| {
             let detects = matches!(spec.kind, RobotKind::Ugv | RobotKind::Basestation);
             let defaults = GoalDetectionParams::default();
             detects.then(|| GoalDetectionParams {
-                class: d.class.clone(),
+                class: classes.goal_class.clone().unwrap_or_else(|| d.class.clone()),
                 merge_distance_m: d.merge_distance_m.unwrap_or(defaults.merge_distance_m),
                 min_size_m: d.min_size_m.unwrap_or(defaults.min_size_m),
                 placement_region_m: d.placement_region_m.unwrap_or(defaults.placement_region_m),
@@ -126,6 +145,8 @@ impl RobotSetup {
                         kld_sampling: l
                             .and_then(|l| l.kld_sampling)
                             .unwrap_or_else(|| LocalizationParams::default().kld_sampling),
+                        ground_classes: classes.ground_classes.clone(),
+                        class_weights: classes.class_weights.clone(),
                         ..LocalizationParams::default()
                     }),
                     prior_sigma_m: l.map(|l| l.prior_sigma_m).unwrap_or(2.0),
@@ -140,7 +161,14 @@ impl RobotSetup {
         let nav = if spec.kind == RobotKind::Ugv {
             let layers: Vec<&serde_json::Value> =
                 role.and_then(|r| r.navigation.as_ref()).into_iter().chain(spec.navigation.as_ref()).collect();
-            Some(NavigationSettings::resolve(&layers)?.into_nav_params())
+            let mut nav = NavigationSettings::resolve(&layers)?.into_nav_params();
+            // The planner reports a name its table lacks; a mapped name is the table's.
+            for name in &mut nav.global.graph.class_order {
+                if let Some(resolved) = names.resolve(name) {
+                    *name = resolved;
+                }
+            }
+            Some(nav)
         } else {
             None
         };
@@ -162,7 +190,14 @@ impl RobotSetup {
             map_compression: CompressionParams { level: PngLevel::Fast },
             prior_map: area.prior_map.clone(),
         };
-        Ok(RobotSetup { index, config, pose_input, role: spec.role.clone(), tick_hz: role.map_or(10.0, |r| r.tick_hz) })
+        Ok(RobotSetup {
+            index,
+            config,
+            pose_input,
+            role: spec.role.clone(),
+            tick_hz: role.map_or(10.0, |r| r.tick_hz),
+            warnings,
+        })
     }
 }
 

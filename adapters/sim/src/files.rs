@@ -115,9 +115,11 @@ impl Default for DerivedElevationParams {
 }
 
 impl DerivedElevationParams {
-    /// Height for a class name; classes not listed (road, gravel, …) lie at 0.
+    /// Height for a class name, however the table spells it (`grass/sidewalk` is
+    /// `grass_sidewalk`: [`spomp_core::classes::class_key`]); classes not listed (road, gravel,
+    /// …) lie at 0.
     pub fn height_of(&self, class_name: &str) -> f32 {
-        match class_name {
+        match spomp_core::classes::class_key(class_name).as_str() {
             "building" => self.building_m,
             "vehicle" => self.vehicle_m,
             "grass_sidewalk" => self.grass_sidewalk_m,

@@ -218,6 +218,7 @@ pub fn load_mission_str<E: 'static>(
             "time_limit_s" => v.deserialize::<f64>().map(|_| ()).map_err(Some),
             "comms" => v.deserialize::<super::schema::CommsSpec>().map(|_| ()).map_err(Some),
             "sim" => v.deserialize::<Option<super::schema::SimSpec>>().map(|_| ()).map_err(Some),
+            "classes" => v.deserialize::<BTreeMap<String, String>>().map(|_| ()).map_err(Some),
             other => {
                 const KNOWN: &[&str] = &[
                     "mission",
@@ -231,6 +232,7 @@ pub fn load_mission_str<E: 'static>(
                     "time_limit_s",
                     "comms",
                     "sim",
+                    "classes",
                 ];
                 let hint = super::compile::closest(other, KNOWN)
                     .map(|c| format!(" (did you mean `{c}`?)"))

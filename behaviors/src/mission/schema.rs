@@ -44,6 +44,12 @@ pub struct MissionFile {
     /// Settings for `spomp sim` and dry runs.
     #[serde(default)]
     pub sim: Option<SimSpec>,
+    /// Class names as the world's class table spells them, for the names the mission and the
+    /// skills use: `{ grass_sidewalk: sidewalk, vehicle: car }`. Names not listed are looked up
+    /// as they are (spellings that differ only in case and punctuation, `grass/sidewalk`, match
+    /// without a listing).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub classes: BTreeMap<String, String>,
 }
 
 /// A behaviour-tree node: a mapping with one key, the node type, whose value holds the node's
@@ -126,6 +132,16 @@ pub struct LocalizationSpec {
     /// spomp-localization's parameters).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kld_sampling: Option<bool>,
+    /// `cross_view` only: the classes the robot stands on (matched to the aerial map as ground;
+    /// re-localisation spreads particles over them); unset: the localizer's default (road,
+    /// grass_sidewalk, gravel). Names as in `classes:` or the world's class table.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ground_classes: Option<Vec<String>>,
+    /// `cross_view` only: how much each class counts when a view is matched to the aerial map
+    /// (0 = not at all); unset: the localizer's defaults. A class the world lacks is dropped
+    /// with a warning.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub class_weights: Option<BTreeMap<String, f64>>,
 }
 
 fn default_prior_position() -> f64 {

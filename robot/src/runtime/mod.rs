@@ -676,6 +676,11 @@ impl RobotRuntime {
         &self.problems
     }
 
+    /// Adds problems met outside the runtime (its setup's warnings), reported with the others.
+    pub(crate) fn note_problems(&mut self, problems: impl IntoIterator<Item = String>) {
+        self.problems.extend(problems);
+    }
+
     /// Takes the problems met since the last call.
     pub fn take_problems(&mut self) -> Vec<String> {
         std::mem::take(&mut self.problems)

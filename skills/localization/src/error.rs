@@ -6,10 +6,12 @@ pub enum LocalizationError {
     /// A parameter is out of range.
     #[error("invalid localization parameters: {0}")]
     InvalidParams(String),
-    /// A class named in the parameters is not in the class table.
-    #[error("class `{name}` named in the localization parameters is not in the class table (classes: {known})")]
+    /// None of the ground classes named in the parameters is in the class table.
+    #[error(
+        "none of the ground classes `{name}` of the localization parameters is in the class table (classes: {known})"
+    )]
     UnknownClassName {
-        /// The name that was not found.
+        /// The ground class names, none of which was found.
         name: String,
         /// The names the table has.
         known: String,

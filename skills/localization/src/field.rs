@@ -44,16 +44,22 @@ pub(crate) struct ClassSlots {
 }
 
 impl ClassSlots {
-    /// Resolves the class names of the parameters against a table.
+    /// Resolves the class names of the parameters against a table. A name the table lacks is
+    /// left out (a weighted class counts 0), so that a site's table that lacks one class
+    /// degrades the match instead of failing every update; only a table with none of the
+    /// ground classes is an error (nothing to stand on, nothing to localize against). Callers
+    /// that want to report what was left out resolve the names first (`spomp-robot` does, and
+    /// reports them once).
     pub fn resolve(params: &LocalizationParams, table: &ClassTable) -> Result<Self, LocalizationError> {
-        let unknown = |name: &str| LocalizationError::UnknownClassName {
-            name: name.to_string(),
-            known: table.names().join(", "),
-        };
         let mut ground_class = [false; 256];
-        for name in &params.ground_classes {
-            let info = table.by_name(name).ok_or_else(|| unknown(name))?;
+        for info in params.ground_classes.iter().filter_map(|name| table.by_name(name)) {
             ground_class[info.index as usize] = true;
+        }
+        if !ground_class.contains(&true) {
+            return Err(LocalizationError::UnknownClassName {
+                name: params.ground_classes.join(", "),
+                known: table.names().join(", "),
+            });
         }
         let mut slots = ClassSlots {
             slot_of_class: [NO_SLOT; 256],
@@ -63,7 +69,7 @@ impl ClassSlots {
             ground_class,
         };
         for (name, &weight) in &params.class_weights {
-            let info = table.by_name(name).ok_or_else(|| unknown(name))?;
+            let Some(info) = table.by_name(name) else { continue };
             if weight <= 0.0 || info.ignored || info.index == UNKNOWN_CLASS {
                 continue;
             }
@@ -642,5 +648,19 @@ mod tests {
         assert!(matches!(MatchField::build(&broken, &table(), &params), Err(LocalizationError::InvalidMap(_))));
         let bad_names = LocalizationParams { ground_classes: vec!["lava".into()], ..Default::default() };
         assert!(matches!(MatchField::build(&a, &table(), &bad_names), Err(LocalizationError::UnknownClassName { .. })));
+    }
+
+    #[test]
+    fn a_table_that_lacks_some_classes_degrades_the_match_instead_of_failing() {
+        let params = LocalizationParams {
+            ground_classes: vec!["road".into(), "lava".into()],
+            class_weights: [("road".to_string(), 1.0), ("building".to_string(), 1.5), ("unobtainium".to_string(), 2.0)]
+                .into_iter()
+                .collect(),
+            ..Default::default()
+        };
+        let slots = ClassSlots::resolve(&params, &table()).unwrap();
+        assert_eq!(slots.len(), 2, "the missing class has no slot (weight 0)");
+        assert!(slots.ground_class[table().by_name("road").unwrap().index as usize]);
     }
 }
