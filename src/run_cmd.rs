@@ -39,6 +39,15 @@ pub struct RunArgs {
     /// Take time from `/clock` (a simulator's), whatever the mission says.
     #[arg(long)]
     pub use_sim_time: bool,
+    /// Follow a `spomp sim --ros2 --lockstep` farm: take each step's inputs from it, tick, and
+    /// answer, so the farm's time advances only when this robot is done (implies
+    /// --use-sim-time; the robot's --seed must be the farm's).
+    #[arg(long)]
+    pub lockstep: bool,
+    /// With --lockstep: give the farm up for gone when it sends nothing for this long once it
+    /// has started, wall seconds.
+    #[arg(long, default_value_t = 120.0, value_parser = crate::args::wall_seconds, requires = "lockstep")]
+    pub lockstep_timeout_s: f64,
     /// Record every input and output to this MCAP log (the channels of `spomp sim`'s logs).
     #[arg(long, value_name = "LOG.mcap")]
     pub record: Option<PathBuf>,
@@ -88,7 +97,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     if !args.interfaces.is_empty() {
         settings.dds.interfaces = args.interfaces.clone();
     }
-    settings.use_sim_time |= args.use_sim_time;
+    settings.use_sim_time |= args.use_sim_time || args.lockstep;
     if args.topics {
         for (role, name) in settings.topics.iter() {
             out!("{role:<18} {name}");
@@ -97,6 +106,9 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         return Ok(ExitCode::SUCCESS);
     }
     let seed = args.seed.or(mission.sim.as_ref().and_then(|s| s.seed)).unwrap_or(1);
+    if args.lockstep {
+        settings.lockstep = Some(spomp_ros2::settings::LockstepSettings { seed, timeout_s: args.lockstep_timeout_s });
+    }
     // The operating area (map grid, class table, prior map) is the mission's world, as in `sim`.
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the operating area of `{}`", mission.mission))?;
@@ -121,7 +133,13 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     };
     let mut robot =
         Robot::from_setup(&loaded, setup, registry).with_context(|| format!("setting up robot `{}`", args.robot))?;
+    let simulated_session = robot.team().session();
     let link = crate::team_link::set_up(&args.team_link, mission, &args.robot, &mut robot)?;
+    if args.lockstep && link.link.is_none() {
+        // Over the farm's radio the robot is one of the simulator's: its session is theirs (a
+        // wall-clock session changes every message's bytes, hence what a link's budget carries).
+        robot.set_team_session(simulated_session);
+    }
     if let Some(info) = run_info.as_mut() {
         info.team_session = robot.team().session();
         info.team_secured = robot.team().security().is_some();
@@ -160,7 +178,11 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
             } else {
                 settings.dds.interfaces.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
             },
-            if settings.use_sim_time { "time from /clock" } else { "wall-clock time" },
+            match (&settings.lockstep, settings.use_sim_time) {
+                (Some(_), _) => "in the farm's lockstep",
+                (None, true) => "time from /clock",
+                (None, false) => "wall-clock time",
+            },
         );
     }
     let (report, error) = match (&args.record, live) {
