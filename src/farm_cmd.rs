@@ -85,6 +85,8 @@ pub struct FarmDrivers {
     /// Real time × rate, from the first step.
     pacer: Option<RealTimePacer>,
     lockstep: Option<Lockstep>,
+    /// The step's simulated time.
+    now: Time,
 }
 
 impl FarmDrivers {
@@ -170,7 +172,7 @@ impl FarmDrivers {
             },
             last_hello: Instant::now(),
         });
-        Ok(FarmDrivers { link, driven, pacer, lockstep })
+        Ok(FarmDrivers { link, driven, pacer, lockstep, now: Time::ZERO })
     }
 
     /// Whether `id` is in lockstep and still answering.
@@ -238,6 +240,7 @@ impl ExternalDrivers for FarmDrivers {
     }
 
     fn begin_step(&mut self, now: Time) {
+        self.now = now;
         if let Some(p) = self.pacer.as_mut() {
             p.wait_until(now);
         }
@@ -345,8 +348,7 @@ impl ExternalDrivers for FarmDrivers {
         match self.link.lockstep_team_out(robot.as_str(), to, tier_bits(tiers), budget_bytes as u64, timeout) {
             Ok(bytes) => bytes,
             Err(e) => {
-                let now = self.last(robot.as_str()).map_or(Time::ZERO, |d| d.now);
-                self.drop_robot(robot.as_str(), now, &e);
+                self.drop_robot(robot.as_str(), self.now, &e);
                 None
             }
         }

@@ -188,22 +188,25 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     let (report, error) = match (&args.record, live) {
         (Some(path), live) => {
             let mut rec = Recorder::create(path, options).with_context(|| format!("creating {}", path.display()))?;
-            if let Some(info) = &run_info {
+            // In lockstep the farm's hello says whether the heavy skills run in the background:
+            // the setup is written once it came.
+            if let Some(info) = run_info.as_ref().filter(|_| !args.lockstep) {
                 rec.run_info(info).with_context(|| format!("writing the run's setup to {}", path.display()))?;
             }
             if let Some(tap) = live {
                 rec.set_tap(Box::new(tap));
             }
-            drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref())?
+            let pending = run_info.filter(|_| args.lockstep);
+            drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref(), pending)?
         }
         (None, Some(tap)) => {
             // Only the live view wants the messages: recorded into nothing, uncompressed.
             let options = RecorderOptions { compress: false, ..options };
             let mut rec = Recorder::new(Discard::default(), options).context("starting the live view's recorder")?;
             rec.set_tap(Box::new(tap));
-            drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref())?
+            drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref(), None)?
         }
-        (None, None) => drive::<SafeFile>(&mut node, &stop, args.until_s, None, resumed.as_deref())?,
+        (None, None) => drive::<SafeFile>(&mut node, &stop, args.until_s, None, resumed.as_deref(), None)?,
     };
     if let Some(e) = error {
         return Err(e.context("recording"));
@@ -251,8 +254,9 @@ fn drive<W: Write + Seek>(
     until_s: Option<f64>,
     recorder: Option<Recorder<W>>,
     resumed: Option<&[u8]>,
+    pending_info: Option<spomp_mcap::RunInfo>,
 ) -> Result<(spomp_ros2::RunReport, Option<anyhow::Error>)> {
-    let mut observer = RecordingObserver { recorder, error: None };
+    let mut observer = RecordingObserver { recorder, error: None, pending_info };
     if let Some(bytes) = resumed {
         // Before every other call, as it happened: a replay resumes its robot the same way.
         observer.on_seam(node.robot().id(), Time::ZERO, SeamInput::Resume(bytes));
@@ -268,6 +272,8 @@ fn drive<W: Write + Seek>(
 struct RecordingObserver<W: Write + Seek> {
     recorder: Option<Recorder<W>>,
     error: Option<anyhow::Error>,
+    /// The run's setup, written once a lockstep farm said how the heavy skills run.
+    pending_info: Option<spomp_mcap::RunInfo>,
 }
 
 impl<W: Write + Seek> RecordingObserver<W> {
@@ -284,6 +290,13 @@ impl<W: Write + Seek> RecordingObserver<W> {
 }
 
 impl<W: Write + Seek> RunObserver for RecordingObserver<W> {
+    fn on_lockstep(&mut self, background_skills: bool) {
+        if let Some(info) = self.pending_info.take() {
+            let info = spomp_mcap::RunInfo { background_skills, ..info };
+            self.record(|r| r.run_info(&info));
+        }
+    }
+
     fn on_odometry(&mut self, robot: &str, odom: &Odometry) {
         self.record(|r| r.odometry(robot, odom));
     }

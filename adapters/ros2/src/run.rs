@@ -63,6 +63,9 @@ pub trait RunObserver {
     /// Every call made on the robot's seam, in order, with what it answered: what a replay
     /// feeds a fresh robot (`spomp run --record` logs them, as `spomp sim --replayable` does).
     fn on_seam(&mut self, _robot: &RobotId, _now: Time, _call: SeamInput<'_>) {}
+    /// A lockstep farm's hello was taken, before any call of its run: the heavy skills run in the
+    /// background (`true`, under the farm's latency model) or inline.
+    fn on_lockstep(&mut self, _background_skills: bool) {}
 }
 
 /// An observer that ignores everything.
@@ -242,7 +245,11 @@ impl RobotNode {
     /// Creates the ROS 2 node of `robot` with `settings`; `peers` are the other robots of the
     /// team (team-state messages go to each of them).
     pub fn new(mut robot: Robot, settings: RunSettings, peers: Vec<RobotId>) -> Result<Self, RunError> {
-        robot.set_background_skills(true);
+        // In lockstep the farm's hello says (turning background work on builds a prior map's
+        // graph at once, which cannot be undone).
+        if settings.lockstep.is_none() {
+            robot.set_background_skills(true);
+        }
         let workers = SkillWorkers::start(robot.id().as_str())?;
         let mut node = DdsNode::new(&settings.dds, settings.topics.namespace(), "spomp")?;
         let t = &settings.topics;
@@ -437,7 +444,7 @@ impl RobotNode {
             };
             last_call = Instant::now();
             if let Op::Hello(hello) = &call.op {
-                let reply = self.take_hello(hello, &mut step);
+                let reply = self.take_hello(hello, &mut step, observer);
                 self.answer(0, reply);
                 continue;
             }
@@ -483,7 +490,12 @@ impl RobotNode {
     }
 
     /// The farm's hello: the same seed, or the runs would differ from the first random draw.
-    fn take_hello(&mut self, hello: &lockstep::Hello, step: &mut LockstepStep) -> Reply {
+    fn take_hello(
+        &mut self,
+        hello: &lockstep::Hello,
+        step: &mut LockstepStep,
+        observer: &mut dyn RunObserver,
+    ) -> Reply {
         let seed = self.settings.lockstep.as_ref().map_or(0, |l| l.seed);
         if hello.protocol != lockstep::PROTOCOL {
             return Reply::Refused(format!(
@@ -504,6 +516,7 @@ impl RobotNode {
         if step.hello.is_none() {
             // As the simulator sets its robots up: background work only under a latency model.
             self.robot.set_background_skills(hello.skill_latency_s.is_some());
+            observer.on_lockstep(hello.skill_latency_s.is_some());
             step.hello = Some(hello.clone());
         }
         // Every hello starts the calls again: the farm says hello once before the first step,
