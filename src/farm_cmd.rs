@@ -82,6 +82,11 @@ static STOPPED: DrivenStep = DrivenStep {
 pub struct FarmDrivers {
     link: FarmLink,
     driven: Vec<String>,
+    /// Robots the farm may drive whose process has not reported: the simulator runs them until
+    /// it does.
+    absent: Vec<String>,
+    /// Robots whose process reported late, for the simulator to hand over.
+    joined: Vec<RobotId>,
     /// Real time × rate, from the first step.
     pacer: Option<RealTimePacer>,
     lockstep: Option<Lockstep>,
@@ -144,14 +149,15 @@ impl FarmDrivers {
             }
             None => wait_for_status(&mut link, &candidates, wait),
         };
-        let simulated: Vec<&str> =
-            candidates.iter().filter(|c| !driven.contains(c)).map(String::as_str).collect();
+        let absent: Vec<String> = candidates.iter().filter(|c| !driven.contains(c)).cloned().collect();
+        let simulated: Vec<&str> = absent.iter().map(String::as_str).collect();
         if !simulated.is_empty() {
             eprintln!(
-                "spomp sim --ros2: no process reported for {} within {:.0} s: the simulator runs {}",
+                "spomp sim --ros2: no process reported for {} within {:.0} s: the simulator runs {} until {} does",
                 simulated.join(", "),
                 options.wait_s,
-                if simulated.len() == 1 { "it" } else { "them" }
+                if simulated.len() == 1 { "it" } else { "them" },
+                if simulated.len() == 1 { "it" } else { "one" }
             );
         }
         eprintln!("spomp sim --ros2: driving {}", if driven.is_empty() { "no robot".into() } else { driven.join(", ") });
@@ -172,7 +178,7 @@ impl FarmDrivers {
             },
             last_hello: Instant::now(),
         });
-        Ok(FarmDrivers { link, driven, pacer, lockstep, now: Time::ZERO })
+        Ok(FarmDrivers { link, driven, absent, joined: Vec::new(), pacer, lockstep, now: Time::ZERO })
     }
 
     /// Whether `id` is in lockstep and still answering.
@@ -198,11 +204,11 @@ impl FarmDrivers {
         }
     }
 
-    /// Says hello to the dropped robots (twice a wall second): a process that answers (restarted,
-    /// or back) is driven again from this step.
+    /// Says hello to the dropped robots and those that never reported (twice a wall second): a
+    /// process that answers (restarted, back, or late) is driven from this step on.
     fn rejoin_dropped(&mut self, now: Time) {
         let Some(l) = self.lockstep.as_mut() else { return };
-        if l.dropped.is_empty() || l.last_hello.elapsed() < Duration::from_millis(500) {
+        if (l.dropped.is_empty() && self.absent.is_empty()) || l.last_hello.elapsed() < Duration::from_millis(500) {
             return;
         }
         l.last_hello = Instant::now();
@@ -212,6 +218,21 @@ impl FarmDrivers {
                 eprintln!("spomp sim --ros2 --lockstep: {id} rejoined at {:.1} s", now.as_secs_f64());
             }
         }
+        let hello = l.hello.clone();
+        for id in std::mem::take(&mut self.absent) {
+            if self.link.lockstep_rejoin(&id, &hello) {
+                self.join(id, now);
+            } else {
+                self.absent.push(id);
+            }
+        }
+    }
+
+    /// A process reported late: it drives its robot from this step on.
+    fn join(&mut self, id: String, now: Time) {
+        eprintln!("spomp sim --ros2: {id}'s process reported at {:.1} s: it drives {id} from now on", now.as_secs_f64());
+        self.joined.push(RobotId::new(&id));
+        self.driven.push(id);
     }
 
     fn last(&self, id: &str) -> Option<&StepDone> {
@@ -252,6 +273,13 @@ impl ExternalDrivers for FarmDrivers {
             }
         } else {
             self.link.poll(now);
+            for id in std::mem::take(&mut self.absent) {
+                if self.link.tree_status(&id).is_empty() {
+                    self.absent.push(id);
+                } else {
+                    self.join(id, now);
+                }
+            }
         }
     }
 
@@ -402,6 +430,10 @@ impl ExternalDrivers for FarmDrivers {
 
     fn tree_status(&self, robot: &RobotId) -> Option<String> {
         self.last(robot.as_str()).map(|d| d.tree.clone())
+    }
+
+    fn joined(&mut self) -> Vec<RobotId> {
+        std::mem::take(&mut self.joined)
     }
 
     fn end_run(&mut self) {

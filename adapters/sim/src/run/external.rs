@@ -99,4 +99,9 @@ pub trait ExternalDrivers {
     }
     /// The run is over.
     fn end_run(&mut self) {}
+    /// Robots whose process reported since the last call (it started late): the simulator stops
+    /// running them itself and hands them to the driver from this step on.
+    fn joined(&mut self) -> Vec<RobotId> {
+        Vec::new()
+    }
 }

@@ -776,6 +776,11 @@ impl Simulation {
         }
         if let Some(d) = self.drivers.as_mut() {
             d.begin_step(now);
+            for id in d.joined() {
+                if let Some(r) = self.robots.iter_mut().find(|r| r.id == id && r.alive()) {
+                    r.external = true;
+                }
+            }
             self.driven_outbox.extend(d.take_team_messages());
         }
         self.apply_kills(observer);
