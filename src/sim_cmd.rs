@@ -207,15 +207,9 @@ pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         );
     }
     for robot in &args.drive {
-        match mission.team.iter().find(|r| &r.id == robot) {
-            None => {
-                let ids: Vec<&str> = mission.team.iter().map(|r| r.id.as_str()).collect();
-                return usage(format!(
-                    "--drive {robot}: no robot `{robot}` in the team; robots are: {}",
-                    ids.join(", ")
-                ));
-            }
-            Some(_) => {}
+        if !mission.team.iter().any(|r| &r.id == robot) {
+            let ids: Vec<&str> = mission.team.iter().map(|r| r.id.as_str()).collect();
+            return usage(format!("--drive {robot}: no robot `{robot}` in the team; robots are: {}", ids.join(", ")));
         }
     }
     if first_seed.checked_add(u64::from(trials) - 1).is_none() {
@@ -475,7 +469,7 @@ fn run_trial(
                 interfaces: args.interfaces.clone(),
                 drive: args.drive.clone(),
                 wait_s: args.wait_s,
-                lockstep: args.lockstep.then(|| crate::farm_cmd::LockstepOptions {
+                lockstep: args.lockstep.then_some(crate::farm_cmd::LockstepOptions {
                     seed,
                     skill_latency: args.skill_latency,
                     timeout_s: args.lockstep_timeout_s,

@@ -41,10 +41,6 @@ fn start_sim(mission: &str, domain: &str, out: &Path, extra: &[&str]) -> Reap {
     Reap(child)
 }
 
-fn start_run(mission: &str, domain: &str, extra: &[&str]) -> Reap {
-    start_robot(mission, "ugv1", domain, extra)
-}
-
 /// `spomp run` of `robot` in the farm's lockstep.
 fn start_lockstep_robot(mission: &str, robot: &str, domain: &str, extra: &[&str]) -> Reap {
     start_robot(mission, robot, domain, &[&["--lockstep"], extra].concat())
@@ -134,7 +130,12 @@ fn a_ugv_driven_by_a_separate_spomp_run_process_in_lockstep_reaches_its_goals_as
     let robot_log = out.join("ugv1.mcap");
     // The basestation has no process: the farm simulates it (and does not wait for it).
     let latency = ["--skill-latency", "typical"];
-    let sim = start_sim(MISSION, &d, &out.join("sim"), &[&["--lockstep", "--drive", "ugv1", "--no-mcap"], &latency[..]].concat());
+    let sim = start_sim(
+        MISSION,
+        &d,
+        &out.join("sim"),
+        &[&["--lockstep", "--drive", "ugv1", "--no-mcap"], &latency[..]].concat(),
+    );
     let run = start_lockstep_robot(MISSION, "ugv1", &d, &["--record", robot_log.to_str().expect("utf-8 path")]);
     // The robot process ends with the farm's run, with a safe command and its figures.
     let FarmEnd { summary, run_status, run_out, run_err } = finish_farm(sim, run);
@@ -204,6 +205,33 @@ fn a_robot_process_that_stops_answering_is_dropped_and_its_body_stops() {
 }
 
 #[test]
+fn a_robot_process_that_starts_late_drives_its_robot_from_then_on() {
+    let d = domain(600);
+    let out = temp_dir("late");
+    // The farm waits 1 s, then simulates ugv1 itself (at most 2× real time) until its process
+    // reports.
+    let mut sim = start_sim(
+        FAR_MISSION,
+        &d,
+        &out,
+        &["--lockstep", "--rate", "2", "--wait-s", "1", "--time-limit-s", "60", "--no-mcap"],
+    );
+    std::thread::sleep(Duration::from_secs(4));
+    let mut run = start_lockstep_robot(FAR_MISSION, "ugv1", &d, &[]);
+    let status = wait_with_timeout(&mut sim.0, Duration::from_secs(240)).expect("the farm run ends");
+    let (sim_out, sim_err) = output(&mut sim.0);
+    let _ = wait_with_timeout(&mut run.0, Duration::from_secs(20));
+    let (run_out, run_err) = output(&mut run.0);
+    assert!(status.code().is_some_and(|c| c <= 1), "spomp sim failed ({status}):\n{sim_out}\n{sim_err}");
+    assert!(sim_err.contains("the simulator runs them until one does"), "{sim_err}");
+    assert!(sim_err.contains("ugv1's process reported at"), "{sim_err}");
+    let report: serde_json::Value =
+        serde_json::from_str(&run_out).unwrap_or_else(|_| panic!("run prints its figures:\n{run_out}\n{run_err}"));
+    assert!(report["ticks"].as_u64().unwrap_or(0) > 50, "the late process drove its robot: {report:#}");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
 fn a_lockstep_farm_refuses_a_robot_set_up_with_another_seed() {
     let d = domain(400);
     let out = temp_dir("seed");
@@ -232,7 +260,10 @@ fn a_lockstep_farm_of_four_processes_runs_exactly_as_the_simulator() {
     let (sim_out, sim_err) = output(&mut sim.0);
     drop(robots);
     assert!(status.success(), "spomp sim --ros2 --lockstep failed ({status}):\n{sim_out}\n{sim_err}");
-    assert!(sim_err.contains("driving base, uav1, ugv1, ugv2"), "every robot with a process is driven by it:\n{sim_err}");
+    assert!(
+        sim_err.contains("driving base, uav1, ugv1, ugv2"),
+        "every robot with a process is driven by it:\n{sim_err}"
+    );
     let summary: serde_json::Value = serde_json::from_str(&sim_out).expect("sim prints its summary as JSON");
     let farm = &summary["runs"][0];
     assert_eq!(farm["outcome"], "complete", "{summary:#}");

@@ -116,7 +116,7 @@ pub enum Reply {
     /// The answer to [`Op::TeamOut`].
     TeamOut(Option<Vec<u8>>),
     /// The step is done.
-    Done(StepDone),
+    Done(Box<StepDone>),
 }
 
 /// What a robot did in a step.
@@ -279,7 +279,7 @@ impl FarmLockstep {
             return Err(LockstepError::Unexpected { seq: self.next_seq, what: "no tick to answer".into() });
         };
         match self.wait(seq, timeout)? {
-            Reply::Done(done) => Ok(done),
+            Reply::Done(done) => Ok(*done),
             other => Err(LockstepError::Unexpected { seq, what: reply_name(&other) }),
         }
     }
@@ -363,7 +363,7 @@ mod tests {
             problems: vec!["stuck".into()],
             goals: Vec::new(),
         };
-        for reply in [Reply::Ready, Reply::TeamOut(None), Reply::TeamOut(Some(vec![9])), Reply::Done(done)] {
+        for reply in [Reply::Ready, Reply::TeamOut(None), Reply::TeamOut(Some(vec![9])), Reply::Done(Box::new(done))] {
             let out = LockstepOut { robot: "ugv1".into(), seq: 8, reply };
             assert_eq!(round_trip(&out), out);
         }

@@ -433,7 +433,8 @@ impl RobotNode {
                 Some(Ok(Some((call, _)))) => call,
                 Some(Ok(None)) | Some(Err(_)) | None => {
                     if step.hello.is_some() && last_call.elapsed() > timeout {
-                        let what = format!("lockstep: the farm sent nothing for {:.0} s; stopping", timeout.as_secs_f64());
+                        let what =
+                            format!("lockstep: the farm sent nothing for {:.0} s; stopping", timeout.as_secs_f64());
                         observer.on_problem(self.robot.id().as_str(), state.now().unwrap_or(Time::ZERO), &what);
                         eprintln!("{}: {what}", self.robot.id());
                         break;
@@ -596,7 +597,7 @@ impl RobotNode {
                 observer.on_seam(&id, now, SeamInput::Halt);
                 self.robot.halt(now, None);
             }
-            Op::Tick => return Some(Reply::Done(self.lockstep_tick(state, step, now, observer, started))),
+            Op::Tick => return Some(Reply::Done(Box::new(self.lockstep_tick(state, step, now, observer, started)))),
         }
         None
     }
@@ -1282,10 +1283,7 @@ impl LockstepStep {
 
 /// A tier set from its bits (bit k = tier k), as the lockstep calls carry it.
 fn tiers_from_bits(bits: u8) -> TierSet {
-    crate::team::TIERS
-        .iter()
-        .filter(|t| bits & (1 << **t as u8) != 0)
-        .fold(TierSet::NONE, |set, t| set.with(*t))
+    crate::team::TIERS.iter().filter(|t| bits & (1 << **t as u8) != 0).fold(TierSet::NONE, |set, t| set.with(*t))
 }
 
 /// Latency samples kept for the percentiles.

@@ -79,7 +79,13 @@ pub trait ExternalDrivers {
     fn exchange_work(&mut self, _robot: &RobotId, _now: Time) {}
     /// Lockstep: the robot's team-state message for `to` over a link allowing `tiers` and
     /// `budget_bytes` (its `team_message_for`), at this point of the step.
-    fn team_message_for(&mut self, _robot: &RobotId, _to: &RobotId, _tiers: TierSet, _budget_bytes: usize) -> Option<Vec<u8>> {
+    fn team_message_for(
+        &mut self,
+        _robot: &RobotId,
+        _to: &RobotId,
+        _tiers: TierSet,
+        _budget_bytes: usize,
+    ) -> Option<Vec<u8>> {
         None
     }
     /// Lockstep: the robot's upkeep and tick, when due.
