@@ -39,6 +39,15 @@ pub struct RunArgs {
     /// Take time from `/clock` (a simulator's), whatever the mission says.
     #[arg(long)]
     pub use_sim_time: bool,
+    /// Follow a `spomp sim --ros2 --lockstep` farm: take each step's inputs from it, tick, and
+    /// answer, so the farm's time advances only when this robot is done (implies
+    /// --use-sim-time; the robot's --seed must be the farm's).
+    #[arg(long)]
+    pub lockstep: bool,
+    /// With --lockstep: give the farm up for gone when it sends nothing for this long once it
+    /// has started, wall seconds.
+    #[arg(long, default_value_t = 120.0, value_parser = crate::args::wall_seconds, requires = "lockstep")]
+    pub lockstep_timeout_s: f64,
     /// Record every input and output to this MCAP log (the channels of `spomp sim`'s logs).
     #[arg(long, value_name = "LOG.mcap")]
     pub record: Option<PathBuf>,
@@ -88,7 +97,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     if !args.interfaces.is_empty() {
         settings.dds.interfaces = args.interfaces.clone();
     }
-    settings.use_sim_time |= args.use_sim_time;
+    settings.use_sim_time |= args.use_sim_time || args.lockstep;
     if args.topics {
         for (role, name) in settings.topics.iter() {
             out!("{role:<18} {name}");
@@ -97,6 +106,9 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         return Ok(ExitCode::SUCCESS);
     }
     let seed = args.seed.or(mission.sim.as_ref().and_then(|s| s.seed)).unwrap_or(1);
+    if args.lockstep {
+        settings.lockstep = Some(spomp_ros2::settings::LockstepSettings { seed, timeout_s: args.lockstep_timeout_s });
+    }
     // The operating area (map grid, class table, prior map) is the mission's world, as in `sim`.
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the operating area of `{}`", mission.mission))?;
@@ -121,7 +133,13 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     };
     let mut robot =
         Robot::from_setup(&loaded, setup, registry).with_context(|| format!("setting up robot `{}`", args.robot))?;
+    let simulated_session = robot.team().session();
     let link = crate::team_link::set_up(&args.team_link, mission, &args.robot, &mut robot)?;
+    if args.lockstep && link.link.is_none() {
+        // Over the farm's radio the robot is one of the simulator's: its session is theirs (a
+        // wall-clock session changes every message's bytes, hence what a link's budget carries).
+        robot.set_team_session(simulated_session);
+    }
     if let Some(info) = run_info.as_mut() {
         info.team_session = robot.team().session();
         info.team_secured = robot.team().security().is_some();
@@ -160,28 +178,35 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
             } else {
                 settings.dds.interfaces.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
             },
-            if settings.use_sim_time { "time from /clock" } else { "wall-clock time" },
+            match (&settings.lockstep, settings.use_sim_time) {
+                (Some(_), _) => "in the farm's lockstep",
+                (None, true) => "time from /clock",
+                (None, false) => "wall-clock time",
+            },
         );
     }
     let (report, error) = match (&args.record, live) {
         (Some(path), live) => {
             let mut rec = Recorder::create(path, options).with_context(|| format!("creating {}", path.display()))?;
-            if let Some(info) = &run_info {
+            // In lockstep the farm's hello says whether the heavy skills run in the background:
+            // the setup is written once it came.
+            if let Some(info) = run_info.as_ref().filter(|_| !args.lockstep) {
                 rec.run_info(info).with_context(|| format!("writing the run's setup to {}", path.display()))?;
             }
             if let Some(tap) = live {
                 rec.set_tap(Box::new(tap));
             }
-            drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref())?
+            let pending = run_info.filter(|_| args.lockstep);
+            drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref(), pending)?
         }
         (None, Some(tap)) => {
             // Only the live view wants the messages: recorded into nothing, uncompressed.
             let options = RecorderOptions { compress: false, ..options };
             let mut rec = Recorder::new(Discard::default(), options).context("starting the live view's recorder")?;
             rec.set_tap(Box::new(tap));
-            drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref())?
+            drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref(), None)?
         }
-        (None, None) => drive::<SafeFile>(&mut node, &stop, args.until_s, None, resumed.as_deref())?,
+        (None, None) => drive::<SafeFile>(&mut node, &stop, args.until_s, None, resumed.as_deref(), None)?,
     };
     if let Some(e) = error {
         return Err(e.context("recording"));
@@ -229,8 +254,9 @@ fn drive<W: Write + Seek>(
     until_s: Option<f64>,
     recorder: Option<Recorder<W>>,
     resumed: Option<&[u8]>,
+    pending_info: Option<spomp_mcap::RunInfo>,
 ) -> Result<(spomp_ros2::RunReport, Option<anyhow::Error>)> {
-    let mut observer = RecordingObserver { recorder, error: None };
+    let mut observer = RecordingObserver { recorder, error: None, pending_info };
     if let Some(bytes) = resumed {
         // Before every other call, as it happened: a replay resumes its robot the same way.
         observer.on_seam(node.robot().id(), Time::ZERO, SeamInput::Resume(bytes));
@@ -246,6 +272,8 @@ fn drive<W: Write + Seek>(
 struct RecordingObserver<W: Write + Seek> {
     recorder: Option<Recorder<W>>,
     error: Option<anyhow::Error>,
+    /// The run's setup, written once a lockstep farm said how the heavy skills run.
+    pending_info: Option<spomp_mcap::RunInfo>,
 }
 
 impl<W: Write + Seek> RecordingObserver<W> {
@@ -262,6 +290,13 @@ impl<W: Write + Seek> RecordingObserver<W> {
 }
 
 impl<W: Write + Seek> RunObserver for RecordingObserver<W> {
+    fn on_lockstep(&mut self, background_skills: bool) {
+        if let Some(info) = self.pending_info.take() {
+            let info = spomp_mcap::RunInfo { background_skills, ..info };
+            self.record(|r| r.run_info(&info));
+        }
+    }
+
     fn on_odometry(&mut self, robot: &str, odom: &Odometry) {
         self.record(|r| r.odometry(robot, odom));
     }

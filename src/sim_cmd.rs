@@ -94,10 +94,21 @@ pub struct SimArgs {
     /// (repeatable).
     #[arg(long = "allow-dir", value_name = "DIR")]
     pub allow_dirs: Vec<PathBuf>,
-    /// Run as a ROS 2 robot farm: publish the UGVs' sensors and `/clock` and take their
-    /// commands from `spomp run --use-sim-time` processes instead of ticking their trees.
+    /// Run as a ROS 2 robot farm: publish the robots' sensors and `/clock` and take their
+    /// commands from `spomp run --use-sim-time` processes (one per robot that has one; the
+    /// simulator runs the others) instead of ticking their trees.
     #[arg(long)]
     pub ros2: bool,
+    /// With --ros2: run in lockstep with the robots' processes (`spomp run --lockstep`): each step
+    /// waits for every driven robot's answer, so the run does not depend on the machine's load,
+    /// and it is the run `spomp sim` makes with the same seed and --skill-latency. As fast as the
+    /// robots answer unless --rate is given.
+    #[arg(long, requires = "ros2")]
+    pub lockstep: bool,
+    /// With --lockstep: a robot that does not answer a call within this long is reported and
+    /// dropped (its body stops), wall seconds.
+    #[arg(long, default_value_t = 30.0, value_parser = crate::args::wall_seconds, requires = "lockstep")]
+    pub lockstep_timeout_s: f64,
     /// Serve the run live over the Foxglove WebSocket protocol (open ws://ADDR in Foxglove; see
     /// docs/live.md), paced at real time × --rate. ADDR: HOST:PORT, default 127.0.0.1:8765
     /// (port 0: any free port). Give it after the mission. One trial.
@@ -112,11 +123,12 @@ pub struct SimArgs {
     /// With --ros2: only this local address carries DDS discovery (repeatable).
     #[arg(long = "interface", value_name = "IP", requires = "ros2")]
     pub interfaces: Vec<std::net::IpAddr>,
-    /// With --ros2: drive only this robot over ROS 2 (repeatable; default every UGV and UAV).
+    /// With --ros2: drive only this robot over ROS 2 (repeatable; default every robot whose
+    /// process reports within --wait-s).
     #[arg(long, value_name = "ID", requires = "ros2")]
     pub drive: Vec<String>,
-    /// With --ros2: wait this long for the `spomp run` processes before the clock starts,
-    /// seconds.
+    /// With --ros2: wait this long for the `spomp run` processes before the clock starts (it
+    /// starts at once when every robot has reported), seconds.
     #[arg(long, default_value_t = 60.0, value_parser = crate::args::wall_seconds, requires = "ros2")]
     pub wait_s: f64,
 }
@@ -195,20 +207,9 @@ pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         );
     }
     for robot in &args.drive {
-        match mission.team.iter().find(|r| &r.id == robot) {
-            None => {
-                let ids: Vec<&str> = mission.team.iter().map(|r| r.id.as_str()).collect();
-                return usage(format!(
-                    "--drive {robot}: no robot `{robot}` in the team; robots are: {}",
-                    ids.join(", ")
-                ));
-            }
-            Some(r) if r.kind == RobotKind::Basestation => {
-                return usage(format!(
-                    "--drive {robot}: only UGVs and UAVs can be driven over ROS 2 (`{robot}` is a basestation)"
-                ));
-            }
-            Some(_) => {}
+        if !mission.team.iter().any(|r| &r.id == robot) {
+            let ids: Vec<&str> = mission.team.iter().map(|r| r.id.as_str()).collect();
+            return usage(format!("--drive {robot}: no robot `{robot}` in the team; robots are: {}", ids.join(", ")));
         }
     }
     if first_seed.checked_add(u64::from(trials) - 1).is_none() {
@@ -463,11 +464,16 @@ fn run_trial(
         let farm = crate::farm_cmd::FarmDrivers::new(
             mission,
             &crate::farm_cmd::FarmOptions {
-                rate: args.rate.unwrap_or(1.0),
+                rate: args.rate,
                 domain_id: args.domain_id,
                 interfaces: args.interfaces.clone(),
                 drive: args.drive.clone(),
                 wait_s: args.wait_s,
+                lockstep: args.lockstep.then_some(crate::farm_cmd::LockstepOptions {
+                    seed,
+                    skill_latency: args.skill_latency,
+                    timeout_s: args.lockstep_timeout_s,
+                }),
             },
         )?;
         sim.drive_externally(Box::new(farm)).context("handing the robots to the farm")?;

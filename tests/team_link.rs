@@ -3,6 +3,10 @@
 //! over Zenoh, signed with keys from `spomp keys generate`. A rogue that has the team's transport
 //! password but not its signing keys injects goals, claims and visits all along.
 //!
+//! The farm runs in lockstep with the robots (`--lockstep`): its clock waits for every robot's
+//! answer, so a loaded machine slows the run down instead of changing it. The team state still
+//! travels over the real link, in real time.
+//!
 //! DDS stays on 127.0.0.1 (`ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`, a domain id per test);
 //! Zenoh listens and connects on 127.0.0.1 ports only, multicast scouting off.
 
@@ -58,20 +62,23 @@ impl Team {
         self.dir.join(format!("{robot}.state"))
     }
 
-    fn start_farm(&self) -> Reap {
+    /// The farm in lockstep; `extra` after the rest (`--rate` caps its speed).
+    fn start_farm(&self, extra: &[&str]) -> Reap {
         let child = spomp()
             .args([
                 "sim",
                 MISSION,
                 "--ros2",
+                "--lockstep",
+                "--lockstep-timeout-s",
+                "5",
                 "--domain-id",
                 &self.domain,
                 "--json",
-                "--rate",
-                "2",
                 "--no-mcap",
-                "--out",
             ])
+            .args(extra)
+            .arg("--out")
             .arg(self.dir.join("sim"))
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -84,7 +91,7 @@ impl Team {
     /// ugv1's (gossip finds the rest).
     fn start_robot(&self, robot: &str, extra: &[&str]) -> Reap {
         let mut cmd = spomp();
-        cmd.args(["run", MISSION, "--robot", robot, "--use-sim-time", "--json", "--domain-id", &self.domain]);
+        cmd.args(["run", MISSION, "--robot", robot, "--lockstep", "--json", "--domain-id", &self.domain]);
         cmd.arg("--keys").arg(self.keys());
         cmd.args(["--listen", &format!("tcp/127.0.0.1:{}", self.ports[robot])]);
         for hub in ["base", "ugv1"].iter().filter(|h| **h != robot) {
@@ -204,23 +211,24 @@ fn stop_robots(robots: Vec<(&str, Reap)>) -> BTreeMap<String, serde_json::Value>
     out
 }
 
-fn finish_farm(farm: &mut Reap, limit: Duration) -> serde_json::Value {
+/// The farm's summary and what it printed on stderr.
+fn finish_farm(farm: &mut Reap, limit: Duration) -> (serde_json::Value, String) {
     let status = wait_with_timeout(&mut farm.0, limit);
     let (out, err) = output(&mut farm.0);
     let status = status.unwrap_or_else(|| panic!("the farm run did not end within {limit:?}:\n{err}"));
     assert!(status.success(), "spomp sim --ros2 failed ({status}):\n{out}\n{err}");
-    serde_json::from_str(&out).expect("sim prints its summary as JSON")
+    (serde_json::from_str(&out).expect("sim prints its summary as JSON"), err)
 }
 
 #[test]
 fn four_processes_complete_a_mission_over_the_signed_team_link_and_a_rogue_changes_nothing() {
     let team = Team::new("complete", domain(600));
-    let mut farm = team.start_farm();
+    let mut farm = team.start_farm(&[]);
     let robots: Vec<(&str, Reap)> = ROBOTS.iter().map(|r| (*r, team.start_robot(r, &[]))).collect();
     let stop = Arc::new(AtomicBool::new(false));
     let rogue = start_rogue(&team, stop.clone());
 
-    let summary = finish_farm(&mut farm, Duration::from_secs(400));
+    let (summary, farm_err) = finish_farm(&mut farm, Duration::from_secs(400));
     stop.store(true, Ordering::SeqCst);
     let _ = rogue.join();
     let reports = stop_robots(robots);
@@ -251,10 +259,7 @@ fn four_processes_complete_a_mission_over_the_signed_team_link_and_a_rogue_chang
     assert!(rejected > 0, "{reports:#?}");
     assert!(reports["base"]["team_rejected"].get("mallory").is_some(), "{:#}", reports["base"]);
     for robot in ROBOTS {
-        // Every message of a teammate checks (ugv1's name is the rogue's too); the farm's own
-        // simulated basestation, which talks on the ROS 2 `team/in` topic, is not listened to
-        // once the team link is up (regression: its unsigned messages were refused as the real
-        // basestation's).
+        // Every message of a teammate checks (ugv1's name is the rogue's too).
         for teammate in ROBOTS.iter().filter(|r| **r != "ugv1") {
             assert!(
                 reports[robot]["team_rejected"].get(teammate).is_none(),
@@ -263,7 +268,9 @@ fn four_processes_complete_a_mission_over_the_signed_team_link_and_a_rogue_chang
             );
         }
     }
-    assert!(reports["ugv1"]["team_in_ignored"].as_u64().unwrap_or(0) > 0, "{:#}", reports["ugv1"]);
+    // Every robot with a process is driven by it, the basestation too: the farm simulates no
+    // phantom of it.
+    assert!(farm_err.contains("driving base, uav1, ugv1, ugv2"), "{farm_err}");
     // Bytes per link and tier, for the note.
     eprintln!("ugv1's link: {:#}", reports["ugv1"]["team_link"]);
     eprintln!("mission time {:.0} s", trial["end_s"].as_f64().unwrap_or(0.0));
@@ -272,7 +279,9 @@ fn four_processes_complete_a_mission_over_the_signed_team_link_and_a_rogue_chang
 #[test]
 fn a_killed_ugv_frees_its_goal_after_the_lease_and_resumes_from_its_state_file() {
     let team = Team::new("resume", domain(700));
-    let mut farm = team.start_farm();
+    // At most 2× real time: the test watches the robots' state files on the wall clock, and a
+    // run that ended before ugv2's reboot would leave nothing to rejoin.
+    let mut farm = team.start_farm(&["--rate", "2"]);
     let mut robots: Vec<(&str, Reap)> = ROBOTS.iter().map(|r| (*r, team.start_robot(r, &[]))).collect();
 
     // Wait until ugv2 holds a goal (its state file says so), then kill it without warning.
@@ -324,9 +333,12 @@ fn a_killed_ugv_frees_its_goal_after_the_lease_and_resumes_from_its_state_file()
         std::thread::sleep(Duration::from_millis(100));
     };
     eprintln!("ugv2 re-converged {converged:?} (wall) after its restart");
-    let summary = finish_farm(&mut farm, Duration::from_secs(400));
+    let (summary, farm_err) = finish_farm(&mut farm, Duration::from_secs(400));
     let reports = stop_robots(robots);
     assert_eq!(summary["runs"][0]["outcome"], "complete", "{summary:#}");
+    // The farm dropped ugv2 when its process died, and drove it again once it was back.
+    assert!(farm_err.contains("ugv2 dropped at"), "{farm_err}");
+    assert!(farm_err.contains("ugv2 rejoined at"), "{farm_err}");
     assert!(reports["ugv2"]["states_saved"].as_u64().unwrap_or(0) > 0, "{:#}", reports["ugv2"]);
 
     // The resumed, signing robot's log replays: the resume is a seam call, and with the team's

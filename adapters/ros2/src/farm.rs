@@ -13,7 +13,8 @@ use spomp_teamstate::GoalView;
 
 use crate::clock::TimeBase;
 use crate::convert;
-use crate::dds::{DdsError, DdsNode, DdsSettings, sensor_qos, state_qos};
+use crate::dds::{DdsError, DdsNode, DdsSettings, latched_qos, sensor_qos, state_qos};
+use crate::lockstep::{FarmLockstep, Hello, LockstepError, Op, StepDone};
 use crate::run::MissionStatus;
 use crate::topics::{CLOCK_TOPIC, TopicNames};
 
@@ -48,6 +49,8 @@ struct FarmRobot {
     setpoint_cmd: Option<(FlightCommand, Time)>,
     goals: Vec<GoalView>,
     tree: String,
+    /// The robot's lockstep topics, in a lockstep farm.
+    lockstep: Option<FarmLockstep>,
 }
 
 /// The ROS 2 link of a simulator whose robots are driven by `spomp run` processes.
@@ -64,8 +67,9 @@ pub struct FarmLink {
 pub const COMMAND_TIMEOUT_S: f64 = 0.5;
 
 impl FarmLink {
-    /// A link for `robots` (id and `ros2:` settings each) in `dds`'s domain.
-    pub fn new(dds: &DdsSettings, robots: &[(String, Option<Ros2Spec>)]) -> Result<Self, DdsError> {
+    /// A link for `robots` (id and `ros2:` settings each) in `dds`'s domain; with `lockstep`,
+    /// each robot's lockstep topics too ([`crate::lockstep`]).
+    pub fn new(dds: &DdsSettings, robots: &[(String, Option<Ros2Spec>)], lockstep: bool) -> Result<Self, DdsError> {
         let mut node = DdsNode::new(dds, "/", "spomp_sim")?;
         let clock = node.publisher(CLOCK_TOPIC, &state_qos(1))?;
         let mut out = Vec::new();
@@ -82,7 +86,11 @@ impl FarmLink {
                 cmd_vel: node.subscription(t.get("cmd_vel"), &sensor_qos(1))?,
                 setpoint: node.subscription(t.get("setpoint"), &sensor_qos(1))?,
                 team_out: node.subscription(t.get("team/out"), &sensor_qos(64))?,
-                status: node.subscription(&t.status(), &sensor_qos(1))?,
+                // Reliable and latched like the robot's writer: the status a robot published
+                // before discovery matched the two is still delivered (with a volatile, best-effort
+                // reader a robot that reported once at time zero, while the clock waited for it,
+                // was never seen).
+                status: node.subscription(&t.status(), &latched_qos(1))?,
                 depth_scale_m: spec
                     .as_ref()
                     .and_then(|s| s.depth_scale_m)
@@ -91,6 +99,7 @@ impl FarmLink {
                 setpoint_cmd: None,
                 goals: Vec::new(),
                 tree: String::new(),
+                lockstep: if lockstep { Some(FarmLockstep::new(&mut node, id, &t)?) } else { None },
             });
         }
         Ok(FarmLink { robots: out, clock, outbox: VecDeque::new(), malformed: 0, _node: node })
@@ -98,6 +107,90 @@ impl FarmLink {
 
     fn robot(&self, id: &str) -> Option<&FarmRobot> {
         self.robots.iter().find(|r| r.id == id)
+    }
+
+    fn lockstep_of(&mut self, id: &str) -> Option<&mut FarmLockstep> {
+        self.robots.iter_mut().find(|r| r.id == id).and_then(|r| r.lockstep.as_mut())
+    }
+
+    /// Says `hello` to every robot in lockstep, again and again, until each answers or `wait`
+    /// passes: each robot with its answer (ready, refused, or no answer).
+    pub fn connect_lockstep(
+        &mut self,
+        hello: &Hello,
+        wait: std::time::Duration,
+    ) -> Vec<(String, Result<(), LockstepError>)> {
+        use std::time::{Duration, Instant};
+        let deadline = Instant::now() + wait;
+        let mut answers: Vec<Option<Result<(), LockstepError>>> = self.robots.iter().map(|_| None).collect();
+        let mut next_hello = Instant::now();
+        loop {
+            let say = Instant::now() >= next_hello;
+            if say {
+                next_hello = Instant::now() + Duration::from_millis(250);
+            }
+            for (r, answer) in self.robots.iter_mut().zip(answers.iter_mut()) {
+                let Some(l) = r.lockstep.as_mut().filter(|_| answer.is_none()) else { continue };
+                if say {
+                    l.say_hello(hello);
+                }
+                *answer = l.hello_answer();
+            }
+            if answers.iter().all(Option::is_some) || Instant::now() >= deadline {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        self.robots
+            .iter()
+            .zip(answers)
+            .map(|(r, a)| {
+                let timeout = LockstepError::Timeout { seq: 0, timeout_s: wait.as_secs_f64() };
+                (r.id.clone(), a.unwrap_or(Err(timeout)))
+            })
+            .collect()
+    }
+
+    /// Says `hello` to a robot that left the lockstep (or never joined); true once its process
+    /// answered ready: its calls start again from the first.
+    pub fn lockstep_rejoin(&mut self, id: &str, hello: &Hello) -> bool {
+        let Some(l) = self.lockstep_of(id) else { return false };
+        if let Some(Ok(())) = l.hello_answer() {
+            l.restart();
+            return true;
+        }
+        l.say_hello(hello);
+        false
+    }
+
+    /// Sends a lockstep call to a robot (nothing if it is not in lockstep).
+    pub fn lockstep_call(&mut self, id: &str, op: Op) {
+        if let Some(l) = self.lockstep_of(id) {
+            l.send(op);
+        }
+    }
+
+    /// Asks a robot in lockstep for its team-state message to `to`, waiting for it.
+    pub fn lockstep_team_out(
+        &mut self,
+        id: &str,
+        to: &spomp_core::RobotId,
+        tiers: u8,
+        budget_bytes: u64,
+        timeout: std::time::Duration,
+    ) -> Result<Option<Vec<u8>>, LockstepError> {
+        match self.lockstep_of(id) {
+            Some(l) => l.team_out(to, tiers, budget_bytes, timeout),
+            None => Ok(None),
+        }
+    }
+
+    /// Waits for a robot's answer to this step's tick.
+    pub fn lockstep_done(&mut self, id: &str, timeout: std::time::Duration) -> Result<StepDone, LockstepError> {
+        match self.lockstep_of(id) {
+            Some(l) => l.wait_done(timeout),
+            None => Err(LockstepError::Unexpected { seq: 0, what: format!("`{id}` is not in lockstep") }),
+        }
     }
 
     /// Whether `id` is driven over this link.

@@ -16,6 +16,7 @@ pub mod clock;
 pub mod convert;
 pub mod dds;
 pub mod farm;
+pub mod lockstep;
 
 pub mod pairing;
 pub mod run;

@@ -30,6 +30,7 @@ use spomp_teamstate::TierSet;
 use crate::clock::{TimeBase, ros_nanos, wall_nanos};
 use crate::convert;
 use crate::dds::{DdsError, DdsNode, latched_qos, sensor_qos, state_qos};
+use crate::lockstep::{self, LockstepIn, LockstepOut, Op, Reply, StepDone};
 use crate::pairing::{OdometryHistory, PanoramaPairer};
 use crate::settings::RunSettings;
 use crate::team::{StateSink, TeamChannel};
@@ -62,6 +63,9 @@ pub trait RunObserver {
     /// Every call made on the robot's seam, in order, with what it answered: what a replay
     /// feeds a fresh robot (`spomp run --record` logs them, as `spomp sim --replayable` does).
     fn on_seam(&mut self, _robot: &RobotId, _now: Time, _call: SeamInput<'_>) {}
+    /// A lockstep farm's hello was taken, before any call of its run: the heavy skills run in the
+    /// background (`true`, under the farm's latency model) or inline.
+    fn on_lockstep(&mut self, _background_skills: bool) {}
 }
 
 /// An observer that ignores everything.
@@ -223,6 +227,8 @@ pub struct RobotNode {
     /// Where the resume state goes, and how often (seconds).
     state_sink: Option<(StateSink, f64)>,
     // Entities before the node: they are dropped first.
+    /// A farm's lockstep calls and this robot's answers (`--lockstep`).
+    lockstep: Option<(Subscription<LockstepIn>, Publisher<LockstepOut>)>,
     inputs: Inputs,
     outputs: Outputs,
     _node: DdsNode,
@@ -239,7 +245,11 @@ impl RobotNode {
     /// Creates the ROS 2 node of `robot` with `settings`; `peers` are the other robots of the
     /// team (team-state messages go to each of them).
     pub fn new(mut robot: Robot, settings: RunSettings, peers: Vec<RobotId>) -> Result<Self, RunError> {
-        robot.set_background_skills(true);
+        // In lockstep the farm's hello says (turning background work on builds a prior map's
+        // graph at once, which cannot be undone).
+        if settings.lockstep.is_none() {
+            robot.set_background_skills(true);
+        }
         let workers = SkillWorkers::start(robot.id().as_str())?;
         let mut node = DdsNode::new(&settings.dds, settings.topics.namespace(), "spomp")?;
         let t = &settings.topics;
@@ -268,11 +278,19 @@ impl RobotNode {
             team_out: node.publisher(t.get("team/out"), &state_qos(64))?,
             status: node.publisher(&settings.topics.status(), &latched_qos(1))?,
         };
+        let lockstep = match settings.lockstep {
+            Some(_) => Some((
+                node.subscription(&lockstep::in_topic(t), &lockstep::lockstep_qos())?,
+                node.publisher(&lockstep::out_topic(t), &lockstep::lockstep_qos())?,
+            )),
+            None => None,
+        };
         Ok(RobotNode {
             robot,
             workers,
             settings,
             peers,
+            lockstep,
             inputs,
             outputs,
             team_channel: None,
@@ -307,6 +325,9 @@ impl RobotNode {
     /// Runs until `stop` is set (SIGINT/SIGTERM) or, when given, until robot time `until_s`;
     /// publishes a safety stop before returning.
     pub fn run(&mut self, stop: &AtomicBool, until_s: Option<f64>, observer: &mut dyn RunObserver) -> RunReport {
+        if self.lockstep.is_some() {
+            return self.run_lockstep(stop, until_s, observer);
+        }
         let mut state = LoopState::new(&self.settings, self.robot.tick_hz());
         state.flies = self.robot.kind() == RobotKind::Uav;
         state.sensorless = self.robot.kind() == RobotKind::Basestation;
@@ -393,6 +414,369 @@ impl RobotNode {
         let mut report = state.snapshot(&self.robot, started.elapsed());
         report.team_link = self.team_channel.as_ref().map(|c| c.stats());
         report
+    }
+
+    /// `run` in a farm's lockstep ([`crate::lockstep`]): the farm's calls, in the order it sends
+    /// them, are made on the robot as the simulator makes them on its own robots, and each step
+    /// is answered. Ends when the farm ends the run, when `stop` is set, at robot time `until_s`,
+    /// or when the farm, once it said hello, sends nothing for the settings' timeout.
+    fn run_lockstep(&mut self, stop: &AtomicBool, until_s: Option<f64>, observer: &mut dyn RunObserver) -> RunReport {
+        let mut state = LoopState::new(&self.settings, self.robot.tick_hz());
+        state.flies = self.robot.kind() == RobotKind::Uav;
+        state.sensorless = self.robot.kind() == RobotKind::Basestation;
+        let started = Instant::now();
+        let timeout = Duration::from_secs_f64(self.settings.lockstep.as_ref().map_or(60.0, |l| l.timeout_s));
+        let mut step = LockstepStep::new(self.robot.tick_hz());
+        let mut last_call = Instant::now();
+        while !stop.load(Ordering::SeqCst) {
+            let call = match self.lockstep.as_ref().map(|(calls, _)| calls.take()) {
+                Some(Ok(Some((call, _)))) => call,
+                Some(Ok(None)) | Some(Err(_)) | None => {
+                    if step.hello.is_some() && last_call.elapsed() > timeout {
+                        let what =
+                            format!("lockstep: the farm sent nothing for {:.0} s; stopping", timeout.as_secs_f64());
+                        observer.on_problem(self.robot.id().as_str(), state.now().unwrap_or(Time::ZERO), &what);
+                        eprintln!("{}: {what}", self.robot.id());
+                        break;
+                    }
+                    std::thread::sleep(LOCKSTEP_POLL);
+                    continue;
+                }
+            };
+            last_call = Instant::now();
+            if let Op::Hello(hello) = &call.op {
+                let reply = self.take_hello(hello, &mut step, observer);
+                self.answer(0, reply);
+                continue;
+            }
+            if step.hello.is_none() {
+                // Calls of an earlier run of the farm, or before our hello was answered.
+                continue;
+            }
+            if call.seq != step.next_seq {
+                let what = format!("lockstep: call {} arrived where {} was due; stopping", call.seq, step.next_seq);
+                observer.on_problem(self.robot.id().as_str(), state.now().unwrap_or(Time::ZERO), &what);
+                eprintln!("{}: {what}", self.robot.id());
+                break;
+            }
+            step.next_seq += 1;
+            if matches!(call.op, Op::End) {
+                break;
+            }
+            if let Op::Begin(now) = call.op
+                && until_s.is_some_and(|u| now.as_secs_f64() >= u)
+            {
+                break;
+            }
+            if let Some(reply) = self.lockstep_call(call.op, &mut state, &mut step, observer, started) {
+                self.answer(call.seq, reply);
+            }
+        }
+        if let Some(now) = state.now() {
+            observer.on_seam(self.robot.id(), now, SeamInput::Halt);
+            self.robot.halt(now, None);
+            self.publish_command(&mut state, now, StopReason::EStop, observer);
+            state.report.robot_time_s = now.as_secs_f64();
+        }
+        self.save_state(&mut state);
+        let mut report = state.snapshot(&self.robot, started.elapsed());
+        report.team_link = self.team_channel.as_ref().map(|c| c.stats());
+        report
+    }
+
+    fn answer(&self, seq: u64, reply: Reply) {
+        if let Some((_, answers)) = self.lockstep.as_ref() {
+            let _ = answers.publish(LockstepOut { robot: self.robot.id().to_string(), seq, reply });
+        }
+    }
+
+    /// The farm's hello: the same seed, or the runs would differ from the first random draw.
+    fn take_hello(
+        &mut self,
+        hello: &lockstep::Hello,
+        step: &mut LockstepStep,
+        observer: &mut dyn RunObserver,
+    ) -> Reply {
+        let seed = self.settings.lockstep.as_ref().map_or(0, |l| l.seed);
+        if hello.protocol != lockstep::PROTOCOL {
+            return Reply::Refused(format!(
+                "{}: lockstep protocol {} here, {} at the farm (run the same spomp version)",
+                self.robot.id(),
+                lockstep::PROTOCOL,
+                hello.protocol
+            ));
+        }
+        if hello.seed != seed {
+            return Reply::Refused(format!(
+                "{}: the farm runs seed {} and this robot was set up with seed {seed}: start it with --seed {}",
+                self.robot.id(),
+                hello.seed,
+                hello.seed
+            ));
+        }
+        if step.hello.is_none() {
+            // As the simulator sets its robots up: background work only under a latency model.
+            self.robot.set_background_skills(hello.skill_latency_s.is_some());
+            observer.on_lockstep(hello.skill_latency_s.is_some());
+            step.hello = Some(hello.clone());
+        }
+        // Every hello starts the calls again: the farm says hello once before the first step,
+        // and again to a robot it dropped, which then rejoins.
+        step.next_seq = 1;
+        Reply::Ready
+    }
+
+    /// One call of a step; the answer when the call wants one.
+    fn lockstep_call(
+        &mut self,
+        op: Op,
+        state: &mut LoopState,
+        step: &mut LockstepStep,
+        observer: &mut dyn RunObserver,
+        started: Instant,
+    ) -> Option<Reply> {
+        let id = self.robot.id().clone();
+        let now = state.sim_now.unwrap_or(Time::ZERO);
+        match op {
+            Op::Hello(_) | Op::End => {}
+            Op::Begin(t) => {
+                state.sim_now = Some(t);
+                state.clock_rx = Some(Instant::now());
+                state.report.received.clock += 1;
+                step.estimate_after_panorama = None;
+            }
+            Op::Odometry(odom) => {
+                state.report.received.odometry += 1;
+                state.odom_rx = Some((now, Instant::now()));
+                state.history.push(odom);
+                observer.on_odometry(id.as_str(), &odom);
+                observer.on_seam(&id, now, SeamInput::Odometry(&odom));
+                self.robot.on_odometry(odom);
+            }
+            Op::ExternalPose(est) => self.external_pose(state, est, observer),
+            Op::Panorama(frame) => {
+                state.report.received.panoramas += 1;
+                state.panorama_stamp = Some(frame.stamp);
+                let frame = Arc::new(frame);
+                observer.on_panorama(id.as_str(), &frame);
+                observer.on_seam(&id, now, SeamInput::Panorama(&frame));
+                self.robot.on_panorama(frame);
+                step.estimate_after_panorama = self.robot.pose();
+                self.publish_perception(state, observer);
+            }
+            Op::CameraTiles(tiles) => {
+                state.report.received.camera_tiles += tiles.len() as u64;
+                observer.on_seam(&id, now, SeamInput::CameraTiles(&tiles));
+                self.robot.on_camera_tiles(&tiles, now);
+            }
+            Op::ExchangeWork => self.exchange_work_at_modelled_time(state, step, now, observer),
+            Op::TeamOut { to, tiers, budget_bytes } => {
+                if self.team_channel.is_some() {
+                    // The team state goes over the team link, not the farm's radio.
+                    return Some(Reply::TeamOut(None));
+                }
+                let tiers = tiers_from_bits(tiers);
+                let budget_bytes = usize::try_from(budget_bytes).unwrap_or(usize::MAX);
+                let sent = self.robot.team_message_for(&to, tiers, budget_bytes);
+                let call = SeamInput::TeamOut { to: &to, tiers, budget_bytes, sent: sent.as_deref() };
+                observer.on_seam(&id, now, call);
+                return Some(Reply::TeamOut(sent));
+            }
+            Op::TeamIn { from, bytes } => {
+                if self.team_channel.is_some() {
+                    state.report.team_in_ignored += 1;
+                } else {
+                    state.report.received.team += 1;
+                    observer.on_seam(&id, now, SeamInput::TeamIn { from: &from, bytes: &bytes });
+                    if let Err(e) = self.robot.on_team_message(&from, &bytes) {
+                        state.report.note_rejected(&from, &e);
+                    }
+                }
+            }
+            Op::Halt => {
+                observer.on_seam(&id, now, SeamInput::Halt);
+                self.robot.halt(now, None);
+            }
+            Op::Tick => return Some(Reply::Done(Box::new(self.lockstep_tick(state, step, now, observer, started)))),
+        }
+        None
+    }
+
+    /// Background work under the simulator's latency model: each result is handed back at the
+    /// first step its modelled time has passed (waiting for its thread if it is not done yet),
+    /// then the work due now goes to the threads.
+    fn exchange_work_at_modelled_time(
+        &mut self,
+        state: &mut LoopState,
+        step: &mut LockstepStep,
+        now: Time,
+        observer: &mut dyn RunObserver,
+    ) {
+        let Some((perception_s, planner_s)) = step.hello.as_ref().and_then(|h| h.skill_latency_s) else { return };
+        let mut k = 0;
+        while k < step.work_out.len() {
+            if step.work_out[k].0 > now {
+                k += 1;
+                continue;
+            }
+            let (_, work_id) = step.work_out.remove(k);
+            let Some((work, took)) = self.wait_for_work(state, step, work_id, now, observer) else { continue };
+            let kind = work.kind();
+            observer.on_seam(self.robot.id(), now, SeamInput::FinishWork(work_id));
+            self.robot.finish_work(work);
+            state.report.skill_jobs += 1;
+            match kind {
+                WorkKind::Perception => {
+                    state.report.max_panorama_ms = state.report.max_panorama_ms.max(ms(took));
+                    self.publish_perception(state, observer);
+                }
+                WorkKind::Planner => state.report.max_planner_ms = state.report.max_planner_ms.max(ms(took)),
+            }
+        }
+        let work = self.robot.take_work(now);
+        if work.is_empty() {
+            return;
+        }
+        let ids: Vec<u64> = work.iter().map(|w| w.id()).collect();
+        observer.on_seam(self.robot.id(), now, SeamInput::TakeWork(&ids));
+        for w in work {
+            let latency_s = match w.kind() {
+                WorkKind::Perception => perception_s,
+                WorkKind::Planner => planner_s,
+            };
+            let due = Time::from_nanos(now.nanos + Time::from_secs_f64(latency_s).nanos);
+            step.work_out.push((due, w.id()));
+            self.workers.submit(w);
+        }
+    }
+
+    /// Work number `work_id` from the threads, waiting for it; `None` if a skill failed.
+    fn wait_for_work(
+        &mut self,
+        state: &mut LoopState,
+        step: &mut LockstepStep,
+        work_id: u64,
+        now: Time,
+        observer: &mut dyn RunObserver,
+    ) -> Option<(spomp_robot::runtime::FinishedWork, Duration)> {
+        loop {
+            if let Some(done) = step.finished.remove(&work_id) {
+                return Some(done);
+            }
+            if state.skill_failed {
+                return None;
+            }
+            match self.workers.wait_finished(Duration::from_secs(1)) {
+                Some(WorkOutcome::Done { work, took }) => {
+                    step.finished.insert(work.id(), (work, took));
+                }
+                Some(WorkOutcome::Panicked { kind, message }) => {
+                    let what = format!("{} failed on its worker thread: {message}; the robot stops", kind.name());
+                    observer.on_problem(self.robot.id().as_str(), now, &what);
+                    self.log(now, 50, what.clone());
+                    state.last_problem = Some(what);
+                    state.skill_failed = true;
+                }
+                None => {}
+            }
+        }
+    }
+
+    /// Upkeep and tick when due (as the simulator ticks its robots), the outputs published, and
+    /// the step's answer.
+    fn lockstep_tick(
+        &mut self,
+        state: &mut LoopState,
+        step: &mut LockstepStep,
+        now: Time,
+        observer: &mut dyn RunObserver,
+        started: Instant,
+    ) -> StepDone {
+        let id = self.robot.id().clone();
+        if let Some(channel) = self.team_channel.as_mut() {
+            for (from, bytes) in channel.receive() {
+                state.report.received.team += 1;
+                observer.on_seam(&id, now, SeamInput::TeamIn { from: &from, bytes: &bytes });
+                if let Err(e) = self.robot.on_team_message(&from, &bytes) {
+                    state.report.note_rejected(&from, &e);
+                }
+            }
+        }
+        while let Some(msg) = take(&self.inputs.estop, &mut state.report.malformed_inputs) {
+            if msg.data != state.estop {
+                let what = if msg.data { "e-stop engaged: tree halted" } else { "e-stop released" };
+                observer.on_problem(id.as_str(), now, what);
+                self.log(now, if msg.data { 30 } else { 20 }, what.into());
+            }
+            state.estop = msg.data;
+        }
+        let mut transitions = Recorder::default();
+        let mut transitioned = Vec::new();
+        let mut problems = Vec::new();
+        let mut ticked = false;
+        if state.estop || state.skill_failed {
+            if !state.halted {
+                observer.on_seam(&id, now, SeamInput::Halt);
+                self.robot.halt(now, None);
+                state.halted = true;
+            }
+        } else if now >= step.next_tick {
+            let tick_start = Instant::now();
+            step.next_tick = Time::from_nanos(now.nanos + step.tick_period_ns - 1);
+            state.halted = false;
+            self.robot.maintain(now);
+            state.status = self.robot.tick(now, Some(&mut transitions));
+            state.report.ticks += 1;
+            ticked = true;
+            transitioned = transitions.records.iter().map(|r| r.node_id).collect();
+            self.publish_transitions(&mut transitions, observer);
+            let (command, flight) = (self.robot.command(), self.robot.flight());
+            observer.on_seam(&id, now, SeamInput::Tick { command, flight });
+            state.report.max_tick_ms = state.report.max_tick_ms.max(ms(tick_start.elapsed()));
+            problems = self.robot.take_problems();
+            for p in &problems {
+                observer.on_problem(id.as_str(), now, p);
+                state.last_problem = Some(p.clone());
+            }
+        }
+        let reason = if state.estop {
+            StopReason::EStop
+        } else if state.skill_failed {
+            StopReason::SkillFailed
+        } else {
+            StopReason::None
+        };
+        if ticked || reason != StopReason::None {
+            self.publish_command(state, now, reason, observer);
+            self.publish_state(state, now, observer);
+        }
+        if self.team_channel.is_some() && now >= state.next_team {
+            state.next_team = Time::from_nanos(now.nanos + Time::from_secs_f64(self.settings.team_period_s).nanos);
+            self.send_team(now, observer);
+        }
+        if let Some((_, period)) = self.state_sink.as_ref()
+            && now >= state.next_save
+        {
+            state.next_save = Time::from_nanos(now.nanos + Time::from_secs_f64(*period).nanos);
+            self.save_state(state);
+        }
+        if now >= state.next_status {
+            state.next_status = Time::from_nanos(now.nanos + Time::from_secs_f64(STATUS_PERIOD_S).nanos);
+            self.publish_status(state, now, reason, started.elapsed());
+        }
+        let stopped = reason != StopReason::None;
+        StepDone {
+            now,
+            ticked: ticked || stopped,
+            command: if stopped { Some(Twist2::ZERO) } else { self.robot.command() },
+            flight: if stopped { None } else { self.robot.flight() },
+            estimate_after_panorama: step.estimate_after_panorama.take(),
+            estimate: self.robot.pose(),
+            tree: format!("{:?}", self.robot.tree().status()).to_lowercase(),
+            transitioned,
+            problems,
+            goals: self.robot.team().goals().to_vec(),
+        }
     }
 
     /// Hands finished skill work back to the robot (publishing a new scan), then the work the
@@ -861,6 +1245,45 @@ struct LoopState {
     odom_latency: VecDeque<f64>,
     panorama_latency: VecDeque<f64>,
     report: RunReport,
+}
+
+/// How long the lockstep loop sleeps when no call is waiting.
+const LOCKSTEP_POLL: Duration = Duration::from_micros(200);
+
+/// Where a robot is in a farm's lockstep.
+struct LockstepStep {
+    /// The farm's hello, once taken.
+    hello: Option<lockstep::Hello>,
+    /// Number of the next call.
+    next_seq: u64,
+    /// Period of the tree's ticks, nanoseconds (rounded as the simulator rounds it).
+    tick_period_ns: i64,
+    next_tick: Time,
+    /// Work on the threads: (modelled time its result is due, work number), in the order taken.
+    work_out: Vec<(Time, u64)>,
+    /// Results the threads finished before they were due.
+    finished: std::collections::HashMap<u64, (spomp_robot::runtime::FinishedWork, Duration)>,
+    /// The estimate right after this step's panorama.
+    estimate_after_panorama: Option<PoseEstimate>,
+}
+
+impl LockstepStep {
+    fn new(tick_hz: f64) -> Self {
+        LockstepStep {
+            hello: None,
+            next_seq: 1,
+            tick_period_ns: ((1e9 / tick_hz).round() as i64).max(1),
+            next_tick: Time::ZERO,
+            work_out: Vec::new(),
+            finished: std::collections::HashMap::new(),
+            estimate_after_panorama: None,
+        }
+    }
+}
+
+/// A tier set from its bits (bit k = tier k), as the lockstep calls carry it.
+fn tiers_from_bits(bits: u8) -> TierSet {
+    crate::team::TIERS.iter().filter(|t| bits & (1 << **t as u8) != 0).fold(TierSet::NONE, |set, t| set.with(*t))
 }
 
 /// Latency samples kept for the percentiles.

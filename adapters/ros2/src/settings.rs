@@ -44,6 +44,17 @@ pub struct RunSettings {
     pub team_period_s: f64,
     /// Byte budget of one team-state message.
     pub team_budget_bytes: usize,
+    /// Follow a simulator farm's lockstep (`spomp run --lockstep`) instead of `/clock`.
+    pub lockstep: Option<LockstepSettings>,
+}
+
+/// A robot in a farm's lockstep (see [`crate::lockstep`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LockstepSettings {
+    /// The run seed this robot was set up with: the farm's must be the same.
+    pub seed: u64,
+    /// The farm is given up for gone when it sends nothing for this long, wall seconds.
+    pub timeout_s: f64,
 }
 
 impl RunSettings {
@@ -75,6 +86,7 @@ impl RunSettings {
             gps_origin: ros.gps_origin.map(|o| (o.latitude_deg, o.longitude_deg)),
             team_period_s: 1.0,
             team_budget_bytes: (mission.comms.bandwidth_bytes_per_s.clamp(1_000.0, 1e9)) as usize,
+            lockstep: None,
         })
     }
 }

@@ -67,6 +67,12 @@ impl SkillWorkers {
     pub fn try_finished(&self) -> Option<WorkOutcome> {
         self.done.try_recv().ok()
     }
+
+    /// The next finished work, waiting for it at most `timeout` (a farm's lockstep hands a
+    /// result back at its modelled time, and waits for the thread if it is not done by then).
+    pub fn wait_finished(&self, timeout: Duration) -> Option<WorkOutcome> {
+        self.done.recv_timeout(timeout).ok()
+    }
 }
 
 fn work_loop(kind: WorkKind, rx: &mpsc::Receiver<SkillWork>, done: &mpsc::Sender<WorkOutcome>) {

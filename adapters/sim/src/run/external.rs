@@ -6,9 +6,31 @@
 //! than the driver's timeout stops the robot), carries the team-state messages the driver's
 //! robots send over the same radio model as everyone else's, and learns their goals, claims and
 //! visits from the status they report.
+//!
+//! A driver in lockstep ([`ExternalDrivers::lockstep`]) is given every call the simulator makes
+//! on its own robots' seams at the same point of the step — inputs, background work, each radio
+//! message out and in, the tick — and the step's outcome ([`DrivenStep`]) before the simulator
+//! goes on: the run is then the one the simulator makes with the robots inside it.
 
 use spomp_core::{FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, PoseEstimate, RobotId, Time, Twist2};
-use spomp_teamstate::GoalView;
+use spomp_teamstate::{GoalView, TierSet};
+
+/// What a driven robot in lockstep did in a step ([`ExternalDrivers::end_step`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DrivenStep {
+    /// Whether its tree ticked.
+    pub ticked: bool,
+    /// `command()` after the step.
+    pub command: Option<Twist2>,
+    /// Its estimate right after this step's panorama, if one came.
+    pub estimate_after_panorama: Option<PoseEstimate>,
+    /// Its estimate at the end of the step.
+    pub estimate: Option<PoseEstimate>,
+    /// Nodes (depth-first ids) whose status changed in the tick.
+    pub transitioned: Vec<u32>,
+    /// Problems reported in the tick.
+    pub problems: Vec<String>,
+}
 
 /// A team-state message a driven robot sent.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -48,4 +70,44 @@ pub trait ExternalDrivers {
     fn goals(&self, robot: &RobotId) -> &[GoalView];
     /// Whether a driven robot reported its tree finished.
     fn tree_done(&self, robot: &RobotId) -> bool;
+
+    /// Whether the driven robots run in lockstep with the simulator (the calls below).
+    fn lockstep(&self) -> bool {
+        false
+    }
+    /// Lockstep: hand the robot its background work due back, and take the work it has due.
+    fn exchange_work(&mut self, _robot: &RobotId, _now: Time) {}
+    /// Lockstep: the robot's team-state message for `to` over a link allowing `tiers` and
+    /// `budget_bytes` (its `team_message_for`), at this point of the step.
+    fn team_message_for(
+        &mut self,
+        _robot: &RobotId,
+        _to: &RobotId,
+        _tiers: TierSet,
+        _budget_bytes: usize,
+    ) -> Option<Vec<u8>> {
+        None
+    }
+    /// Lockstep: the robot's upkeep and tick, when due.
+    fn tick(&mut self, _robot: &RobotId, _now: Time) {}
+    /// Lockstep: waits until every robot told to tick has answered (a robot that does not
+    /// answer in time is reported and no longer driven).
+    fn end_step(&mut self, _now: Time) {}
+    /// Lockstep: what the robot did in this step, once [`ExternalDrivers::end_step`] returned.
+    fn step_of(&self, _robot: &RobotId) -> Option<&DrivenStep> {
+        None
+    }
+    /// The robot was killed: halt it.
+    fn halt(&mut self, _robot: &RobotId, _now: Time) {}
+    /// The root status of a driven robot's tree as it last reported it (`running`, `success`, …).
+    fn tree_status(&self, _robot: &RobotId) -> Option<String> {
+        None
+    }
+    /// The run is over.
+    fn end_run(&mut self) {}
+    /// Robots whose process reported since the last call (it started late): the simulator stops
+    /// running them itself and hands them to the driver from this step on.
+    fn joined(&mut self) -> Vec<RobotId> {
+        Vec::new()
+    }
 }

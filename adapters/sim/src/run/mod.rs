@@ -43,7 +43,7 @@ use spomp_robot::runtime::{FinishedWork, WorkKind};
 use spomp_robot::{PoseInput, Robot, RobotRuntime, RobotSetup};
 use spomp_teamstate::{GoalOrigin, Tier, TierSet};
 
-pub use external::{DrivenTeamMessage, ExternalDrivers};
+pub use external::{DrivenStep, DrivenTeamMessage, ExternalDrivers};
 pub use pace::RealTimePacer;
 pub use seam::{SeamInput, tier_bits};
 pub use setup::{faults_for_mission, operating_area, radio_for_mission, world_for_mission};
@@ -435,15 +435,31 @@ fn sense_ugv(r: &mut SimRobot, world: &World, now: Time) -> Option<SensedUgv> {
     if let Some(frame) = &panorama {
         r.robot.on_panorama(Arc::clone(frame));
         if let Some(est) = r.robot.pose() {
-            let error = est.pose.position().distance(truth.position());
-            r.localization_errors.push(error);
-            let t = now.as_secs_f64();
-            if r.localization_error_series.last().is_none_or(|&(last, _)| t - last >= 1.0 - 1e-9) {
-                r.localization_error_series.push((t, error));
-            }
+            note_localization(r, &est, truth, now);
         }
     }
     Some(SensedUgv { odometry: odom, external_pose, panorama })
+}
+
+/// A UGV's estimate right after a panorama, against the truth: its localization error.
+fn note_localization(r: &mut SimRobot, est: &PoseEstimate, truth: Pose2, now: Time) {
+    let error = est.pose.position().distance(truth.position());
+    r.localization_errors.push(error);
+    let t = now.as_secs_f64();
+    if r.localization_error_series.last().is_none_or(|&(last, _)| t - last >= 1.0 - 1e-9) {
+        r.localization_error_series.push((t, error));
+    }
+}
+
+/// Counts a problem a robot reported (the first `MAX_PROBLEMS` distinct ones are kept).
+fn note_problem(problems: &mut BTreeMap<(String, String), ProblemCount>, robot: &RobotId, message: String, now: Time) {
+    let key = (robot.to_string(), message);
+    if let Some(p) = problems.get_mut(&key) {
+        p.count += 1;
+    } else if problems.len() < MAX_PROBLEMS {
+        let p = ProblemCount { robot: key.0.clone(), message: key.1.clone(), count: 1, first_s: now.as_secs_f64() };
+        problems.insert(key, p);
+    }
 }
 
 /// Seconds from the first to the last second of a once-a-second trajectory in which the robot
@@ -644,18 +660,12 @@ impl Simulation {
     }
 
     /// Hands the robots `drivers` drives over to it (see [`ExternalDrivers`]): UGVs (odometry,
-    /// panoramas out; velocity in) and UAVs (position and camera tiles out; setpoints in); a
-    /// basestation has nothing to drive. Returns the ids now driven.
+    /// panoramas out; velocity in), UAVs (position and camera tiles out; setpoints in) and
+    /// basestations (their surveyed position out). Returns the ids now driven.
     pub fn drive_externally(&mut self, drivers: Box<dyn ExternalDrivers>) -> Result<Vec<RobotId>, SimError> {
         let mut driven = Vec::new();
         for r in &mut self.robots {
             if drivers.drives(&r.id) {
-                if r.kind == RobotKind::Basestation {
-                    return Err(SimError::invalid(
-                        "driven robot",
-                        format!("robot `{}` is a basestation: only UGVs and UAVs can be driven from outside", r.id),
-                    ));
-                }
                 r.external = true;
                 driven.push(r.id.clone());
             }
@@ -766,6 +776,11 @@ impl Simulation {
         }
         if let Some(d) = self.drivers.as_mut() {
             d.begin_step(now);
+            for id in d.joined() {
+                if let Some(r) = self.robots.iter_mut().find(|r| r.id == id && r.alive()) {
+                    r.external = true;
+                }
+            }
             self.driven_outbox.extend(d.take_team_messages());
         }
         self.apply_kills(observer);
@@ -781,11 +796,15 @@ impl Simulation {
             let period = observer.record_period_s().max(self.options.dt_s);
             self.next_record = Time::from_nanos(now.nanos + (period * 1e9).round() as i64 - 1);
             for r in &self.robots {
+                let driven = self.drivers.as_ref().filter(|_| r.external).and_then(|d| d.step_of(&r.id));
                 let snap = RobotSnapshot {
                     kind: r.kind,
                     truth: r.truth(),
                     z_m: r.z_m(),
-                    estimate: r.robot.pose(),
+                    estimate: match driven {
+                        Some(step) => step.estimate,
+                        None => r.robot.pose(),
+                    },
                     command: r.command,
                 };
                 observer.on_state(&r.id, now, &snap);
@@ -828,6 +847,9 @@ impl Simulation {
                 r.killed_s = Some(now.as_secs_f64());
                 r.command = Twist2::ZERO;
                 r.robot.halt(now, None);
+                if let Some(d) = self.drivers.as_mut().filter(|_| r.external) {
+                    d.halt(&r.id, now);
+                }
                 observer.on_seam(&r.id, now, SeamInput::Halt);
                 observer.on_event(now, &SimEvent::RobotKilled { robot: r.id.to_string() });
             }
@@ -892,7 +914,13 @@ impl Simulation {
         let Some(latency) = self.options.skill_latency else { return };
         let now = self.now;
         for r in &mut self.robots {
-            if !r.alive() || r.external {
+            if !r.alive() {
+                continue;
+            }
+            if r.external {
+                if let Some(d) = self.drivers.as_mut().filter(|d| d.lockstep()) {
+                    d.exchange_work(&r.id, now);
+                }
                 continue;
             }
             let mut k = 0;
@@ -984,7 +1012,8 @@ impl Simulation {
                         // that drives it.
                         d.pose(&r.id, &estimate, uav.altitude_m());
                         let tiles = camera.reveal(world, pose);
-                        if !tiles.is_empty() {
+                        // In lockstep every call is made, as on the simulator's own robots.
+                        if !tiles.is_empty() || d.lockstep() {
                             d.camera_tiles(&r.id, now, &tiles, world.spec());
                         }
                         continue;
@@ -998,6 +1027,10 @@ impl Simulation {
                 Body::Fixed { pose } => {
                     if alive {
                         let estimate = PoseEstimate { stamp: now, pose: *pose, covariance: [0.0; 9], confidence: 1.0 };
+                        if let Some(d) = self.drivers.as_mut().filter(|_| r.external) {
+                            d.pose(&r.id, &estimate, 0.0);
+                            continue;
+                        }
                         observer.on_seam(&r.id, now, SeamInput::ExternalPose(&estimate));
                         r.robot.on_external_pose(estimate);
                     }
@@ -1044,7 +1077,14 @@ impl Simulation {
                 // Over the wire: encoded, decoded and checked by the receiver. A driven robot's
                 // messages were sent already; the link carries those it has room for (a small
                 // link, coordination only, cannot tell tiers apart in them: it carries none).
-                let messages: Vec<Vec<u8>> = if self.robots[a].external {
+                let lockstep = self.drivers.as_ref().is_some_and(|d| d.lockstep());
+                let messages: Vec<Vec<u8>> = if self.robots[a].external && lockstep {
+                    let budget_bytes = usize::try_from(budget).unwrap_or(usize::MAX);
+                    match self.drivers.as_mut() {
+                        Some(d) => d.team_message_for(&from, &to, tiers, budget_bytes).into_iter().collect(),
+                        None => Vec::new(),
+                    }
+                } else if self.robots[a].external {
                     let mut budget = if link.tier == LinkTier::All { budget } else { 0 };
                     let mut out = Vec::new();
                     self.driven_outbox.retain(|m| {
@@ -1089,16 +1129,45 @@ impl Simulation {
     fn tick_trees(&mut self, observer: &mut dyn SimObserver) {
         let now = self.now;
         let dt = self.options.dt_s;
+        // Robots in lockstep tick in their processes while the simulator's own tick here.
+        let lockstep = self.drivers.as_ref().is_some_and(|d| d.lockstep());
+        if let Some(d) = self.drivers.as_mut().filter(|_| lockstep) {
+            for r in self.robots.iter().filter(|r| r.alive() && r.external) {
+                d.tick(&r.id, now);
+            }
+        }
         // Upkeep and ticks touch only their robot (parallel when allowed); observers hear of
         // them afterwards, in robot order.
         let ticked = for_each_robot(self.options.parallel_robots, &mut self.robots, |r| tick_robot(r, now));
+        if let Some(d) = self.drivers.as_mut().filter(|_| lockstep) {
+            d.end_step(now);
+        }
         for (r, ticked) in self.robots.iter_mut().zip(ticked) {
             if !r.alive() {
                 continue;
             }
             if r.external {
                 if let Some(d) = self.drivers.as_mut() {
-                    r.command = d.command(&r.id, now).unwrap_or(Twist2::ZERO);
+                    if !lockstep {
+                        r.command = d.command(&r.id, now).unwrap_or(Twist2::ZERO);
+                    } else if let Some(step) = d.step_of(&r.id) {
+                        if step.ticked {
+                            r.command = step.command.unwrap_or(Twist2::ZERO);
+                        }
+                        for node in &step.transitioned {
+                            if let Some(t) = r.ticked.get_mut(*node as usize) {
+                                *t = true;
+                            }
+                        }
+                        if let Some(est) = &step.estimate_after_panorama {
+                            let truth = r.truth();
+                            note_localization(r, est, truth, now);
+                        }
+                        for message in &step.problems {
+                            observer.on_problem(&r.id, now, message);
+                            note_problem(&mut self.problems, &r.id, message.clone(), now);
+                        }
+                    }
                     let id = r.id.clone();
                     let held =
                         d.goals(&id).iter().find(|g| g.visited.is_none() && g.is_held_by(&id)).map(|g| g.id.clone());
@@ -1125,18 +1194,7 @@ impl Simulation {
                 }
                 for message in r.robot.take_problems() {
                     observer.on_problem(&r.id, now, &message);
-                    let key = (r.id.to_string(), message);
-                    if let Some(p) = self.problems.get_mut(&key) {
-                        p.count += 1;
-                    } else if self.problems.len() < MAX_PROBLEMS {
-                        let p = ProblemCount {
-                            robot: key.0.clone(),
-                            message: key.1.clone(),
-                            count: 1,
-                            first_s: now.as_secs_f64(),
-                        };
-                        self.problems.insert(key, p);
-                    }
+                    note_problem(&mut self.problems, &r.id, message, now);
                 }
             }
             // Claim bookkeeping for the "time heading to a goal" metric.
@@ -1359,8 +1417,17 @@ impl Simulation {
     fn finish(mut self, _observer: &mut dyn SimObserver, wall_s: f64) -> RunResult {
         let end_s = self.now.as_secs_f64();
         // Each tree's status at the end of the run, before the halt that stops it.
-        let final_status: Vec<String> =
-            self.robots.iter().map(|r| format!("{:?}", r.robot.tree().status()).to_lowercase()).collect();
+        let final_status: Vec<String> = self
+            .robots
+            .iter()
+            .map(|r| match self.drivers.as_ref().filter(|_| r.external).and_then(|d| d.tree_status(&r.id)) {
+                Some(status) => status,
+                None => format!("{:?}", r.robot.tree().status()).to_lowercase(),
+            })
+            .collect();
+        if let Some(d) = self.drivers.as_mut() {
+            d.end_run();
+        }
         for r in &mut self.robots {
             if r.alive() {
                 r.robot.halt(self.now, None);
