@@ -291,8 +291,7 @@ fn a_site_table_with_its_own_class_names_runs_as_the_built_in_names_do() {
             .unwrap();
         assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
         let mut r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-        let run = r["runs"][0].take();
-        run
+        r["runs"][0].take()
     };
     let (a, b) = (run(&builtin_mission, "out-builtin"), run(&site_mission, "out-site"));
     assert_eq!(b["outcome"], "complete", "{b}");
