@@ -34,7 +34,8 @@ pub struct TeamLinkArgs {
     pub connect: Vec<String>,
     /// Keep the robot's team state (and its role's `persist` entries) in this file, written
     /// atomically every `--state-period-s` and at shutdown; at start the robot resumes from it
-    /// if it is there and checks out (a damaged or foreign file is reported and ignored).
+    /// if it is there and checks out (a damaged state file is reported and ignored; anything
+    /// else at the path — another file, a link, another robot's state — stops the start).
     #[arg(long, value_name = "FILE")]
     pub state_file: Option<PathBuf>,
     /// How often the state file is written, seconds of robot time.
@@ -67,6 +68,9 @@ impl TeamChannel for ZenohChannel {
     }
     fn stats(&self) -> serde_json::Value {
         serde_json::to_value(self.0.stats()).unwrap_or_default()
+    }
+    fn refused(&self) -> Vec<(&'static str, u64)> {
+        self.0.stats().refused.by_reason().to_vec()
     }
 }
 
@@ -116,6 +120,10 @@ pub fn set_up(args: &TeamLinkArgs, mission: &MissionFile, robot_id: &str, robot:
                 }
                 Err(e) => notes.push(format!("state file {} ignored: {e}", path.display())),
             },
+            // Something else is at the path: starting would overwrite it with the first save.
+            Err(e @ spomp_zenoh::StateFileError::NotAStateFile { .. }) => {
+                return Err(anyhow::Error::new(e).context("--state-file: refusing to start"));
+            }
             Err(e) => notes.push(format!("state file ignored: {e}")),
         }
     }
@@ -130,6 +138,12 @@ pub fn set_up(args: &TeamLinkArgs, mission: &MissionFile, robot_id: &str, robot:
         spomp_behaviors::mission::check_endpoint(e).map_err(|why| anyhow::anyhow!("--listen/--connect: {why}"))?;
     }
     config.multicast_scouting = spec.multicast_scouting;
+    // Only the team may send: the key directory's members, or the mission's robots. Messages
+    // naming anyone else are refused and counted by the link before anything is kept of them.
+    config.members = Some(match &keys {
+        Some(k) => k.members().cloned().collect(),
+        None => mission.team.iter().map(|r| RobotId::new(&r.id)).collect(),
+    });
     match &keys {
         Some(k) => config.credentials = Some(k.credentials(&id)?),
         None => notes.push("warning: team link without --keys: any process that reaches it is believed".into()),

@@ -2,8 +2,8 @@
 //!
 //! Each function takes the fuzzer's bytes and drives the same public function the `spomp`
 //! command line uses for that input (the mission loader, `World::load`, the mission builder that
-//! reads QGroundControl plans, the team-state decoder, the MCAP log reader, checker and recoverer,
-//! the depth-panorama reader and terrain analysis). A panic, an abort, a hang or a memory blow-up
+//! reads QGroundControl plans, the team-state decoder, the team link's receive path, the MCAP log
+//! reader, checker and recoverer, the depth-panorama reader and terrain analysis). A panic, an abort, a hang or a memory blow-up
 //! is a finding; a clean error is not. Some targets also check a property (a recovered log checks
 //! as closed, a decoded sync message re-encodes to something that decodes the same).
 //!
@@ -411,6 +411,126 @@ pub fn teamstate_sync(data: &[u8]) {
     }
 }
 
+/// The team link's members in [`teamlink_receive`]: name and key seed.
+const LINK_MEMBERS: [(&str, u8); 3] = [("base", 1), ("ugv1", 2), ("uav1", 3)];
+/// The message size limit in [`teamlink_receive`] (small, so oversized messages are cheap).
+const LINK_MAX_MESSAGE_BYTES: usize = 1 << 16;
+
+/// A secured team state of a [`LINK_MEMBERS`] member, session `session`.
+fn link_member(name: &str, session: u64) -> spomp_teamstate::TeamState {
+    use spomp_core::RobotId;
+    use spomp_teamstate::{TeamKeys, TeamSecurity, TeamState, TeamStateParams};
+    let mut keys = TeamKeys::new("fuzz-team");
+    for (member, seed) in LINK_MEMBERS {
+        keys.add(RobotId::new(member), &TeamSecurity::public_key_of(&[seed; 32])).expect("a valid key");
+    }
+    let seed = LINK_MEMBERS.iter().find(|m| m.0 == name).map_or(0, |m| m.1);
+    let params = TeamStateParams { max_message_bytes: LINK_MAX_MESSAGE_BYTES, ..TeamStateParams::default() };
+    let mut state = TeamState::new(RobotId::new(name), 5, params).expect("valid parameters");
+    let security = TeamSecurity::new(RobotId::new(name), &[seed; 32], std::sync::Arc::new(keys)).expect("a member");
+    state.set_security(std::sync::Arc::new(security)).expect("its own key");
+    state.set_session(session);
+    state
+}
+
+/// Team-link messages as a robot receives them from the transport, through the whole receive
+/// path: the link's intake (`spomp_zenoh::Intake`: the sender named by the key expression,
+/// the member list, the size limit, the bounded inbox), then the secured team state's
+/// `apply_bytes` (decoding, addresses, records, every signature, session and replay checks).
+/// The bytes choose a sequence of deliveries to the basestation: genuine signed messages of
+/// ugv1 (made on the spot), any bytes under any key expression, replays and bit flips of
+/// genuine messages, oversized payloads, and inbox drains. Properties: a refused payload is
+/// never copied, the link's per-sender figures name members only, every offered message is
+/// either kept or counted, only members' messages reach the team state, and a message it
+/// refuses leaves its every table as it was.
+pub fn teamlink_receive(data: &[u8]) {
+    use spomp_core::{Pose2, RobotId, Time};
+    use spomp_teamstate::TierSet;
+    use spomp_zenoh::{Intake, LinkConfig};
+
+    let mut u = Unstructured::new(data);
+    let mut config = LinkConfig::new("fuzz-team", RobotId::new("base"));
+    config.members = Some(LINK_MEMBERS.iter().map(|m| RobotId::new(m.0)).collect());
+    config.max_message_bytes = LINK_MAX_MESSAGE_BYTES;
+    config.queue_messages = 8;
+    let intake = Intake::new(&config);
+    let mut base = link_member("base", 10);
+    let mut ugv1 = link_member("ugv1", 20);
+    let key = |from: &str| format!("spomp/fuzz-team/team/base/{from}/coordination");
+    let mut genuine: Vec<Vec<u8>> = Vec::new();
+    let mut offered = 0u64;
+    let drain = |intake: &Intake, base: &mut spomp_teamstate::TeamState| {
+        for (from, bytes) in intake.take() {
+            assert!(LINK_MEMBERS.iter().any(|m| m.0 == from.as_str()), "kept a message of non-member {from}");
+            let (sizes, records) = (base.table_sizes(), base.records().count());
+            if base.apply_bytes(&from, &bytes).is_err() {
+                assert_eq!(base.table_sizes(), sizes, "a refused message changed a table");
+                assert_eq!(base.records().count(), records);
+            }
+        }
+    };
+    for step in 0..48u32 {
+        // Out of bytes, `Unstructured` would answer zeros: stop instead.
+        if u.is_empty() {
+            break;
+        }
+        let Ok(op) = u.int_in_range(0u8..=6) else { break };
+        match op {
+            // A genuine message of ugv1, delivered.
+            0 => {
+                let _ = ugv1.set_pose(Pose2::new(f64::from(step), 1.0, 0.0), Time::from_secs_f64(f64::from(step)));
+                if let Some(m) = ugv1.make_sync(&RobotId::new("base"), TierSet::ALL, 4096) {
+                    let bytes = m.encode();
+                    offered += 1;
+                    intake.offer(&key("ugv1"), bytes.len(), || bytes.clone());
+                    genuine.push(bytes);
+                }
+            }
+            // Any bytes under a member's name or any name (any key expression chunk).
+            1 | 2 => {
+                let from = if op == 1 {
+                    u.choose(&LINK_MEMBERS).map_or("ugv1", |m| m.0).to_string()
+                } else {
+                    u.arbitrary::<String>().unwrap_or_default()
+                };
+                let bytes: Vec<u8> = u.arbitrary().unwrap_or_default();
+                offered += 1;
+                intake.offer(&key(&from), bytes.len(), || bytes.clone());
+            }
+            // A genuine message again, or with bytes changed.
+            3 | 4 if !genuine.is_empty() => {
+                let pick = u.choose_index(genuine.len()).unwrap_or(0);
+                let mut bytes = genuine[pick].clone();
+                if op == 4 {
+                    for _ in 0..u.int_in_range(1u8..=4).unwrap_or(1) {
+                        let at = u.choose_index(bytes.len()).unwrap_or(0);
+                        bytes[at] ^= u.int_in_range(1u8..=255).unwrap_or(1);
+                    }
+                }
+                offered += 1;
+                intake.offer(&key("ugv1"), bytes.len(), || bytes.clone());
+            }
+            3 | 4 => {}
+            // Over the size limit: refused without its payload being copied.
+            5 => {
+                let extra: u16 = u.arbitrary().unwrap_or(1);
+                offered += 1;
+                intake.offer(&key("ugv1"), LINK_MAX_MESSAGE_BYTES + 1 + usize::from(extra), || {
+                    panic!("an oversized payload was copied")
+                });
+            }
+            _ => drain(&intake, &mut base),
+        }
+    }
+    drain(&intake, &mut base);
+    let stats = intake.stats();
+    assert!(stats.received.keys().all(|k| LINK_MEMBERS.iter().any(|m| m.0 == k)), "{:?}", stats.received);
+    let kept: u64 = stats.received.values().map(|c| c.messages).sum::<u64>() + stats.received_unlisted.messages;
+    let refused = stats.refused.unknown_sender + stats.refused.oversized + stats.refused.inbox_full;
+    assert_eq!(kept + refused, offered, "every message kept or counted");
+    assert!(base.table_sizes().peers <= LINK_MEMBERS.len());
+}
+
 /// The MCAP log reader, `spomp log check` and `spomp log recover` on arbitrary bytes; a log
 /// that recovers must check as closed, with the messages the recovery counted.
 pub fn mcap_log(data: &[u8]) {
@@ -491,6 +611,16 @@ mod seeds {
         let mut png = std::io::Cursor::new(Vec::new());
         img.write_to(&mut png, image::ImageFormat::Png).expect("png");
         put("terrain_input", "seed-8x32", png.get_ref());
+        // Team-link deliveries (each byte pair picks an operation and its argument): genuine
+        // messages and drains; a replay and a flip of one; a stranger's name; an oversized one.
+        put("teamlink_receive", "seed-genuine", &[0, 0, 6, 0, 0, 6, 0, 6]);
+        put("teamlink_receive", "seed-replay-flip", &[0, 0, 6, 3, 0, 6, 4, 0, 1, 9, 40, 6, 0, 6]);
+        put(
+            "teamlink_receive",
+            "seed-stranger",
+            &[2, 8, b'm', b'a', b'l', b'l', b'o', b'r', b'y', b'!', 4, 1, 2, 3, 4, 6],
+        );
+        put("teamlink_receive", "seed-oversized", &[0, 5, 0, 1, 6, 0, 6]);
     }
 }
 
@@ -545,6 +675,11 @@ mod replay {
     #[test]
     fn mcap_log() {
         replay("mcap_log", super::mcap_log);
+    }
+
+    #[test]
+    fn teamlink_receive() {
+        replay("teamlink_receive", super::teamlink_receive);
     }
 
     #[test]

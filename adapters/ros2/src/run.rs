@@ -141,11 +141,19 @@ pub struct RunReport {
     pub safety_stops: u64,
     /// Final status of the tree.
     pub tree_status: String,
-    /// Team-state messages refused (unsigned, forged, from non-members, malformed), by the
-    /// sender the transport named.
+    /// Team-state messages refused (unsigned, forged, replayed, malformed), by the teammate the
+    /// transport named: one entry per robot of the team at most. Senders outside the team are
+    /// counted in `team_rejected_unknown_sender`, never by name.
     pub team_rejected: std::collections::BTreeMap<String, u64>,
-    /// Why the last refused message of each sender was refused.
+    /// Why the last refused message of each teammate was refused (clipped to
+    /// [`MAX_WHY_CHARS`] characters).
     pub team_rejected_why: std::collections::BTreeMap<String, String>,
+    /// Refused messages of every sender by kind: the team state's reasons
+    /// (`spomp_teamstate::SyncError::kind`) and the link's own (`unknown_sender`, `oversized`,
+    /// `inbox_full`). A fixed, small set of keys.
+    pub team_rejected_by_kind: std::collections::BTreeMap<&'static str, u64>,
+    /// Refused messages that named a sender outside the team (by the link or the robot).
+    pub team_rejected_unknown_sender: u64,
     /// The team link's figures (bytes per link and tier), when one is plugged in.
     pub team_link: Option<serde_json::Value>,
     /// Resume states written.
@@ -155,10 +163,41 @@ pub struct RunReport {
     pub team_in_ignored: u64,
 }
 
+/// The longest reason kept in `team_rejected_why`, characters (a refusal quotes names a sender
+/// chose, which may be megabytes long).
+pub const MAX_WHY_CHARS: usize = 240;
+
+/// `text` cut to `max` characters, with `…` where it was cut.
+fn clip(text: &str, max: usize) -> String {
+    match text.char_indices().nth(max) {
+        Some((end, _)) => format!("{}…", &text[..end]),
+        None => text.to_string(),
+    }
+}
+
 impl RunReport {
-    fn note_rejected(&mut self, from: &RobotId, why: &spomp_teamstate::SyncError) {
-        *self.team_rejected.entry(from.to_string()).or_default() += 1;
-        self.team_rejected_why.insert(from.to_string(), why.to_string());
+    /// Counts a refused message: by kind always, and by sender only for a teammate
+    /// (`member`), so the tables stay as small as the team whatever names a flood invents.
+    fn note_rejected(&mut self, from: &RobotId, member: bool, why: &spomp_teamstate::SyncError) {
+        *self.team_rejected_by_kind.entry(why.kind()).or_default() += 1;
+        if member {
+            *self.team_rejected.entry(from.to_string()).or_default() += 1;
+            self.team_rejected_why.insert(from.to_string(), clip(&why.to_string(), MAX_WHY_CHARS));
+        } else {
+            self.team_rejected_unknown_sender += 1;
+        }
+    }
+
+    /// Adds the refusals a team link made itself (`TeamChannel::refused`).
+    fn add_link_refusals(&mut self, refused: &[(&'static str, u64)]) {
+        for &(kind, n) in refused {
+            if n > 0 {
+                *self.team_rejected_by_kind.entry(kind).or_default() += n;
+            }
+            if kind == "unknown_sender" {
+                self.team_rejected_unknown_sender += n;
+            }
+        }
     }
 }
 
@@ -412,7 +451,10 @@ impl RobotNode {
         }
         self.save_state(&mut state);
         let mut report = state.snapshot(&self.robot, started.elapsed());
-        report.team_link = self.team_channel.as_ref().map(|c| c.stats());
+        if let Some(channel) = self.team_channel.as_ref() {
+            report.team_link = Some(channel.stats());
+            report.add_link_refusals(&channel.refused());
+        }
         report
     }
 
@@ -942,7 +984,7 @@ impl RobotNode {
             let from = RobotId::new(&from);
             observer.on_seam(self.robot.id(), now, SeamInput::TeamIn { from: &from, bytes: &msg.data });
             if let Err(e) = self.robot.on_team_message(&from, &msg.data) {
-                state.report.note_rejected(&from, &e);
+                state.report.note_rejected(&from, self.peers.contains(&from), &e);
             }
         }
         if let Some(channel) = self.team_channel.as_mut() {
@@ -952,7 +994,7 @@ impl RobotNode {
                 let now = state.now().unwrap_or(Time::ZERO);
                 observer.on_seam(self.robot.id(), now, SeamInput::TeamIn { from: &from, bytes: &bytes });
                 if let Err(e) = self.robot.on_team_message(&from, &bytes) {
-                    state.report.note_rejected(&from, &e);
+                    state.report.note_rejected(&from, self.peers.contains(&from), &e);
                 }
             }
         }
@@ -1134,7 +1176,11 @@ impl RobotNode {
         if let Ok(data) = serde_json::to_string(&status) {
             let _ = self.outputs.status.publish(ros::StringMsg { data });
         }
-        let report = state.snapshot(&self.robot, wall);
+        let mut report = state.snapshot(&self.robot, wall);
+        if let Some(channel) = self.team_channel.as_ref() {
+            report.team_link = Some(channel.stats());
+            report.add_link_refusals(&channel.refused());
+        }
         let level = match reason {
             StopReason::None if state.last_problem.is_none() => 0,
             StopReason::None | StopReason::EStop => 1,

@@ -18,6 +18,11 @@ pub trait TeamChannel: Send {
     fn receive(&mut self) -> Vec<(RobotId, Vec<u8>)>;
     /// Figures for diagnostics (bytes per link and tier, drops), as JSON.
     fn stats(&self) -> serde_json::Value;
+    /// Messages the link itself refused before handing them on, by reason (e.g.
+    /// `unknown_sender`, `oversized`): counted with the robot's own refusals.
+    fn refused(&self) -> Vec<(&'static str, u64)> {
+        Vec::new()
+    }
 }
 
 /// Where a robot's resume state goes (the CLI writes it to a file atomically).

@@ -6,8 +6,10 @@
 //! | `<robot>.key.json` | that robot's Ed25519 secret key and transport password | that robot only |
 //! | `transport.passwords` | every member's `user:password` line (Zenoh's dictionary) | every robot |
 //!
-//! Secret files are written readable by their owner only. A robot loads `team.json`, its own
-//! key file and the dictionary; a key file of another robot or team is refused.
+//! Secret files are written readable by their owner only (mode 0600), and a secret file that
+//! group or others may read or write is refused, as ssh refuses such keys. A robot loads
+//! `team.json`, its own key file and the dictionary; a key file of another robot or team is
+//! refused.
 
 use std::collections::BTreeMap;
 use std::fs;
@@ -106,11 +108,29 @@ fn invalid(path: &Path, reason: impl Into<String>) -> KeyDirError {
     KeyDirError::Invalid { path: path.to_path_buf(), reason: reason.into() }
 }
 
-fn read_small(path: &Path) -> Result<String, KeyDirError> {
+/// Reads a small key-directory file; a `secret` one only if no one but its owner may read or
+/// write it.
+fn read_small(path: &Path, secret: bool) -> Result<String, KeyDirError> {
     let meta = fs::metadata(path).map_err(io(path))?;
     if !meta.is_file() {
         return Err(invalid(path, "not a regular file"));
     }
+    #[cfg(unix)]
+    if secret {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = meta.permissions().mode() & 0o777;
+        if mode & 0o077 != 0 {
+            return Err(invalid(
+                path,
+                format!(
+                    "mode {mode:04o}: a secret file others may read or change is refused; make it readable by its owner only: chmod 600 {}",
+                    path.display()
+                ),
+            ));
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = secret;
     if meta.len() > MAX_KEY_FILE_BYTES {
         return Err(invalid(path, format!("{} bytes; a key file is at most {MAX_KEY_FILE_BYTES}", meta.len())));
     }
@@ -192,7 +212,7 @@ impl KeyDir {
     /// Reads the team's public keys from `dir/team.json`.
     pub fn load(dir: &Path) -> Result<KeyDir, KeyDirError> {
         let path = dir.join(TEAM_FILE);
-        let text = read_small(&path)?;
+        let text = read_small(&path, false)?;
         let file: TeamFile = serde_json::from_str(&text).map_err(|e| {
             invalid(&path, format!("{e}; expected {{\"format\": \"{TEAM_FORMAT}\", \"team\": NAME, \"members\": {{ROBOT: PUBLIC_KEY_HEX}}}}"))
         })?;
@@ -229,7 +249,7 @@ impl KeyDir {
     /// Reads `robot`'s secrets from `dir/<robot>.key.json`.
     pub fn robot_keys(&self, robot: &RobotId) -> Result<RobotKeys, KeyDirError> {
         let path = self.dir.join(format!("{}.key.json", robot));
-        let text = read_small(&path)?;
+        let text = read_small(&path, true)?;
         let file: RobotFile = serde_json::from_str(&text).map_err(|e| invalid(&path, e.to_string()))?;
         if file.format != ROBOT_FORMAT {
             return Err(invalid(&path, format!("format `{}`, expected `{ROBOT_FORMAT}`", file.format)));
@@ -258,7 +278,7 @@ impl KeyDir {
     pub fn credentials(&self, robot: &RobotId) -> Result<Credentials, KeyDirError> {
         let keys = self.robot_keys(robot)?;
         let dictionary_file = self.dir.join(PASSWORDS_FILE);
-        read_small(&dictionary_file)?;
+        read_small(&dictionary_file, true)?;
         Ok(Credentials { user: robot.to_string(), password: keys.password, dictionary_file })
     }
 }
@@ -292,6 +312,38 @@ mod tests {
         fs::write(dir.join(TEAM_FILE), "{\"format\": 1}").unwrap();
         let err = KeyDir::load(&dir).unwrap_err().to_string();
         assert!(err.contains("team.json") && err.contains("expected"), "{err}");
+        let _ = fs::remove_dir_all(&dir);
+    }
+
+    /// Regression (issue 36): key files anyone could read were taken without a word.
+    #[cfg(unix)]
+    #[test]
+    fn secret_files_others_may_read_are_refused_with_the_fix() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = std::env::temp_dir().join(format!("spomp-keys-mode-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        let ugv1 = RobotId::new("ugv1");
+        let keys = KeyDir::generate(&dir, "city", std::slice::from_ref(&ugv1)).unwrap();
+        let mode = |name: &str| fs::metadata(dir.join(name)).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode("ugv1.key.json"), 0o600);
+        assert_eq!(mode(PASSWORDS_FILE), 0o600);
+        let chmod = |name: &str, m: u32| fs::set_permissions(dir.join(name), fs::Permissions::from_mode(m)).unwrap();
+        for wide in [0o644, 0o640, 0o604, 0o620, 0o666] {
+            chmod("ugv1.key.json", wide);
+            let err = keys.security(&ugv1).unwrap_err().to_string();
+            assert!(err.contains("ugv1.key.json") && err.contains("chmod 600"), "{wide:o}: {err}");
+            assert!(keys.credentials(&ugv1).is_err(), "{wide:o}");
+        }
+        chmod("ugv1.key.json", 0o400);
+        assert!(keys.security(&ugv1).is_ok(), "owner-only modes are fine");
+        chmod(PASSWORDS_FILE, 0o644);
+        let err = keys.credentials(&ugv1).unwrap_err().to_string();
+        assert!(err.contains(PASSWORDS_FILE) && err.contains("chmod 600"), "{err}");
+        chmod(PASSWORDS_FILE, 0o600);
+        assert!(keys.credentials(&ugv1).is_ok());
+        // The public keys may be read by anyone.
+        chmod(TEAM_FILE, 0o644);
+        assert!(KeyDir::load(&dir).is_ok());
         let _ = fs::remove_dir_all(&dir);
     }
 }

@@ -16,5 +16,7 @@ pub mod pump;
 pub mod state_file;
 
 pub use keys::{KeyDir, KeyDirError, RobotKeys};
-pub use link::{Credentials, LinkConfig, LinkError, LinkStats, TeamLink, TierCounts};
+pub use link::{
+    Credentials, Intake, LinkConfig, LinkError, LinkStats, MAX_UNLISTED_SENDERS, Refusals, TeamLink, TierCounts,
+};
 pub use state_file::{StateFileError, read_state, write_state};

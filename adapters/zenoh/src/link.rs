@@ -55,11 +55,20 @@ pub struct LinkConfig {
     pub max_message_bytes: usize,
     /// Messages kept waiting, each way, before new ones are dropped (and counted).
     pub queue_messages: usize,
+    /// The team: the only senders whose messages are taken and whose liveliness is tracked (the
+    /// key directory's members, or the mission's robots). A message naming anyone else is
+    /// refused and counted before anything is kept of it. None takes any sender and tracks at
+    /// most [`MAX_UNLISTED_SENDERS`] of them by name.
+    pub members: Option<BTreeSet<RobotId>>,
 }
+
+/// Without a member list ([`LinkConfig::members`]), how many senders (and liveliness tokens)
+/// are tracked by name; the rest are counted together.
+pub const MAX_UNLISTED_SENDERS: usize = 64;
 
 impl LinkConfig {
     /// A config for `robot` of `team` with the defaults: no endpoints, no scouting, no
-    /// authentication, 16 MiB messages, 256 queued messages.
+    /// authentication, 16 MiB messages, 256 queued messages, any sender taken.
     pub fn new(team: &str, robot: RobotId) -> Self {
         LinkConfig {
             team: team.to_string(),
@@ -70,6 +79,7 @@ impl LinkConfig {
             credentials: None,
             max_message_bytes: 16 * 1024 * 1024,
             queue_messages: 256,
+            members: None,
         }
     }
 }
@@ -102,15 +112,36 @@ pub struct TierCounts {
     pub bytes_per_s: f64,
 }
 
+/// Received messages refused by the link itself, before anything was kept of them, by reason.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Refusals {
+    /// The key expression named a sender outside [`LinkConfig::members`].
+    pub unknown_sender: u64,
+    /// Larger than [`LinkConfig::max_message_bytes`].
+    pub oversized: u64,
+    /// The inbox held [`LinkConfig::queue_messages`] already.
+    pub inbox_full: u64,
+}
+
+impl Refusals {
+    /// The counts by reason, as the rejection counters name them.
+    pub fn by_reason(&self) -> [(&'static str, u64); 3] {
+        [("unknown_sender", self.unknown_sender), ("oversized", self.oversized), ("inbox_full", self.inbox_full)]
+    }
+}
+
 /// What crossed the link so far.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct LinkStats {
-    /// Sent, per peer and tier (`coordination`, `scans`, `maps`).
+    /// Sent, per peer and tier (`coordination`, `scans`, `maps`): peers this robot chose.
     pub sent: BTreeMap<String, BTreeMap<&'static str, TierCounts>>,
-    /// Received messages and bytes per sender.
+    /// Received messages and bytes per sender: members only (or, without a member list, the
+    /// first [`MAX_UNLISTED_SENDERS`] senders).
     pub received: BTreeMap<String, TierCounts>,
-    /// Received messages dropped: the inbox was full, or a message was over the size limit.
-    pub received_dropped: u64,
+    /// Received from senders beyond [`MAX_UNLISTED_SENDERS`] (no member list), all together.
+    pub received_unlisted: TierCounts,
+    /// Received messages refused by the link, by reason.
+    pub refused: Refusals,
     /// Wall-clock seconds since the link opened.
     pub elapsed_s: f64,
 }
@@ -143,14 +174,100 @@ struct Inbox {
     messages: VecDeque<(RobotId, Vec<u8>)>,
 }
 
+/// Who may send: the members by their key-expression chunk, or anyone.
+#[derive(Clone)]
+struct Roster(Option<BTreeMap<String, RobotId>>);
+
+impl Roster {
+    fn new(members: Option<&BTreeSet<RobotId>>) -> Roster {
+        Roster(members.map(|m| m.iter().map(|r| (key_chunk(r.as_str()), r.clone())).collect()))
+    }
+
+    /// The sender a key-expression chunk names, if it may send; never keeps anything of it.
+    fn admit(&self, chunk: &str) -> Option<RobotId> {
+        match &self.0 {
+            Some(members) => members.get(chunk).cloned(),
+            None => Some(RobotId::new(chunk)),
+        }
+    }
+
+    fn listed(&self) -> bool {
+        self.0.is_some()
+    }
+}
+
+/// The receiving half of a link without the transport: what the link does with each message
+/// Zenoh delivers (refuse and count, or keep in the bounded inbox), and the inbox
+/// [`TeamLink::receive`] drains. Public so that tests and the fuzz target drive the same code
+/// with any key expression and payload.
+pub struct Intake {
+    roster: Roster,
+    max_message_bytes: usize,
+    queue_messages: usize,
+    inbox: Mutex<Inbox>,
+    stats: Mutex<LinkStats>,
+}
+
+impl Intake {
+    /// The intake of a link opened with `config` (its members, size limit and queue length).
+    pub fn new(config: &LinkConfig) -> Intake {
+        Intake {
+            roster: Roster::new(config.members.as_ref()),
+            max_message_bytes: config.max_message_bytes,
+            queue_messages: config.queue_messages,
+            inbox: Mutex::new(Inbox::default()),
+            stats: Mutex::new(LinkStats::default()),
+        }
+    }
+
+    /// Takes one message that arrived on key expression `key` (`…/team/<to>/<from>/<tier>`)
+    /// with a payload of `len` bytes, which `payload` copies out: refused and counted unless
+    /// its sender may send, it fits the size limit and the inbox has room. Nothing of a refused
+    /// message is kept, and its payload is not copied.
+    pub fn offer(&self, key: &str, len: usize, payload: impl FnOnce() -> Vec<u8>) {
+        let chunk = key.rsplit('/').nth(1).unwrap_or("");
+        let Some(from) = self.roster.admit(chunk) else {
+            lock(&self.stats).refused.unknown_sender += 1;
+            return;
+        };
+        if len > self.max_message_bytes {
+            lock(&self.stats).refused.oversized += 1;
+            return;
+        }
+        let mut stats = lock(&self.stats);
+        let mut inbox = lock(&self.inbox);
+        if inbox.messages.len() >= self.queue_messages {
+            stats.refused.inbox_full += 1;
+            return;
+        }
+        let tracked = self.roster.listed()
+            || stats.received.len() < MAX_UNLISTED_SENDERS
+            || stats.received.contains_key(from.as_str());
+        let counts =
+            if tracked { stats.received.entry(from.to_string()).or_default() } else { &mut stats.received_unlisted };
+        counts.messages += 1;
+        counts.bytes += len as u64;
+        inbox.messages.push_back((from, payload()));
+    }
+
+    /// The messages kept since the last call, oldest first, with their senders.
+    pub fn take(&self) -> Vec<(RobotId, Vec<u8>)> {
+        lock(&self.inbox).messages.drain(..).collect()
+    }
+
+    /// What the link counted so far (receiving and sending).
+    pub fn stats(&self) -> LinkStats {
+        lock(&self.stats).clone()
+    }
+}
+
 /// A robot's end of the team link (see the module doc).
 pub struct TeamLink {
     robot: RobotId,
     team_key: String,
     session: zenoh::Session,
-    inbox: Arc<Mutex<Inbox>>,
+    intake: Arc<Intake>,
     alive: Arc<Mutex<BTreeSet<RobotId>>>,
-    stats: Arc<Mutex<LinkStats>>,
     outbox: Option<SyncSender<Outgoing>>,
     sender: Option<JoinHandle<()>>,
     opened: std::time::Instant,
@@ -174,46 +291,41 @@ impl TeamLink {
         let zconfig = zenoh_config(config, &team_key)?;
         let session = zenoh::open(zconfig).wait().map_err(zenoh_err)?;
 
-        let inbox = Arc::new(Mutex::new(Inbox::default()));
-        let stats = Arc::new(Mutex::new(LinkStats::default()));
+        let intake = Arc::new(Intake::new(config));
         let subscriber = {
-            let (inbox, stats) = (inbox.clone(), stats.clone());
-            let (limit, queue) = (config.max_message_bytes, config.queue_messages);
+            let intake = intake.clone();
             session
                 .declare_subscriber(format!("spomp/{team_key}/team/{me}/*/*"))
                 .callback(move |sample| {
-                    // …/team/<to>/<from>/<tier>: the sender is the second-last chunk.
-                    let key = sample.key_expr().as_str();
-                    let from = key.rsplit('/').nth(1).unwrap_or("").to_string();
-                    let bytes = sample.payload().to_bytes().into_owned();
-                    let mut stats = lock(&stats);
-                    let mut inbox = lock(&inbox);
-                    if bytes.len() > limit || inbox.messages.len() >= queue {
-                        stats.received_dropped += 1;
-                        return;
-                    }
-                    let counts = stats.received.entry(from.clone()).or_default();
-                    counts.messages += 1;
-                    counts.bytes += bytes.len() as u64;
-                    inbox.messages.push_back((RobotId::new(&from), bytes));
+                    // Measured before it is copied: a 100 MB payload is refused without a copy.
+                    let payload = sample.payload();
+                    intake.offer(sample.key_expr().as_str(), payload.len(), || payload.to_bytes().into_owned());
                 })
                 .wait()
                 .map_err(zenoh_err)?
         };
         let alive = Arc::new(Mutex::new(BTreeSet::new()));
         let alive_subscriber = {
-            let alive = alive.clone();
+            let (alive, roster) = (alive.clone(), intake.roster.clone());
             session
                 .liveliness()
                 .declare_subscriber(format!("spomp/{team_key}/alive/*"))
                 .history(true)
                 .callback(move |sample| {
-                    let Some(robot) = sample.key_expr().as_str().rsplit('/').next().map(RobotId::new) else { return };
+                    let chunk = sample.key_expr().as_str().rsplit('/').next().unwrap_or("");
+                    // Tokens of non-members are not tracked (anyone with the transport
+                    // password can declare any number of them).
+                    let Some(robot) = roster.admit(chunk) else { return };
                     let mut alive = lock(&alive);
                     match sample.kind() {
-                        SampleKind::Put => alive.insert(robot),
-                        SampleKind::Delete => alive.remove(&robot),
-                    };
+                        SampleKind::Put if roster.listed() || alive.len() < MAX_UNLISTED_SENDERS => {
+                            alive.insert(robot);
+                        }
+                        SampleKind::Put => {}
+                        SampleKind::Delete => {
+                            alive.remove(&robot);
+                        }
+                    }
                 })
                 .wait()
                 .map_err(zenoh_err)?
@@ -223,19 +335,18 @@ impl TeamLink {
 
         let (outbox, queue) = sync_channel::<Outgoing>(config.queue_messages.max(1));
         let sender = {
-            let (session, stats) = (session.clone(), stats.clone());
+            let (session, intake) = (session.clone(), intake.clone());
             std::thread::Builder::new()
                 .name(format!("team-link-{me}"))
-                .spawn(move || send_loop(&session, &queue, &stats))
+                .spawn(move || send_loop(&session, &queue, &intake.stats))
                 .map_err(|e| LinkError::Config(format!("starting the sender thread: {e}")))?
         };
         Ok(TeamLink {
             robot: config.robot.clone(),
             team_key,
             session,
-            inbox,
+            intake,
             alive,
-            stats,
             outbox: Some(outbox),
             sender: Some(sender),
             opened: std::time::Instant::now(),
@@ -259,7 +370,8 @@ impl TeamLink {
         match outbox.try_send(Outgoing { key, peer: to.to_string(), tier, bytes }) {
             Ok(()) => true,
             Err(TrySendError::Full(m) | TrySendError::Disconnected(m)) => {
-                lock(&self.stats).sent.entry(m.peer).or_default().entry(tier_name(tier)).or_default().dropped += 1;
+                lock(&self.intake.stats).sent.entry(m.peer).or_default().entry(tier_name(tier)).or_default().dropped +=
+                    1;
                 false
             }
         }
@@ -268,7 +380,7 @@ impl TeamLink {
     /// The messages received since the last call, oldest first, with the sender each key
     /// expression named (which the receiver's signature check must confirm).
     pub fn receive(&self) -> Vec<(RobotId, Vec<u8>)> {
-        lock(&self.inbox).messages.drain(..).collect()
+        self.intake.take()
     }
 
     /// The robots whose liveliness token is visible now (this one included once its own
@@ -279,7 +391,7 @@ impl TeamLink {
 
     /// What crossed the link so far, with rates over the time since it opened.
     pub fn stats(&self) -> LinkStats {
-        let mut stats = lock(&self.stats).clone();
+        let mut stats = self.intake.stats();
         stats.elapsed_s = self.opened.elapsed().as_secs_f64();
         let rate = |c: &mut TierCounts| c.bytes_per_s = c.bytes as f64 / stats.elapsed_s.max(1e-9);
         stats.sent.values_mut().flat_map(|tiers| tiers.values_mut()).for_each(rate);
@@ -375,4 +487,55 @@ fn zenoh_config(config: &LinkConfig, team_key: &str) -> Result<zenoh::Config, Li
         set("transport/auth/usrpwd/dictionary_file", dict)?;
     }
     Ok(z)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config(members: Option<&[&str]>) -> LinkConfig {
+        let mut config = LinkConfig::new("city", RobotId::new("base"));
+        config.members = members.map(|m| m.iter().map(|r| RobotId::new(r)).collect());
+        config.max_message_bytes = 1000;
+        config.queue_messages = 8;
+        config
+    }
+
+    fn key(from: &str) -> String {
+        format!("spomp/city/team/base/{from}/coordination")
+    }
+
+    /// Regression (issue 36): every invented sender name got an entry of its own in the link's
+    /// figures, kept for ever.
+    #[test]
+    fn invented_senders_are_refused_and_counted_without_an_entry_or_a_copy() {
+        let intake = Intake::new(&config(Some(&["base", "ugv1"])));
+        for k in 0..10_000 {
+            intake.offer(&key(&format!("intruder-{k}")), 10, || panic!("a refused payload was copied"));
+        }
+        intake.offer(&key("ugv1"), 1001, || panic!("an oversized payload was copied"));
+        for _ in 0..10 {
+            intake.offer(&key("ugv1"), 3, || vec![1, 2, 3]);
+        }
+        let stats = intake.stats();
+        assert_eq!(stats.refused, Refusals { unknown_sender: 10_000, oversized: 1, inbox_full: 2 });
+        assert_eq!(stats.received.keys().collect::<Vec<_>>(), ["ugv1"]);
+        assert_eq!(stats.received["ugv1"].messages, 8);
+        let taken = intake.take();
+        assert_eq!(taken.len(), 8, "the inbox holds queue_messages at most");
+        assert!(taken.iter().all(|(from, bytes)| from.as_str() == "ugv1" && bytes == &[1, 2, 3]));
+        assert!(intake.take().is_empty());
+    }
+
+    #[test]
+    fn without_a_member_list_the_figures_name_a_bounded_number_of_senders() {
+        let intake = Intake::new(&config(None));
+        for k in 0..1000 {
+            intake.offer(&key(&format!("s{k}")), 1, || vec![0]);
+            intake.take();
+        }
+        let stats = intake.stats();
+        assert_eq!(stats.received.len(), MAX_UNLISTED_SENDERS);
+        assert_eq!(stats.received_unlisted.messages, 1000 - MAX_UNLISTED_SENDERS as u64);
+    }
 }

@@ -107,6 +107,12 @@ pub enum RuntimeError {
     },
 }
 
+/// How many problems [`RobotRuntime::report`] keeps waiting for the adapter; beyond, they are
+/// counted and the count reported instead.
+pub const MAX_REPORTED_PROBLEMS: usize = 64;
+/// The longest problem text [`RobotRuntime::report`] keeps, characters.
+pub const MAX_PROBLEM_CHARS: usize = 400;
+
 /// One robot's state and skills: the environment its behaviour nodes act on.
 pub struct RobotRuntime {
     id: RobotId,
@@ -143,6 +149,9 @@ pub struct RobotRuntime {
     nav: Option<Box<NavStack>>,
     /// Problems met outside a tick (a bad map blob, a skill error), drained by the adapter.
     problems: Vec<String>,
+    /// Problems [`RobotRuntime::report`] left out since the last take because
+    /// [`MAX_REPORTED_PROBLEMS`] were waiting (a flood of refused messages).
+    problems_left_out: u64,
     /// Newest map version applied, per publishing robot.
     applied_maps: HashMap<RobotId, u64>,
     /// Map publishing of a mapping robot: period, effort, next due time, last version sent.
@@ -205,6 +214,7 @@ impl RobotRuntime {
             localization: Localization::External,
             nav: None,
             problems: Vec::new(),
+            problems_left_out: 0,
             applied_maps: HashMap::new(),
             map_publish_period_s: 10.0,
             map_compression: CompressionParams::default(),
@@ -649,8 +659,18 @@ impl RobotRuntime {
         }
     }
 
-    /// Records a problem for the adapter to report.
+    /// Records a problem for the adapter to report: at most [`MAX_REPORTED_PROBLEMS`] wait at
+    /// once (the rest are counted, and the count reported), each cut to
+    /// [`MAX_PROBLEM_CHARS`] characters. What a peer sends can cause one per message.
     pub fn report(&mut self, problem: String) {
+        if self.problems.len() >= MAX_REPORTED_PROBLEMS {
+            self.problems_left_out += 1;
+            return;
+        }
+        let problem = match problem.char_indices().nth(MAX_PROBLEM_CHARS) {
+            Some((end, _)) => format!("{}…", &problem[..end]),
+            None => problem,
+        };
         self.problems.push(problem);
     }
 
@@ -683,6 +703,10 @@ impl RobotRuntime {
 
     /// Takes the problems met since the last call.
     pub fn take_problems(&mut self) -> Vec<String> {
+        if self.problems_left_out > 0 {
+            let n = std::mem::take(&mut self.problems_left_out);
+            self.problems.push(format!("{n} more problems left out (more than {MAX_REPORTED_PROBLEMS} at once)"));
+        }
         std::mem::take(&mut self.problems)
     }
 }

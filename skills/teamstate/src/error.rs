@@ -85,6 +85,17 @@ pub enum SyncError {
         /// The sender's newest session seen.
         current: u64,
     },
+    /// A message of the sender's current session that was received already, or is older than
+    /// the window of recent messages this robot remembers (a replay; a secured team only).
+    #[error("message {seq} from {from} replayed (newest received: {newest})")]
+    Replayed {
+        /// The sender.
+        from: String,
+        /// The message's sequence number.
+        seq: u32,
+        /// The sender's newest sequence number received in this session.
+        newest: u32,
+    },
     /// A record in the message is inconsistent (e.g. key and body disagree, non-finite values).
     #[error("invalid record {index}: {reason}")]
     InvalidRecord {
@@ -93,4 +104,37 @@ pub enum SyncError {
         /// What is wrong.
         reason: String,
     },
+}
+
+impl SyncError {
+    /// Every [`SyncError::kind`], for tables counted by kind (a fixed, small set).
+    pub const KINDS: [&'static str; 10] = [
+        "oversized",
+        "bad_header",
+        "malformed",
+        "wrong_address",
+        "not_a_member",
+        "unsigned",
+        "bad_signature",
+        "stale_session",
+        "replayed",
+        "invalid_record",
+    ];
+
+    /// A short, fixed name of the kind of refusal (one of [`SyncError::KINDS`]): what a
+    /// counter keyed by kind uses, so its size never depends on what a sender chose to send.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            SyncError::Oversized { .. } => "oversized",
+            SyncError::BadHeader => "bad_header",
+            SyncError::Malformed(_) => "malformed",
+            SyncError::WrongAddress { .. } => "wrong_address",
+            SyncError::NotAMember(_) => "not_a_member",
+            SyncError::Unsigned(_) => "unsigned",
+            SyncError::BadSignature { .. } => "bad_signature",
+            SyncError::StaleSession { .. } => "stale_session",
+            SyncError::Replayed { .. } => "replayed",
+            SyncError::InvalidRecord { .. } => "invalid_record",
+        }
+    }
 }

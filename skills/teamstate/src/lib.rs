@@ -45,6 +45,6 @@ pub use record::{
     TierSet, UnreachableRecord, VisitRecord,
 };
 pub use snapshot::{RestoreSummary, SnapshotError};
-pub use state::{ApplyReport, ClaimOutcome, IdentifyOutcome, MISSION_WRITER, RobotStatus, TeamState};
+pub use state::{ApplyReport, ClaimOutcome, IdentifyOutcome, MISSION_WRITER, RobotStatus, TableSizes, TeamState};
 pub use sync::{Ack, SyncMessage, decode, encode};
 pub use view::{ClaimInfo, GoalStatus, GoalView};

@@ -415,6 +415,11 @@ impl RecordSet {
         self.0.get(key).map(|f| &f.0)
     }
 
+    /// How many records are held.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
     /// Whether a record of `key` is held.
     pub fn contains_key(&self, key: &RecordKey) -> bool {
         self.0.contains(key)

@@ -69,6 +69,23 @@ pub struct ApplyReport {
     pub peer_restarted: bool,
 }
 
+/// Entry counts of a team database's tables ([`TeamState::table_sizes`]). Each grows only with
+/// records that passed validation (and, on a secured team, every signature check) or with
+/// peers this robot syncs with; a refused message adds to none of them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TableSizes {
+    /// Records held.
+    pub records: usize,
+    /// Change-log entries (one per record at most).
+    pub change_log: usize,
+    /// Scans in arrival order.
+    pub scans: usize,
+    /// Peers with sync state: senders of accepted messages and addressees of `make_sync`.
+    pub peers: usize,
+    /// Entries of the peers' tables: messages in flight, records sent and pending.
+    pub peer_entries: usize,
+}
+
 /// A robot's last known state, as recorded in the team state.
 pub type RobotStatus = RobotRecord;
 
@@ -862,6 +879,12 @@ impl TeamState {
                     current: p.session,
                 });
             }
+            // A signed message of the current session is taken once: again, or older than the
+            // window of recent messages remembered, it is a replay. (An unsigned team cannot
+            // tell a replay from a forgery, and the simulator's radio may deliver twice.)
+            Some(p) if msg.session == p.session && self.security.is_some() && p.received.seen_or_older(msg.seq) => {
+                return Err(SyncError::Replayed { from: from.to_string(), seq: msg.seq, newest: p.received.upto });
+            }
             Some(p) => msg.session > p.session,
             None => false,
         };
@@ -1024,7 +1047,24 @@ impl TeamState {
     /// Forgets what is known about `peer`'s holdings (e.g. the peer restarted); everything is
     /// offered again on the next sync.
     pub fn reset_peer(&mut self, peer: &RobotId) {
-        self.peers.remove(peer);
+        if let Some(old) = self.peers.remove(peer) {
+            // This robot's own numbering towards the peer goes on: restarted at 1, its next
+            // messages would look like replays to a peer that remembers the higher numbers.
+            let kept = PeerState { last_sent_seq: old.last_sent_seq, session: old.session, ..PeerState::default() };
+            self.peers.insert(peer.clone(), kept);
+        }
+    }
+
+    /// How many entries the database's tables hold (see [`TableSizes`]): what a bound on its
+    /// memory is stated in.
+    pub fn table_sizes(&self) -> TableSizes {
+        TableSizes {
+            records: self.records.len(),
+            change_log: self.changes.len(),
+            scans: self.scan_log.len(),
+            peers: self.peers.len(),
+            peer_entries: self.peers.values().map(|p| p.in_flight.len() + p.sent.len() + p.pending.len()).sum(),
+        }
     }
 }
 

@@ -44,6 +44,12 @@ impl Ack {
         seq != 0 && seq <= self.upto && (self.upto - seq) < 64 && self.mask >> (self.upto - seq) & 1 == 1
     }
 
+    /// Whether message `seq` was received already, or is older than the 64-message window
+    /// (so whether it was cannot be told).
+    pub fn seen_or_older(&self, seq: u32) -> bool {
+        seq <= self.upto && (self.upto - seq >= 64 || self.covers(seq))
+    }
+
     /// Records the receipt of message `seq`.
     pub(crate) fn record(&mut self, seq: u32) {
         if seq == 0 {
