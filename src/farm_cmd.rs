@@ -59,7 +59,7 @@ impl FarmDrivers {
             dds.interfaces = options.interfaces.clone();
         }
         let link = FarmLink::new(&dds, &robots).context("starting the farm's ROS 2 node")?;
-        eprintln!(
+        errln!(
             "spomp sim --ros2: driving {} over DDS domain {} at {}× real time; start `spomp run MISSION --robot ID --use-sim-time` for each",
             driven.join(", "),
             dds.domain_id,
@@ -86,7 +86,7 @@ impl FarmDrivers {
                 break;
             }
             if Instant::now() >= deadline {
-                eprintln!(
+                errln!(
                     "spomp sim --ros2: starting without {} (no status after {:.0} s)",
                     missing.join(", "),
                     self.wait_s

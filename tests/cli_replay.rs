@@ -197,7 +197,8 @@ fn a_crafted_log_cannot_write_outside_the_replay_folder() {
     let crafted = out.path().join("crafted.mcap");
     // The escape through a name is refused as such; an include outside the mission's folder
     // (leading `..` only) is legitimate and lands inside the scratch folder, deep enough.
-    for (path, refused) in [(format!("a/{}{below_root}", "../".repeat(64)), true), (format!("../../../{below_root}"), false)]
+    for (path, refused) in
+        [(format!("a/{}{below_root}", "../".repeat(64)), true), (format!("../../../{below_root}"), false)]
     {
         let mut info = recorded.clone();
         info.files.push((path.clone(), "pwned".into()));
