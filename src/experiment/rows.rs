@@ -490,7 +490,7 @@ mod tests {
         sink.append(&row(0)).unwrap();
         drop(sink);
         // A crash in the middle of the second row.
-        let mut f = OpenOptions::new().append(true).open(dir.path().join(JSONL)).unwrap();
+        let mut f = std::fs::OpenOptions::new().append(true).open(dir.path().join(JSONL)).unwrap();
         f.write_all(b"{\"trial\":1,\"configu").unwrap();
         drop(f);
         let rows = read_rows(dir.path()).unwrap();

@@ -446,6 +446,8 @@ fn fields_of(opcode: u8) -> &'static [(&'static str, Field)] {
             ("name", Bytes32),
             ("media type", Bytes32),
             ("data", Bytes64),
+            // The reader slices the data up to the CRC: the CRC must fit too.
+            ("crc", Fixed(4)),
         ],
         0x0C => &[("name", Bytes32), ("metadata", StrMap)],
         _ => &[],
