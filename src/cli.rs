@@ -457,7 +457,7 @@ where
                 (Some(count), _, _) => plan_cmd::Queries::RandomPairs { count, seed, max_rank: pair_max_rank },
                 (None, Some(from), Some(to)) => plan_cmd::Queries::Single { from, to },
                 _ => {
-                    eprintln!("error: give --from and --to, or --random-pairs N");
+                    errln!("error: give --from and --to, or --random-pairs N");
                     return ExitCode::from(2);
                 }
             };
@@ -468,7 +468,7 @@ where
     match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            errln!("error: {e:#}");
             ExitCode::from(1)
         }
     }

@@ -152,7 +152,7 @@ pub fn nodes(
     if let Some(name) = only
         && registry.get(name).is_none()
     {
-        eprintln!("error: unknown node type `{name}`; run `spomp nodes` for the list");
+        errln!("error: unknown node type `{name}`; run `spomp nodes` for the list");
         return Ok(ExitCode::from(2));
     }
     let specs: Vec<_> = registry.iter().filter(|s| only.is_none_or(|n| n == s.name)).collect();

@@ -122,7 +122,7 @@ impl FarmDrivers {
             (Some(_), Some(rate)) => format!("in lockstep, at most {rate}× real time"),
             (None, rate) => format!("at {}× real time", rate.unwrap_or(1.0)),
         };
-        eprintln!(
+        errln!(
             "spomp sim --ros2: waiting up to {:.0} s for the processes of {} on DDS domain {} ({how}); start `spomp run MISSION --robot ID {}` for each",
             options.wait_s,
             candidates.join(", "),
@@ -152,7 +152,7 @@ impl FarmDrivers {
         let absent: Vec<String> = candidates.iter().filter(|c| !driven.contains(c)).cloned().collect();
         let simulated: Vec<&str> = absent.iter().map(String::as_str).collect();
         if !simulated.is_empty() {
-            eprintln!(
+            errln!(
                 "spomp sim --ros2: no process reported for {} within {:.0} s: the simulator runs {} until {} does",
                 simulated.join(", "),
                 options.wait_s,
@@ -160,7 +160,7 @@ impl FarmDrivers {
                 if simulated.len() == 1 { "it" } else { "one" }
             );
         }
-        eprintln!(
+        errln!(
             "spomp sim --ros2: driving {}",
             if driven.is_empty() { "no robot".into() } else { driven.join(", ") }
         );
@@ -197,7 +197,7 @@ impl FarmDrivers {
 
     /// A robot stopped answering: reported, and driven no more (its body stops).
     fn drop_robot(&mut self, id: &str, now: Time, why: &LockstepError) {
-        eprintln!(
+        errln!(
             "spomp sim --ros2 --lockstep: {id} dropped at {:.1} s ({why}); its body stops and the run goes on",
             now.as_secs_f64()
         );
@@ -218,7 +218,7 @@ impl FarmDrivers {
         for id in l.dropped.clone() {
             if self.link.lockstep_rejoin(&id, &l.hello) {
                 l.dropped.remove(&id);
-                eprintln!("spomp sim --ros2 --lockstep: {id} rejoined at {:.1} s", now.as_secs_f64());
+                errln!("spomp sim --ros2 --lockstep: {id} rejoined at {:.1} s", now.as_secs_f64());
             }
         }
         let hello = l.hello.clone();
@@ -233,7 +233,7 @@ impl FarmDrivers {
 
     /// A process reported late: it drives its robot from this step on.
     fn join(&mut self, id: String, now: Time) {
-        eprintln!(
+        errln!(
             "spomp sim --ros2: {id}'s process reported at {:.1} s: it drives {id} from now on",
             now.as_secs_f64()
         );

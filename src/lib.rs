@@ -23,6 +23,15 @@ macro_rules! out {
     }};
 }
 
+/// `eprintln!` that never panics: a message to a closed or failing stderr (a closed pipe, a full
+/// disk) is dropped, and the command still ends with its own exit code.
+macro_rules! errln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr().lock(), $($arg)*);
+    }};
+}
+
 mod args;
 pub mod cli;
 mod commands;
@@ -31,6 +40,7 @@ mod farm_cmd;
 mod live;
 mod log_cmd;
 mod memory_stage;
+mod output;
 mod plan_cmd;
 mod replay_cmd;
 mod run_cmd;

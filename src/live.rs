@@ -55,7 +55,7 @@ impl MessageTap for LiveTap {
         if let Err(e) = served
             && !std::mem::replace(&mut self.failed, true)
         {
-            eprintln!("live view: {e} (the run goes on; later failures are not reported)");
+            errln!("live view: {e} (the run goes on; later failures are not reported)");
         }
     }
 }

@@ -15,7 +15,9 @@ fn read_log(path: &Path) -> Result<Vec<u8>> {
 }
 
 fn describe(path: &Path, c: &LogCheck) -> String {
-    let state = if c.closed {
+    let state = if c.closed && !c.intact() {
+        "closed, but corrupt (see below)".to_string()
+    } else if c.closed {
         "closed properly".to_string()
     } else if c.lost_bytes > 0 {
         format!("not closed (the run was cut short); {} bytes after the last whole chunk are lost", c.lost_bytes)
@@ -30,8 +32,30 @@ fn describe(path: &Path, c: &LogCheck) -> String {
         c.topics.len(),
         c.readable_bytes
     );
+    out.push_str(&format!("  {} checksum(s) verified, {} failed\n", c.crcs_verified, c.crc_failures.len()));
+    for (offset, why) in &c.crc_failures {
+        out.push_str(&format!("  checksum failed at byte {offset}: {why}\n"));
+    }
     if let Some((offset, why)) = &c.bad_record {
-        out.push_str(&format!("  corrupt record at byte {offset}: {why}; nothing after it is read\n"));
+        out.push_str(&format!(
+            "  corrupt record at byte {offset}: {why}; nothing after it is read ({} chunk(s) from there on)\n",
+            c.dropped_chunks
+        ));
+    }
+    out
+}
+
+/// What `log recover` left out of the recovered log, one line each (empty: nothing).
+fn dropped(c: &LogCheck) -> Vec<String> {
+    let mut out = Vec::new();
+    if let Some((offset, _)) = &c.bad_record {
+        out.push(format!("{} chunk(s) from byte {offset} on (the corrupt record and all after it)", c.dropped_chunks));
+    }
+    for offset in &c.bad_attachments {
+        out.push(format!("the attachment at byte {offset} (its CRC does not match)"));
+    }
+    if c.crc_failures.iter().any(|(_, why)| why.starts_with("data section")) {
+        out.push("the metadata records (the data section CRC fails and nothing else covers them)".to_string());
     }
     out
 }
@@ -46,11 +70,16 @@ fn as_json(path: &Path, c: &LogCheck) -> serde_json::Value {
         "readable_bytes": c.readable_bytes,
         "lost_bytes": c.lost_bytes,
         "corrupt": c.bad_record.as_ref().map(|(o, why)| serde_json::json!({"offset": o, "message": why})),
+        "dropped_chunks": c.dropped_chunks,
+        "crcs_verified": c.crcs_verified,
+        "crc_failures": c.crc_failures.iter().map(|(o, why)| serde_json::json!({"offset": o, "message": why})).collect::<Vec<_>>(),
+        "intact": c.intact(),
     })
 }
 
 /// `spomp log check LOG`: exit 0 when the log reads cleanly to its end or, for a log a crash cut
-/// short, to its last whole chunk; 1 when a whole record is corrupt or the file is no MCAP log.
+/// short, to its last whole chunk, with every checksum it records matching; 1 when a whole
+/// record is corrupt, a checksum fails or the file is no MCAP log.
 pub fn check(path: &Path, json: bool) -> Result<ExitCode> {
     let bytes = read_log(path)?;
     let c = spomp_mcap::check_log(&bytes).with_context(|| format!("{}", path.display()))?;
@@ -62,11 +91,12 @@ pub fn check(path: &Path, json: bool) -> Result<ExitCode> {
             out!("  `spomp log recover {} --out FIXED.mcap` writes it as a closed, indexed log", path.display());
         }
     }
-    Ok(if c.bad_record.is_some() { ExitCode::from(1) } else { ExitCode::SUCCESS })
+    Ok(if c.intact() { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
-/// `spomp log recover LOG --out FIXED`: writes the readable messages of a log as a complete,
-/// indexed MCAP file.
+/// `spomp log recover LOG --out FIXED`: writes what checks out of a log (its readable messages,
+/// the metadata and attachments whose checksums hold) as a complete, indexed MCAP file, and
+/// says what it left out.
 pub fn recover(path: &Path, out_path: &Path, json: bool) -> Result<ExitCode> {
     if same_file(path, out_path) {
         bail!("--out {} is the log itself; write the recovered log to another file", out_path.display());
@@ -74,13 +104,18 @@ pub fn recover(path: &Path, out_path: &Path, json: bool) -> Result<ExitCode> {
     let bytes = read_log(path)?;
     let mut buf = std::io::Cursor::new(Vec::new());
     let c = spomp_mcap::recover_log(&bytes, &mut buf).with_context(|| format!("{}", path.display()))?;
-    std::fs::write(out_path, buf.into_inner()).with_context(|| format!("writing {}", out_path.display()))?;
+    crate::output::write(out_path, buf.into_inner())?;
+    let left_out = dropped(&c);
     if json {
         let mut v = as_json(path, &c);
         v["out"] = serde_json::json!(out_path);
+        v["dropped"] = serde_json::json!(left_out);
         out!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         out!("{}", describe(path, &c).trim_end());
+        for d in &left_out {
+            out!("dropped: {d}");
+        }
         out!("wrote {} messages to {}", c.messages(), out_path.display());
     }
     Ok(ExitCode::SUCCESS)

@@ -103,9 +103,9 @@ pub fn plan(a: &PlanArgs) -> Result<ExitCode> {
     let single_path = if single { paths.first() } else { None };
 
     if let Some(dir) = &a.out {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        crate::output::create_dir(dir)?;
         let file = dir.join("plan.png");
-        plan_image(&world, &planner, &paths).save(&file).with_context(|| format!("writing {}", file.display()))?;
+        crate::output::write_png(&plan_image(&world, &planner, &paths), &file)?;
         if !a.json {
             out!("wrote {}", file.display());
         }
@@ -148,7 +148,7 @@ pub fn plan(a: &PlanArgs) -> Result<ExitCode> {
         }
     }
     for f in &failures {
-        eprintln!("no path: {f}");
+        errln!("no path: {f}");
     }
     // A single query that finds no path is a failure; random pairs report a rate.
     Ok(if single && single_path.is_none() { ExitCode::from(1) } else { ExitCode::SUCCESS })

@@ -54,7 +54,7 @@ pub fn replay(
     let bytes = match read_regular(&args.log, MAX_LOG_BYTES) {
         Ok(b) => b,
         Err(e) => {
-            eprintln!("error: {}: {e}", args.log.display());
+            errln!("error: {}: {e}", args.log.display());
             return Ok(ExitCode::from(2));
         }
     };
@@ -67,7 +67,7 @@ pub fn replay(
             match keys {
                 Ok(s) => Some(std::sync::Arc::new(s)),
                 Err(e) => {
-                    eprintln!("error: {e}");
+                    errln!("error: {e}");
                     return Ok(ExitCode::from(2));
                 }
             }
@@ -83,7 +83,7 @@ pub fn replay(
     let report = match spomp_mcap::replay::replay(&bytes, &options, registry, &mut print) {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("error: {}: {e}", args.log.display());
+            errln!("error: {}: {e}", args.log.display());
             return Ok(ExitCode::from(2));
         }
     };

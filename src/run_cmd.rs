@@ -90,7 +90,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     let mut settings = match RunSettings::from_mission(mission, &args.robot, args.domain_id) {
         Ok(s) => s,
         Err(e) => {
-            eprintln!("error: --robot: {e}");
+            errln!("error: --robot: {e}");
             return Ok(ExitCode::from(2));
         }
     };
@@ -147,7 +147,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     let peers: Vec<RobotId> = mission.team.iter().filter(|r| r.id != args.robot).map(|r| RobotId::new(&r.id)).collect();
     let mut node = RobotNode::new(robot, settings.clone(), peers).context("starting the ROS 2 node")?;
     for n in &link.notes {
-        eprintln!("{n}");
+        errln!("{n}");
     }
     let resumed = link.resumed;
     crate::team_link::plug(&mut node, link.link, &args.team_link, &args.robot);
@@ -162,14 +162,14 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         Some(addr) => {
             let server =
                 spomp_live::LiveServer::start(addr, &format!("spomp run {} --robot {}", mission.mission, args.robot))?;
-            eprintln!("live view: {} (Foxglove: Open connection → Foxglove WebSocket; docs/live.md)", server.url());
+            errln!("live view: {} (Foxglove: Open connection → Foxglove WebSocket; docs/live.md)", server.url());
             Some(LiveTap::new(server))
         }
         None => None,
     };
     let options = RecorderOptions { panorama_downsample: 1, ..RecorderOptions::default() };
     if !args.json {
-        eprintln!(
+        errln!(
             "spomp run: robot {} on DDS domain {} ({}), {}; Ctrl-C stops it",
             args.robot,
             settings.dds.domain_id,

@@ -172,7 +172,7 @@ const REPLAYABLE_BYTES_PER_ROBOT_S: f64 = 175e3;
 
 /// A usage error: printed, exit 2.
 fn usage(message: String) -> Result<ExitCode> {
-    eprintln!("error: {message}");
+    errln!("error: {message}");
     Ok(ExitCode::from(2))
 }
 
@@ -294,8 +294,7 @@ pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     let was_interrupted = interrupted.load(Ordering::Relaxed);
     let combined = combine(&mission.mission, runs, was_interrupted);
     let path = out_dir.join("summary.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&combined)?)
-        .with_context(|| format!("writing {}", path.display()))?;
+    crate::output::write(&path, serde_json::to_string_pretty(&combined)?)?;
     if args.json {
         out!("{}", serde_json::to_string_pretty(&combined)?);
     } else {
@@ -429,7 +428,7 @@ fn run_trial(
         Some(addr) => {
             let server = spomp_live::LiveServer::start(addr, &format!("spomp sim {} (seed {seed})", mission.mission))?;
             bar.suspend(|| {
-                eprintln!(
+                errln!(
                     "live view: {} (Foxglove: Open connection → Foxglove WebSocket; docs/live.md), {}× real time",
                     server.url(),
                     args.rate.unwrap_or(1.0)
@@ -439,7 +438,8 @@ fn run_trial(
         }
         None => None,
     };
-    std::fs::create_dir_all(trial_dir.join("plots")).with_context(|| format!("creating {}", trial_dir.display()))?;
+    crate::output::create_dir(&trial_dir)?;
+    crate::output::create_dir(&trial_dir.join("plots"))?;
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
     let options = SimOptions {
@@ -485,7 +485,7 @@ fn run_trial(
     let mcap_path = trial_dir.join("run.mcap");
     let panos_dir = args.save_panos.then(|| trial_dir.join("panoramas"));
     if let Some(d) = &panos_dir {
-        std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
+        crate::output::create_dir(d)?;
     }
     let settings = ObserverSettings {
         pano_every_ns: (args.pano_every_s * 1e9) as i64,
@@ -528,13 +528,12 @@ fn run_trial(
 
 fn write_trial_outputs(result: &RunResult, trial_dir: &Path) -> Result<()> {
     let path = trial_dir.join("summary.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&result.summary)?)
-        .with_context(|| format!("writing {}", path.display()))?;
+    crate::output::write(&path, serde_json::to_string_pretty(&result.summary)?)?;
     sim_plots::map_plot(result, &trial_dir.join("plots").join("map.png"))?;
     sim_plots::goal_times_plot(&result.summary, &trial_dir.join("plots").join("goal_visits.png"))?;
     sim_plots::localization_error_plot(result, &trial_dir.join("plots").join("localization_error.png"))?;
     let path = trial_dir.join("localization_error.csv");
-    std::fs::write(&path, localization_error_csv(result)).with_context(|| format!("writing {}", path.display()))?;
+    crate::output::write(&path, localization_error_csv(result))?;
     Ok(())
 }
 

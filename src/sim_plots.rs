@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use image::{Rgb, RgbImage};
 use imageproc::drawing::{draw_filled_circle_mut, draw_hollow_circle_mut, draw_line_segment_mut};
 use plotters::prelude::*;
@@ -56,7 +56,7 @@ pub fn map_plot(result: &RunResult, path: &Path) -> Result<()> {
 }
 
 fn save(img: &RgbImage, path: &Path) -> Result<()> {
-    img.save(path).with_context(|| format!("writing {}", path.display()))
+    crate::output::write_png(img, path)
 }
 
 /// The font plots are labelled with (DejaVu Sans Mono, shipped in `assets/fonts` with its
@@ -78,10 +78,9 @@ pub fn goal_times_plot(summary: &RunSummary, path: &Path) -> Result<()> {
     times.sort_by(f64::total_cmp);
     let total = summary.goals.len().max(1) as f64;
     let x_max = summary.end_s.max(1.0);
-    let root = BitMapBackend::new(path, (800, 400)).into_drawing_area();
-    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+    crate::output::plot_png(path, (800, 400), |root| {
         root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(root)
             .margin(15)
             .x_label_area_size(35)
             .y_label_area_size(45)
@@ -96,10 +95,8 @@ pub fn goal_times_plot(summary: &RunSummary, path: &Path) -> Result<()> {
         chart.draw_series(LineSeries::new(points, BLUE.stroke_width(2)))?;
         chart
             .draw_series(times.iter().enumerate().map(|(k, t)| Circle::new((*t, (k + 1) as f64), 3, BLUE.filled())))?;
-        root.present()?;
         Ok(())
-    };
-    draw().map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))
+    })
 }
 
 /// Each UGV's localization error over time (one line per UGV, in team colours), with the
@@ -112,10 +109,9 @@ pub fn localization_error_plot(result: &RunResult, path: &Path) -> Result<()> {
     let worst =
         series.iter().flat_map(|(_, s)| s.iter().map(|&(_, e)| e)).filter(|e| e.is_finite()).fold(0.0, f64::max);
     let y_max = (worst * 1.05).max(6.0);
-    let root = BitMapBackend::new(path, (800, 400)).into_drawing_area();
-    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+    crate::output::plot_png(path, (800, 400), |root| {
         root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(root)
             .margin(15)
             .x_label_area_size(35)
             .y_label_area_size(45)
@@ -138,8 +134,6 @@ pub fn localization_error_plot(result: &RunResult, path: &Path) -> Result<()> {
                 .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], colour.stroke_width(2)));
         }
         chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
-        root.present()?;
         Ok(())
-    };
-    draw().map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))
+    })
 }

@@ -177,7 +177,7 @@ pub fn plug(node: &mut RobotNode, link: Option<TeamLink>, args: &TeamLinkArgs, r
         node.set_state_sink(
             Box::new(move |bytes| {
                 if let Err(e) = spomp_zenoh::write_state(&path, &robot, &bytes) {
-                    eprintln!("warning: writing the state file: {e}");
+                    errln!("warning: writing the state file: {e}");
                 }
             }),
             args.state_period_s,
@@ -205,7 +205,7 @@ pub fn generate(mission: &Path, out: &Path, registry: &NodeRegistry<RobotRuntime
             Ok(ExitCode::SUCCESS)
         }
         Err(e) => {
-            eprintln!("error: {e}");
+            errln!("error: {e}");
             Ok(ExitCode::from(1))
         }
     }

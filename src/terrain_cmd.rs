@@ -155,18 +155,18 @@ fn unit_to_u8(v: f32) -> u8 {
 fn save_gray(dir: &Path, name: &str, cols: usize, rows: usize, pixels: Vec<u8>) -> Result<()> {
     let path = dir.join(name);
     let img = GrayImage::from_raw(cols as u32, rows as u32, pixels).context("stage buffer size")?;
-    img.save(&path).with_context(|| format!("writing {}", path.display()))
+    crate::output::write_png(&img, &path)
 }
 
 fn save_rgb(path: &Path, img: &RgbImage) -> Result<()> {
-    img.save(path).with_context(|| format!("writing {}", path.display()))
+    crate::output::write_png(img, path)
 }
 
 /// Writes one image per stage: `filled_depth.png` (16-bit counts, same scale as the input),
 /// `gradient.png` (|∇| / 2∇_thresh), `obstacles.png` (red obstacle, black no return),
 /// `distance.png` (D / D_max), `traversable.png` and `reachability.png` (top-down S(φ)).
 fn write_stage_images(dir: &Path, out: &TerrainOutput, range_scale_m: f64, params: &TerrainParams) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    crate::output::create_dir(dir)?;
     let g = out.geometry();
     let (rows, cols) = (g.rows, g.cols);
 
@@ -175,7 +175,7 @@ fn write_stage_images(dir: &Path, out: &TerrainOutput, range_scale_m: f64, param
     let img: ImageBuffer<Luma<u16>, Vec<u16>> =
         ImageBuffer::from_raw(cols as u32, rows as u32, filled.to_counts(range_scale_m))
             .context("stage buffer size")?;
-    img.save(&path).with_context(|| format!("writing {}", path.display()))?;
+    crate::output::write_png(&img, &path)?;
 
     let grad_full_scale = (2.0 * params.slope_threshold) as f32;
     save_gray(

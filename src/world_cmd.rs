@@ -81,7 +81,7 @@ pub fn load_world(dir: &Path) -> Result<World> {
 pub fn show(dir: &Path, out: Option<&Path>, json: bool) -> Result<ExitCode> {
     let world = load_world(dir)?;
     let out = out.map(Path::to_path_buf).unwrap_or_else(|| dir.join("render.png"));
-    render_png(&world).save(&out).with_context(|| format!("writing {}", out.display()))?;
+    crate::output::write_png(&render_png(&world), &out)?;
 
     let spec = world.spec();
     let mut counts = [0usize; 256];
@@ -207,5 +207,5 @@ pub fn save_depth_png(depth: &DepthPanorama, range_scale_m: f64, path: &Path) ->
     let counts = depth.to_counts(range_scale_m);
     let img: ImageBuffer<Luma<u16>, Vec<u16>> = ImageBuffer::from_raw(g.cols as u32, g.rows as u32, counts)
         .context("panorama buffer does not match its geometry")?;
-    img.save(path).with_context(|| format!("writing {}", path.display()))
+    crate::output::write_png(&img, path)
 }

@@ -157,6 +157,20 @@ pub fn read_classes(path: &Path) -> Result<ImportClasses> {
 /// Parses the text of an import class table (`path` names it in errors).
 pub fn parse_classes(path: &Path, text: &str) -> Result<ImportClasses> {
     let root = yaml::parse(text).map_err(|e| table_error(path, e.loc.line, e.loc.column, &e.message))?;
+    // A file that is not a class table at all (a password file, a key, an `.env`) is said to be
+    // so without quoting any of it.
+    if root.get("classes").is_none() {
+        let found = match root.as_map() {
+            Some(_) => "a mapping without a `classes` key".to_string(),
+            None => root.value.kind().to_string(),
+        };
+        return Err(table_error(
+            path,
+            root.loc.line,
+            root.loc.column,
+            &format!("this is not a class table: expected a mapping with a `classes` list, found {found}"),
+        ));
+    }
     let parsed: ImportTable = root.deserialize().map_err(|e| {
         let field = e.path_string();
         let loc = e.loc.unwrap_or(root.loc);
@@ -650,7 +664,7 @@ pub fn import(a: &ImportArgs) -> Result<ExitCode> {
     world.save(&a.out).with_context(|| format!("writing the world to {}", a.out.display()))?;
     let record_path = a.out.join("import.yaml");
     let text = serde_saphyr::to_string(&record).context("serialising the import record")?;
-    std::fs::write(&record_path, text).with_context(|| format!("writing {}", record_path.display()))?;
+    crate::output::write(&record_path, text)?;
 
     let spec = *world.spec();
     let share = record.colours.snapped_share();
@@ -710,7 +724,7 @@ pub fn import(a: &ImportArgs) -> Result<ExitCode> {
         && let Some(vehicle) = world.classes().by_name(&a.vehicle_class)
         && world.count_class(vehicle.index) > 0
     {
-        eprintln!(
+        errln!(
             "warning: the world has {} vehicle cells but the goal detector finds no cluster in them at {} m per cell \
              (it removes specks thinner than about two cells); a finer --cell-m keeps them",
             world.count_class(vehicle.index),
@@ -718,7 +732,7 @@ pub fn import(a: &ImportArgs) -> Result<ExitCode> {
         );
     }
     if world.meta.start_poses.len() < a.starts {
-        eprintln!(
+        errln!(
             "warning: only {} of {} start poses found (clear easy ground at least {START_CLEARANCE_M} m from other \
              classes)",
             world.meta.start_poses.len(),

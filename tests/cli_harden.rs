@@ -519,3 +519,308 @@ fn log_check_rejects_what_is_not_a_log() {
     spomp().args(["log", "check", "/dev/zero"]).assert().code(1);
     spomp().args(["log", "recover"]).arg(&f).arg("--out").arg(&f).assert().code(1);
 }
+
+#[test]
+fn a_closed_stderr_never_turns_an_error_into_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("missing.mcap");
+    let missing = missing.to_str().unwrap();
+    // Each goes down an `error:` path: a failed command, a usage error caught after parsing, a
+    // replay of a missing log, an experiment that does not load.
+    let commands: [&[&str]; 4] = [
+        &["log", "check", missing],
+        &["plan", "/nonexistent-world", "--from", "1,1"],
+        &["replay", missing],
+        &["experiment", "report", "/nonexistent-experiment"],
+    ];
+    for args in commands {
+        let mut panics = 0;
+        for _ in 0..10 {
+            // The reading end is closed before spomp starts: every write to stderr fails (EPIPE).
+            let (reader, writer) = std::io::pipe().unwrap();
+            drop(reader);
+            let status = StdCommand::new(bin()).args(args).stdout(Stdio::null()).stderr(writer).status().unwrap();
+            assert!(status.code().is_some(), "{args:?}: killed by a signal");
+            assert_ne!(status.code(), Some(0), "{args:?} succeeded");
+            if status.code() == Some(101) {
+                panics += 1;
+            }
+        }
+        assert_eq!(panics, 0, "{args:?}: {panics} of 10 runs panicked with stderr a closed pipe");
+    }
+}
+
+/// A file that is not a class table, given to `world import --classes`: the error says so and
+/// quotes none of it.
+#[test]
+fn a_file_that_is_not_a_class_table_is_not_printed() {
+    let dir = tempfile::tempdir().unwrap();
+    let secrets: [(&str, &str); 4] = [
+        (
+            "passwd",
+            "root:x:0:0:root:/root:/bin/bash\ndaemon:x:1:1:daemon:/usr/sbin:/usr/sbin/nologin\nsecretuser:x:1000:1000::/home/secretuser:/bin/sh\n",
+        ),
+        (
+            "id_ed25519",
+            "-----BEGIN OPENSSH PRIVATE KEY-----\nb3BlbnNzaC1rZXktdjEAAAAABG5vbmUAAAAEbm9uZQAAAAAAAAABAAAAMwAAAAtzc2gtZW\nQyNTUxOQAAACBsecretsecretsecretsecretsecretsecretAAAAJgAAAAtzc2gtZWQyNTUx\n-----END OPENSSH PRIVATE KEY-----\n",
+        ),
+        (".env", "DATABASE_URL=postgres://admin:hunter2secret@db/prod\nAPI_TOKEN=sk-live-secretsecretsecret\n"),
+        // A mapping with the right key, holding the wrong kind: the value is not quoted either.
+        ("nested.yaml", "classes: sk-live-secretsecretsecret-that-is-long-enough-to-matter\n"),
+    ];
+    for (name, text) in secrets {
+        let file = dir.path().join(name);
+        std::fs::write(&file, text).unwrap();
+        let out = spomp()
+            .args(["world", "import", "raster.png", "--classes"])
+            .arg(&file)
+            .args(["--resolution-m", "1", "--out"])
+            .arg(dir.path().join("w"))
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(1), "{name}");
+        let err = stderr_of(&out);
+        assert!(err.contains(&format!("{}:1:", file.display())), "{name}: not located: {err}");
+        for secret in ["secret", "hunter2", "b3BlbnNz", "daemon", "/bin/bash"] {
+            assert!(!err.contains(secret), "{name}: the error quotes the file ({secret}): {err}");
+        }
+    }
+}
+
+/// An experiment output folder written by hand: two configurations and seeds 1 and 2, a row
+/// each with the given configuration, seed, distance (metres) and end time (seconds).
+fn experiment_folder(dir: &Path, rows: &[(&str, u64, f64, f64)]) {
+    std::fs::create_dir_all(dir).unwrap();
+    let meta = serde_json::json!({
+        "experiment": "forged",
+        "configurations": ["a", "b"],
+        "seeds": [1, 2],
+        "claims": [{ "name": "b goes further", "metric": "distance_m", "expect": "increasing", "over": ["a", "b"] }],
+    });
+    std::fs::write(dir.join("experiment.json"), meta.to_string()).unwrap();
+    let mut jsonl = String::new();
+    for (i, (configuration, seed, distance_m, end_s)) in rows.iter().enumerate() {
+        let row = serde_json::json!({
+            "trial": i, "configuration": configuration, "seed": seed, "config_hash": "0", "mission": "m",
+            "outcome": "time_limit", "end_s": end_s, "time_limit_s": 600.0, "ugvs": 1, "goals_total": 2,
+            "goals_visited": 1, "clusters_total": null, "clusters_visited": null, "visit_times_s": [10.0],
+            "distance_m": distance_m, "heading_to_goal_fraction": 0.5, "collisions": 0,
+            "localization_error_m": null, "bytes_sent": 10, "bytes_sent_full_links": 10,
+            "bytes_sent_small_links": 0, "wall_s": 1.0, "robots": [],
+        });
+        jsonl.push_str(&format!("{row}\n"));
+    }
+    std::fs::write(dir.join("trials.jsonl"), jsonl).unwrap();
+}
+
+/// A row holding a value the plotting library cannot draw an axis for (≥ 1e200) made `experiment
+/// report` loop for ever; the rows file was read without a size limit or a look at its type.
+#[test]
+fn experiment_report_survives_absurd_values_and_refuses_odd_rows_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("absurd");
+    // Two seeds each: the spread of the absurd value is what sent the axis code into its loop.
+    experiment_folder(&dir, &[("a", 1, 1e200, 30.0), ("a", 2, 5.0, 30.0), ("b", 1, 12.0, 1e250), ("b", 2, 13.0, 30.0)]);
+    let out = run_with_deadline(
+        StdCommand::new(bin()).args(["experiment", "report", "--json"]).arg(&dir),
+        Duration::from_secs(60),
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", stderr_of(&out));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let left_out = v["left_out_of_plots"].as_array().unwrap();
+    assert!(left_out.len() >= 2, "{v}");
+    let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+    assert!(md.contains("## Left out of the plots") && md.contains("distance_m") && md.contains("end_s"), "{md}");
+    assert!(std::fs::metadata(dir.join("plots/metrics.png")).unwrap().len() > 1000);
+
+    // The rows file as a FIFO, a device, or larger than the limit: an error, never a hang.
+    let fifo_dir = tmp.path().join("fifo");
+    experiment_folder(&fifo_dir, &[]);
+    std::fs::remove_file(fifo_dir.join("trials.jsonl")).unwrap();
+    mkfifo(&fifo_dir.join("trials.jsonl"));
+    let zero_dir = tmp.path().join("zero");
+    experiment_folder(&zero_dir, &[]);
+    std::fs::remove_file(zero_dir.join("trials.jsonl")).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", zero_dir.join("trials.jsonl")).unwrap();
+    let big_dir = tmp.path().join("big");
+    experiment_folder(&big_dir, &[]);
+    let f = std::fs::File::create(big_dir.join("trials.jsonl")).unwrap();
+    f.set_len(65 << 20).unwrap(); // sparse: no disk used
+    for d in [&fifo_dir, &zero_dir, &big_dir] {
+        let out =
+            run_with_deadline(StdCommand::new(bin()).args(["experiment", "report"]).arg(d), Duration::from_secs(30));
+        assert_eq!(out.status.code(), Some(1), "{}: {}", d.display(), stderr_of(&out));
+        let err = stderr_of(&out);
+        assert!(err.contains("not a regular file") || err.contains("at most"), "{err}");
+    }
+}
+
+/// A closed, replayable-free log of a short simulated run (its bytes).
+fn small_log(dir: &Path) -> Vec<u8> {
+    let out_dir = dir.join("sim");
+    let out = spomp()
+        .current_dir(root())
+        .args(["sim", "missions/visit-all-vehicle-clusters.yaml", "--time-limit-s", "8", "--out"])
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    assert!(out.status.code().is_some_and(|c| c <= 1), "{}", stderr_of(&out));
+    std::fs::read(out_dir.join("trial-1/run.mcap")).unwrap()
+}
+
+/// Bit flips anywhere in a closed log: `log check` verified no CRC (19 of 30 flipped logs were
+/// "closed properly"), and `log recover` turned a corrupted log into a checksum-valid one.
+#[test]
+fn log_check_verifies_every_crc_and_recover_keeps_what_checks_out() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = small_log(tmp.path());
+    let clean = tmp.path().join("clean.mcap");
+    std::fs::write(&clean, &log).unwrap();
+    let out = spomp().args(["log", "check", "--json"]).arg(&clean).output().unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", stdout_of(&out));
+    let c: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // Every chunk, the data section and the summary carry a CRC, and each holds.
+    assert!(c["crcs_verified"].as_u64().unwrap() >= c["chunks"].as_u64().unwrap() + 2, "{c}");
+    assert_eq!(c["intact"], true);
+    // 30 flips spread over the file past the leading magic: none may pass as intact.
+    let mut passed = Vec::new();
+    for k in 0..30u64 {
+        let at = 8 + (k * 7919 * 104_729) as usize % (log.len() - 16);
+        let mut bytes = log.clone();
+        bytes[at] ^= 1 << (k % 8);
+        let f = tmp.path().join(format!("flip{k}.mcap"));
+        std::fs::write(&f, &bytes).unwrap();
+        let out = spomp().args(["log", "check", "--json"]).arg(&f).output().unwrap();
+        let v: Option<serde_json::Value> = serde_json::from_slice(&out.stdout).ok();
+        // Exit 1 and a report, or an error (no longer an MCAP log).
+        if out.status.code() == Some(0) || v.as_ref().is_some_and(|v| v["intact"] == true) {
+            passed.push(at);
+        }
+        if k % 10 == 0 {
+            // Recover keeps what checks out: its output is intact and says what it dropped.
+            let fixed = tmp.path().join(format!("fixed{k}.mcap"));
+            let out = spomp().args(["log", "recover", "--json"]).arg(&f).arg("--out").arg(&fixed).output().unwrap();
+            if out.status.code() == Some(0) {
+                let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+                let check = spomp().args(["log", "check", "--json"]).arg(&fixed).output().unwrap();
+                let fc: serde_json::Value = serde_json::from_slice(&check.stdout).unwrap();
+                assert_eq!(fc["intact"], true, "{fc}");
+                assert_eq!(fc["messages"], r["messages"], "{fc} {r}");
+                if r["corrupt"].is_object() {
+                    assert!(!r["dropped"].as_array().unwrap().is_empty(), "{r}");
+                }
+            }
+        }
+    }
+    assert!(passed.is_empty(), "flips at bytes {passed:?} passed as intact");
+    // A chunk whose records do not match its recorded CRC (the CRC field flipped: a flip in
+    // the compressed records mostly fails decompression first): it and all after are dropped.
+    let mut bytes = log.clone();
+    // The first chunk record: walk the records (opcode, u64 length, body) from the magic on.
+    let mut chunk = 8;
+    while log[chunk] != 0x06 {
+        chunk += 9 + u64::from_le_bytes(log[chunk + 1..chunk + 9].try_into().unwrap()) as usize;
+    }
+    let last = bytes.len() - 1;
+    let inside = chunk + 9 + 24; // the chunk's uncompressed_crc
+    bytes[inside] ^= 0x10;
+    let f = tmp.path().join("chunk.mcap");
+    std::fs::write(&f, &bytes).unwrap();
+    let out = spomp().args(["log", "check"]).arg(&f).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let text = stdout_of(&out);
+    assert!(text.contains("CRC mismatch") && !text.contains("closed properly"), "{text}");
+    let fixed = tmp.path().join("chunk-fixed.mcap");
+    let out = spomp().args(["log", "recover"]).arg(&f).arg("--out").arg(&fixed).output().unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", stderr_of(&out));
+    assert!(stdout_of(&out).contains("dropped: "), "{}", stdout_of(&out));
+    assert!(last > inside);
+}
+
+/// A robot named `mission` shares the ids of the mission file's goals: refused by validate.
+#[test]
+fn a_robot_named_mission_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "mission: clash\nteam:\n  - { id: base, kind: basestation, role: base, start: { x_m: 10, y_m: 10 } }\n  \
+                - { id: mission, kind: ugv, role: base, priority: 1, start: { x_m: 12, y_m: 10 } }\n\
+                roles:\n  base:\n    tree:\n      wait: { duration_s: 1e9 }\ncomplete_when: time_limit\ntime_limit_s: 600\n";
+    let m = dir.path().join("clash.yaml");
+    std::fs::write(&m, text).unwrap();
+    let out = spomp().arg("validate").arg("--json").arg(&m).output().unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stdout_of(&out));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((v[0]["line"].as_u64(), v[0]["node_path"].as_str()), (Some(4), Some("team[1].id")), "{v}");
+    assert!(v[0]["message"].as_str().unwrap().contains("reserved"), "{v}");
+}
+
+/// Links planted in output folders beforehand are never written through: world generate, show
+/// and import, the simulator's summaries, plots and log, and the experiment report.
+#[test]
+fn links_planted_in_output_folders_are_not_written_through() {
+    use std::os::unix::fs::symlink;
+    let tmp = tempfile::tempdir().unwrap();
+    let victim = tmp.path().join("victim.txt");
+    std::fs::write(&victim, "precious").unwrap();
+    let untouched = || assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
+
+    // world generate, into a folder holding a link named like an output.
+    let world = tmp.path().join("world");
+    std::fs::create_dir(&world).unwrap();
+    symlink(&victim, world.join("class.png")).unwrap();
+    let out = spomp()
+        .args(["world", "generate", "--seed", "1", "--size-m", "120,100", "--out"])
+        .arg(&world)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr_of(&out));
+    assert!(stderr_of(&out).contains("symbolic link"), "{}", stderr_of(&out));
+    untouched();
+    std::fs::remove_file(world.join("class.png")).unwrap();
+    spomp().args(["world", "generate", "--seed", "1", "--size-m", "120,100", "--out"]).arg(&world).assert().code(0);
+    // world show's render.
+    symlink(&victim, world.join("render.png")).unwrap();
+    let out = spomp().args(["world", "show"]).arg(&world).output().unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr_of(&out));
+    untouched();
+    // world import's record.
+    let imported = tmp.path().join("imported");
+    std::fs::create_dir(&imported).unwrap();
+    symlink(&victim, imported.join("import.yaml")).unwrap();
+    let campus = root().join("tests/worlds/campus");
+    let out = spomp()
+        .args(["world", "import"])
+        .arg(campus.join("campus.png"))
+        .arg("--classes")
+        .arg(campus.join("campus-classes.yaml"))
+        .args(["--resolution-m", "2", "--out"])
+        .arg(&imported)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr_of(&out));
+    untouched();
+
+    // The simulator: a summary, a plot folder, the log.
+    let m = mission(tmp.path(), "m.yaml", "");
+    for (planted, is_dir) in
+        [("summary.json", false), ("trial-1/summary.json", false), ("trial-1/plots", true), ("trial-1/run.mcap", false)]
+    {
+        let out_dir = tmp.path().join(format!("sim-{}", planted.replace('/', "-")));
+        std::fs::create_dir_all(out_dir.join("trial-1")).unwrap();
+        let target = if is_dir { tmp.path().to_path_buf() } else { victim.clone() };
+        symlink(&target, out_dir.join(planted)).unwrap();
+        let out = spomp().args(["sim", "--time-limit-s", "2"]).arg(&m).arg("--out").arg(&out_dir).output().unwrap();
+        // 1: refused where the file is written; 2: a trial folder holding what the simulator
+        // does not write is refused up front.
+        assert!(matches!(out.status.code(), Some(1 | 2)), "{planted}: {}", stderr_of(&out));
+        untouched();
+        assert!(!tmp.path().join("map.png").exists(), "{planted}: a plot went through the folder link");
+    }
+
+    // The experiment report's files.
+    let exp = tmp.path().join("exp");
+    experiment_folder(&exp, &[("a", 1, 1.0, 30.0), ("b", 1, 2.0, 30.0)]);
+    symlink(&victim, exp.join("report.md")).unwrap();
+    let out = spomp().args(["experiment", "report"]).arg(&exp).output().unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr_of(&out));
+    untouched();
+}

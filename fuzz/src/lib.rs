@@ -541,9 +541,33 @@ pub fn mcap_log(data: &[u8]) {
         let _ = fixed.flush();
         let check = spomp_mcap::check_log(fixed.get_ref()).expect("a recovered log is an MCAP log");
         assert!(check.closed, "a recovered log is closed: {check:?}");
+        assert!(check.intact(), "a recovered log has no corrupt record and every checksum holds: {check:?}");
         assert_eq!(check.messages(), recovered.messages(), "the recovered log has the messages counted");
         let all = spomp_mcap::McapLog::from_bytes(fixed.into_inner()).messages().expect("a recovered log reads");
         assert_eq!(all.len() as u64, recovered.messages());
+    }
+}
+
+/// The longest stretch of log time the replay target replays, seconds: a replay is linear in
+/// the calls, and the fuzzer looks for crashes and hangs, not for long runs.
+const MAX_REPLAY_S: f64 = 1.0;
+
+/// `spomp replay` on arbitrary bytes as the log: [`spomp_mcap::open_replay_log`] reads the run's
+/// setup (the `spomp.run` metadata with the mission files and settings, the area attachment),
+/// then [`spomp_mcap::replay::replay`] rebuilds the first recorded robot from it (the mission
+/// files written back into a scratch folder of its own, removed when it ends) and replays up to
+/// [`MAX_REPLAY_S`] of its calls. Property: the replay never claims to have got past the log's
+/// end, and a replayed robot is one the setup lists.
+pub fn replay_log(data: &[u8]) {
+    use spomp_mcap::replay::{ReplayOptions, replay};
+    let Ok(log) = spomp_mcap::open_replay_log(data) else { return };
+    let Some(info) = &log.info else { return };
+    let Some(robot) = info.robot_seeds.keys().next() else { return };
+    let options = ReplayOptions { robot: robot.clone(), until_s: Some(MAX_REPLAY_S), ..ReplayOptions::default() };
+    let registry = spomp_robot::registry();
+    if let Ok(report) = replay(data, &options, &registry, &mut |_| {}) {
+        assert_eq!(&report.robot, robot);
+        assert!(report.replayed_to_s <= report.log_end_s.max(0.0) + 1e-9, "{report:?}");
     }
 }
 
@@ -685,5 +709,10 @@ mod replay {
     #[test]
     fn terrain_input() {
         replay("terrain_input", super::terrain_input);
+    }
+
+    #[test]
+    fn replay_log() {
+        replay("replay_log", super::replay_log);
     }
 }

@@ -252,6 +252,31 @@ mod tests {
         }
     }
 
+    /// A robot named after the team state's writer of mission goals would share their ids
+    /// (issue 36): the loader refuses every such name, located at the robot's id.
+    #[test]
+    fn the_mission_goal_writer_is_a_reserved_robot_id() {
+        let reserved = spomp_behaviors::mission::limits::RESERVED_ROBOT_IDS;
+        assert!(reserved.contains(&spomp_teamstate::MISSION_WRITER), "{reserved:?}");
+        let text = format!(
+            "mission: clash\n\
+             team:\n  - {{ id: {}, kind: ugv, role: idle, priority: 1, start: {{ x_m: 5, y_m: 5 }} }}\n\
+             roles:\n  idle: {{ tree: {{ wait: {{ duration_s: 10 }} }} }}\n\
+             complete_when: time_limit\ntime_limit_s: 10\n",
+            spomp_teamstate::MISSION_WRITER
+        );
+        let loaded = spomp_behaviors::mission::load_mission_str(
+            &text,
+            std::path::Path::new("clash.yaml"),
+            &crate::registry(),
+            &Default::default(),
+        );
+        assert!(!loaded.is_valid());
+        let d = &loaded.diagnostics[0];
+        assert_eq!((d.line, d.node_path.as_str()), (3, "team[0].id"), "{d}");
+        assert!(d.message.contains("is reserved"), "{d}");
+    }
+
     #[test]
     fn kld_sampling_follows_the_mission_else_the_localizer_default() {
         assert!(kld_of(&mission_with_localization("{ mode: cross_view, kld_sampling: true }")));

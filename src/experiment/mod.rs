@@ -20,6 +20,7 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use spomp_behaviors::NodeRegistry;
+use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, read_text};
 use spomp_robot::RobotRuntime;
 use spomp_sim::run::{Outcome, SimOptions, Simulation};
 
@@ -198,7 +199,7 @@ pub fn experiment_schema(registry: &NodeRegistry<RobotRuntime>) -> serde_json::V
 
 /// A usage error: printed, exit 2.
 fn usage(message: String) -> Result<ExitCode> {
-    eprintln!("error: {message}");
+    errln!("error: {message}");
     Ok(ExitCode::from(2))
 }
 
@@ -263,7 +264,7 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
                 done.insert((r.configuration.clone(), r.seed), r);
             }
             Some(_) => {
-                eprintln!(
+                errln!(
                     "error: {}: the row of configuration `{}` seed {} was run with another version of that \
                      configuration (its base mission or overrides changed since); run the edited experiment \
                      into another --out",
@@ -274,7 +275,7 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
                 return Ok(ExitCode::from(1));
             }
             None => {
-                eprintln!(
+                errln!(
                     "error: {} holds a row of configuration `{}` seed {}, which the experiment no longer has; \
                      run it into another --out",
                     out_dir.join(rows::JSONL).display(),
@@ -285,12 +286,12 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
             }
         }
     }
-    if let Ok(text) = std::fs::read_to_string(out_dir.join(META))
+    if let Ok(text) = read_text(&out_dir.join(META), MAX_SOURCE_BYTES)
         && let Ok(previous) = serde_json::from_str::<ExperimentMeta>(&text)
         && !existing.is_empty()
         && (previous.experiment != meta.experiment || previous.configurations != meta.configurations)
     {
-        eprintln!(
+        errln!(
             "error: {} holds rows of experiment `{}` (configurations {}); run `{}` into another --out",
             out_dir.display(),
             previous.experiment,

@@ -11,10 +11,21 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, anyhow, bail};
 use plotters::prelude::*;
 use serde::Serialize;
+use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, read_text};
 
 use super::rows::{self, TrialRow};
 use super::spec::{Claim, Expect, Metric};
 use super::{ExperimentMeta, META};
+
+/// The largest magnitude a plot's axis may reach. Past it (a corrupted or hand-edited row: a
+/// distance of 1e200 m) the plotting library's axis code does not end, so such values are left
+/// out of the plots and named in the report instead.
+pub const PLOT_LIMIT: f64 = 1e12;
+
+/// Whether `v` can be drawn: finite and at most [`PLOT_LIMIT`] in magnitude.
+fn plottable(v: f64) -> bool {
+    v.is_finite() && v.abs() <= PLOT_LIMIT
+}
 
 /// Mean and spread of a metric over a configuration's trials.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -116,8 +127,8 @@ pub fn merge(dirs: &[PathBuf]) -> Result<(ExperimentMeta, Vec<TrialRow>)> {
     let mut merged: BTreeMap<(String, u64), (TrialRow, PathBuf)> = BTreeMap::new();
     for dir in dirs {
         let path = dir.join(META);
-        let text = std::fs::read_to_string(&path).with_context(|| {
-            format!("reading {} (is {} an experiment output folder?)", path.display(), dir.display())
+        let text = read_text(&path, MAX_SOURCE_BYTES).map_err(|e| {
+            anyhow!("reading {}: {e} (is {} an experiment output folder?)", path.display(), dir.display())
         })?;
         let m: ExperimentMeta = serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
         match &meta {
@@ -162,7 +173,7 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>, json: bool) -> Result<ExitCo
     let (meta, rows) = merge(dirs)?;
     let out_dir = out.map(Path::to_path_buf).or_else(|| dirs.first().cloned()).ok_or_else(|| anyhow!("no folder"))?;
     let plots = out_dir.join("plots");
-    std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
+    crate::output::create_dir(&plots)?;
     let mut jsonl = String::new();
     let mut csv = format!("{}\n", rows::CSV_HEADER);
     for r in &rows {
@@ -175,14 +186,26 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>, json: bool) -> Result<ExitCo
     let table = stats_table(&meta, &rows);
     let claims: Vec<ClaimResult> = meta.claims.iter().map(|c| check_claim(c, &rows)).collect();
     let everything = format!("{}: goals visited over time (mean ± sd over seeds)", meta.experiment);
-    goals_over_time_plot(&everything, &meta.configurations, &rows, &plots.join("goals_over_time.png"))?;
-    let groups = claim_groups(&meta, &rows);
+    let (plotted_rows, mut left_out) = rows_to_plot(&rows);
+    goals_over_time_plot(&everything, &meta.configurations, &plotted_rows, &plots.join("goals_over_time.png"))?;
+    let groups = claim_groups(&meta, &plotted_rows);
     for (i, group) in groups.iter().enumerate() {
         let title = format!("goals visited over time: {}", group.join(" / "));
-        goals_over_time_plot(&title, group, &rows, &plots.join(group_plot_name(i)))?;
+        goals_over_time_plot(&title, group, &plotted_rows, &plots.join(group_plot_name(i)))?;
     }
-    metrics_plot(&meta, &table, &plots.join("metrics.png"))?;
+    left_out.extend(metrics_plot(&meta, &table, &plots.join("metrics.png"))?);
     let mut md = markdown(&meta, &rows, &table, &claims);
+    if !left_out.is_empty() {
+        let _ = writeln!(
+            md,
+            "## Left out of the plots\n\nValues that are not finite or exceed {PLOT_LIMIT:e} in magnitude cannot be \
+             drawn; the tables above keep them.\n"
+        );
+        for note in &left_out {
+            let _ = writeln!(md, "- {note}");
+        }
+        let _ = writeln!(md);
+    }
     if !groups.is_empty() {
         let _ = writeln!(
             md,
@@ -217,6 +240,7 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>, json: bool) -> Result<ExitCo
             "trials_expected": expected,
             "configurations": configurations,
             "claims": claims,
+            "left_out_of_plots": left_out,
             "report": out_dir.join("report.md"),
         });
         out!("{}", serde_json::to_string_pretty(&v)?);
@@ -229,6 +253,12 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>, json: bool) -> Result<ExitCo
         );
         for c in &claims {
             out!("  {:<8} {}", c.verdict, c.claim.name);
+        }
+        if !left_out.is_empty() {
+            out!(
+                "  {} value(s) left out of the plots (not finite or beyond {PLOT_LIMIT:e}; see the report)",
+                left_out.len()
+            );
         }
         out!("report: {}", out_dir.join("report.md").display());
     }
@@ -434,6 +464,27 @@ fn group_plot_name(index: usize) -> String {
     format!("goals_over_time_{}.png", index + 1)
 }
 
+/// The rows the goals-over-time plots can draw (times and counts within [`PLOT_LIMIT`]) and a
+/// note for each row left out.
+fn rows_to_plot(rows: &[TrialRow]) -> (Vec<TrialRow>, Vec<String>) {
+    let mut kept = Vec::with_capacity(rows.len());
+    let mut notes = Vec::new();
+    for r in rows {
+        let bad = [("end_s", r.end_s), ("time_limit_s", r.time_limit_s), ("goals_visited", r.goals_visited as f64)]
+            .into_iter()
+            .chain(r.visit_times_s.iter().map(|&t| ("visit_times_s", t)))
+            .find(|(_, v)| !plottable(*v));
+        match bad {
+            Some((field, v)) => notes.push(format!(
+                "configuration `{}` seed {}: {field} = {v:e}; the trial is left out of the goals-over-time plots",
+                r.configuration, r.seed
+            )),
+            None => kept.push(r.clone()),
+        }
+    }
+    (kept, notes)
+}
+
 /// Goals visited over time for `configurations`: per configuration the mean over seeds with a
 /// band of ± one standard deviation (the paper's figure style).
 fn goals_over_time_plot(title: &str, configurations: &[String], rows: &[TrialRow], path: &Path) -> Result<()> {
@@ -442,10 +493,9 @@ fn goals_over_time_plot(title: &str, configurations: &[String], rows: &[TrialRow
     let t_max = rows.iter().map(|r| r.end_s.max(r.time_limit_s.min(r.end_s))).fold(1.0, f64::max);
     let y_max = rows.iter().map(|r| r.goals_visited).max().unwrap_or(1).max(1) as f64 * 1.1;
     const STEPS: usize = 200;
-    let root = BitMapBackend::new(path, (900, 500)).into_drawing_area();
-    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+    crate::output::plot_png(path, (900, 500), |root| {
         root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 18))
             .margin(15)
             .x_label_area_size(35)
@@ -485,14 +535,13 @@ fn goals_over_time_plot(title: &str, configurations: &[String], rows: &[TrialRow
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
             .draw()?;
-        root.present()?;
         Ok(())
-    };
-    draw().map_err(|e| anyhow!("drawing {}: {e}", path.display()))
+    })
 }
 
-/// Each metric's mean per configuration, with a bar of ± one standard deviation.
-fn metrics_plot(meta: &ExperimentMeta, table: &Table, path: &Path) -> Result<()> {
+/// Each metric's mean per configuration, with a bar of ± one standard deviation. Returns a note
+/// for each value left out (not within [`PLOT_LIMIT`]).
+fn metrics_plot(meta: &ExperimentMeta, table: &Table, path: &Path) -> Result<Vec<String>> {
     crate::sim_plots::ensure_font()?;
     let shown = [
         Metric::GoalsVisited,
@@ -505,8 +554,22 @@ fn metrics_plot(meta: &ExperimentMeta, table: &Table, path: &Path) -> Result<()>
         Metric::WallS,
     ];
     let n = meta.configurations.len().max(1);
-    let root = BitMapBackend::new(path, (1200, 700)).into_drawing_area();
-    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+    let mut notes = Vec::new();
+    for metric in shown {
+        for c in &meta.configurations {
+            if let Some(s) = table.get(&(c.clone(), metric))
+                && !(plottable(s.mean - s.sd) && plottable(s.mean + s.sd))
+            {
+                notes.push(format!(
+                    "configuration `{c}`: {} mean {:e} ± {:e}; left out of the metrics plot",
+                    metric.as_str(),
+                    s.mean,
+                    s.sd
+                ));
+            }
+        }
+    }
+    crate::output::plot_png(path, (1200, 700), |root| {
         root.fill(&WHITE)?;
         let areas = root.split_evenly((2, 4));
         for (area, metric) in areas.iter().zip(shown) {
@@ -515,6 +578,7 @@ fn metrics_plot(meta: &ExperimentMeta, table: &Table, path: &Path) -> Result<()>
                 .iter()
                 .enumerate()
                 .filter_map(|(i, c)| table.get(&(c.clone(), metric)).map(|s| (i, *s)))
+                .filter(|(_, s)| plottable(s.mean - s.sd) && plottable(s.mean + s.sd))
                 .collect();
             let highest = values.iter().map(|(_, s)| s.mean + s.sd).fold(0.0, f64::max);
             // An all-zero metric still gets a readable axis.
@@ -552,10 +616,9 @@ fn metrics_plot(meta: &ExperimentMeta, table: &Table, path: &Path) -> Result<()>
                 )))?;
             }
         }
-        root.present()?;
         Ok(())
-    };
-    draw().map_err(|e| anyhow!("drawing {}: {e}", path.display()))
+    })?;
+    Ok(notes)
 }
 
 #[cfg(test)]

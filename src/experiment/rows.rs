@@ -2,12 +2,14 @@
 //! (`trials.jsonl`, the record; `trials.csv`, the same rows for spreadsheets).
 
 use std::collections::BTreeMap;
-use std::fs::{File, OpenOptions};
+use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
+use spomp_behaviors::mission::limits::{SourceError, read_regular};
+use spomp_behaviors::mission::output;
 use spomp_core::{RobotId, Time};
 use spomp_sim::run::{RunSummary, SeamInput, SimObserver};
 use spomp_teamstate::{SyncMessage, TierSet};
@@ -311,15 +313,25 @@ pub fn csv_line(r: &TrialRow) -> String {
     )
 }
 
+/// The largest `trials.jsonl` read, bytes (64 MiB: tens of thousands of rows).
+pub const MAX_ROWS_BYTES: u64 = 64 << 20;
+
+/// The bytes of a `trials.jsonl`, `None` when there is none: a regular file of at most
+/// [`MAX_ROWS_BYTES`] (a FIFO or `/dev/zero` in its place is an error, not a hang).
+fn read_jsonl(path: &Path) -> Result<Option<Vec<u8>>> {
+    match read_regular(path, MAX_ROWS_BYTES) {
+        Ok(bytes) => Ok(Some(bytes)),
+        Err(SourceError::Io { kind: std::io::ErrorKind::NotFound, .. }) => Ok(None),
+        Err(e) => Err(anyhow::anyhow!("{e}")),
+    }
+}
+
 /// Reads the rows of `dir/trials.jsonl`. A last line without its newline (a crash while it was
 /// written) is ignored; any other line that does not parse is an error naming it.
 pub fn read_rows(dir: &Path) -> Result<Vec<TrialRow>> {
     let path = dir.join(JSONL);
-    let text = match std::fs::read_to_string(&path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
-    };
+    let Some(bytes) = read_jsonl(&path)? else { return Ok(Vec::new()) };
+    let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", path.display()))?;
     let complete = match text.rfind('\n') {
         Some(end) => &text[..=end],
         None => "",
@@ -351,12 +363,10 @@ impl RowSink {
     pub fn open(dir: &Path, existing: &[TrialRow]) -> Result<RowSink> {
         let jsonl_path = dir.join(JSONL);
         let csv_path = dir.join(CSV);
-        if let Ok(text) = std::fs::read(&jsonl_path) {
+        if let Some(text) = read_jsonl(&jsonl_path)? {
             let keep = text.iter().rposition(|b| *b == b'\n').map_or(0, |i| i + 1);
             if keep < text.len() {
-                let f = OpenOptions::new()
-                    .write(true)
-                    .open(&jsonl_path)
+                let f = output::open_existing_file(&jsonl_path)
                     .with_context(|| format!("opening {}", jsonl_path.display()))?;
                 f.set_len(keep as u64)
                     .with_context(|| format!("cutting the partial row of {}", jsonl_path.display()))?;
@@ -368,9 +378,7 @@ impl RowSink {
             csv_text.push_str(&csv_line(r));
         }
         write_synced(&csv_path, csv_text.as_bytes())?;
-        let open = |p: &Path| {
-            OpenOptions::new().create(true).append(true).open(p).with_context(|| format!("opening {}", p.display()))
-        };
+        let open = |p: &Path| output::append_file(p).with_context(|| format!("opening {}", p.display()));
         Ok(RowSink { jsonl: open(&jsonl_path)?, csv: open(&csv_path)?, paths: (jsonl_path, csv_path) })
     }
 
@@ -393,14 +401,10 @@ impl RowSink {
     }
 }
 
-/// Writes a whole file through a temporary one renamed over it, synced.
+/// Writes a whole file through a temporary one (an unpredictable name in the same folder),
+/// synced, renamed over it; a link planted at `path` is refused.
 pub fn write_synced(path: &Path, bytes: &[u8]) -> Result<()> {
-    let Some(name) = path.file_name() else { bail!("{} is no file path", path.display()) };
-    let tmp = path.with_file_name(format!(".{}.tmp", name.to_string_lossy()));
-    let mut f = File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
-    f.write_all(bytes).and_then(|()| f.sync_all()).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("replacing {}", path.display()))?;
-    Ok(())
+    crate::output::write(path, bytes)
 }
 
 #[cfg(test)]
@@ -486,7 +490,7 @@ mod tests {
         sink.append(&row(0)).unwrap();
         drop(sink);
         // A crash in the middle of the second row.
-        let mut f = OpenOptions::new().append(true).open(dir.path().join(JSONL)).unwrap();
+        let mut f = std::fs::OpenOptions::new().append(true).open(dir.path().join(JSONL)).unwrap();
         f.write_all(b"{\"trial\":1,\"configu").unwrap();
         drop(f);
         let rows = read_rows(dir.path()).unwrap();

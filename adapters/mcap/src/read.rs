@@ -15,6 +15,9 @@ pub enum ReadError {
     /// A record declares sizes the file cannot hold.
     #[error("corrupt MCAP log: {0}")]
     Corrupt(String),
+    /// A checksum of the log does not match its bytes.
+    #[error("corrupt MCAP log: {0}")]
+    Checksum(String),
     /// A message is not CDR as ROS 2 writes it.
     #[error("message on {topic} is not little-endian CDR: {message}")]
     Decode {
@@ -91,8 +94,17 @@ pub struct LogCheck {
     /// `bad_record` is set, everything from the bad record on.
     pub lost_bytes: u64,
     /// The first record that is whole but corrupt (offset and why), if any: the data after it is
-    /// not read.
+    /// not read. A chunk whose content does not match its CRC is such a record.
     pub bad_record: Option<(u64, String)>,
+    /// Chunks not read because they lie after `bad_record` (the bad one included).
+    pub dropped_chunks: usize,
+    /// Checksums verified and found right (chunks, attachments, the data section, the summary).
+    pub crcs_verified: usize,
+    /// Every checksum that does not match, in file order: where the checked bytes start and
+    /// what failed.
+    pub crc_failures: Vec<(u64, String)>,
+    /// Attachments of the readable data whose CRC does not match (offsets): not to be trusted.
+    pub bad_attachments: Vec<u64>,
 }
 
 impl LogCheck {
@@ -100,15 +112,31 @@ impl LogCheck {
     pub fn messages(&self) -> u64 {
         self.topics.values().sum()
     }
+
+    /// Every record and checksum read checked out: no corrupt record, no CRC mismatch.
+    pub fn intact(&self) -> bool {
+        self.bad_record.is_none() && self.crc_failures.is_empty()
+    }
+}
+
+/// A CRC mismatch, worded for the user.
+fn crc_mismatch(what: &str, saved: u32, computed: u32) -> String {
+    format!("{what} CRC mismatch (recorded {saved:08x}, computed {computed:08x})")
 }
 
 const OP_CHUNK: u8 = 0x06;
+const OP_ATTACHMENT: u8 = 0x09;
 const OP_DATA_END: u8 = 0x0F;
 const OP_FOOTER: u8 = 0x02;
+/// Bytes of a footer record: opcode, length, summary start, summary offset start, summary CRC.
+const FOOTER_LEN: usize = 1 + 8 + 8 + 8 + 4;
 
 /// Checks a log file as a crash may have left it: every record of the data section is read up
 /// to the last whole one, every chunk decompressed and its records checked, and the messages
-/// counted by topic. An error only when the file is not an MCAP log at all.
+/// counted by topic. Every checksum the format has is verified where it is set: each chunk's
+/// `uncompressed_crc` (a mismatch is a bad record: nothing from it on is read), each
+/// attachment's CRC, the data section CRC of the `DataEnd` record and the summary CRC of the
+/// footer. An error only when the file is not an MCAP log at all.
 pub fn check_log(bytes: &[u8]) -> Result<LogCheck, ReadError> {
     let (check, data_end) = scan_data(bytes)?;
     let mut check = check;
@@ -124,18 +152,58 @@ pub fn check_log(bytes: &[u8]) -> Result<LogCheck, ReadError> {
     Ok(check)
 }
 
-/// Rewrites the readable part of a log (see [`check_log`]) as a complete, indexed MCAP file.
+/// Rewrites the part of a log that checks out (see [`check_log`]) as a complete, indexed MCAP
+/// file: the messages of the chunks before the first corrupt record or CRC mismatch, and the
+/// metadata and attachments among them whose checksums hold (none of the metadata when the data
+/// section CRC fails: nothing else covers it). What was left out is in the returned check.
 pub fn recover_log<W: std::io::Write + std::io::Seek>(bytes: &[u8], out: W) -> Result<LogCheck, ReadError> {
     let (mut check, data_end) = scan_data(bytes)?;
+    let data_crc_failed = check.crc_failures.iter().any(|(_, why)| why.starts_with(DATA_SECTION));
     let mut writer = mcap::WriteOptions::new().profile("ros2").library("spomp log recover").create(out)?;
-    for m in mcap::MessageStream::new(&readable_prefix(bytes, data_end))? {
+    let prefix = readable_prefix(bytes, data_end);
+    for m in mcap::MessageStream::new(&prefix)? {
         let Ok(m) = m else { break };
         *check.topics.entry(m.channel.topic.clone()).or_default() += 1;
         writer.write(&m)?;
     }
+    // The records outside chunks: metadata (the run's setup) and attachments whose CRC holds.
+    let mut at = MAGIC_LEN;
+    while let Some((opcode, body)) = record_at(&prefix[..data_end], at) {
+        match opcode {
+            0x0C if !data_crc_failed => {
+                if let Ok(mcap::records::Record::Metadata(m)) = mcap::parse_record(opcode, body) {
+                    writer.write_metadata(&m)?;
+                }
+            }
+            OP_ATTACHMENT if !check.bad_attachments.contains(&(at as u64)) => {
+                if let Ok(mcap::records::Record::Attachment { header, data, .. }) = mcap::parse_record(opcode, body) {
+                    writer.attach(&mcap::Attachment {
+                        log_time: header.log_time,
+                        create_time: header.create_time,
+                        name: header.name,
+                        media_type: header.media_type,
+                        data,
+                    })?;
+                }
+            }
+            _ => {}
+        }
+        at += 9 + body.len();
+    }
     writer.finish()?;
     Ok(check)
 }
+
+/// The record (opcode and body) at `at` of `data`, if `data` holds it whole.
+fn record_at(data: &[u8], at: usize) -> Option<(u8, &[u8])> {
+    let rest = data.get(at..)?;
+    let len = read_u64(rest, 1)?;
+    let body = usize::try_from(len).ok().and_then(|l| rest.get(9..9usize.checked_add(l)?))?;
+    Some((rest[0], body))
+}
+
+/// How a data section CRC failure is worded (and recognised).
+const DATA_SECTION: &str = "data section";
 
 /// The data section up to `data_end`, closed with a provisional end so that a linear reader
 /// reads it to the end.
@@ -161,19 +229,51 @@ fn scan_data(bytes: &[u8]) -> Result<(LogCheck, usize), ReadError> {
         };
         match rest[0] {
             OP_CHUNK => {
-                if let Err(e) = check_chunk(body) {
-                    check.bad_record = Some((at as u64, e.to_string()));
-                    break;
+                match check_chunk(body) {
+                    Ok(crc_checked) => check.crcs_verified += usize::from(crc_checked),
+                    Err(e) => {
+                        if let ReadError::Checksum(why) = &e {
+                            check.crc_failures.push((at as u64, why.clone()));
+                        }
+                        check.bad_record = Some((at as u64, e.to_string()));
+                        check.dropped_chunks = count_chunks(&bytes[at..]);
+                        break;
+                    }
                 }
                 check.chunks += 1;
             }
+            OP_ATTACHMENT if check_fields(OP_ATTACHMENT, body).is_ok() => {
+                match mcap::parse_record(OP_ATTACHMENT, body) {
+                    Err(mcap::McapError::BadAttachmentCrc { saved, calculated }) => {
+                        let name = attachment_name(body);
+                        check
+                            .crc_failures
+                            .push((at as u64, crc_mismatch(&format!("attachment `{name}`"), saved, calculated)));
+                        check.bad_attachments.push(at as u64);
+                    }
+                    Ok(mcap::records::Record::Attachment { crc, .. }) if crc != 0 => check.crcs_verified += 1,
+                    _ => {}
+                }
+            }
             OP_DATA_END => {
+                // The data section CRC covers every byte before this record, the magic included.
+                if let Some(saved) = read_u32(body, 0).filter(|&c| c != 0) {
+                    let computed = crc32fast::hash(&bytes[..at]);
+                    if computed == saved {
+                        check.crcs_verified += 1;
+                    } else {
+                        check.crc_failures.push((0, crc_mismatch(DATA_SECTION, saved, computed)));
+                    }
+                }
                 let after = &rest[9 + body.len()..];
                 // A footer that points at a summary, then the magic: a file closed properly.
                 check.closed = after.len() >= 9 + 20 + MAGIC_LEN
                     && after[after.len() - MAGIC_LEN..] == crate::safe::MAGIC[..]
                     && after[after.len() - MAGIC_LEN - 29] == OP_FOOTER
                     && read_u64(after, after.len() - MAGIC_LEN - 20).is_some_and(|s| s != 0);
+                if after.len() >= FOOTER_LEN + MAGIC_LEN && after[after.len() - MAGIC_LEN..] == crate::safe::MAGIC[..] {
+                    check_summary_crc(bytes, &mut check);
+                }
                 break;
             }
             OP_FOOTER => break,
@@ -194,6 +294,56 @@ fn scan_data(bytes: &[u8]) -> Result<(LogCheck, usize), ReadError> {
         check.lost_bytes = 0;
     }
     Ok((check, at))
+}
+
+/// Verifies the footer's summary CRC (when set): it covers the summary section (or nothing when
+/// there is none) through the footer's `summary_offset_start` field.
+fn check_summary_crc(bytes: &[u8], check: &mut LogCheck) {
+    let footer = bytes.len() - MAGIC_LEN - FOOTER_LEN;
+    if bytes[footer] != OP_FOOTER {
+        return;
+    }
+    let (Some(summary_start), Some(saved)) = (read_u64(bytes, footer + 9), read_u32(bytes, footer + 25)) else {
+        return;
+    };
+    if saved == 0 {
+        return;
+    }
+    let start = if summary_start == 0 { Some(footer) } else { usize::try_from(summary_start).ok() };
+    let what = "summary section";
+    match start.filter(|&s| s <= footer) {
+        Some(start) => {
+            let computed = crc32fast::hash(&bytes[start..footer + 25]);
+            if computed == saved {
+                check.crcs_verified += 1;
+            } else {
+                check.crc_failures.push((start as u64, crc_mismatch(what, saved, computed)));
+            }
+        }
+        None => check.crc_failures.push((
+            footer as u64,
+            format!("{what}: the footer's summary start {summary_start} lies past the footer, so its CRC cannot hold"),
+        )),
+    }
+}
+
+/// Chunks among the whole records of `data` (a run of top-level records).
+fn count_chunks(data: &[u8]) -> usize {
+    let mut n = 0;
+    let mut at = 0;
+    while let Some((opcode, body)) = record_at(data, at) {
+        n += usize::from(opcode == OP_CHUNK);
+        at += 9 + body.len();
+    }
+    n
+}
+
+/// The name of an attachment record (lossy), for messages.
+fn attachment_name(body: &[u8]) -> String {
+    let name = read_u32(body, 16)
+        .and_then(|l| body.get(20..20usize.checked_add(usize::try_from(l).ok()?)?))
+        .unwrap_or_default();
+    String::from_utf8_lossy(name).chars().take(80).collect()
 }
 
 /// Largest decompressed chunk accepted, and the largest expansion over the compressed size.
@@ -296,6 +446,8 @@ fn fields_of(opcode: u8) -> &'static [(&'static str, Field)] {
             ("name", Bytes32),
             ("media type", Bytes32),
             ("data", Bytes64),
+            // The reader slices the data up to the CRC: the CRC must fit too.
+            ("crc", Fixed(4)),
         ],
         0x0C => &[("name", Bytes32), ("metadata", StrMap)],
         _ => &[],
@@ -337,8 +489,20 @@ fn check_fields(opcode: u8, body: &[u8]) -> Result<(), &'static str> {
 }
 
 /// A chunk body: start and end time, uncompressed size and CRC, compression name, records.
-fn check_chunk(body: &[u8]) -> Result<(), ReadError> {
+/// Verifies the records' CRC when the chunk records one; returns whether it did.
+fn check_chunk(body: &[u8]) -> Result<bool, ReadError> {
     let uncompressed = read_u64(body, 16).ok_or_else(|| corrupt("truncated chunk header".into()))?;
+    let saved_crc = read_u32(body, 24).ok_or_else(|| corrupt("truncated chunk header".into()))?;
+    let verify = |plain: &[u8]| -> Result<bool, ReadError> {
+        if saved_crc == 0 {
+            return Ok(false); // no CRC recorded
+        }
+        let computed = crc32fast::hash(plain);
+        if computed != saved_crc {
+            return Err(ReadError::Checksum(crc_mismatch("chunk", saved_crc, computed)));
+        }
+        Ok(true)
+    };
     let name_len = read_u32(body, 28).ok_or_else(|| corrupt("truncated chunk header".into()))? as usize;
     let name = body.get(32..32 + name_len).ok_or_else(|| corrupt("truncated chunk compression name".into()))?;
     let records_len = read_u64(body, 32 + name_len).ok_or_else(|| corrupt("truncated chunk header".into()))?;
@@ -352,14 +516,20 @@ fn check_chunk(body: &[u8]) -> Result<(), ReadError> {
         return Err(corrupt(format!("chunk declares {uncompressed} decompressed bytes from {}", records.len())));
     }
     match name {
-        b"" => check_records(records, false),
+        b"" => {
+            let checked = verify(records)?;
+            check_records(records, false)?;
+            Ok(checked)
+        }
         b"zstd" => {
             let plain = zstd::bulk::decompress(records, uncompressed as usize)
                 .map_err(|e| corrupt(format!("chunk does not decompress: {e}")))?;
             if plain.len() as u64 != uncompressed {
                 return Err(corrupt(format!("chunk decompresses to {} bytes, declared {uncompressed}", plain.len())));
             }
-            check_records(&plain, false)
+            let checked = verify(&plain)?;
+            check_records(&plain, false)?;
+            Ok(checked)
         }
         other => Err(corrupt(format!("unsupported chunk compression `{}`", String::from_utf8_lossy(other)))),
     }

@@ -59,9 +59,11 @@ pub(crate) const FLUSH_CHUNK: u8 = 1;
 pub(crate) const FLUSH_LAST: u8 = 2;
 
 impl SafeFile {
-    /// Creates (truncates) the file at `path`; `mode` tells what a flush means.
+    /// Creates the file at `path` anew (an old regular file is replaced; a symbolic link, a
+    /// FIFO or a folder there is refused, never written through); `mode` tells what a flush
+    /// means.
     pub(crate) fn create(path: &Path, mode: Arc<AtomicU8>) -> std::io::Result<Self> {
-        let file = File::create(path)?;
+        let file = spomp_behaviors::mission::output::create_file(path)?;
         Ok(SafeFile { file, pending: Vec::new(), committed: 0, mode })
     }
 

@@ -132,6 +132,11 @@ fn huge_record_length_inside_a_chunk_is_an_error_not_an_abort() {
     let name_len = u32::from_le_bytes(bytes[body + 28..body + 32].try_into().unwrap()) as usize;
     let first_inner = body + 40 + name_len;
     bytes[first_inner + 1..first_inner + 9].copy_from_slice(&(1u64 << 57).to_le_bytes());
+    // The chunk's CRC would catch the change first; without one (0: not recorded) the length
+    // check must.
+    let crc = McapLog::from_bytes(bytes.clone()).messages().unwrap_err();
+    assert!(crc.to_string().contains("CRC mismatch"), "{crc}");
+    bytes[body + 24..body + 28].copy_from_slice(&[0; 4]);
     let err = McapLog::from_bytes(bytes).messages().unwrap_err();
     assert!(err.to_string().contains("declares"), "{err}");
 }
@@ -162,6 +167,38 @@ fn a_compressed_chunk_behind_an_overrunning_length_is_still_checked() {
     corrupt[chunk + 1..chunk + 9].copy_from_slice(&(u64::MAX / 2).to_le_bytes());
     let err = McapLog::from_bytes(corrupt).messages().unwrap_err();
     assert!(err.to_string().contains("more than the file holds"), "{err}");
+}
+
+/// An attachment whose fields fill its record with no room left for its CRC: the `mcap` reader
+/// slices the data up to the CRC and panicked on it (through `open_replay_log`, and `check_log`
+/// once it verified attachment CRCs). A corrupt record now, never a panic.
+#[test]
+fn an_attachment_without_room_for_its_crc_is_corrupt_not_a_panic() {
+    let mut body = Vec::new();
+    body.extend_from_slice(&0u64.to_le_bytes()); // log time
+    body.extend_from_slice(&0u64.to_le_bytes()); // create time
+    for text in [&b"area"[..], b"application/x"] {
+        body.extend_from_slice(&(text.len() as u32).to_le_bytes());
+        body.extend_from_slice(text);
+    }
+    body.extend_from_slice(&0u64.to_le_bytes()); // no data, and no CRC after it
+    const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+    let mut bytes = MAGIC.to_vec();
+    bytes.push(0x09);
+    bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    bytes.extend_from_slice(&body);
+    // A data end without CRC, a footer without summary, the magic.
+    bytes.push(0x0F);
+    bytes.extend_from_slice(&4u64.to_le_bytes());
+    bytes.extend_from_slice(&[0; 4]);
+    bytes.push(0x02);
+    bytes.extend_from_slice(&20u64.to_le_bytes());
+    bytes.extend_from_slice(&[0; 20]);
+    bytes.extend_from_slice(MAGIC);
+    let check = spomp_mcap::check_log(&bytes).unwrap();
+    assert!(check.bad_record.as_ref().is_some_and(|(_, why)| why.contains("crc")), "{check:?}");
+    let _ = spomp_mcap::open_replay_log(&bytes);
+    let _ = spomp_mcap::recover_log(&bytes, Cursor::new(Vec::new()));
 }
 
 /// Offset of the first top-level chunk record (opcode 6) after the magic.

@@ -13,6 +13,7 @@ use spomp_core::{AerialMap, ClassTable, DepthPanorama, GridSpec, PanoramaGeometr
 use spomp_behaviors::mission::limits::{
     MAX_SOURCE_BYTES, SourceError, number, read_regular, read_text, resolve_inside,
 };
+use spomp_behaviors::mission::output;
 use spomp_behaviors::mission::yaml::{self, Node};
 
 use crate::error::SimError;
@@ -312,9 +313,19 @@ fn open_layer(dir: &Path, file: &str, layer: &'static str) -> Result<(PathBuf, i
     if !path.is_file() {
         return Err(SimError::MissingLayer { layer, path });
     }
-    let img = image::open(&path).map_err(image_err(&path))?;
+    // A regular file within the size limit (no FIFO, no device, no multi-gigabyte file), then
+    // decoded from memory with the image library's default allocation limits.
+    let bytes = read_regular(&path, MAX_LAYER_PNG_BYTES).map_err(source_err(&path))?;
+    let img = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|source| SimError::Io { path: path.clone(), source })?
+        .decode()
+        .map_err(image_err(&path))?;
     Ok((path, img))
 }
+
+/// The largest world layer PNG read, bytes (a 10 000 × 10 000 colour layer compresses far below).
+pub const MAX_LAYER_PNG_BYTES: u64 = 256 << 20;
 
 fn check_size(layer: &'static str, path: &Path, spec: &GridSpec, w: u32, h: u32) -> Result<(), SimError> {
     if w != spec.width || h != spec.height {
@@ -450,13 +461,21 @@ impl World {
             let count = ((e as f64 - offset_m) / scale_m).round().clamp(0.0, u16::MAX as f64) as u16;
             elev_img.put_pixel(x, y, Luma([count]));
         }
-        let save_png = |name: &str, result: Result<(), image::ImageError>| {
+        // Encoded in memory, then written without following a link planted in the folder.
+        let save_png = |name: &str, result: Result<(), image::ImageError>, bytes: Vec<u8>| {
             let path = dir.join(name);
-            result.map_err(image_err(&path))
+            result.map_err(image_err(&path))?;
+            output::write_file(&path, &bytes).map_err(io_err(&path))
         };
-        save_png("class.png", class_img.save(dir.join("class.png")))?;
-        save_png("color.png", color_img.save(dir.join("color.png")))?;
-        save_png("elevation.png", elev_img.save(dir.join("elevation.png")))?;
+        let mut bytes = Vec::new();
+        let encoded = class_img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png);
+        save_png("class.png", encoded, bytes)?;
+        let mut bytes = Vec::new();
+        let encoded = color_img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png);
+        save_png("color.png", encoded, bytes)?;
+        let mut bytes = Vec::new();
+        let encoded = elev_img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png);
+        save_png("elevation.png", encoded, bytes)?;
 
         let desc = WorldFile {
             resolution_m: spec.resolution_m,
@@ -479,7 +498,7 @@ impl World {
             field: String::new(),
             message: e.to_string(),
         })?;
-        std::fs::write(&yaml_path, text).map_err(io_err(&yaml_path))
+        output::write_file(&yaml_path, text.as_bytes()).map_err(io_err(&yaml_path))
     }
 }
 

@@ -7,6 +7,7 @@
 //!   [`MAX_DURATION_S`] seconds (1e9), and `time_limit_s` at most [`MAX_TIME_LIMIT_S`] (7 days).
 //! - The mission name and robot ids are identifiers: 1 to [`MAX_IDENTIFIER_LEN`] characters of
 //!   `A–Z a–z 0–9 _ -` (they name output folders, log topics and files).
+//!   Robot ids in [`RESERVED_ROBOT_IDS`] (`mission`) are refused.
 //! - A team has at most [`MAX_ROBOTS`] robots.
 //! - A mission, an included file or a plan file is a regular file of at most
 //!   [`MAX_SOURCE_BYTES`] bytes (no FIFO, device or directory), inside the mission's folder.
@@ -27,6 +28,11 @@ pub const MAX_DURATION_S: f64 = 1e9;
 
 /// The longest mission time limit, seconds (7 days).
 pub const MAX_TIME_LIMIT_S: f64 = 604_800.0;
+
+/// Robot ids a team may not use: `mission` is the writer name the team state gives the goals
+/// listed in the mission file (`spomp_teamstate::MISSION_WRITER`), so a robot of that name would
+/// number its own goals in the same id space and one of each pair would be lost.
+pub const RESERVED_ROBOT_IDS: &[&str] = &["mission"];
 
 /// The longest mission name or robot id, characters.
 pub const MAX_IDENTIFIER_LEN: usize = 64;

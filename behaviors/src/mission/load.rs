@@ -731,6 +731,15 @@ fn check_team(
         let idx = i.to_string();
         if let Err(e) = limits::check_identifier("a robot id", &r.id) {
             team_diag(vec!["team".into(), idx.clone(), "id".into()], e);
+        } else if limits::RESERVED_ROBOT_IDS.contains(&r.id.as_str()) {
+            team_diag(
+                vec!["team".into(), idx.clone(), "id".into()],
+                format!(
+                    "robot id `{}` is reserved: the goals listed in the mission file are written under that name, \
+                     so this robot's goals would share their ids; pick another id",
+                    r.id
+                ),
+            );
         }
         if let Some(first) = ids.insert(&r.id, i) {
             team_diag(

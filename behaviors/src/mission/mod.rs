@@ -7,6 +7,7 @@ pub mod diagnostic;
 pub mod json_schema;
 pub mod limits;
 pub mod load;
+pub mod output;
 pub mod schema;
 pub mod tree;
 pub mod yaml;

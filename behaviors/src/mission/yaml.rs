@@ -393,7 +393,41 @@ impl de::Error for DeError {
     fn custom<T: fmt::Display>(msg: T) -> Self {
         DeError { message: msg.to_string(), loc: None, path: Vec::new() }
     }
+
+    fn invalid_type(unexp: de::Unexpected<'_>, exp: &dyn de::Expected) -> Self {
+        Self::custom(format_args!("invalid type: {}, expected {exp}", unexpected(unexp)))
+    }
+
+    fn invalid_value(unexp: de::Unexpected<'_>, exp: &dyn de::Expected) -> Self {
+        Self::custom(format_args!("invalid value: {}, expected {exp}", unexpected(unexp)))
+    }
+
+    fn unknown_variant(variant: &str, expected: &'static [&'static str]) -> Self {
+        let found = match unexpected(de::Unexpected::Str(variant)) {
+            long if long.starts_with("a string of") => long,
+            _ => format!("`{variant}`"),
+        };
+        match expected {
+            [] => Self::custom(format_args!("unknown variant {found}, there are no variants")),
+            _ => Self::custom(format_args!("unknown variant {found}, expected one of `{}`", expected.join("`, `"))),
+        }
+    }
 }
+
+/// What was found, for an error message: a long or multi-line string is named by its length,
+/// not quoted, so that a file that is not what was asked for (a key, a password file, an
+/// `.env`) does not end up printed in the error.
+fn unexpected(unexp: de::Unexpected<'_>) -> String {
+    match unexp {
+        de::Unexpected::Str(s) if s.chars().count() > MAX_QUOTED_CHARS || s.contains('\n') => {
+            format!("a string of {} characters", s.chars().count())
+        }
+        other => other.to_string(),
+    }
+}
+
+/// The longest string value an error message quotes; longer ones are named by their length.
+pub const MAX_QUOTED_CHARS: usize = 40;
 
 /// The serde deserializer over a [`Node`].
 struct NodeDeserializer<'a> {

@@ -27,7 +27,8 @@ pub fn mission_files(loaded: &LoadedMission) -> Result<Vec<(String, String)>, Re
     for (k, p) in paths.iter().enumerate() {
         let text = match loaded.sources.get(k) {
             Some(t) => t.clone(),
-            None => std::fs::read_to_string(p).map_err(|e| ReplayError::Io(format!("{}: {e}", p.display())))?,
+            None => spomp_behaviors::mission::limits::read_text(p, spomp_behaviors::mission::limits::MAX_SOURCE_BYTES)
+                .map_err(|e| ReplayError::Io(e.to_string()))?,
         };
         let rel = relative(&base, &canonical(p)?);
         let rel = rel.to_string_lossy().replace('\\', "/");
