@@ -631,7 +631,7 @@ impl RobotNode {
                     state.report.received.team += 1;
                     observer.on_seam(&id, now, SeamInput::TeamIn { from: &from, bytes: &bytes });
                     if let Err(e) = self.robot.on_team_message(&from, &bytes) {
-                        state.report.note_rejected(&from, &e);
+                        state.report.note_rejected(&from, self.peers.contains(&from), &e);
                     }
                 }
             }
@@ -740,7 +740,7 @@ impl RobotNode {
                 state.report.received.team += 1;
                 observer.on_seam(&id, now, SeamInput::TeamIn { from: &from, bytes: &bytes });
                 if let Err(e) = self.robot.on_team_message(&from, &bytes) {
-                    state.report.note_rejected(&from, &e);
+                    state.report.note_rejected(&from, self.peers.contains(&from), &e);
                 }
             }
         }
