@@ -160,10 +160,7 @@ impl FarmDrivers {
                 if simulated.len() == 1 { "it" } else { "one" }
             );
         }
-        errln!(
-            "spomp sim --ros2: driving {}",
-            if driven.is_empty() { "no robot".into() } else { driven.join(", ") }
-        );
+        errln!("spomp sim --ros2: driving {}", if driven.is_empty() { "no robot".into() } else { driven.join(", ") });
         let pacer = match (&options.lockstep, options.rate) {
             (Some(_), None) => None,
             (_, rate) => Some(RealTimePacer::new(rate.unwrap_or(1.0))),
@@ -233,10 +230,7 @@ impl FarmDrivers {
 
     /// A process reported late: it drives its robot from this step on.
     fn join(&mut self, id: String, now: Time) {
-        errln!(
-            "spomp sim --ros2: {id}'s process reported at {:.1} s: it drives {id} from now on",
-            now.as_secs_f64()
-        );
+        errln!("spomp sim --ros2: {id}'s process reported at {:.1} s: it drives {id} from now on", now.as_secs_f64());
         self.joined.push(RobotId::new(&id));
         self.driven.push(id);
     }
