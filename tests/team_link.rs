@@ -17,7 +17,7 @@ use std::net::TcpListener;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use processes::{Reap, output, spomp, wait_with_timeout};
@@ -124,8 +124,9 @@ impl Drop for Team {
 
 /// The rogue: the team's transport password (a leaked one), no signing key of the team. Until
 /// `stop`, it sends every robot forged goals, claims on every mission goal and visits of them, in
-/// ugv1's name (signed with its own key) and in a non-member's.
-fn start_rogue(team: &Team, stop: Arc<AtomicBool>) -> std::thread::JoinHandle<()> {
+/// ugv1's name (signed with its own key) and in a non-member's, every 0.3 s once the basestation
+/// is reachable from both of its links; `rounds` counts the rounds sent.
+fn start_rogue(team: &Team, stop: Arc<AtomicBool>, rounds: Arc<AtomicUsize>) -> std::thread::JoinHandle<()> {
     let keys = KeyDir::load(&team.keys()).expect("team keys");
     let credentials = keys.credentials(&RobotId::new("base")).expect("credentials");
     let own_keys_dir = team.dir.join("rogue-keys");
@@ -168,6 +169,12 @@ fn start_rogue(team: &Team, stop: Arc<AtomicBool>) -> std::thread::JoinHandle<()
                 s
             })
             .collect();
+        // A lockstep run lasts seconds: send only once the victims can hear it.
+        let base = RobotId::new("base");
+        let deadline = std::time::Instant::now() + Duration::from_secs(60);
+        while !links.iter().all(|l| l.reachable().contains(&base)) && std::time::Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(100));
+        }
         while !stop.load(Ordering::SeqCst) {
             for (forger, link) in forgers.iter_mut().zip(&links) {
                 for victim in ROBOTS {
@@ -178,6 +185,7 @@ fn start_rogue(team: &Team, stop: Arc<AtomicBool>) -> std::thread::JoinHandle<()
                     forger.reset_peer(&to);
                 }
             }
+            rounds.fetch_add(1, Ordering::SeqCst);
             std::thread::sleep(Duration::from_millis(300));
         }
     })
@@ -223,10 +231,18 @@ fn finish_farm(farm: &mut Reap, limit: Duration) -> (serde_json::Value, String) 
 #[test]
 fn four_processes_complete_a_mission_over_the_signed_team_link_and_a_rogue_changes_nothing() {
     let team = Team::new("complete", domain(600));
-    let mut farm = team.start_farm(&[]);
     let robots: Vec<(&str, Reap)> = ROBOTS.iter().map(|r| (*r, team.start_robot(r, &[]))).collect();
     let stop = Arc::new(AtomicBool::new(false));
-    let rogue = start_rogue(&team, stop.clone());
+    let rounds = Arc::new(AtomicUsize::new(0));
+    let rogue = start_rogue(&team, stop.clone(), rounds.clone());
+    // The rogue's forgeries must reach the robots before the run ends, and a lockstep run is
+    // over in seconds: the farm starts once a few rounds went out to a reachable team.
+    let deadline = std::time::Instant::now() + Duration::from_secs(90);
+    while rounds.load(Ordering::SeqCst) < 5 && std::time::Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(rounds.load(Ordering::SeqCst) >= 5, "the rogue never reached the basestation");
+    let mut farm = team.start_farm(&[]);
 
     let (summary, farm_err) = finish_farm(&mut farm, Duration::from_secs(400));
     stop.store(true, Ordering::SeqCst);

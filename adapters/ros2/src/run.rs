@@ -450,7 +450,12 @@ impl RobotNode {
             state.report.robot_time_s = now.as_secs_f64();
         }
         self.save_state(&mut state);
-        let mut report = state.snapshot(&self.robot, started.elapsed());
+        self.with_link_figures(state.snapshot(&self.robot, started.elapsed()))
+    }
+
+    /// `report` with the team link's figures and the refusals the link made itself (senders
+    /// that are no members, oversized messages), which never reach the robot.
+    fn with_link_figures(&self, mut report: RunReport) -> RunReport {
         if let Some(channel) = self.team_channel.as_ref() {
             report.team_link = Some(channel.stats());
             report.add_link_refusals(&channel.refused());
@@ -521,9 +526,7 @@ impl RobotNode {
             state.report.robot_time_s = now.as_secs_f64();
         }
         self.save_state(&mut state);
-        let mut report = state.snapshot(&self.robot, started.elapsed());
-        report.team_link = self.team_channel.as_ref().map(|c| c.stats());
-        report
+        self.with_link_figures(state.snapshot(&self.robot, started.elapsed()))
     }
 
     fn answer(&self, seq: u64, reply: Reply) {
@@ -1176,11 +1179,7 @@ impl RobotNode {
         if let Ok(data) = serde_json::to_string(&status) {
             let _ = self.outputs.status.publish(ros::StringMsg { data });
         }
-        let mut report = state.snapshot(&self.robot, wall);
-        if let Some(channel) = self.team_channel.as_ref() {
-            report.team_link = Some(channel.stats());
-            report.add_link_refusals(&channel.refused());
-        }
+        let report = self.with_link_figures(state.snapshot(&self.robot, wall));
         let level = match reason {
             StopReason::None if state.last_problem.is_none() => 0,
             StopReason::None | StopReason::EStop => 1,
