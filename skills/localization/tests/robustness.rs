@@ -170,12 +170,18 @@ fn params_round_trip_reject_unknown_keys_and_fill_defaults() {
     assert!(matches!(CrossViewLocalizer::new(bad), Err(LocalizationError::InvalidParams(_))));
 }
 
+/// A weighted class the table lacks counts 0 (a site's table that lacks one class degrades the
+/// match instead of failing every update); a table with none of the ground classes is an error
+/// that names them.
 #[test]
-fn unknown_class_names_in_params_are_reported() {
+fn unknown_class_names_in_params_degrade_or_are_reported() {
     let mut weights = LocalizationParams::default().class_weights;
     weights.insert("lava".into(), 1.0);
     let params = LocalizationParams { class_weights: weights, ..Default::default() };
     let mut loc = CrossViewLocalizer::new(params).unwrap();
+    loc.prepare_map(&small_map(), &ClassTable::default_table()).unwrap();
+    let params = LocalizationParams { ground_classes: vec!["lava".into(), "magma".into()], ..Default::default() };
+    let mut loc = CrossViewLocalizer::new(params).unwrap();
     let err = loc.prepare_map(&small_map(), &ClassTable::default_table()).unwrap_err();
-    assert!(err.to_string().contains("lava"), "{err}");
+    assert!(err.to_string().contains("lava, magma"), "{err}");
 }
