@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Checks the layering rules of DESIGN.md §2 on the workspace's dependency graph.
+"""Checks the layering rules of docs/design.md §2 on the workspace's dependency graph.
 
 Layers, bottom to top: core < skills < behaviors (engine + mission language) < robot < adapters
 < the CLI (root package).

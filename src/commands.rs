@@ -127,7 +127,7 @@ pub fn validate(
     } else {
         emit(&human);
     }
-    // Warnings do not fail validation (DESIGN.md §3: exit 0 only when valid).
+    // Warnings do not fail validation (docs/design.md §3: exit 0 only when valid).
     Ok(if errors == 0 && failed_runs == 0 { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 

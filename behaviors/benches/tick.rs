@@ -1,4 +1,4 @@
-//! Ticking a 1000-node tree: the engine's per-node overhead (DESIGN.md §8: ≤ 20 ns per node
+//! Ticking a 1000-node tree: the engine's per-node overhead (docs/design.md §8: ≤ 20 ns per node
 //! tick on one core). The tree is built from a mission through the real loader, so the figure
 //! includes port bindings and the blackboard. `SPOMP_BENCH_CLOCK=cpu` reports thread CPU time.
 //!

@@ -1,4 +1,4 @@
-//! The semantic class table: data, not code (DESIGN.md §5).
+//! The semantic class table: data, not code (docs/design.md §5).
 //!
 //! Class rasters, semantic panoramas and aerial maps store a [`ClassId`] per cell or pixel; the
 //! table gives each index a name, a traversability rank (0 easiest … 5 impassable), a colour for

@@ -1,4 +1,4 @@
-//! Depth and semantic panoramas, following the convention of DESIGN.md §5.
+//! Depth and semantic panoramas, following the convention of docs/design.md §5.
 //!
 //! Row 0 looks up at +v_fov/2, the last row down at −v_fov/2, rows evenly spaced. Column 0 looks
 //! along the robot's +x axis and azimuth decreases with the column index (clockwise seen from

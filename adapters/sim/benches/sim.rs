@@ -1,6 +1,6 @@
 //! Simulator benchmarks: panorama synthesis (bar: ≤ 2 ms for 256 × 1024 on one core), city
 //! generation, a UGV step, and the whole team (1 UAV + 5 UGVs, full stack) per 10 simulated
-//! seconds (DESIGN.md §8: ≥ 100× real time, i.e. ≤ 100 ms per 10 s).
+//! seconds (docs/design.md §8: ≥ 100× real time, i.e. ≤ 100 ms per 10 s).
 //!
 //! `cargo bench -p spomp-sim --bench sim -- --warm-up-time 1 --measurement-time 3`; with
 //! `SPOMP_BENCH_CLOCK=cpu` the figures are the benchmark thread's CPU time (spomp-bench-clock),

@@ -1,4 +1,4 @@
-//! The team link between robot processes (DESIGN.md §6 "Team link"): the team-state sync
+//! The team link between robot processes (docs/design.md §6 "Team link"): the team-state sync
 //! messages of `spomp-teamstate` carried between `spomp run` processes over Zenoh, with
 //! transport authentication, per-tier priorities and the team's key directory; and the state
 //! file a robot resumes from after a reboot.

@@ -8,7 +8,7 @@ use serde::Serialize;
 
 use super::yaml::Loc;
 
-/// The validation stage that found a problem (DESIGN.md §3).
+/// The validation stage that found a problem (docs/design.md §3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Stage {
@@ -45,7 +45,7 @@ impl Stage {
     }
 }
 
-/// How serious a problem is: an error makes a mission invalid, a warning does not (DESIGN.md
+/// How serious a problem is: an error makes a mission invalid, a warning does not (docs/design.md
 /// §3: exit code 0 only when valid).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Serialize)]
 #[serde(rename_all = "snake_case")]

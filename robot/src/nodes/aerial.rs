@@ -1,4 +1,4 @@
-//! UAV nodes of the paper's aerial planner (§Aerial Planner, DESIGN.md §5 "UAV time-sharing"):
+//! UAV nodes of the paper's aerial planner (§Aerial Planner, docs/design.md §5 "UAV time-sharing"):
 //! `follow_waypoints` (a mission list or a QGroundControl `.plan`, resumable, routed around
 //! no-fly polygons), `seek_robot` (round-robin over the robots the team state knows, flying to a
 //! robot's last known pose or, when that is stale, the end of its last known path) and

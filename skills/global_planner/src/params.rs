@@ -1,4 +1,4 @@
-//! Parameters of the global planner (DESIGN.md §5 "Global planner", paper §Global Ground Planner).
+//! Parameters of the global planner (docs/design.md §5 "Global planner", paper §Global Ground Planner).
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};

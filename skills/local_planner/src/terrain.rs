@@ -8,7 +8,7 @@ use spomp_core::{DepthPanorama, PanoramaGeometry, Pose2, ReachabilityScan, Robot
 use crate::error::{ParamsError, TerrainError, non_negative, positive};
 use crate::stages::{self, DistanceScratch, GradientScratch, GradientWindow, ReachScratch, Tables};
 
-/// Parameters of terrain analysis. Defaults are the real-robot values (DESIGN.md §5; where the
+/// Parameters of terrain analysis. Defaults are the real-robot values (docs/design.md §5; where the
 /// paper gives none, the authors' launch file); [`TerrainParams::simulation`] gives the
 /// simulation values. The local planner README's table says where each rule comes from.
 ///

@@ -2,7 +2,7 @@
 //! sparse local grid at the aerial map's resolution.
 //!
 //! Each pixel with a return is taken to robot-frame (x, y, z) with its row's elevation angle and
-//! its column's azimuth (panorama convention, DESIGN.md §5). Ground-class points are kept when
+//! its column's azimuth (panorama convention, docs/design.md §5). Ground-class points are kept when
 //! they lie near the ground plane, obstacle-class points when they are low (walls near their
 //! base), people and unweighted classes never. Each (cell, class) pair is kept once, so the
 //! dense returns near the robot do not outweigh the sparse far ones; the result is a list of

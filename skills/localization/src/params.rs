@@ -1,4 +1,4 @@
-//! Parameters of the cross-view localizer, with their defaults (DESIGN.md §5 "Localization").
+//! Parameters of the cross-view localizer, with their defaults (docs/design.md §5 "Localization").
 
 use std::collections::BTreeMap;
 

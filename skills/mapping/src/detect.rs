@@ -1,8 +1,8 @@
-//! Goal detection in the aerial class map (paper §High-Level Coordination, DESIGN.md §5).
+//! Goal detection in the aerial class map (paper §High-Level Coordination, docs/design.md §5).
 //!
 //! 1. Binary mask of the goal class.
 //! 2. Morphological open (removes specks), then close (dilate, erode) with a disk of half the
-//!    merge distance. DESIGN.md fixes this order (the paper's text says close then open).
+//!    merge distance. docs/design.md fixes this order (the paper's text says close then open).
 //! 3. Clusters: 8-connected components of the *dilated* mask (the first half of the close), so
 //!    that blobs whose gap is at most the merge distance join; closing alone would not join
 //!    thin objects such as a row of cars, because the eroding disk fits through the gap beside

@@ -5,7 +5,7 @@
 //!   [`decode_map`], [`CompressedMap`]).
 //! - [`GoalDetector`]: clusters of a class (vehicles) in the class layer become goals, placed
 //!   at the clearest cell of the easiest class near each cluster (paper §High-Level
-//!   Coordination, DESIGN.md §5 "Mapping").
+//!   Coordination, docs/design.md §5 "Mapping").
 
 mod detect;
 mod error;

@@ -1,4 +1,4 @@
-//! Parameters of the mapping skill (DESIGN.md §5 "Mapping").
+//! Parameters of the mapping skill (docs/design.md §5 "Mapping").
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};

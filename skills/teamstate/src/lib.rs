@@ -1,6 +1,6 @@
 //! Replicated team database with priorities and deterministic merge rules, transport-free.
 //!
-//! The paper's MOCHA role (DESIGN.md §5 "Team state"): every robot holds a [`TeamState`] with
+//! The paper's MOCHA role (docs/design.md §5 "Team state"): every robot holds a [`TeamState`] with
 //! goals and their status (identified / claimed / visited / unreachable), the last known state of
 //! every robot, shared reachability scans and aerial-map versions. Robots exchange
 //! [`SyncMessage`]s pairwise whenever a link allows; the merge is a join-semilattice per record,

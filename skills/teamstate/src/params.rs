@@ -1,4 +1,4 @@
-//! Parameters of the team database (DESIGN.md §5 "Team state", "Goal coordination").
+//! Parameters of the team database (docs/design.md §5 "Team state", "Goal coordination").
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
