@@ -442,7 +442,12 @@ impl RobotNode {
                 std::thread::sleep(IDLE_SLEEP);
             }
         }
-        // Shutdown: one last safe command, whatever the state.
+        self.shut_down(state, observer, started)
+    }
+
+    /// Shutdown, paced or in lockstep: one last safe command whatever the state, the state file
+    /// saved, and the run's report.
+    fn shut_down(&mut self, mut state: LoopState, observer: &mut dyn RunObserver, started: Instant) -> RunReport {
         if let Some(now) = state.now() {
             observer.on_seam(self.robot.id(), now, SeamInput::Halt);
             self.robot.halt(now, None);
@@ -519,14 +524,7 @@ impl RobotNode {
                 self.answer(call.seq, reply);
             }
         }
-        if let Some(now) = state.now() {
-            observer.on_seam(self.robot.id(), now, SeamInput::Halt);
-            self.robot.halt(now, None);
-            self.publish_command(&mut state, now, StopReason::EStop, observer);
-            state.report.robot_time_s = now.as_secs_f64();
-        }
-        self.save_state(&mut state);
-        self.with_link_figures(state.snapshot(&self.robot, started.elapsed()))
+        self.shut_down(state, observer, started)
     }
 
     fn answer(&self, seq: u64, reply: Reply) {
