@@ -1,5 +1,15 @@
 //! `spomp plan`: builds the global planner's traversability graph on a world's full aerial map
 //! and plans on it, one query or many random ones.
+//!
+//! A path the graph finds is not always one a robot can drive: the graph ranks classes (it
+//! may cross vegetation, which is costly, not forbidden) and sees no curbs. So every path is
+//! also checked against what the simulated UGV can drive on the world's ground truth: the cells
+//! it can reach from the start ([`spomp_sim::reachable_cells`]: its step and drop limits, slope
+//! and disc footprint, down a curb but not up it). The path is drivable when every point of it
+//! lies within [`DRIVE_CORRIDOR_M`] of a reachable cell (the local planner swerves that much
+//! around a global path, off a curb edge, say) and on no impassable class. The report gives the
+//! share of queries whose path is drivable beside the graph's success rate, and what stopped
+//! the others (the class there and why).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -13,9 +23,95 @@ use rand_chacha::ChaCha8Rng;
 use serde_json::json;
 use spomp_core::{GridSpec, Point2};
 use spomp_global_planner::{EdgeState, GlobalPath, GlobalPlanner, GlobalPlannerParams};
-use spomp_sim::{World, render_png};
+use spomp_sim::{UgvLimits, UgvParams, World, render_png};
 
 use crate::world_cmd::load_world;
+
+/// How far a drivable path may stray from the cells the UGV can reach, metres: about the
+/// robot's diameter, what its local planner deviates from a global path.
+pub const DRIVE_CORRIDOR_M: f64 = 1.0;
+
+/// Where a path stopped the simulated UGV.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Blocked {
+    /// The first point of the path it cannot get to, map frame.
+    pub at: Point2,
+    /// Class of the cell there.
+    pub class: String,
+    /// Why, for people.
+    pub why: String,
+}
+
+/// Checks `path` against what the UGV with `limits` can drive on the world's ground truth from
+/// the path's first point: `None` when it can follow it to the end, else where and why not.
+pub fn drive(world: &World, limits: &UgvLimits, path: &[Point2]) -> Option<Blocked> {
+    let classes = world.classes();
+    let spec = *world.spec();
+    let name_at = |p: Point2| {
+        world.class_at(p).and_then(|c| classes.get(c)).map_or_else(|| "off the map".to_string(), |c| c.name.clone())
+    };
+    let first = *path.first()?;
+    let reach = spomp_sim::reachable_cells(world, limits, first);
+    if !reach.data.iter().any(|&r| r) {
+        return Some(Blocked { at: first, class: name_at(first), why: "the UGV cannot stand at the start".into() });
+    }
+    let near = distance_to(&spec, &reach.data);
+    let step = spec.resolution_m / 2.0;
+    for w in path.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let n = ((a.distance(b) / step).ceil() as usize).max(1);
+        for k in 0..=n {
+            let p = a + (b - a) * (k as f64 / n as f64);
+            let Some(cell) = spec.cell_at(p) else {
+                return Some(Blocked { at: p, class: name_at(p), why: "off the map".into() });
+            };
+            let i = spec.index(cell);
+            if classes.rank(world.map().class[i]) >= spomp_core::classes::IMPASSABLE_RANK {
+                return Some(Blocked { at: p, class: name_at(p), why: "an impassable class".into() });
+            }
+            if f64::from(near[i]) > DRIVE_CORRIDOR_M {
+                return Some(Blocked {
+                    at: p,
+                    class: name_at(p),
+                    why: format!(
+                        "no ground the UGV can reach from the start within {DRIVE_CORRIDOR_M} m (a step, curb or \
+                         slope it cannot climb, or too narrow for its footprint)"
+                    ),
+                });
+            }
+        }
+    }
+    None
+}
+
+/// Distance of every cell to the nearest cell marked in `mask`, metres (chamfer, 1 and √2
+/// steps).
+fn distance_to(spec: &GridSpec, mask: &[bool]) -> Vec<f32> {
+    let (w, h) = (spec.width as usize, spec.height as usize);
+    let res = spec.resolution_m as f32;
+    let diag = res * std::f32::consts::SQRT_2;
+    let mut d: Vec<f32> = mask.iter().map(|&m| if m { 0.0 } else { f32::INFINITY }).collect();
+    let passes: [(bool, [(i64, i64, f32); 4]); 2] = [
+        (false, [(-1, 0, res), (0, -1, res), (-1, -1, diag), (1, -1, diag)]),
+        (true, [(1, 0, res), (0, 1, res), (1, 1, diag), (-1, 1, diag)]),
+    ];
+    for (backward, steps) in passes {
+        for k in 0..w * h {
+            let i = if backward { w * h - 1 - k } else { k };
+            let (c, r) = ((i % w) as i64, (i / w) as i64);
+            for (dc, dr, cost) in steps {
+                let (nc, nr) = (c + dc, r + dr);
+                if nc >= 0 && nr >= 0 && (nc as usize) < w && (nr as usize) < h {
+                    let v = d[nr as usize * w + nc as usize] + cost;
+                    if v < d[i] {
+                        d[i] = v;
+                    }
+                }
+            }
+        }
+    }
+    d
+}
 
 /// What to plan.
 pub enum Queries {
@@ -87,16 +183,36 @@ pub fn plan(a: &PlanArgs) -> Result<ExitCode> {
     let mut query_ms = Vec::with_capacity(pairs.len());
     let mut paths: Vec<GlobalPath> = Vec::new();
     let mut failures = Vec::new();
+    let limits = UgvParams::default().limits;
+    let mut drivable = 0usize;
+    let mut blocked: Vec<(Point2, Point2, Blocked)> = Vec::new();
     for (from, to) in &pairs {
         let t = Instant::now();
         let result = planner.plan(*from, *to);
         query_ms.push(ms_since(t));
         match result {
-            Ok(p) => paths.push(p),
+            Ok(p) => {
+                // The robot starts at `from` and must end at `to`, wherever the graph's path
+                // begins and ends.
+                let mut route = vec![*from];
+                route.extend(p.waypoints.iter().copied());
+                route.push(*to);
+                route.dedup_by(|a, b| a.distance(*b) < 1e-9);
+                match drive(&world, &limits, &route) {
+                    None => drivable += 1,
+                    Some(b) => blocked.push((*from, *to, b)),
+                }
+                paths.push(p);
+            }
             Err(e) => failures.push(format!("({:.1}, {:.1}) → ({:.1}, {:.1}): {e}", from.x, from.y, to.x, to.y)),
         }
     }
     let success_rate = if pairs.is_empty() { 0.0 } else { paths.len() as f64 / pairs.len() as f64 };
+    let drivable_rate = if pairs.is_empty() { 0.0 } else { drivable as f64 / pairs.len() as f64 };
+    let mut blocked_by: std::collections::BTreeMap<String, usize> = std::collections::BTreeMap::new();
+    for (_, _, b) in &blocked {
+        *blocked_by.entry(b.class.clone()).or_insert(0) += 1;
+    }
     let query_max = query_ms.iter().copied().fold(0.0, f64::max);
     query_ms.sort_by(f64::total_cmp);
     let query_median = query_ms.get(query_ms.len() / 2).copied().unwrap_or(f64::NAN);
@@ -119,6 +235,11 @@ pub fn plan(a: &PlanArgs) -> Result<ExitCode> {
             "query_ms_median": query_median,
             "query_ms_max": query_max,
             "success_rate": success_rate,
+            "ugv_drivable_rate": drivable_rate,
+            "ugv_blocked_by_class": blocked_by,
+            "ugv_blocked": blocked.iter().map(|(f, t, b)| json!({
+                "from": [f.x, f.y], "to": [t.x, t.y], "at": [b.at.x, b.at.y], "class": b.class, "why": b.why,
+            })).collect::<Vec<_>>(),
             "path_length_m": single_path.map(|p| p.length_m),
             "path_cost": single_path.map(|p| p.cost),
         });
@@ -139,12 +260,28 @@ pub fn plan(a: &PlanArgs) -> Result<ExitCode> {
                 p.cost,
                 p.waypoints.len()
             );
+            match blocked.first() {
+                None => out!("the simulated UGV can drive it"),
+                Some((_, _, b)) => out!(
+                    "the simulated UGV cannot drive it: stopped at ({:.1}, {:.1}) on `{}` ({})",
+                    b.at.x,
+                    b.at.y,
+                    b.class,
+                    b.why
+                ),
+            }
         } else if !single {
             out!(
-                "{} random pairs: success {:.1} %, query median {query_median:.3} ms, max {query_max:.3} ms",
+                "{} random pairs: graph success {:.1} %, drivable by the simulated UGV {:.1} %, query median \
+                 {query_median:.3} ms, max {query_max:.3} ms",
                 pairs.len(),
-                success_rate * 100.0
+                success_rate * 100.0,
+                drivable_rate * 100.0
             );
+            if !blocked_by.is_empty() {
+                let by: Vec<String> = blocked_by.iter().map(|(c, n)| format!("{n} on `{c}`")).collect();
+                out!("paths the UGV cannot drive: {} ({})", blocked.len(), by.join(", "));
+            }
         }
     }
     for f in &failures {

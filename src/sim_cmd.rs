@@ -923,14 +923,17 @@ pub fn dry_run(
     let seed = mission.sim.as_ref().and_then(|s| s.seed).unwrap_or(1);
     let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
+    let spec = *world.spec();
     let options = SimOptions { seed, time_limit_s: limits.time_limit_s, ..SimOptions::default() };
     let sim = Simulation::new(loaded, registry, Arc::new(world), options)
         .with_context(|| format!("setting up `{}` in the simulator", mission.mission))?;
     let start = Instant::now();
-    let result =
-        sim.run_until(&mut spomp_sim::run::NoObserver, &mut || start.elapsed().as_secs_f64() > limits.max_wall_s);
+    let mut watch = OffMap { spec, left: Vec::new() };
+    let result = sim.run_until(&mut watch, &mut || start.elapsed().as_secs_f64() > limits.max_wall_s);
     let s = &result.summary;
-    let ok = s.outcome.succeeded();
+    // A run in which a robot left the map did not do what the mission means, whatever its
+    // outcome: a flight mostly off the map is not a complete dry run.
+    let ok = s.outcome.succeeded() && watch.left.is_empty();
     let stopped = s.outcome == spomp_sim::run::Outcome::Interrupted;
     if !json {
         out!(
@@ -947,6 +950,18 @@ pub fn dry_run(
             out!(
                 "  stopped after {} s of wall time (--max-wall-s); give a shorter --time-limit-s or a larger --max-wall-s",
                 limits.max_wall_s
+            );
+        }
+        for (robot, at_s, p) in &watch.left {
+            out!(
+                "  {robot} left the map at {at_s:.0} s, at ({:.1}, {:.1}): the dry run fails (the world spans x {:.1}…{:.1} \
+                 m, y {:.1}…{:.1} m)",
+                p.x,
+                p.y,
+                spec.origin.x,
+                spec.origin.x + spec.size_m().0,
+                spec.origin.y,
+                spec.origin.y + spec.size_m().1
             );
         }
         if !s.nodes_never_ticked.is_empty() {
@@ -966,8 +981,26 @@ pub fn dry_run(
         "never_ticked": s.nodes_never_ticked,
         "goals_visited": s.goals_visited,
         "goals": s.goals.len(),
+        "left_the_map": watch.left.iter().map(|(r, t, p)| serde_json::json!({ "robot": r, "at_s": t, "x": p.x, "y": p.y }))
+            .collect::<Vec<_>>(),
     });
     Ok((ok, value))
+}
+
+/// Notes each robot's first position off the world's map during a dry run.
+struct OffMap {
+    spec: spomp_core::GridSpec,
+    /// Robot, simulated seconds, where.
+    left: Vec<(String, f64, spomp_core::Point2)>,
+}
+
+impl spomp_sim::run::SimObserver for OffMap {
+    fn on_state(&mut self, robot: &spomp_core::RobotId, now: spomp_core::Time, state: &spomp_sim::run::RobotSnapshot) {
+        let p = state.truth.position();
+        if self.spec.cell_at(p).is_none() && !self.left.iter().any(|(r, _, _)| r == robot.as_str()) {
+            self.left.push((robot.as_str().to_string(), now.as_secs_f64(), p));
+        }
+    }
 }
 
 /// `--live ADDR`: HOST:PORT with an IP address (`127.0.0.1:8765`, `[::1]:8765`, `0.0.0.0:8765`

@@ -54,15 +54,38 @@ pub const DEFAULT_COLOUR_TOLERANCE: f64 = 30.0;
 /// WGS-84 equatorial radius, metres (the equirectangular approximation QGC plans use too).
 const EARTH_RADIUS_M: f64 = 6_378_137.0;
 
-/// The class-table format `--classes` expects, shown when a table does not parse.
+/// The class-table formats `--classes` accepts, shown when a table does not parse.
 pub const CLASS_TABLE_FORMAT: &str = "\
+either spomp's table:
 classes:
   - { index: 0, name: road,     rank: 0, color: [128, 64, 128] }
   - { index: 2, name: building, rank: 5, color: [70, 70, 70], height_m: 10 }
   # index: label value 0-254, unique; name: unique; rank: 0 easiest … 5 impassable;
   # color: the class's [R, G, B] in the raster; optional height_m (metres above the road,
   # default by name: building 12, vehicle 1.5, grass_sidewalk 0.15, vegetation 1,
-  # tree_trunk 5, light_pole 6, others 0) and ignored (true for classes such as people)";
+  # tree_trunk 5, light_pole 6, others 0) and ignored (true for classes such as people)
+or a list of names with colours (YAML or JSON), as mapping pipelines write it:
+- { name: road, color: [128, 64, 128] }
+- { name: grass/sidewalk, color: \"#98fb98\" }
+  # colour as [R, G, B] or \"#RRGGBB\" (key color, colour or rgb); label value = position in
+  # the list unless the entry gives index (or id); rank, height_m and ignored as the spomp
+  # table's class of the same name (spellings differ: grass/sidewalk is grass_sidewalk), rank 5
+  # (impassable) for names it lacks, unless the entry gives them";
+
+/// Name of the class a transparent pixel (alpha 0) becomes: the raster says nothing there.
+pub const NO_DATA_CLASS: &str = "no_data";
+
+/// Height of no-data cells, metres: a wall the simulated UGV cannot climb and its range sensor
+/// sees, as a fence at the edge of the surveyed area would be. Their class is impassable (rank
+/// 5), so planners never route through them and no robot starts there.
+pub const NO_DATA_HEIGHT_M: f32 = 3.0;
+
+/// A car seen from above is about this wide, metres (and 4.5 m long).
+pub const CAR_WIDTH_M: f64 = 2.0;
+
+/// The typical width of the vehicle blobs must lie in this range, metres, or the scale is
+/// questioned: a single car is about 2 m wide, a row of cars parked side by side about 5 m.
+pub const PLAUSIBLE_VEHICLE_WIDTH_M: (f64, f64) = (1.0, 6.0);
 
 /// The pixel scale of the raster.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -131,6 +154,47 @@ struct ImportTable {
     classes: Vec<ImportClass>,
 }
 
+/// An entry of a class list as mapping pipelines write it: a name and a colour, the rest
+/// optional (fields other pipelines add, such as a training id, are ignored).
+#[derive(Clone, Debug, Deserialize)]
+struct ListedClass {
+    name: String,
+    #[serde(alias = "colour", alias = "rgb")]
+    color: ListedColour,
+    #[serde(default, alias = "id")]
+    index: Option<ClassId>,
+    #[serde(default)]
+    rank: Option<u8>,
+    #[serde(default)]
+    height_m: Option<f32>,
+    #[serde(default)]
+    ignored: Option<bool>,
+}
+
+/// A colour as `[R, G, B]` or `"#RRGGBB"`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+enum ListedColour {
+    Rgb([u8; 3]),
+    Hex(String),
+}
+
+impl ListedColour {
+    fn rgb(&self) -> Result<[u8; 3], String> {
+        match self {
+            ListedColour::Rgb(c) => Ok(*c),
+            ListedColour::Hex(text) => {
+                let hex = text.trim().trim_start_matches('#');
+                let byte = |k: usize| hex.get(k..k + 2).and_then(|h| u8::from_str_radix(h, 16).ok());
+                match (hex.len(), byte(0), byte(2), byte(4)) {
+                    (6, Some(r), Some(g), Some(b)) => Ok([r, g, b]),
+                    _ => Err(format!("colour `{text}` is neither [R, G, B] nor \"#RRGGBB\"")),
+                }
+            }
+        }
+    }
+}
+
 /// A class table for import: the classes and each one's height, metres.
 #[derive(Clone, Debug)]
 pub struct ImportClasses {
@@ -138,6 +202,8 @@ pub struct ImportClasses {
     pub table: ClassTable,
     /// Height of each class index, metres.
     pub heights_m: [f32; 256],
+    /// What the reader had to assume (ranks of names the built-in table lacks), for the user.
+    pub notes: Vec<String>,
 }
 
 fn table_error(path: &Path, line: u32, column: u32, message: &str) -> anyhow::Error {
@@ -154,9 +220,13 @@ pub fn read_classes(path: &Path) -> Result<ImportClasses> {
     parse_classes(path, &text)
 }
 
-/// Parses the text of an import class table (`path` names it in errors).
+/// Parses the text of an import class table (`path` names it in errors): spomp's table, or a
+/// list of names with colours ([`CLASS_TABLE_FORMAT`]).
 pub fn parse_classes(path: &Path, text: &str) -> Result<ImportClasses> {
     let root = yaml::parse(text).map_err(|e| table_error(path, e.loc.line, e.loc.column, &e.message))?;
+    if root.as_seq().is_some() {
+        return parse_listed(path, &root);
+    }
     // A file that is not a class table at all (a password file, a key, an `.env`) is said to be
     // so without quoting any of it.
     if root.get("classes").is_none() {
@@ -168,7 +238,10 @@ pub fn parse_classes(path: &Path, text: &str) -> Result<ImportClasses> {
             path,
             root.loc.line,
             root.loc.column,
-            &format!("this is not a class table: expected a mapping with a `classes` list, found {found}"),
+            &format!(
+                "this is not a class table: expected a mapping with a `classes` list or a list of names with \
+                 colours, found {found}"
+            ),
         ));
     }
     let parsed: ImportTable = root.deserialize().map_err(|e| {
@@ -205,24 +278,103 @@ pub fn parse_classes(path: &Path, text: &str) -> Result<ImportClasses> {
             })
             .collect(),
     };
+    finish_table(path, &root, table, heights_m, Vec::new())
+}
+
+/// A list of names with colours: label values by position (or the entry's `index`), ranks,
+/// heights and `ignored` from the built-in class of the same name.
+fn parse_listed(path: &Path, root: &yaml::Node) -> Result<ImportClasses> {
+    let entries = root.as_seq().unwrap_or_default();
+    let builtin = ClassTable::default_table();
+    let defaults = DerivedElevationParams::default();
+    let mut heights_m = [0.0f32; 256];
+    let mut classes = Vec::with_capacity(entries.len());
+    let mut unranked = Vec::new();
+    for (i, node) in entries.iter().enumerate() {
+        let fail = |message: String| table_error(path, node.loc.line, node.loc.column, &format!("[{i}]: {message}"));
+        if node.as_map().is_none() {
+            return Err(fail(format!("expected an entry with a `name` and a `color`, found {}", node.value.kind())));
+        }
+        let entry: ListedClass = node.deserialize().map_err(|e| {
+            let field = e.path_string();
+            fail(if field.is_empty() { e.message.clone() } else { format!("{field}: {}", e.message) })
+        })?;
+        let color = entry.color.rgb().map_err(&fail)?;
+        let index = match entry.index {
+            Some(k) => k,
+            None => ClassId::try_from(i).map_err(|_| fail("more than 255 classes".into()))?,
+        };
+        let known = builtin.by_name(&entry.name);
+        let rank = match (entry.rank, known) {
+            (Some(r), _) => r,
+            (None, Some(k)) => k.rank,
+            (None, None) => {
+                unranked.push(entry.name.clone());
+                spomp_core::classes::IMPASSABLE_RANK
+            }
+        };
+        let h = entry.height_m.unwrap_or_else(|| defaults.height_of(&entry.name));
+        if !(h.is_finite() && (-100.0..=1000.0).contains(&h)) {
+            return Err(fail(format!("height_m must be between -100 and 1000 metres, got {h}")));
+        }
+        heights_m[index as usize] = h;
+        let ignored = entry.ignored.unwrap_or(known.is_some_and(|k| k.ignored));
+        classes.push(ClassInfo { index, name: entry.name, rank, color, ignored });
+    }
+    let mut notes = Vec::new();
+    if !unranked.is_empty() {
+        notes.push(format!(
+            "classes {unranked:?} are not among spomp's classes ({}), so they are taken as impassable (rank 5); give \
+             an entry `rank: 0…5` to change that",
+            builtin.names().join(", ")
+        ));
+    }
+    finish_table(path, root, ClassTable { classes }, heights_m, notes)
+}
+
+/// The checks both formats share: duplicates (located at the entry that repeats an earlier
+/// one), an empty table, and the core table's rules.
+fn finish_table(
+    path: &Path,
+    root: &yaml::Node,
+    table: ClassTable,
+    heights_m: [f32; 256],
+    notes: Vec<String>,
+) -> Result<ImportClasses> {
+    let listed = root.as_seq().is_some();
+    let entry_loc = |i: usize| {
+        if listed { root.as_seq().and_then(|s| s.get(i)).map_or(root.loc, |n| n.loc) } else { class_loc(root, i) }
+    };
+    let entry_name = |i: usize| if listed { format!("[{i}]") } else { format!("classes[{i}]") };
     // Duplicates located at the entry that repeats an earlier one (the core check below would
     // only name the value).
-    for (i, c) in parsed.classes.iter().enumerate() {
-        let earlier = &parsed.classes[..i];
+    for (i, c) in table.classes.iter().enumerate() {
+        let earlier = &table.classes[..i];
         let what = if earlier.iter().any(|e| e.index == c.index) {
-            Some(format!("classes[{i}]: index {} is used twice", c.index))
+            Some(format!("{}: index {} is used twice", entry_name(i), c.index))
         } else if earlier.iter().any(|e| e.name == c.name) {
-            Some(format!("classes[{i}]: name `{}` is used twice", c.name))
+            Some(format!("{}: name `{}` is used twice", entry_name(i), c.name))
+        } else if earlier.iter().any(|e| e.color == c.color) {
+            Some(format!(
+                "{}: colour {:?} is used twice (a pixel could not tell the classes apart)",
+                entry_name(i),
+                c.color
+            ))
+        } else if c.name == NO_DATA_CLASS {
+            Some(format!(
+                "{}: the name `{NO_DATA_CLASS}` is reserved for the raster's transparent pixels",
+                entry_name(i)
+            ))
         } else {
             None
         };
         if let Some(message) = what {
-            let loc = class_loc(&root, i);
+            let loc = entry_loc(i);
             return Err(table_error(path, loc.line, loc.column, &message));
         }
     }
     if table.classes.is_empty() {
-        return Err(table_error(path, root.loc.line, root.loc.column, "`classes` is empty; list at least one class"));
+        return Err(table_error(path, root.loc.line, root.loc.column, "the table is empty; list at least one class"));
     }
     // The core parser owns the table's rules (unique indices and names, ranks, reserved index).
     let text = serde_saphyr::to_string(&table).context("serialising the class table")?;
@@ -230,7 +382,7 @@ pub fn parse_classes(path: &Path, text: &str) -> Result<ImportClasses> {
         let loc = root.get("classes").map_or(root.loc, |n| n.loc);
         return Err(table_error(path, loc.line, loc.column, &e.to_string()));
     }
-    Ok(ImportClasses { table, heights_m })
+    Ok(ImportClasses { table, heights_m, notes })
 }
 
 fn class_loc(root: &yaml::Node, i: usize) -> yaml::Loc {
@@ -238,8 +390,9 @@ fn class_loc(root: &yaml::Node, i: usize) -> yaml::Loc {
 }
 
 /// Decodes a PNG raster within the limits: a regular file of at most [`MAX_RASTER_BYTES`], at
-/// most [`MAX_RASTER_PIXELS`] pixels (checked from the header before decoding).
-pub fn read_raster(path: &Path) -> Result<image::RgbImage> {
+/// most [`MAX_RASTER_PIXELS`] pixels (checked from the header before decoding). Alpha is kept
+/// (opaque when the image has none): transparent pixels are no data.
+pub fn read_raster(path: &Path) -> Result<image::RgbaImage> {
     let bytes = read_regular(path, MAX_RASTER_BYTES).map_err(|e| anyhow::anyhow!("raster: {e}"))?;
     let reader = || {
         image::ImageReader::new(std::io::Cursor::new(&bytes[..]))
@@ -258,7 +411,7 @@ pub fn read_raster(path: &Path) -> Result<image::RgbImage> {
     limits.max_alloc = Some(pixels * 16 + (64 << 20));
     reader.limits(limits);
     let img = reader.decode().with_context(|| format!("{}: not a readable image", path.display()))?;
-    Ok(img.to_rgb8())
+    Ok(img.to_rgba8())
 }
 
 /// How the raster's colours matched the classes.
@@ -268,28 +421,55 @@ pub struct ColourMatch {
     pub exact: u64,
     /// Pixels within the tolerance of a class colour.
     pub near: u64,
-    /// Pixels farther than the tolerance from every class colour, snapped to the nearest.
+    /// Pixels farther than the tolerance from every class colour, given the class around them.
     pub snapped: u64,
+    /// Transparent pixels (alpha 0): no data.
+    pub no_data: u64,
     /// The most common snapped colours: `[r, g, b]`, pixels, the class they went to.
     pub top_snapped: Vec<([u8; 3], u64, String)>,
 }
 
 impl ColourMatch {
-    /// Share of pixels snapped, 0–1.
+    /// Share of the opaque pixels snapped, 0–1.
     pub fn snapped_share(&self) -> f64 {
         self.snapped as f64 / (self.exact + self.near + self.snapped).max(1) as f64
     }
 }
 
+/// The no-data class a table gains for a raster with transparent pixels: the highest free
+/// index below the reserved unknown index, impassable, and a colour no class uses (black when
+/// free) so the world's class layer can still be written as colours.
+pub fn no_data_class(table: &ClassTable) -> Option<ClassInfo> {
+    let index = (0..spomp_core::classes::UNKNOWN_CLASS).rev().find(|&k| table.get(k).is_none())?;
+    let used = |c: [u8; 3]| table.classes.iter().any(|k| k.color == c);
+    let color = (0u32..1 << 24).map(|v| [(v >> 16) as u8, (v >> 8) as u8, v as u8]).find(|&c| !used(c))?;
+    Some(ClassInfo {
+        index,
+        name: NO_DATA_CLASS.to_string(),
+        rank: spomp_core::classes::IMPASSABLE_RANK,
+        color,
+        ignored: false,
+    })
+}
+
 /// The class of every pixel (row-major, image rows top-down) and how the colours matched.
 ///
-/// A colour within `tolerance` of a class colour takes that class (the nearest one). A colour
-/// farther from every class is snapped: to the most common class among the matched pixels
-/// around it (3 × 3, else 5 × 5), else to the class of the nearest colour. Neighbours first,
-/// because such pixels are mostly anti-aliased edges whose blended colour can lie nearer a third
-/// class than either of the two it mixes (road and grass blend to a colour nearest gravel's).
-pub fn classify(img: &image::RgbImage, table: &ClassTable, tolerance: f64) -> (Vec<ClassId>, ColourMatch) {
-    let colours: Vec<([u8; 3], ClassId)> = table.classes.iter().map(|c| (c.color, c.index)).collect();
+/// A transparent pixel (alpha 0) is `no_data` (its colour is meaningless and never matched).
+/// An opaque colour within `tolerance` of a class colour takes that class (the nearest one). A
+/// colour farther from every class (an anti-aliased edge, a text label, a scale bar) takes the
+/// class around it: each pass gives every such pixel that touches classified pixels (3 × 3)
+/// their most common class, until none is left; so an edge goes to the majority across it and
+/// a label to what it was printed on (no data on a transparent margin), never to the class
+/// whose colour happens to be nearest white. Only a raster with no matched pixel at all falls
+/// back to the nearest colour.
+pub fn classify(
+    img: &image::RgbaImage,
+    table: &ClassTable,
+    no_data: Option<ClassId>,
+    tolerance: f64,
+) -> (Vec<ClassId>, ColourMatch) {
+    let colours: Vec<([u8; 3], ClassId)> =
+        table.classes.iter().filter(|c| Some(c.index) != no_data).map(|c| (c.color, c.index)).collect();
     let nearest = |rgb: [u8; 3]| -> (ClassId, f64) {
         let d2 = |c: [u8; 3]| (0..3).map(|k| (f64::from(c[k]) - f64::from(rgb[k])).powi(2)).sum::<f64>();
         colours
@@ -304,7 +484,16 @@ pub fn classify(img: &image::RgbImage, table: &ClassTable, tolerance: f64) -> (V
     let mut classes = Vec::with_capacity(w * h);
     let mut matched = Vec::with_capacity(w * h);
     for px in img.pixels() {
-        let (class, distance) = *memo.entry(px.0).or_insert_with(|| nearest(px.0));
+        let [r, g, b, alpha] = px.0;
+        if alpha == 0
+            && let Some(nd) = no_data
+        {
+            report.no_data += 1;
+            classes.push(nd);
+            matched.push(true);
+            continue;
+        }
+        let (class, distance) = *memo.entry([r, g, b]).or_insert_with(|| nearest([r, g, b]));
         if distance == 0.0 {
             report.exact += 1;
         } else if distance <= tolerance {
@@ -315,14 +504,18 @@ pub fn classify(img: &image::RgbImage, table: &ClassTable, tolerance: f64) -> (V
         classes.push(class);
         matched.push(distance <= tolerance);
     }
-    let mut snapped_to: HashMap<([u8; 3], ClassId), u64> = HashMap::new();
+    let mut pending: Vec<usize> = (0..w * h).filter(|&i| !matched[i]).collect();
     let mut votes = [0u32; 256];
-    for i in (0..w * h).filter(|&i| !matched[i]) {
-        let (x, y) = ((i % w) as i64, (i / w) as i64);
-        for radius in [1i64, 2] {
+    // Pixels given a class in one pass vote only in the next, so the result does not depend on
+    // the scan order.
+    while !pending.is_empty() {
+        let mut assigned = Vec::new();
+        let mut still = Vec::new();
+        for &i in &pending {
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
             votes.fill(0);
-            for dy in -radius..=radius {
-                for dx in -radius..=radius {
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
                     let (nx, ny) = (x + dx, y + dy);
                     if nx >= 0 && ny >= 0 && (nx as usize) < w && (ny as usize) < h {
                         let j = ny as usize * w + nx as usize;
@@ -332,15 +525,28 @@ pub fn classify(img: &image::RgbImage, table: &ClassTable, tolerance: f64) -> (V
                     }
                 }
             }
-            // The most votes; ties to the lower index, so the result does not depend on order.
-            let best = (0..256).max_by_key(|&c| (votes[c], std::cmp::Reverse(c))).filter(|&c| votes[c] > 0);
-            if let Some(c) = best {
-                classes[i] = c as ClassId;
-                break;
+            // The most votes; ties to the lower index.
+            match (0..256).max_by_key(|&c| (votes[c], std::cmp::Reverse(c))).filter(|&c| votes[c] > 0) {
+                Some(c) => assigned.push((i, c as ClassId)),
+                None => still.push(i),
             }
         }
-        let rgb = img.as_raw()[i * 3..i * 3 + 3].try_into().unwrap_or([0; 3]);
-        *snapped_to.entry((rgb, classes[i])).or_insert(0) += 1;
+        if assigned.is_empty() {
+            break; // nothing matched anywhere: the nearest colours stand
+        }
+        for (i, c) in assigned {
+            classes[i] = c;
+            matched[i] = true;
+        }
+        pending = still;
+    }
+    let mut snapped_to: HashMap<([u8; 3], ClassId), u64> = HashMap::new();
+    for (i, px) in img.pixels().enumerate() {
+        let [r, g, b, alpha] = px.0;
+        let opaque_or_kept = alpha != 0 || no_data.is_none();
+        if opaque_or_kept && memo.get(&[r, g, b]).is_some_and(|&(_, d)| d > tolerance) {
+            *snapped_to.entry(([r, g, b], classes[i])).or_insert(0) += 1;
+        }
     }
     // Per snapped colour: its pixel count and the class most of them went to.
     let mut per_colour: HashMap<[u8; 3], (u64, ClassId, u64)> = HashMap::new();
@@ -533,6 +739,72 @@ fn resample(
     Ok(ClassGrid { width: cols, height: rows, class })
 }
 
+/// The typical width of the vehicle blobs (8-connected pixels of class `vehicle`) of a pixel
+/// class grid, metres: per blob of at least two pixels, the diameter of the widest disc inside
+/// it (from the distance of its pixels to the nearest other pixel), and the median over blobs.
+/// A car is about [`CAR_WIDTH_M`] wide whatever the cluster it is parked in, so this measures
+/// the pixel scale; `None` without vehicle blobs.
+pub fn vehicle_width_m(pixels: &[ClassId], width: u32, height: u32, vehicle: ClassId, pixel_m: f64) -> Option<f64> {
+    let (w, h) = (width as usize, height as usize);
+    let spec = GridSpec::new(Point2::new(0.0, 0.0), pixel_m, width, height);
+    let inside = clearance_m(&spec, |i| pixels[i] != vehicle);
+    let mut seen = vec![false; w * h];
+    let mut widths = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..w * h {
+        if pixels[start] != vehicle || seen[start] {
+            continue;
+        }
+        seen[start] = true;
+        stack.push(start);
+        let (mut count, mut deepest) = (0usize, 0.0f32);
+        while let Some(i) = stack.pop() {
+            count += 1;
+            deepest = deepest.max(inside[i]);
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx >= 0 && ny >= 0 && (nx as usize) < w && (ny as usize) < h {
+                        let j = ny as usize * w + nx as usize;
+                        if pixels[j] == vehicle && !seen[j] {
+                            seen[j] = true;
+                            stack.push(j);
+                        }
+                    }
+                }
+            }
+        }
+        if count >= 2 {
+            // Centre-to-centre distances: a blob n pixels across has its deepest pixel n / 2
+            // (n even) or (n + 1) / 2 (n odd) pixels from the outside; half a pixel off either way.
+            widths.push((2.0 * f64::from(deepest) - 0.5 * pixel_m).max(pixel_m));
+        }
+    }
+    if widths.is_empty() {
+        return None;
+    }
+    widths.sort_by(f64::total_cmp);
+    Some(widths[widths.len() / 2])
+}
+
+/// Refuses a pixel scale at which vehicles come out of implausible size, unless `force`; the
+/// error names the measured width and the resolution that would make it a car's.
+pub fn check_vehicle_width(measured_m: f64, pixel_m: f64, force: bool) -> Result<()> {
+    let (lo, hi) = PLAUSIBLE_VEHICLE_WIDTH_M;
+    if force || (lo..=hi).contains(&measured_m) {
+        return Ok(());
+    }
+    let likely = pixel_m * CAR_WIDTH_M / measured_m;
+    bail!(
+        "at {pixel_m} m per pixel the raster's vehicles are {measured_m:.1} m wide (the median over its vehicle \
+         blobs); cars are about {CAR_WIDTH_M} m × 4.5 m, so the scale is probably wrong: the likely resolution is \
+         about --resolution-m {likely:.3} (--pixels-per-m {:.2}). Check the map's scale, or pass --force to import it \
+         as given",
+        1.0 / likely
+    )
+}
+
 /// Vehicle-cluster centres as the goal detector sees them with its defaults in the whole map;
 /// none when the table has no class `vehicle_class`.
 fn vehicle_clusters(map: &AerialMap, table: &ClassTable, vehicle_class: &str) -> Vec<Point2> {
@@ -569,6 +841,10 @@ pub struct ImportRecord {
     pub colour_tolerance: f64,
     /// How the colours matched.
     pub colours: ColourMatch,
+    /// The typical width of the raster's vehicle blobs, metres (see [`vehicle_width_m`]).
+    pub vehicle_width_m: Option<f64>,
+    /// What the class-table reader assumed.
+    pub notes: Vec<String>,
 }
 
 /// Imports a raster into a [`World`] (not yet written).
@@ -576,11 +852,27 @@ pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
     if !(a.colour_tolerance.is_finite() && a.colour_tolerance >= 0.0) {
         bail!("--colour-tolerance must be a non-negative RGB distance, got {}", a.colour_tolerance);
     }
-    let classes = read_classes(&a.classes)?;
+    let mut classes = read_classes(&a.classes)?;
     let img = read_raster(&a.raster)?;
     let (width, height) = img.dimensions();
     let res = check_scale(a.scale, width, height, a.force)?;
-    let (pixel_classes, colours) = classify(&img, &classes.table, a.colour_tolerance);
+    let no_data = if img.pixels().any(|p| p.0[3] == 0) {
+        let class = no_data_class(&classes.table).context("the class table leaves no index or colour for no data")?;
+        classes.heights_m[class.index as usize] = NO_DATA_HEIGHT_M;
+        let index = class.index;
+        classes.table.classes.push(class);
+        Some(index)
+    } else {
+        None
+    };
+    let (pixel_classes, colours) = classify(&img, &classes.table, no_data, a.colour_tolerance);
+    let vehicle_width_m = classes
+        .table
+        .by_name(&a.vehicle_class)
+        .and_then(|v| vehicle_width_m(&pixel_classes, width, height, v.index, res));
+    if let Some(measured) = vehicle_width_m {
+        check_vehicle_width(measured, res, a.force)?;
+    }
     let share = colours.snapped_share();
     if share > 0.2 && !a.force {
         bail!(
@@ -615,8 +907,9 @@ pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
     }
     map.version = 1;
     let clusters = vehicle_clusters(&map, &classes.table, &a.vehicle_class);
-    let mut world = World::new(map, classes.table, WorldMeta { vehicle_clusters: clusters, ..WorldMeta::default() })
-        .context("building the world")?;
+    let mut world =
+        World::new(map, classes.table.clone(), WorldMeta { vehicle_clusters: clusters, ..WorldMeta::default() })
+            .context("building the world")?;
     let near = a.start_near.unwrap_or(spec.origin);
     world.meta.start_poses = start_poses(&world, near, a.starts);
 
@@ -630,6 +923,7 @@ pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
         }
         None => None,
     };
+    world.meta.gps_origin = gps_origin.map(|[lat, lon]| spomp_core::GeoPoint::new(lat, lon));
     let record = ImportRecord {
         raster: a.raster.clone(),
         classes: a.classes.clone(),
@@ -640,6 +934,8 @@ pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
         gps_origin,
         colour_tolerance: a.colour_tolerance,
         colours,
+        vehicle_width_m,
+        notes: classes.notes,
     };
     Ok((world, record))
 }
@@ -682,7 +978,10 @@ pub fn import(a: &ImportArgs) -> Result<ExitCode> {
                 "snapped": record.colours.snapped,
                 "snapped_share": share,
                 "top_snapped": record.colours.top_snapped,
+                "no_data": record.colours.no_data,
             },
+            "vehicle_width_m": record.vehicle_width_m,
+            "notes": record.notes,
             "vehicle_clusters": world.meta.vehicle_clusters,
             "start_poses": world.meta.start_poses,
             "gps_origin": record.gps_origin,
@@ -713,12 +1012,25 @@ pub fn import(a: &ImportArgs) -> Result<ExitCode> {
                 String::new()
             }
         );
+        if record.colours.no_data > 0 {
+            out!(
+                "{:.1} % of the pixels are transparent: class `{NO_DATA_CLASS}` (impassable, a {NO_DATA_HEIGHT_M} m wall \
+                 in the simulator)",
+                record.colours.no_data as f64 / (total + record.colours.no_data as f64) * 100.0
+            );
+        }
+        if let Some(v) = record.vehicle_width_m {
+            out!("vehicles are {v:.1} m wide (median over the vehicle blobs; a car is about {CAR_WIDTH_M} m)");
+        }
         for (i, s) in world.meta.start_poses.iter().enumerate() {
             out!("start pose {i}: {{ x_m: {:.2}, y_m: {:.2}, yaw_deg: {:.0} }}", s.x, s.y, s.yaw.to_degrees());
         }
         if let Some([lat, lon]) = record.gps_origin {
             out!("map origin (south-west corner) at {lat:.7}, {lon:.7} (ros2.gps_origin, QGC planned home)");
         }
+    }
+    for note in &record.notes {
+        errln!("warning: {note}");
     }
     if world.meta.vehicle_clusters.is_empty()
         && let Some(vehicle) = world.classes().by_name(&a.vehicle_class)
@@ -782,12 +1094,12 @@ mod tests {
     #[test]
     fn colours_snap_to_the_nearest_class_and_far_ones_are_counted() {
         let t = table();
-        let mut img = image::RgbImage::new(4, 1);
-        img.put_pixel(0, 0, image::Rgb([128, 64, 128])); // exact road
-        img.put_pixel(1, 0, image::Rgb([120, 60, 125])); // anti-aliased road
-        img.put_pixel(2, 0, image::Rgb([75, 72, 70])); // near building
-        img.put_pixel(3, 0, image::Rgb([255, 255, 0])); // no class: snapped to its neighbours'
-        let (classes, m) = classify(&img, &t.table, 30.0);
+        let mut img = image::RgbaImage::new(4, 1);
+        img.put_pixel(0, 0, image::Rgba([128, 64, 128, 255])); // exact road
+        img.put_pixel(1, 0, image::Rgba([120, 60, 125, 255])); // anti-aliased road
+        img.put_pixel(2, 0, image::Rgba([75, 72, 70, 255])); // near building
+        img.put_pixel(3, 0, image::Rgba([255, 255, 0, 255])); // no class: snapped to its neighbours'
+        let (classes, m) = classify(&img, &t.table, None, 30.0);
         assert_eq!(classes, [0, 0, 2, 2]);
         assert_eq!((m.exact, m.near, m.snapped), (1, 2, 1));
         assert!((m.snapped_share() - 0.25).abs() < 1e-12);
@@ -802,15 +1114,122 @@ mod tests {
             color: [190, 153, 153],
             ignored: false,
         });
-        let mut edge = image::RgbImage::from_pixel(3, 3, image::Rgb([152, 251, 152]));
-        edge.put_pixel(0, 0, image::Rgb([128, 64, 128]));
-        edge.put_pixel(1, 1, image::Rgb([140, 157, 140]));
-        let (classes, m) = classify(&edge, &table, 30.0);
+        let mut edge = image::RgbaImage::from_pixel(3, 3, image::Rgba([152, 251, 152, 255]));
+        edge.put_pixel(0, 0, image::Rgba([128, 64, 128, 255]));
+        edge.put_pixel(1, 1, image::Rgba([140, 157, 140, 255]));
+        let (classes, m) = classify(&edge, &table, None, 30.0);
         assert_eq!(classes[4], 3, "{classes:?}");
         assert_eq!(m.snapped, 1);
         // Alone, a far colour takes the nearest class colour.
-        let lone = image::RgbImage::from_pixel(1, 1, image::Rgb([140, 157, 140]));
-        assert_eq!(classify(&lone, &table, 30.0).0, [6]);
+        let lone = image::RgbaImage::from_pixel(1, 1, image::Rgba([140, 157, 140, 255]));
+        assert_eq!(classify(&lone, &table, None, 30.0).0, [6]);
+    }
+
+    /// The authors' class-table format: a list of names with colours, read as it is.
+    #[test]
+    fn a_list_of_names_with_colours_is_a_class_table() {
+        let yaml = "- { name: unknown, color: [0, 0, 0] }\n- { name: road, color: [128, 64, 128] }\n\
+                    - { name: grass/sidewalk, colour: \"#98FB98\" }\n- { name: vehicle, rgb: [0, 0, 142], trainId: 7 }\n\
+                    - { name: water, color: [60, 110, 220] }\n- { name: pond, color: [60, 110, 221], rank: 4, id: 20 }\n";
+        let t = parse_classes(Path::new("l.yaml"), yaml).unwrap_or_else(|e| panic!("{e:#}"));
+        let c = |n: &str| t.table.by_name(n).cloned().unwrap_or_else(|| panic!("{n}"));
+        assert_eq!((c("road").index, c("road").rank), (1, 0), "position is the label value, rank by name");
+        assert_eq!((c("grass/sidewalk").index, c("grass/sidewalk").rank), (2, 2));
+        assert_eq!(c("grass/sidewalk").color, [152, 251, 152]);
+        assert_eq!(t.heights_m[2], 0.15, "the curb, by the built-in name");
+        assert_eq!((c("vehicle").rank, t.heights_m[3]), (3, 1.5));
+        assert_eq!((c("water").rank, c("unknown").rank), (5, 5), "names spomp lacks are impassable");
+        assert_eq!((c("pond").index, c("pond").rank), (20, 4), "an entry's own index and rank win");
+        assert!(t.notes.len() == 1 && t.notes[0].contains("\"water\"") && t.notes[0].contains("rank"), "{:?}", t.notes);
+        // The same in JSON.
+        let json = r##"[{"name": "road", "color": "#804080"}, {"name": "Building", "color": [70, 70, 70]}]"##;
+        let t = parse_classes(Path::new("l.json"), json).unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(t.table.by_name("building").map(|c| (c.index, c.rank)), Some((1, 5)));
+        // Anything else: located, and both formats shown.
+        let err =
+            |text: &str| parse_classes(Path::new("x.yaml"), text).err().map(|e| e.to_string()).unwrap_or_default();
+        let e = err("- { name: road }\n");
+        assert!(e.starts_with("x.yaml:1:3:") && e.contains("[0]") && e.contains("color"), "{e}");
+        let e = err("- { name: road, color: \"#12345\" }\n");
+        assert!(e.contains("#RRGGBB"), "{e}");
+        let e = err("- road\n- grass\n");
+        assert!(e.contains("[0]: expected an entry with a `name` and a `color`"), "{e}");
+        let e = err("road: [1, 2, 3]\n");
+        assert!(e.contains("a list of names with colours") && e.contains("- { name: road"), "{e}");
+        let e = err("- { name: a, color: [1, 2, 3] }\n- { name: b, color: [1, 2, 3] }\n");
+        assert!(e.contains("x.yaml:2:3") && e.contains("colour [1, 2, 3] is used twice"), "{e}");
+        let e = err("- { name: no_data, color: [1, 2, 3] }\n");
+        assert!(e.contains("reserved"), "{e}");
+    }
+
+    /// Transparent pixels are no data, never matched to a colour; a white label takes the class
+    /// it was printed on (or no data on the margin), never the class nearest white.
+    #[test]
+    fn transparency_is_no_data_and_labels_take_the_class_beneath() {
+        let mut t = table();
+        // A light vehicle colour nearest white, as some tables have.
+        t.table.classes.push(ClassInfo {
+            index: 4,
+            name: "vehicle".into(),
+            rank: 3,
+            color: [220, 220, 250],
+            ignored: false,
+        });
+        let nd = no_data_class(&t.table).unwrap_or_else(|| panic!("a free index"));
+        assert_eq!((nd.index, nd.rank, nd.color), (254, 5, [0, 0, 0]));
+        let mut table = t.table.clone();
+        table.classes.push(nd);
+        // 12 × 6: road, a transparent west margin (4 columns, black RGB behind alpha 0), and a
+        // white 3 × 3 label, half on the margin, half on the road.
+        let mut img = image::RgbaImage::from_pixel(12, 6, image::Rgba([128, 64, 128, 255]));
+        for y in 0..6 {
+            for x in 0..4 {
+                img.put_pixel(x, y, image::Rgba([128, 64, 128, 0]));
+            }
+        }
+        for y in 1..4 {
+            for x in 3..9 {
+                img.put_pixel(x, y, image::Rgba([255, 255, 255, 255]));
+            }
+        }
+        let (classes, m) = classify(&img, &table, Some(254), 30.0);
+        assert_eq!(m.no_data, 21, "the margin less the label's pixels on it");
+        assert_eq!(m.snapped, 18);
+        assert!(!classes.contains(&4), "no label pixel became a vehicle: {classes:?}");
+        assert_eq!(classes[0], 254, "a transparent pixel is no data even with a class colour behind it");
+        assert_eq!(classes[2 * 12 + 8], 0, "the label on the road is road");
+        assert_eq!(classes[2 * 12 + 3], 254, "the label on the margin is no data");
+        // Without no data (an opaque raster), alpha is not looked at.
+        let (classes, _) = classify(&img, &t.table, None, 30.0);
+        assert_eq!(classes[0], 0);
+    }
+
+    #[test]
+    fn vehicle_blobs_measure_the_scale() {
+        // Two cars of 4 × 9 pixels and one 3 × 3 speck on road.
+        let (w, h) = (30u32, 14u32);
+        let mut px = vec![0 as ClassId; (w * h) as usize];
+        let mut paint = |x0: u32, y0: u32, cw: u32, ch: u32| {
+            for y in y0..y0 + ch {
+                for x in x0..x0 + cw {
+                    px[(y * w + x) as usize] = 4;
+                }
+            }
+        };
+        paint(2, 2, 4, 9);
+        paint(10, 2, 4, 9);
+        paint(20, 2, 3, 3);
+        let at = |m: f64| vehicle_width_m(&px, w, h, 4, m).unwrap_or(f64::NAN);
+        // Four pixels at 0.5 m: 2 m, measured to within a pixel.
+        assert!((at(0.5) - 2.0).abs() <= 0.5, "{}", at(0.5));
+        assert!(check_vehicle_width(at(0.5), 0.5, false).is_ok());
+        // Pixels per metre taken for metres per pixel: 2.5 m pixels, 10 m wide cars.
+        let e = check_vehicle_width(at(2.5), 2.5, false).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(e.contains("m wide") && e.contains("--resolution-m 0.") && e.contains("--force"), "{e}");
+        assert!(check_vehicle_width(at(2.5), 2.5, true).is_ok());
+        // Too small: 5 cm pixels make 20 cm cars.
+        assert!(check_vehicle_width(at(0.05), 0.05, false).is_err());
+        assert_eq!(vehicle_width_m(&vec![0; 4], 2, 2, 4, 0.5), None);
     }
 
     #[test]

@@ -153,6 +153,23 @@ pub fn check(loaded: &LoadedMission, options: &LoadOptions) -> Vec<Diagnostic> {
                     drivable.join(", ")
                 ),
             ));
+        } else if let Some(ground) = ground_classes(mission, i, world.classes())
+            && !ground.iter().any(|g| g == name)
+        {
+            // On a parked car or inside vegetation: the robot cannot localize there and, on a
+            // real site, would not start there at all.
+            out.push(at(
+                &path,
+                &node_path,
+                format!(
+                    "UGV `{}` starts at ({}, {}) on `{name}`, which is not ground (a UGV starts on one of its ground \
+                     classes: {})",
+                    robot.id,
+                    pose.x,
+                    pose.y,
+                    ground.join(", ")
+                ),
+            ));
         } else if let Err(e) = Ugv::new(&world, UgvParams::default(), pose) {
             out.push(at(
                 &path,
@@ -243,30 +260,58 @@ pub fn check(loaded: &LoadedMission, options: &LoadOptions) -> Vec<Diagnostic> {
                     BbValue::Point(p) => vec![*p],
                     BbValue::Points(ps) => ps.to_vec(),
                     BbValue::Str(plan) if port.spec.name.as_ref() == "plan_file" => {
-                        // Read as the node reads it; a plan that does not parse is the build's
-                        // error to report, not this stage's.
-                        spomp_robot::nodes::plan_waypoints(&base.join(&**plan)).unwrap_or_default()
+                        // Read and placed as the node reads it over this world; a plan that
+                        // does not parse is the build's error to report, not this stage's.
+                        spomp_robot::nodes::plan_waypoints(&base.join(&**plan), world.meta.gps_origin)
+                            .unwrap_or_default()
                     }
                     _ => continue,
                 };
                 let outside: Vec<(usize, Point2)> =
                     points.iter().copied().enumerate().filter(|(_, p)| world.class_at(*p).is_none()).collect();
                 if let Some(&(first, p)) = outside.first() {
-                    let what = if port.spec.name.as_ref() == "plan_file" { "waypoint of the plan" } else { "point" };
+                    let plan = port.spec.name.as_ref() == "plan_file";
+                    let what = if plan { "waypoint of the plan" } else { "point" };
+                    // A plan is the operator's flight: one that leaves the map is an error
+                    // (the UAV would survey nothing there). Literal points may be transit.
+                    let placed = match (plan, world.meta.gps_origin) {
+                        (false, _) => String::new(),
+                        (true, Some(o)) => format!(
+                            " (placed by their coordinates: the world's origin is at {:.7}, {:.7})",
+                            o.latitude_deg, o.longitude_deg
+                        ),
+                        (true, None) => " (placed around the plan's home: the world has no GPS reference; import \
+                                         it with --gps-reference to place plans by their coordinates)"
+                            .to_string(),
+                    };
                     let message = format!(
-                        "{} of {} `{}` points lie outside the world (first: {what} {first} at ({:.1}, {:.1})): {bounds}",
+                        "{} of {} `{}` points lie outside the world{placed} (first: {what} {first} at ({:.1}, \
+                         {:.1})): {bounds}",
                         outside.len(),
                         points.len(),
                         port.spec.name,
                         p.x,
                         p.y
                     );
-                    out.push(Diagnostic::new(&ir_file, port.loc, &ir.path, Stage::World, message).into_warning());
+                    let d = Diagnostic::new(&ir_file, port.loc, &ir.path, Stage::World, message);
+                    out.push(if plan { d } else { d.into_warning() });
                 }
             }
         }
     }
     out
+}
+
+/// The ground classes of UGV `index` as the world's table spells them: its localizer's (the
+/// mission's `localization.ground_classes`, else the localizer's defaults), whatever its
+/// localization mode; `None` when none resolves (a class note reports that).
+fn ground_classes(
+    mission: &spomp_behaviors::mission::MissionFile,
+    index: usize,
+    table: &spomp_core::ClassTable,
+) -> Option<Vec<String>> {
+    let ground = ClassNames::new(mission, table).ground_classes(mission, index);
+    (!ground.is_empty()).then_some(ground)
 }
 
 /// Every leaf of a compiled tree.

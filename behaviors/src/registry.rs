@@ -111,9 +111,21 @@ pub enum Category {
 #[derive(Debug, Clone, Default)]
 pub struct PortBindings {
     bindings: BTreeMap<Text, Binding>,
+    map_origin: Option<spomp_core::GeoPoint>,
 }
 
 impl PortBindings {
+    /// Where the map frame's origin lies on the Earth, when the tree is built for a
+    /// georeferenced operating area (`BuildOptions::map_origin`); `None` otherwise.
+    pub fn map_origin(&self) -> Option<spomp_core::GeoPoint> {
+        self.map_origin
+    }
+
+    /// Sets the map origin factories see.
+    pub fn set_map_origin(&mut self, origin: Option<spomp_core::GeoPoint>) {
+        self.map_origin = origin;
+    }
+
     /// Adds a binding.
     pub fn insert(&mut self, name: impl Into<Text>, b: Binding) {
         self.bindings.insert(name.into(), b);

@@ -6,6 +6,7 @@
 
 pub mod aerial;
 pub mod classes;
+pub mod geo;
 pub mod geometry;
 pub mod grid;
 pub mod ids;
@@ -17,6 +18,7 @@ pub mod time;
 
 pub use aerial::{AerialMap, MapTile};
 pub use classes::{ClassId, ClassInfo, ClassTable, ClassTableError, UNKNOWN_CLASS};
+pub use geo::GeoPoint;
 pub use geometry::{Point2, Pose2, normalize_angle};
 pub use grid::{Cell, Grid, GridSpec};
 pub use ids::{GoalId, RobotId, RobotKind};

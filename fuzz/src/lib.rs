@@ -387,7 +387,7 @@ pub fn qgc_plan(data: &[u8]) {
         let loaded = load_mission_with(&mission, r, &LoadOptions::default());
         // The mission itself is valid; should loading ever read the plan, a bad plan stops here.
         let Some(role) = loaded.roles.get("explorer") else { return };
-        let options = BuildOptions { base_dir: Some(loaded.base_dir()) };
+        let options = BuildOptions { base_dir: Some(loaded.base_dir()), ..BuildOptions::default() };
         let _ = build_tree(&role.tree, r, &mut Blackboard::new(), options);
     });
 }

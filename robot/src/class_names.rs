@@ -61,6 +61,21 @@ impl<'a> ClassNames<'a> {
         self.table.names().join(", ")
     }
 
+    /// The ground classes of robot `index` as the table spells them, whatever its localization
+    /// mode: its `localization.ground_classes`, else the localizer's defaults; names the table
+    /// lacks are left out (the notes of [`ClassNames::robot`] report them).
+    pub fn ground_classes(&self, mission: &MissionFile, index: usize) -> Vec<String> {
+        let listed =
+            mission.team.get(index).and_then(|r| r.localization.as_ref()).and_then(|l| l.ground_classes.clone());
+        let mut out: Vec<String> = Vec::new();
+        for name in listed.unwrap_or_else(|| LocalizationParams::default().ground_classes) {
+            if let Some(n) = self.resolve(&name).filter(|n| !out.contains(n)) {
+                out.push(n);
+            }
+        }
+        out
+    }
+
     /// Problems with the mapping itself: every name it maps to must be in the table.
     pub fn mapping_notes(&self) -> Vec<ClassNote> {
         self.mapping

@@ -114,7 +114,7 @@ impl Robot {
                     .map_err(|e| RobotError::MissionGoal(e.to_string()))?;
             }
         }
-        let build = BuildOptions { base_dir: Some(loaded.base_dir()) };
+        let build = BuildOptions { base_dir: Some(loaded.base_dir()), map_origin: setup.map_origin };
         let tree = build_executor(role, registry, &robot_id, start, build)?;
         let tick_hz = if setup.tick_hz.is_finite() && setup.tick_hz > 0.0 { setup.tick_hz } else { 10.0 };
         Ok(Robot { runtime, tree, pose_input: setup.pose_input, tick_hz, persist: role.persist.clone() })

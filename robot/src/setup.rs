@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use spomp_behaviors::mission::MissionFile;
 use spomp_behaviors::mission::schema::LocalizationMode;
-use spomp_core::{AerialMap, ClassTable, GridSpec, Pose2, RobotId, RobotKind};
+use spomp_core::{AerialMap, ClassTable, GeoPoint, GridSpec, Pose2, RobotId, RobotKind};
 use spomp_localization::LocalizationParams;
 use spomp_mapping::{CompressionParams, GoalDetectionParams, PngLevel};
 use spomp_teamstate::TeamStateParams;
@@ -26,6 +26,11 @@ pub struct OperatingArea {
     /// what the team maps. Shared: every robot set up over the area holds this one map until it
     /// changes its own copy.
     pub prior_map: Option<Arc<AerialMap>>,
+    /// Where the map frame's origin (0, 0) lies on the Earth, when the area is georeferenced
+    /// (an imported world's `gps_origin`): QGroundControl plans are placed by their coordinates
+    /// through it. `None`: a robot's own `ros2.gps_origin` if it has one, else each plan is laid
+    /// out around its planned home.
+    pub map_origin: Option<GeoPoint>,
 }
 
 /// Where a robot's map-frame pose comes from, as the adapter must supply it.
@@ -72,6 +77,9 @@ pub struct RobotSetup {
     /// What the setup had to leave out (class names the area's table lacks), each with the
     /// mission field that named it: the robot reports them once as problems.
     pub warnings: Vec<String>,
+    /// Where the map frame's origin lies on the Earth: the area's, else the robot's
+    /// `ros2.gps_origin` (its tree's QGroundControl plans are placed through it).
+    pub map_origin: Option<GeoPoint>,
 }
 
 /// Why a mission's robot could not be set up.
@@ -197,6 +205,10 @@ impl RobotSetup {
             role: spec.role.clone(),
             tick_hz: role.map_or(10.0, |r| r.tick_hz),
             warnings,
+            map_origin: area.map_origin.or_else(|| {
+                let o = spec.ros2.as_ref()?.gps_origin.as_ref()?;
+                Some(GeoPoint::new(o.latitude_deg, o.longitude_deg))
+            }),
         })
     }
 }
@@ -244,6 +256,7 @@ mod tests {
             classes: ClassTable::default_table(),
             grid: GridSpec::new(Point2::new(0.0, 0.0), 0.5, 40, 40),
             prior_map: None,
+            map_origin: None,
         };
         let setup = RobotSetup::from_mission(mission, "ugv1", &area, 1).unwrap();
         match setup.config.localization {

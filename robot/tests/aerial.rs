@@ -44,7 +44,7 @@ fn build_from(path: &Path, role: &str, id: &str, start: Pose2) -> RobotExecutor 
     let registry = builtin_registry();
     let loaded = load_mission(path, &registry);
     assert!(loaded.diagnostics.is_empty(), "{:#?}", loaded.diagnostics);
-    let opts = BuildOptions { base_dir: Some(loaded.base_dir()) };
+    let opts = BuildOptions { base_dir: Some(loaded.base_dir()), ..BuildOptions::default() };
     build_executor(&loaded.roles[role], &registry, &RobotId::new(id), start, opts).unwrap()
 }
 

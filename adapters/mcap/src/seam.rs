@@ -229,6 +229,10 @@ pub struct AreaRecord {
     pub grid: GridSpec,
     /// The map the robots start with, if any (shared with the robots replayed over it).
     pub prior_map: Option<Arc<AerialMap>>,
+    /// Where the map frame's origin lies on the Earth, when the area is georeferenced (kept in
+    /// the run metadata as `map_origin`, so logs written before it read as before).
+    #[serde(skip)]
+    pub map_origin: Option<spomp_core::GeoPoint>,
 }
 
 /// The run's setup, as a replay needs it to build a fresh robot.
@@ -273,6 +277,9 @@ impl RunInfo {
         m.insert("background_skills".into(), self.background_skills.to_string());
         m.insert("team_session".into(), self.team_session.to_string());
         m.insert("team_secured".into(), self.team_secured.to_string());
+        if let Some(o) = self.area.map_origin {
+            m.insert("map_origin".into(), format!("{},{}", o.latitude_deg, o.longitude_deg));
+        }
         for (k, (path, text)) in self.files.iter().enumerate() {
             m.insert(format!("file.{k}.path"), path.clone());
             m.insert(format!("file.{k}.text"), text.clone());
@@ -283,7 +290,13 @@ impl RunInfo {
         m
     }
 
-    fn from_metadata(m: &BTreeMap<String, String>, area: AreaRecord) -> Result<RunInfo, ReadError> {
+    fn from_metadata(m: &BTreeMap<String, String>, mut area: AreaRecord) -> Result<RunInfo, ReadError> {
+        if let Some(v) = m.get("map_origin") {
+            let corrupt = || ReadError::Corrupt(format!("run metadata `map_origin` is not LAT,LON: `{v}`"));
+            let (lat, lon) = v.split_once(',').ok_or_else(corrupt)?;
+            let (lat, lon) = (lat.parse().map_err(|_| corrupt())?, lon.parse().map_err(|_| corrupt())?);
+            area.map_origin = Some(spomp_core::GeoPoint::new(lat, lon));
+        }
         let get = |k: &str| m.get(k).ok_or_else(|| ReadError::Corrupt(format!("run metadata lacks `{k}`")));
         let num = |k: &str| -> Result<u64, ReadError> {
             get(k)?.parse().map_err(|_| ReadError::Corrupt(format!("run metadata `{k}` is not a number")))
@@ -482,6 +495,7 @@ mod tests {
                 classes: ClassTable::default_table(),
                 grid: GridSpec::new(Point2::new(-0.1, 1e-300), 0.5, 3, 2),
                 prior_map: None,
+                map_origin: Some(spomp_core::GeoPoint::new(39.952_7, -75.165_1)),
             },
             background_skills: true,
             team_session: u64::MAX - 3,

@@ -522,8 +522,11 @@ pub fn generate_city(p: &CityParams, seed: u64) -> Result<World, SimError> {
         map.elevation[i] = cv.elevation[i] as f32;
     }
     map.version = 1;
-    let mut world =
-        World::new(map, table, WorldMeta { vehicle_clusters: clusters, roadblocks, start_poses: Vec::new() })?;
+    let mut world = World::new(
+        map,
+        table,
+        WorldMeta { vehicle_clusters: clusters, roadblocks, start_poses: Vec::new(), gps_origin: None },
+    )?;
     world.meta.start_poses = start_poses(&world, p, xs[0], ys[0]);
     Ok(world)
 }

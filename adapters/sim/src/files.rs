@@ -202,6 +202,20 @@ fn check_description(desc: &WorldFile) -> Result<(), FieldError> {
             return Err((field, message));
         }
     }
+    if let Some(g) = &desc.meta.gps_origin
+        && !(g.latitude_deg.is_finite()
+            && g.latitude_deg.abs() <= 85.0
+            && g.longitude_deg.is_finite()
+            && g.longitude_deg.abs() <= 180.0)
+    {
+        let field = "meta.gps_origin".to_string();
+        let message = format!(
+            "{field} must be a latitude within ±85° and a longitude within ±180°, got {}, {}",
+            number(g.latitude_deg),
+            number(g.longitude_deg)
+        );
+        return Err((field, message));
+    }
     Ok(())
 }
 

@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use spomp_core::{AerialMap, Cell, ClassId, ClassTable, GridSpec, Point2, Pose2};
+use spomp_core::{AerialMap, Cell, ClassId, ClassTable, GeoPoint, GridSpec, Point2, Pose2};
 
 use crate::error::SimError;
 
@@ -20,6 +20,11 @@ pub struct WorldMeta {
     pub roadblocks: Vec<Point2>,
     /// Free start poses for a team, in order of use.
     pub start_poses: Vec<Pose2>,
+    /// Where the map frame's origin (0, 0) lies on the Earth, for a georeferenced world
+    /// (`spomp world import --gps-reference`): QGroundControl plans flown in it are placed by
+    /// their coordinates through it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gps_origin: Option<GeoPoint>,
 }
 
 /// The simulated world.

@@ -41,6 +41,10 @@ pub struct BuildOptions {
     /// is resolved against it before the node's factory sees it. `None`: the process's working
     /// directory.
     pub base_dir: Option<PathBuf>,
+    /// Where the map frame's origin lies on the Earth, when the robot's operating area is
+    /// georeferenced: factories that read geographic files (QGroundControl plans) place them
+    /// through it ([`PortBindings::map_origin`]).
+    pub map_origin: Option<spomp_core::GeoPoint>,
 }
 
 /// A literal on a `*_file` port, resolved against the mission's folder.
@@ -136,6 +140,7 @@ fn build<E: 'static>(
                 message: format!("unknown node type `{}`", ir.type_name),
             })?;
             let mut bindings = PortBindings::default();
+            bindings.set_map_origin(opts.map_origin);
             for p in ports {
                 let b = match &p.binding {
                     IrBinding::Literal(v) => Binding::Literal(resolve_file_port(&p.spec.name, v, opts)),

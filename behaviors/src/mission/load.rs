@@ -383,7 +383,7 @@ pub fn load_mission_str<E: 'static>(
     if diags.is_empty() {
         let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
         for role in out.roles.values() {
-            let opts = super::BuildOptions { base_dir: Some(base.clone()) };
+            let opts = super::BuildOptions { base_dir: Some(base.clone()), ..super::BuildOptions::default() };
             let mut bb = crate::blackboard::Blackboard::new();
             if let Err(super::BuildError::Node { path: node_path, message }) =
                 super::build_tree(&role.tree, nodes, &mut bb, opts)

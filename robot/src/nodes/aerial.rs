@@ -35,7 +35,7 @@ pub fn register_aerial(r: &mut NodeRegistry<RobotRuntime>) {
         NodeTypeSpec::leaf(
             "follow_waypoints",
             Action,
-            "Flies the waypoint list — `waypoints`, or the NAV_WAYPOINT items of a QGroundControl `plan_file` (read when the mission is built; its planned home position is the map origin, x east, y north, metres; exclusion geofences become no-fly zones, inclusion geofences fences the transfers stay inside) — at `altitude_m` and `speed_mps`, starting at index `progress` and advancing it on arrival within `arrive_radius_m` of each waypoint, so a state machine that leaves and re-enters the state resumes where it left off. With `resume_from` connected it resumes at the very point it was interrupted: it flies back there first and then on along the interrupted leg, so a survey leaves no gap. Transfers route around `no_fly` polygons and stay inside its `inside` fences, if any (shortest path over their corners, kept `margin_m` clear; a UAV outside every fence flies straight in); a waypoint inside a zone or outside every fence is refused when the mission is built (a waypoint read from the blackboard: reported and skipped), one with no route to it reported and skipped. Succeeds when the list is exhausted. Give exactly one of `waypoints` and `plan_file`.",
+            "Flies the waypoint list — `waypoints`, or the waypoints of a QGroundControl `plan_file` (read when the mission is built; NAV_WAYPOINT items, surveys' generated items, return to launch; placed by their latitude and longitude through the operating area's GPS reference when it has one — an imported world's `gps_origin`, a robot's `ros2.gps_origin` — else around the plan's planned home as the map origin; x east, y north, metres; exclusion geofences become no-fly zones, inclusion geofences fences the transfers stay inside) — at `altitude_m` and `speed_mps`, starting at index `progress` and advancing it on arrival within `arrive_radius_m` of each waypoint, so a state machine that leaves and re-enters the state resumes where it left off. With `resume_from` connected it resumes at the very point it was interrupted: it flies back there first and then on along the interrupted leg, so a survey leaves no gap. Transfers route around `no_fly` polygons and stay inside its `inside` fences, if any (shortest path over their corners, kept `margin_m` clear; a UAV outside every fence flies straight in); a waypoint inside a zone or outside every fence is refused when the mission is built (a waypoint read from the blackboard: reported and skipped), one with no route to it reported and skipped. Succeeds when the list is exhausted. Give exactly one of `waypoints` and `plan_file`.",
             vec![
                 PortSpec::optional("waypoints", Points, "Waypoints (map frame), flown in order."),
                 PortSpec::optional("plan_file", Str, "QGroundControl .plan file, relative to the mission file; its altitudes are ignored in favour of `altitude_m`."),
@@ -369,7 +369,7 @@ fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, Str
             );
         }
         (Binding::Unset, Binding::Literal(BbValue::Str(path))) => {
-            let plan = load_plan(Path::new(&*path)).map_err(|e| e.to_string())?;
+            let plan = load_plan(Path::new(&*path), p.map_origin()).map_err(|e| e.to_string())?;
             if plan.waypoints.is_empty() {
                 return Err(format!("QGroundControl plan `{path}` has no waypoints to fly"));
             }

@@ -232,6 +232,7 @@ fn build_robot(
         classes: info.area.classes.clone(),
         grid: info.area.grid,
         prior_map: info.area.prior_map.clone(),
+        map_origin: info.area.map_origin,
     };
     let mut setup = RobotSetup::from_mission(&mission, id, &area, info.run_seed).map_err(|e| match e {
         spomp_robot::SetupError::Settings(s) if !sets.is_empty() => ReplayError::Set(s.to_string()),

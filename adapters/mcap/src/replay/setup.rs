@@ -100,7 +100,12 @@ pub(crate) fn png_level(name: &str) -> Result<PngLevel, ReplayError> {
 
 /// The operating area as a log stores it.
 pub fn area_record(area: &OperatingArea) -> AreaRecord {
-    AreaRecord { classes: area.classes.clone(), grid: area.grid, prior_map: area.prior_map.clone() }
+    AreaRecord {
+        classes: area.classes.clone(),
+        grid: area.grid,
+        prior_map: area.prior_map.clone(),
+        map_origin: area.map_origin,
+    }
 }
 
 /// Everything a replay needs about a run, for the recorder: `source` is what runs it (`sim`,

@@ -73,5 +73,6 @@ pub fn operating_area(mission: &MissionFile, world: &World) -> OperatingArea {
         classes: world.classes().clone(),
         grid: *world.spec(),
         prior_map: mission.sim.as_ref().is_some_and(|s| s.prior_map).then(|| world.shared_map()),
+        map_origin: world.meta.gps_origin,
     }
 }
