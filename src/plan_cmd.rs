@@ -91,7 +91,9 @@ fn distance_to(spec: &GridSpec, mask: &[bool]) -> Vec<f32> {
     let res = spec.resolution_m as f32;
     let diag = res * std::f32::consts::SQRT_2;
     let mut d: Vec<f32> = mask.iter().map(|&m| if m { 0.0 } else { f32::INFINITY }).collect();
-    let passes: [(bool, [(i64, i64, f32); 4]); 2] = [
+    /// A neighbour already visited in a pass: column and row offsets, step length.
+    type Step = (i64, i64, f32);
+    let passes: [(bool, [Step; 4]); 2] = [
         (false, [(-1, 0, res), (0, -1, res), (-1, -1, diag), (1, -1, diag)]),
         (true, [(1, 0, res), (0, 1, res), (1, 1, diag), (-1, 1, diag)]),
     ];

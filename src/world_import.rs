@@ -1229,7 +1229,7 @@ mod tests {
         assert!(check_vehicle_width(at(2.5), 2.5, true).is_ok());
         // Too small: 5 cm pixels make 20 cm cars.
         assert!(check_vehicle_width(at(0.05), 0.05, false).is_err());
-        assert_eq!(vehicle_width_m(&vec![0; 4], 2, 2, 4, 0.5), None);
+        assert_eq!(vehicle_width_m(&[0; 4], 2, 2, 4, 0.5), None);
     }
 
     #[test]
