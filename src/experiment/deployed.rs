@@ -336,7 +336,7 @@ pub fn run_deployed_trial(
     };
     let keys = dir.join("keys");
     if channel == TeamChannel::Zenoh {
-        let robots: Vec<RobotId> = ids.iter().map(RobotId::new).collect();
+        let robots: Vec<RobotId> = ids.iter().map(|id| RobotId::new(id)).collect();
         spomp_zenoh::KeyDir::generate(&keys, &mission.mission, &robots)
             .with_context(|| format!("generating the team's keys in {}", keys.display()))?;
     }
