@@ -9,6 +9,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::net::IpAddr;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
@@ -36,6 +37,26 @@ pub struct FarmOptions {
     pub wait_s: f64,
     /// Run in lockstep with the robots' processes.
     pub lockstep: Option<LockstepOptions>,
+    /// Where the farm's messages (robots driven, absent, dropped, joined) go: this list when
+    /// given (`spomp experiment --deployed` puts them in the trial's row), else stderr.
+    pub notes: Option<Arc<Mutex<Vec<String>>>>,
+}
+
+/// Says the farm's messages where [`FarmOptions::notes`] asks.
+#[derive(Debug, Clone, Default)]
+struct Notes(Option<Arc<Mutex<Vec<String>>>>);
+
+impl Notes {
+    fn say(&self, message: String) {
+        match &self.0 {
+            Some(list) => {
+                if let Ok(mut l) = list.lock() {
+                    l.push(message);
+                }
+            }
+            None => errln!("{message}"),
+        }
+    }
 }
 
 /// The lockstep's settings.
@@ -92,6 +113,7 @@ pub struct FarmDrivers {
     lockstep: Option<Lockstep>,
     /// The step's simulated time.
     now: Time,
+    notes: Notes,
 }
 
 impl FarmDrivers {
@@ -122,13 +144,16 @@ impl FarmDrivers {
             (Some(_), Some(rate)) => format!("in lockstep, at most {rate}× real time"),
             (None, rate) => format!("at {}× real time", rate.unwrap_or(1.0)),
         };
-        errln!(
-            "spomp sim --ros2: waiting up to {:.0} s for the processes of {} on DDS domain {} ({how}); start `spomp run MISSION --robot ID {}` for each",
-            options.wait_s,
-            candidates.join(", "),
-            dds.domain_id,
-            if options.lockstep.is_some() { "--lockstep" } else { "--use-sim-time" },
-        );
+        let notes = Notes(options.notes.clone());
+        if notes.0.is_none() {
+            errln!(
+                "spomp sim --ros2: waiting up to {:.0} s for the processes of {} on DDS domain {} ({how}); start `spomp run MISSION --robot ID {}` for each",
+                options.wait_s,
+                candidates.join(", "),
+                dds.domain_id,
+                if options.lockstep.is_some() { "--lockstep" } else { "--use-sim-time" },
+            );
+        }
         let wait = Duration::from_secs_f64(options.wait_s);
         let driven: Vec<String> = match &options.lockstep {
             Some(l) => {
@@ -152,15 +177,20 @@ impl FarmDrivers {
         let absent: Vec<String> = candidates.iter().filter(|c| !driven.contains(c)).cloned().collect();
         let simulated: Vec<&str> = absent.iter().map(String::as_str).collect();
         if !simulated.is_empty() {
-            errln!(
+            notes.say(format!(
                 "spomp sim --ros2: no process reported for {} within {:.0} s: the simulator runs {} until {} does",
                 simulated.join(", "),
                 options.wait_s,
                 if simulated.len() == 1 { "it" } else { "them" },
                 if simulated.len() == 1 { "it" } else { "one" }
+            ));
+        }
+        if notes.0.is_none() {
+            errln!(
+                "spomp sim --ros2: driving {}",
+                if driven.is_empty() { "no robot".into() } else { driven.join(", ") }
             );
         }
-        errln!("spomp sim --ros2: driving {}", if driven.is_empty() { "no robot".into() } else { driven.join(", ") });
         let pacer = match (&options.lockstep, options.rate) {
             (Some(_), None) => None,
             (_, rate) => Some(RealTimePacer::new(rate.unwrap_or(1.0))),
@@ -178,7 +208,7 @@ impl FarmDrivers {
             },
             last_hello: Instant::now(),
         });
-        Ok(FarmDrivers { link, driven, absent, joined: Vec::new(), pacer, lockstep, now: Time::ZERO })
+        Ok(FarmDrivers { link, driven, absent, joined: Vec::new(), pacer, lockstep, now: Time::ZERO, notes })
     }
 
     /// Whether `id` is in lockstep and still answering.
@@ -194,10 +224,10 @@ impl FarmDrivers {
 
     /// A robot stopped answering: reported, and driven no more (its body stops).
     fn drop_robot(&mut self, id: &str, now: Time, why: &LockstepError) {
-        errln!(
+        self.notes.say(format!(
             "spomp sim --ros2 --lockstep: {id} dropped at {:.1} s ({why}); its body stops and the run goes on",
             now.as_secs_f64()
-        );
+        ));
         if let Some(l) = self.lockstep.as_mut() {
             l.dropped.insert(id.to_string());
             l.steps.remove(id);
@@ -215,7 +245,7 @@ impl FarmDrivers {
         for id in l.dropped.clone() {
             if self.link.lockstep_rejoin(&id, &l.hello) {
                 l.dropped.remove(&id);
-                errln!("spomp sim --ros2 --lockstep: {id} rejoined at {:.1} s", now.as_secs_f64());
+                self.notes.say(format!("spomp sim --ros2 --lockstep: {id} rejoined at {:.1} s", now.as_secs_f64()));
             }
         }
         let hello = l.hello.clone();
@@ -230,7 +260,10 @@ impl FarmDrivers {
 
     /// A process reported late: it drives its robot from this step on.
     fn join(&mut self, id: String, now: Time) {
-        errln!("spomp sim --ros2: {id}'s process reported at {:.1} s: it drives {id} from now on", now.as_secs_f64());
+        self.notes.say(format!(
+            "spomp sim --ros2: {id}'s process reported at {:.1} s: it drives {id} from now on",
+            now.as_secs_f64()
+        ));
         self.joined.push(RobotId::new(&id));
         self.driven.push(id);
     }

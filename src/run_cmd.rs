@@ -9,7 +9,8 @@ use std::sync::atomic::AtomicBool;
 
 use anyhow::{Context, Result, bail};
 use spomp_behaviors::NodeRegistry;
-use spomp_behaviors::mission::{LoadOptions, load_mission_with};
+use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, read_text};
+use spomp_behaviors::mission::{LoadOptions, load_mission_str, load_mission_with};
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::{
     FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, Time, Twist2,
@@ -73,6 +74,11 @@ pub struct RunArgs {
     /// (repeatable).
     #[arg(long = "allow-dir", value_name = "DIR")]
     pub allow_dirs: Vec<PathBuf>,
+    /// Resolve the mission's relative paths (includes, plan files, world folder) as if the
+    /// file were in DIR, not in its own folder: how `spomp experiment --deployed` runs a
+    /// configuration's patched mission, written to the trial's folder.
+    #[arg(long, value_name = "DIR")]
+    pub resolve_in: Option<PathBuf>,
     /// The team link between robot processes, the team's keys, the state file.
     #[command(flatten)]
     pub team_link: crate::team_link::TeamLinkArgs,
@@ -81,7 +87,20 @@ pub struct RunArgs {
 /// Runs `spomp run`.
 pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<ExitCode> {
     let options = LoadOptions { allowed_dirs: args.allow_dirs.clone() };
-    let loaded = load_mission_with(&args.mission, registry, &options);
+    let loaded = match &args.resolve_in {
+        Some(dir) => {
+            let text = match read_text(&args.mission, MAX_SOURCE_BYTES) {
+                Ok(t) => t,
+                Err(e) => {
+                    errln!("error: {}: {e}", args.mission.display());
+                    return Ok(ExitCode::from(1));
+                }
+            };
+            let name = args.mission.file_name().map_or_else(|| "mission.yaml".into(), |n| n.to_os_string());
+            load_mission_str(&text, &dir.join(name), registry, &options)
+        }
+        None => load_mission_with(&args.mission, registry, &options),
+    };
     if !loaded.is_valid() {
         crate::commands::print_diagnostics(&loaded);
         return Ok(ExitCode::from(1));

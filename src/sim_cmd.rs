@@ -474,6 +474,7 @@ fn run_trial(
                     skill_latency: args.skill_latency,
                     timeout_s: args.lockstep_timeout_s,
                 }),
+                notes: None,
             },
         )?;
         sim.drive_externally(Box::new(farm)).context("handing the robots to the farm")?;

@@ -4,6 +4,7 @@
 //!
 //! See `docs/experiments.md`.
 
+pub mod deployed;
 pub mod report;
 pub mod rows;
 pub mod spec;
@@ -25,7 +26,10 @@ use spomp_robot::RobotRuntime;
 use spomp_sim::run::{Outcome, SimOptions, Simulation};
 
 use rows::{ByteCounter, RowSink, TrialRow};
-use spec::{Claim, LoadedExperiment, ResolvedConfiguration, Trial, load_experiment, shard_of, trial_hash};
+use spec::{
+    Claim, LoadedExperiment, ResolvedConfiguration, TeamChannel, Trial, deployed_trial, load_experiment, shard_of,
+    trial_hash,
+};
 
 /// Exit code of a run stopped by Ctrl-C or SIGTERM (128 + SIGINT, as shells report it).
 const EXIT_INTERRUPTED: u8 = 130;
@@ -74,6 +78,13 @@ pub struct ExperimentArgs {
     /// (repeatable).
     #[arg(long = "allow-dir", value_name = "DIR")]
     pub allow_dirs: Vec<PathBuf>,
+    /// Also run each selected trial deployed, as robots run it: the simulator as a lockstep
+    /// robot farm and one `spomp run` process per robot over loopback, the team state over the
+    /// farm's radio model (`--deployed`, `--deployed=radio`) or the signed Zenoh link
+    /// (`--deployed=zenoh`); repeatable. Rows are marked with the channel; `report` sets them
+    /// beside the in-process rows. A configuration's `deployed:` list does the same in the file.
+    #[arg(long, value_name = "CHANNEL", num_args = 0..=1, require_equals = true, default_missing_value = "radio")]
+    pub deployed: Vec<TeamChannel>,
     /// `report`, `schema` or `validate` instead of a run.
     #[command(subcommand)]
     pub action: Option<ExperimentCommand>,
@@ -234,8 +245,7 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
             existing.len()
         ));
     }
-    let hashes: Vec<String> =
-        loaded.trials.iter().map(|t| trial_hash(&loaded.configurations[t.configuration], t.seed)).collect();
+    let hash_of = |t: &Trial| trial_hash(&loaded.configurations[t.configuration], t.seed);
     let names: Vec<&str> = loaded.configurations.iter().map(|c| c.name.as_str()).collect();
     if let Some(bad) = args.only.iter().find(|o| !names.contains(&o.as_str())) {
         return usage(format!("--only {bad}: no such configuration; configurations are: {}", names.join(", ")));
@@ -244,24 +254,36 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
     if let Some(bad) = args.seeds.iter().find(|s| !seeds.contains(s)) {
         return usage(format!("--seed {bad}: not a seed of the experiment"));
     }
+    // The file's trials, and the deployed runs --deployed asks for besides.
+    let in_process = loaded.trials.iter().filter(|t| t.deployed.is_none()).count();
+    let mut trials = loaded.trials.clone();
+    for t in loaded.trials.iter().filter(|t| t.deployed.is_none()) {
+        for channel in &args.deployed {
+            let d = deployed_trial(t, *channel, in_process);
+            if !trials.iter().any(|x| x.index == d.index) {
+                trials.push(d);
+            }
+        }
+    }
+    trials.sort_by_key(|t| t.index);
     let selected: Vec<Trial> = match args.shard {
-        Some((i, n)) => shard_of(&loaded.trials, i, n),
-        None => loaded.trials.clone(),
+        Some((i, n)) => shard_of(&trials, i, n),
+        None => trials,
     }
     .into_iter()
     .filter(|t| args.only.is_empty() || args.only.contains(&loaded.configurations[t.configuration].name))
     .filter(|t| args.seeds.is_empty() || args.seeds.contains(&t.seed))
     .collect();
-    // Rows already there: each must be a trial of this experiment as it is now.
-    let mut done: BTreeMap<(String, u64), &TrialRow> = BTreeMap::new();
+    // Rows already there: each must be a trial of this experiment as it is now (a deployed row
+    // is its in-process trial run another way, with the same hash).
+    let mut done: BTreeMap<(String, u64, Option<TeamChannel>), &TrialRow> = BTreeMap::new();
     for r in &existing {
-        let trial = loaded
-            .trials
-            .iter()
-            .find(|t| loaded.configurations[t.configuration].name == r.configuration && t.seed == r.seed);
+        let trial = loaded.trials.iter().find(|t| {
+            t.deployed.is_none() && loaded.configurations[t.configuration].name == r.configuration && t.seed == r.seed
+        });
         match trial {
-            Some(t) if hashes[t.index] == r.config_hash => {
-                done.insert((r.configuration.clone(), r.seed), r);
+            Some(t) if hash_of(t) == r.config_hash => {
+                done.insert((r.configuration.clone(), r.seed, r.deployed), r);
             }
             Some(_) => {
                 errln!(
@@ -302,7 +324,7 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
     }
     let pending: Vec<Trial> = selected
         .iter()
-        .filter(|t| !done.contains_key(&(loaded.configurations[t.configuration].name.clone(), t.seed)))
+        .filter(|t| !done.contains_key(&(loaded.configurations[t.configuration].name.clone(), t.seed, t.deployed)))
         .cloned()
         .collect();
     let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize);
@@ -336,12 +358,20 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
     let failures: Mutex<Vec<String>> = Mutex::new(Vec::new());
     let written = std::sync::atomic::AtomicUsize::new(0);
     let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut allow_dirs: Vec<PathBuf> = file.parent().map(Path::to_path_buf).into_iter().collect();
+    allow_dirs.extend(args.allow_dirs.iter().cloned());
+    let work_dir = out_dir.join("deployed");
+    let deployment = deployed::Deployment { allow_dirs: &allow_dirs, work_dir: &work_dir };
     let run_one = |t: &Trial| {
         if interrupted.load(Ordering::Relaxed) {
             return;
         }
         let configuration = &loaded.configurations[t.configuration];
-        let outcome = run_trial(t, configuration, &hashes[t.index], registry, parallel_robots, &interrupted);
+        let hash = hash_of(t);
+        let outcome = match t.deployed {
+            None => run_trial(t, configuration, &hash, registry, parallel_robots, &interrupted),
+            Some(_) => deployed::run_deployed_trial(t, configuration, &hash, registry, &deployment, &interrupted),
+        };
         match outcome {
             Ok(Some(row)) => {
                 let appended = sink
@@ -351,13 +381,17 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
                 match appended {
                     Ok(()) => {
                         written.fetch_add(1, Ordering::Relaxed);
-                        bar.set_message(format!("{} seed {}: {}", row.configuration, row.seed, row.outcome));
+                        let how = row.deployed.map_or_else(String::new, |c| format!(" (deployed, {c})"));
+                        bar.set_message(format!("{} seed {}{how}: {}", row.configuration, row.seed, row.outcome));
                     }
                     Err(e) => push(&failures, format!("{e:#}")),
                 }
             }
             Ok(None) => {} // cut short by a signal: not a finished trial
-            Err(e) => push(&failures, format!("configuration `{}` seed {}: {e:#}", configuration.name, t.seed)),
+            Err(e) => {
+                let how = t.deployed.map_or_else(String::new, |c| format!(" (deployed, {c})"));
+                push(&failures, format!("configuration `{}` seed {}{how}: {e:#}", configuration.name, t.seed));
+            }
         }
         bar.inc(1);
     };
@@ -500,7 +534,7 @@ mod tests {
     use super::*;
 
     fn trial(index: usize, configuration: usize) -> Trial {
-        Trial { index, configuration, seed: index as u64 + 1 }
+        Trial { index, configuration, seed: index as u64 + 1, deployed: None }
     }
 
     #[test]

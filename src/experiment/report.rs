@@ -1,7 +1,9 @@
 //! `spomp experiment report`: merges the rows of one or more output folders (shards), and writes
 //! `report.md` (per configuration the mean and spread of each metric over seeds, time to the
 //! k-th goal, a verdict per claim) with PNG plots (goals visited over time, a band per
-//! configuration; each metric's mean and spread).
+//! configuration; each metric's mean and spread). Deployed rows (`--deployed`) are set beside
+//! the in-process rows of the same configuration and seeds; the tables, plots and claims are
+//! the in-process rows'.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -14,7 +16,7 @@ use serde::Serialize;
 use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, read_text};
 
 use super::rows::{self, TrialRow};
-use super::spec::{Claim, Expect, Metric};
+use super::spec::{Claim, Expect, Metric, TeamChannel};
 use super::{ExperimentMeta, META};
 
 /// The largest magnitude a plot's axis may reach. Past it (a corrupted or hand-edited row: a
@@ -120,11 +122,12 @@ pub fn check_claim(claim: &Claim, rows: &[TrialRow]) -> ClaimResult {
     ClaimResult { claim: claim.clone(), stats, verdict: if holds { "holds" } else { "fails" }, weakest_step_se }
 }
 
-/// Reads and merges the rows of `dirs`: one row per (configuration, seed); equal duplicates
-/// (the same trial in two folders) count once, differing ones are an error.
+/// Reads and merges the rows of `dirs`: one row per (configuration, seed, in-process or
+/// deployed channel); equal duplicates (the same trial in two folders) count once, differing
+/// ones are an error.
 pub fn merge(dirs: &[PathBuf]) -> Result<(ExperimentMeta, Vec<TrialRow>)> {
     let mut meta: Option<(ExperimentMeta, &Path)> = None;
-    let mut merged: BTreeMap<(String, u64), (TrialRow, PathBuf)> = BTreeMap::new();
+    let mut merged: BTreeMap<(String, u64, Option<TeamChannel>), (TrialRow, PathBuf)> = BTreeMap::new();
     for dir in dirs {
         let path = dir.join(META);
         let text = read_text(&path, MAX_SOURCE_BYTES).map_err(|e| {
@@ -143,13 +146,14 @@ pub fn merge(dirs: &[PathBuf]) -> Result<(ExperimentMeta, Vec<TrialRow>)> {
             Some(_) => {}
         }
         for row in rows::read_rows(dir)? {
-            let key = (row.configuration.clone(), row.seed);
+            let key = (row.configuration.clone(), row.seed, row.deployed);
             match merged.get(&key) {
                 Some((other, from)) if other.deterministic_part() != row.deterministic_part() => bail!(
-                    "configuration `{}` seed {}: the rows in {} and {} differ (hash {} and {}); \
+                    "configuration `{}` seed {}{}: the rows in {} and {} differ (hash {} and {}); \
                      they are not the same trial",
                     row.configuration,
                     row.seed,
+                    row.deployed.map_or_else(String::new, |c| format!(" (deployed, {c})")),
                     from.display(),
                     dir.display(),
                     other.config_hash,
@@ -168,15 +172,203 @@ pub fn merge(dirs: &[PathBuf]) -> Result<(ExperimentMeta, Vec<TrialRow>)> {
     Ok((meta, rows))
 }
 
+/// One seed of a configuration, in-process and deployed over one channel.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DeployedPair {
+    /// Seed.
+    pub seed: u64,
+    /// Vehicle clusters visited (goals, in a world without clusters): in-process, deployed.
+    pub clusters_visited: (f64, f64),
+    /// Distance the UAVs flew, metres: in-process, deployed.
+    pub uav_distance_m: (f64, f64),
+    /// Goals visited: in-process, deployed.
+    pub goals_visited: (usize, usize),
+    /// Whether the deployed row equals the in-process one field for field but wall time.
+    pub identical: bool,
+    /// The deployed trial's process problems.
+    pub process_problems: Vec<String>,
+}
+
+/// A configuration's deployed trials over one team channel beside its in-process trials of
+/// the same seeds.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DeployedComparison {
+    /// Configuration.
+    pub configuration: String,
+    /// Team channel of the deployed trials.
+    pub channel: TeamChannel,
+    /// Per seed with both rows, in seed order.
+    pub pairs: Vec<DeployedPair>,
+    /// Seeds with a deployed row but no in-process one (not compared).
+    pub unpaired_seeds: Vec<u64>,
+    /// Mean clusters visited: in-process, deployed.
+    pub clusters_visited: (f64, f64),
+    /// Deployed mean over in-process mean of clusters visited.
+    pub clusters_ratio: Option<f64>,
+    /// Mean UAV distance, metres: in-process, deployed.
+    pub uav_distance_m: (f64, f64),
+    /// Deployed mean over in-process mean of UAV distance.
+    pub uav_distance_ratio: Option<f64>,
+}
+
+/// The deployed rows of `rows` beside the in-process rows of the same configuration and seed,
+/// per configuration (in `configurations` order) and channel.
+pub fn deployed_comparisons(configurations: &[String], rows: &[TrialRow]) -> Vec<DeployedComparison> {
+    let mut out = Vec::new();
+    for c in configurations {
+        for channel in TeamChannel::ALL {
+            let deployed: Vec<&TrialRow> =
+                rows.iter().filter(|r| &r.configuration == c && r.deployed == Some(channel)).collect();
+            if deployed.is_empty() {
+                continue;
+            }
+            let mut pairs = Vec::new();
+            let mut unpaired_seeds = Vec::new();
+            for d in deployed {
+                let Some(i) = rows.iter().find(|r| &r.configuration == c && r.seed == d.seed && r.deployed.is_none())
+                else {
+                    unpaired_seeds.push(d.seed);
+                    continue;
+                };
+                let bare = |r: &TrialRow| TrialRow {
+                    trial: 0,
+                    deployed: None,
+                    process_problems: Vec::new(),
+                    ..r.deterministic_part()
+                };
+                pairs.push(DeployedPair {
+                    seed: d.seed,
+                    clusters_visited: (i.clusters_or_goals_visited(), d.clusters_or_goals_visited()),
+                    uav_distance_m: (i.uav_distance_m(), d.uav_distance_m()),
+                    goals_visited: (i.goals_visited, d.goals_visited),
+                    identical: bare(i) == bare(d),
+                    process_problems: d.process_problems.clone(),
+                });
+            }
+            pairs.sort_by_key(|p| p.seed);
+            unpaired_seeds.sort_unstable();
+            let mean = |f: &dyn Fn(&DeployedPair) -> f64| {
+                if pairs.is_empty() { f64::NAN } else { pairs.iter().map(f).sum::<f64>() / pairs.len() as f64 }
+            };
+            let ratio = |(a, b): (f64, f64)| (a.is_finite() && b.is_finite() && a != 0.0).then(|| b / a);
+            let clusters_visited = (mean(&|p| p.clusters_visited.0), mean(&|p| p.clusters_visited.1));
+            let uav_distance_m = (mean(&|p| p.uav_distance_m.0), mean(&|p| p.uav_distance_m.1));
+            out.push(DeployedComparison {
+                configuration: c.clone(),
+                channel,
+                pairs,
+                unpaired_seeds,
+                clusters_ratio: ratio(clusters_visited),
+                clusters_visited,
+                uav_distance_ratio: ratio(uav_distance_m),
+                uav_distance_m,
+            });
+        }
+    }
+    out
+}
+
+/// The report's section on deployed trials (empty without any).
+fn deployed_markdown(comparisons: &[DeployedComparison]) -> String {
+    let mut md = String::new();
+    if comparisons.is_empty() {
+        return md;
+    }
+    let _ = writeln!(
+        md,
+        "## Deployed beside in-process
+
+Trials run as robots run them (`--deployed`): the simulator as a lockstep \
+         robot farm, one `spomp run` process per robot, the team state over the farm's radio model (`radio`) or the \
+         signed Zenoh link (`zenoh`). Each is set beside the in-process trial of the same configuration and seed; \
+         means are over the seeds with both. Over the radio model a deployed row is the in-process row, field for \
+         field but wall time (`identical`). The claims, tables and plots above use the in-process rows only.\n"
+    );
+    let _ = writeln!(
+        md,
+        "| configuration | channel | seeds | clusters visited: in-process | deployed | ratio | UAV distance (m): \
+         in-process | deployed | ratio | identical | with process problems |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
+    let ratio = |r: Option<f64>| r.map_or_else(|| "—".to_string(), |r| format!("{r:.3}"));
+    for c in comparisons {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            c.configuration,
+            c.channel,
+            c.pairs.len(),
+            fmt_num(c.clusters_visited.0),
+            fmt_num(c.clusters_visited.1),
+            ratio(c.clusters_ratio),
+            fmt_num(c.uav_distance_m.0),
+            fmt_num(c.uav_distance_m.1),
+            ratio(c.uav_distance_ratio),
+            c.pairs.iter().filter(|p| p.identical).count(),
+            c.pairs.iter().filter(|p| !p.process_problems.is_empty()).count()
+        );
+    }
+    let _ = writeln!(
+        md,
+        "
+### Per seed
+"
+    );
+    let _ = writeln!(
+        md,
+        "| configuration | channel | seed | clusters visited: in-process | deployed | UAV distance (m): in-process | \
+         deployed | goals visited: in-process | deployed | identical | process problems |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
+    for c in comparisons {
+        for p in &c.pairs {
+            let problems =
+                if p.process_problems.is_empty() { "—".to_string() } else { p.process_problems.join("; ") };
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {} | {} | {:.0} | {:.0} | {} | {} | {} | {} |",
+                c.configuration,
+                c.channel,
+                p.seed,
+                p.clusters_visited.0,
+                p.clusters_visited.1,
+                p.uav_distance_m.0,
+                p.uav_distance_m.1,
+                p.goals_visited.0,
+                p.goals_visited.1,
+                if p.identical { "yes" } else { "no" },
+                problems.replace('|', "\\|")
+            );
+        }
+    }
+    let unpaired: Vec<String> = comparisons
+        .iter()
+        .flat_map(|c| c.unpaired_seeds.iter().map(move |s| format!("{}/{s} ({})", c.configuration, c.channel)))
+        .collect();
+    if !unpaired.is_empty() {
+        let _ = writeln!(
+            md,
+            "
+Deployed rows without an in-process row of their seed (not compared): {}.",
+            unpaired.join(", ")
+        );
+    }
+    let _ = writeln!(md);
+    md
+}
+
 /// `spomp experiment report DIR... [--out DIR]`.
 pub fn report(dirs: &[PathBuf], out: Option<&Path>, json: bool) -> Result<ExitCode> {
-    let (meta, rows) = merge(dirs)?;
+    let (meta, all_rows) = merge(dirs)?;
+    // The study is the in-process rows'; deployed rows get their own section.
+    let comparisons = deployed_comparisons(&meta.configurations, &all_rows);
+    let rows: Vec<TrialRow> = all_rows.iter().filter(|r| r.deployed.is_none()).cloned().collect();
     let out_dir = out.map(Path::to_path_buf).or_else(|| dirs.first().cloned()).ok_or_else(|| anyhow!("no folder"))?;
     let plots = out_dir.join("plots");
     crate::output::create_dir(&plots)?;
     let mut jsonl = String::new();
     let mut csv = format!("{}\n", rows::CSV_HEADER);
-    for r in &rows {
+    for r in &all_rows {
         jsonl.push_str(&serde_json::to_string(r)?);
         jsonl.push('\n');
         csv.push_str(&rows::csv_line(r));
@@ -195,6 +387,7 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>, json: bool) -> Result<ExitCo
     }
     left_out.extend(metrics_plot(&meta, &table, &plots.join("metrics.png"))?);
     let mut md = markdown(&meta, &rows, &table, &claims);
+    md.push_str(&deployed_markdown(&comparisons));
     if !left_out.is_empty() {
         let _ = writeln!(
             md,
@@ -240,6 +433,7 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>, json: bool) -> Result<ExitCo
             "trials_expected": expected,
             "configurations": configurations,
             "claims": claims,
+            "deployed": comparisons,
             "left_out_of_plots": left_out,
             "report": out_dir.join("report.md"),
         });
@@ -253,6 +447,19 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>, json: bool) -> Result<ExitCo
         );
         for c in &claims {
             out!("  {:<8} {}", c.verdict, c.claim.name);
+        }
+        for c in &comparisons {
+            let ratio = |r: Option<f64>| r.map_or_else(|| "—".to_string(), |r| format!("{r:.3}"));
+            out!(
+                "  deployed ({}) {}: {} seeds; clusters visited {} vs {} in-process (×{}), UAV distance ×{}",
+                c.channel,
+                c.configuration,
+                c.pairs.len(),
+                fmt_num(c.clusters_visited.1),
+                fmt_num(c.clusters_visited.0),
+                ratio(c.clusters_ratio),
+                ratio(c.uav_distance_ratio)
+            );
         }
         if !left_out.is_empty() {
             out!(
@@ -654,6 +861,8 @@ mod tests {
             bytes_sent_maps: 0,
             wall_s: 1.0,
             robots: Vec::new(),
+            deployed: None,
+            process_problems: Vec::new(),
         }
     }
 
@@ -693,6 +902,58 @@ mod tests {
         let mut rows: Vec<TrialRow> = ["a1", "a3", "a5", "off", "on"].iter().map(|c| row(c, 1, 2)).collect();
         rows.extend(["relay-none", "relay-all"].iter().map(|c| row(c, 1, 0)));
         assert_eq!(claim_groups(&meta, &rows), vec![vec!["a1", "a3", "a5"], vec!["off", "on"]]);
+    }
+
+    fn uav(distance_m: f64) -> rows::RobotRow {
+        rows::RobotRow {
+            id: "uav1".into(),
+            kind: "uav".into(),
+            distance_m,
+            goals_visited: 0,
+            visit_times_s: Vec::new(),
+            heading_to_goal_fraction: 0.0,
+            collisions: 0,
+            localization_error_m: None,
+            bytes_sent: 0,
+            travel_time_s: None,
+            tree_status: "running".into(),
+        }
+    }
+
+    #[test]
+    fn deployed_rows_are_set_beside_the_in_process_rows_of_their_seeds() {
+        let inside = |seed, clusters, uav_m| {
+            let mut r = row("c", seed, clusters);
+            r.clusters_visited = Some(clusters);
+            r.robots = vec![uav(uav_m)];
+            r
+        };
+        let (a, b) = (inside(1, 4, 1000.0), inside(2, 6, 3000.0));
+        let deployed = |r: &TrialRow, clusters, uav_m| {
+            let mut d = inside(r.seed, clusters, uav_m);
+            d.deployed = Some(TeamChannel::Zenoh);
+            d.wall_s = 99.0;
+            d
+        };
+        // Seed 1 did worse deployed; seed 2 the same (wall time aside); seed 3 has no partner.
+        let (da, db) = (deployed(&a, 3, 600.0), deployed(&b, 6, 3000.0));
+        let mut dc = deployed(&a, 1, 1.0);
+        dc.seed = 3;
+        dc.process_problems = vec!["ugv2 dropped at 5.0 s".into()];
+        let c = deployed_comparisons(&["c".into()], &[a, b, da, db, dc]);
+        assert_eq!(c.len(), 1);
+        let c = &c[0];
+        assert_eq!((c.channel, c.pairs.len(), c.unpaired_seeds.clone()), (TeamChannel::Zenoh, 2, vec![3]));
+        assert_eq!(c.clusters_visited, (5.0, 4.5));
+        assert_eq!(c.clusters_ratio, Some(0.9));
+        assert_eq!(c.uav_distance_m, (2000.0, 1800.0));
+        assert_eq!(c.uav_distance_ratio, Some(0.9));
+        assert_eq!(c.pairs.iter().map(|p| p.identical).collect::<Vec<_>>(), [false, true]);
+        let md = deployed_markdown(&[c.clone()]);
+        assert!(md.contains("| c | zenoh | 2 | 5.00 | 4.50 | 0.900 |"), "{md}");
+        assert!(md.contains("c/3 (zenoh)"), "{md}");
+        // No deployed rows: no section.
+        assert!(deployed_markdown(&deployed_comparisons(&["c".into()], &[row("c", 1, 2)])).is_empty());
     }
 
     #[test]

@@ -14,7 +14,7 @@ use spomp_core::{RobotId, Time};
 use spomp_sim::run::{RunSummary, SeamInput, SimObserver};
 use spomp_teamstate::{SyncMessage, TierSet};
 
-use super::spec::Metric;
+use super::spec::{Metric, TeamChannel};
 
 /// The record of the trials, one JSON object a line.
 pub const JSONL: &str = "trials.jsonl";
@@ -109,12 +109,30 @@ pub struct TrialRow {
     pub wall_s: f64,
     /// Each robot, in team order.
     pub robots: Vec<RobotRow>,
+    /// A deployed trial's team channel (the lockstep farm and one `spomp run` process per
+    /// robot); absent for a trial run in-process.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub deployed: Option<TeamChannel>,
+    /// A deployed trial's process problems: a robot process that did not report in time, was
+    /// dropped from the lockstep (died or hung), failed, or had to be killed at the end.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub process_problems: Vec<String>,
 }
 
 impl TrialRow {
     /// The row without its wall-clock time, for comparing runs.
     pub fn deterministic_part(&self) -> TrialRow {
         TrialRow { wall_s: 0.0, ..self.clone() }
+    }
+
+    /// Vehicle clusters visited (generated worlds), else goals visited.
+    pub fn clusters_or_goals_visited(&self) -> f64 {
+        self.clusters_visited.unwrap_or(self.goals_visited) as f64
+    }
+
+    /// Distance flown by the team's UAVs, metres (their sum).
+    pub fn uav_distance_m(&self) -> f64 {
+        self.robots.iter().filter(|r| r.kind == "uav").map(|r| r.distance_m).sum()
     }
 
     /// The visited share of the world's clusters (generated worlds), else of the goals.
@@ -174,17 +192,36 @@ pub struct ByteCounter {
     pub by_tier: [u64; 3],
 }
 
+impl ByteCounter {
+    /// Counts a message `robot` sent over a link allowing `tiers`.
+    pub fn count(&mut self, robot: &RobotId, tiers: TierSet, bytes: &[u8]) {
+        let map = if tiers == TierSet::ALL { &mut self.full } else { &mut self.small };
+        *map.entry(robot.to_string()).or_default() += bytes.len() as u64;
+        // The robot encoded this message itself: it decodes. Were it ever not to, its bytes
+        // still count, as coordination.
+        let split = SyncMessage::decode(bytes).map_or([bytes.len() as u64, 0, 0], |m| m.bytes_by_tier(bytes.len()));
+        for (total, b) in self.by_tier.iter_mut().zip(split) {
+            *total += b;
+        }
+    }
+
+    /// Adds `other`'s counts to these.
+    pub fn add(&mut self, other: &ByteCounter) {
+        for (mine, theirs) in [(&mut self.full, &other.full), (&mut self.small, &other.small)] {
+            for (robot, b) in theirs {
+                *mine.entry(robot.clone()).or_default() += b;
+            }
+        }
+        for (total, b) in self.by_tier.iter_mut().zip(other.by_tier) {
+            *total += b;
+        }
+    }
+}
+
 impl SimObserver for ByteCounter {
     fn on_seam(&mut self, robot: &RobotId, _now: Time, call: SeamInput<'_>) {
         if let SeamInput::TeamOut { tiers, sent: Some(bytes), .. } = call {
-            let map = if tiers == TierSet::ALL { &mut self.full } else { &mut self.small };
-            *map.entry(robot.to_string()).or_default() += bytes.len() as u64;
-            // The robot encoded this message itself: it decodes. Were it ever not to, its bytes
-            // still count, as coordination.
-            let split = SyncMessage::decode(bytes).map_or([bytes.len() as u64, 0, 0], |m| m.bytes_by_tier(bytes.len()));
-            for (total, b) in self.by_tier.iter_mut().zip(split) {
-                *total += b;
-            }
+            self.count(robot, tiers, bytes);
         }
     }
 
@@ -268,6 +305,8 @@ pub fn row_of(
         bytes_sent_maps: bytes.by_tier[2],
         wall_s: summary.wall_s,
         robots,
+        deployed: None,
+        process_problems: Vec::new(),
     }
 }
 
@@ -276,15 +315,16 @@ pub fn row_of(
 pub const CSV_HEADER: &str = "trial,configuration,seed,config_hash,mission,outcome,end_s,time_limit_s,ugvs,\
 goals_total,goals_visited,clusters_total,clusters_visited,visit_times_s,distance_m,heading_to_goal_fraction,\
 collisions,localization_error_m,bytes_sent,bytes_sent_full_links,bytes_sent_small_links,bytes_sent_coordination,\
-bytes_sent_scans,bytes_sent_maps,wall_s";
+bytes_sent_scans,bytes_sent_maps,wall_s,deployed";
 
 /// A row as a CSV line (with its newline). Configuration and mission names are plain
-/// identifiers, so no field needs quoting.
+/// identifiers, so no field needs quoting; `deployed` is the team channel of a deployed trial,
+/// empty for an in-process one.
 pub fn csv_line(r: &TrialRow) -> String {
     let opt = |v: Option<usize>| v.map_or_else(String::new, |v| v.to_string());
     let times: Vec<String> = r.visit_times_s.iter().map(|t| format!("{t:.1}")).collect();
     format!(
-        "{},{},{},{},{},{},{:.1},{:.1},{},{},{},{},{},{},{:.1},{:.4},{},{},{},{},{},{},{},{},{:.2}\n",
+        "{},{},{},{},{},{},{:.1},{:.1},{},{},{},{},{},{},{:.1},{:.4},{},{},{},{},{},{},{},{},{:.2},{}\n",
         r.trial,
         r.configuration,
         r.seed,
@@ -309,7 +349,8 @@ pub fn csv_line(r: &TrialRow) -> String {
         r.bytes_sent_coordination,
         r.bytes_sent_scans,
         r.bytes_sent_maps,
-        r.wall_s
+        r.wall_s,
+        r.deployed.map_or("", TeamChannel::as_str)
     )
 }
 
@@ -452,6 +493,8 @@ mod tests {
                 tree_status: "running".into(),
                 travel_time_s: Some(90.0),
             }],
+            deployed: None,
+            process_problems: Vec::new(),
         }
     }
 

@@ -135,6 +135,45 @@ pub struct Configuration {
     /// Time limit of this configuration's trials, seconds.
     #[serde(default)]
     pub time_limit_s: Option<f64>,
+    /// Also run each of this configuration's trials deployed, once per team channel listed
+    /// (`radio`: the farm's radio model; `zenoh`: the signed Zenoh link): the simulator as a
+    /// lockstep robot farm and one `spomp run` process per robot, as robots run the mission.
+    /// The rows say which; `spomp experiment report` sets them beside the in-process rows.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub deployed: Vec<TeamChannel>,
+}
+
+/// How the robot processes of a deployed trial exchange their team state.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, JsonSchema, clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum TeamChannel {
+    /// Over the farm's radio model, as in the simulator (a lockstep run is then the in-process
+    /// run, bit for bit).
+    Radio,
+    /// Over the signed Zenoh link between the processes (keys generated per trial), in real
+    /// time: what robots do.
+    Zenoh,
+}
+
+impl TeamChannel {
+    /// Every channel, in the order of trial indices.
+    pub const ALL: [TeamChannel; 2] = [TeamChannel::Radio, TeamChannel::Zenoh];
+
+    /// The channel's name in rows and reports.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            TeamChannel::Radio => "radio",
+            TeamChannel::Zenoh => "zenoh",
+        }
+    }
+}
+
+impl std::fmt::Display for TeamChannel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
 }
 
 /// Overrides of one role.
@@ -303,19 +342,34 @@ pub struct ResolvedConfiguration {
     pub name: String,
     /// The patched mission, loaded and valid.
     pub loaded: LoadedMission,
+    /// The patched mission's text (JSON), whose relative paths resolve in the base mission's
+    /// folder: what a deployed trial's robot processes load.
+    pub patched: String,
     /// Hash of what its trials depend on besides the seed (see [`trial_hash`]).
     pub hash_input: String,
 }
 
-/// One trial: a configuration and a seed.
+/// One trial: a configuration and a seed, run in-process or deployed.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Trial {
-    /// Index in the experiment: configuration index × number of seeds + seed index.
+    /// Index in the experiment: configuration index × number of seeds + seed index for an
+    /// in-process trial; a deployed one's is its in-process trial's plus the number of
+    /// in-process trials times 1 (radio) or 2 (zenoh) (see [`deployed_trial`]).
     pub index: usize,
     /// Index of its configuration.
     pub configuration: usize,
     /// Seed.
     pub seed: u64,
+    /// Run deployed over this team channel; `None`: in-process.
+    pub deployed: Option<TeamChannel>,
+}
+
+/// The deployed trial of in-process trial `trial` over `channel`, in an experiment of
+/// `in_process` in-process trials: its index follows every in-process one, so indices (and
+/// shards) do not depend on which channels a run selects.
+pub fn deployed_trial(trial: &Trial, channel: TeamChannel, in_process: usize) -> Trial {
+    let k = TeamChannel::ALL.iter().position(|c| *c == channel).unwrap_or(0) + 1;
+    Trial { index: trial.index + in_process * k, deployed: Some(channel), ..trial.clone() }
 }
 
 /// An experiment file loaded: the typed file, its resolved configurations and its trials, or
@@ -446,9 +500,21 @@ pub fn load_experiment(
         let seeds = file.seeds.values();
         for c in 0..file.configurations.len() {
             for (s, &seed) in seeds.iter().enumerate() {
-                out.trials.push(Trial { index: c * seeds.len() + s, configuration: c, seed });
+                out.trials.push(Trial { index: c * seeds.len() + s, configuration: c, seed, deployed: None });
             }
         }
+        let in_process = out.trials.len();
+        for (c, configuration) in file.configurations.iter().enumerate() {
+            for channel in TeamChannel::ALL.iter().filter(|ch| configuration.deployed.contains(ch)) {
+                let deployed: Vec<Trial> = out.trials[..in_process]
+                    .iter()
+                    .filter(|t| t.configuration == c)
+                    .map(|t| deployed_trial(t, *channel, in_process))
+                    .collect();
+                out.trials.extend(deployed);
+            }
+        }
+        out.trials.sort_by_key(|t| t.index);
     }
     out.file = Some(file);
     out
@@ -895,7 +961,8 @@ fn resolve(
     // What the trials depend on besides the seed: the base mission's text as written, this
     // configuration's overrides as parsed (its description aside: words change no result), and
     // the experiment-wide time limit.
-    let overrides = Configuration { description: None, ..c.clone() };
+    // Nor where the trials run: a deployed trial is the same trial run another way.
+    let overrides = Configuration { description: None, deployed: Vec::new(), ..c.clone() };
     let hash_input = serde_json::json!({
         "row_format": ROW_FORMAT,
         "base_mission": base_text,
@@ -903,7 +970,7 @@ fn resolve(
         "time_limit_s": file.time_limit_s,
     })
     .to_string();
-    Some(ResolvedConfiguration { name: c.name.clone(), loaded, hash_input })
+    Some(ResolvedConfiguration { name: c.name.clone(), loaded, patched, hash_input })
 }
 
 /// `p` made absolute against the working folder (no file system access).
@@ -955,6 +1022,15 @@ mod tests {
     }
 
     #[test]
+    fn deployed_trials_follow_every_in_process_trial_whatever_the_channels_selected() {
+        let t = Trial { index: 3, configuration: 1, seed: 2, deployed: None };
+        let radio = deployed_trial(&t, TeamChannel::Radio, 10);
+        let zenoh = deployed_trial(&t, TeamChannel::Zenoh, 10);
+        assert_eq!((radio.index, radio.deployed, radio.seed), (13, Some(TeamChannel::Radio), 2));
+        assert_eq!((zenoh.index, zenoh.configuration), (23, 1));
+    }
+
+    #[test]
     fn merge_is_key_by_key() {
         let mut base =
             serde_json::json!({ "profile": "simulation", "global_planner": { "learning": "on", "sharing": "all" } });
@@ -997,7 +1073,7 @@ mod shard_properties {
 
     fn trials(configurations: usize, seeds: usize) -> Vec<Trial> {
         (0..configurations * seeds)
-            .map(|i| Trial { index: i, configuration: i / seeds, seed: (i % seeds) as u64 + 1 })
+            .map(|i| Trial { index: i, configuration: i / seeds, seed: (i % seeds) as u64 + 1, deployed: None })
             .collect()
     }
 
