@@ -155,10 +155,9 @@ impl Dwa {
         region: &SafeRegion,
     ) -> Option<Twist2> {
         let p = &self.params;
-        if !(robot.x.is_finite() && robot.y.is_finite() && robot.yaw.is_finite())
-            || !(distance_m.is_finite() && distance_m >= 0.0)
-            || !(speed_mps.is_finite() && speed_mps > 0.0)
-        {
+        let finite_pose = robot.x.is_finite() && robot.y.is_finite() && robot.yaw.is_finite();
+        let usable = distance_m.is_finite() && distance_m >= 0.0 && speed_mps.is_finite() && speed_mps > 0.0;
+        if !(finite_pose && usable) {
             return None;
         }
         let reach = distance_m + p.lookahead_m;
