@@ -37,7 +37,7 @@ def fill(inside, colour):
 fill(lambda x, y: x < 10 or y < 4 or x >= 46, ROAD)
 fill(lambda x, y: 10 <= x < 46 and y >= 24, BUILDING)
 # The pocket: under the wall (y < 24 m), above the vegetation's edge from (10, 12) to (40, 24).
-MOUTH = float(os.environ.get("WEDGE_MOUTH", "12"))
+MOUTH = 12.0  # width of the pocket at its mouth, metres
 fill(lambda x, y: 10 <= x < 40 and y < 24 and y >= 24 - MOUTH + MOUTH / 30 * (x - 10), GRAVEL)
 for x0 in (50.0, 52.5, 55.0):
     fill(lambda x, y, x0=x0: x0 <= x < x0 + 2 and 18 <= y < 22.5, VEHICLE)
