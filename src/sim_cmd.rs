@@ -649,7 +649,7 @@ impl<W: Write + Seek> RunObserver<W> {
                 let Some(k) = find(&self.goals, goal) else { return false };
                 self.goals[k].visited_by = Some(by.clone());
             }
-            SimEvent::RobotKilled { .. } | SimEvent::MissionEnded { .. } => return false,
+            SimEvent::RobotKilled { .. } | SimEvent::RobotStuck { .. } | SimEvent::MissionEnded { .. } => return false,
         }
         true
     }

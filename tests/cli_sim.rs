@@ -174,3 +174,36 @@ sim: { world: { generate: { size_m: [120, 100], vehicle_clusters: 1, roadblocks:
     assert_eq!(u2["inflation_m"], 0.9, "the robot's own override: {u2}");
     assert_eq!(u2["slope_threshold"], 0.25, "the rest from its role's profile: {u2}");
 }
+
+/// Issue 33: a UGV whose straight way to the goal runs into a dead-end pocket (the tip of a
+/// flat gravel wedge between a building and 1 m vegetation, tests/worlds/wedge) must get
+/// itself out with the shipped goal cycle — no progress detected, backed up, the failed edge
+/// learnt — and visit the goal by the longer road, never standing still for long while driven.
+/// Before, it stayed wedged at the tip until the time limit, the simulator refusing its every
+/// move without a word.
+#[test]
+fn a_ugv_wedged_in_a_dead_end_pocket_gets_itself_out_and_visits_the_goal() {
+    let out_dir = tempfile::tempdir().unwrap();
+    let out = spomp()
+        .current_dir(root())
+        .args(["sim", "tests/worlds/wedge/wedge-mission.yaml", "--allow-dir", "missions/subtrees", "--seed", "1"])
+        .args(["--no-mcap", "--pano-every-s", "0", "--json", "--out"])
+        .arg(out_dir.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let combined: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let run = &combined["runs"][0];
+    assert_eq!(run["outcome"], "complete", "{run}");
+    assert_eq!(run["goals_visited"], 1, "{run}");
+    let ugv1 = run["robots"].as_array().unwrap().iter().find(|r| r["id"] == "ugv1").unwrap();
+    assert_eq!(ugv1["goals_visited"], 1, "{ugv1}");
+    let still = ugv1["longest_motionless_driving_s"].as_f64().unwrap();
+    assert!(still <= 120.0, "motionless for {still} s while driven (issue 33 bound: 120 s): {ugv1}");
+    // A refusal the simulator counted is reported too, never silent.
+    let stuck = ugv1["stuck_events"].as_u64().unwrap();
+    let problems = run["problems"].as_array().unwrap();
+    let reported = problems.iter().any(|p| p["robot"] == "ugv1" && p["message"].as_str().unwrap().contains("stuck at"));
+    assert_eq!(stuck > 0, reported, "stuck events {stuck} against problems {problems:?}");
+}

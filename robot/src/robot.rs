@@ -61,7 +61,15 @@ pub struct Robot {
     tick_hz: f64,
     /// Blackboard entries kept across reboots (the role's `persist`).
     persist: Vec<String>,
+    /// The first tick that found the robot's first inputs missing ([`Robot::tick`]), and
+    /// whether that wait was reported.
+    waiting_since: Option<Time>,
+    wait_reported: bool,
 }
+
+/// A robot still without its first inputs this long after its first tick reports it once,
+/// seconds.
+pub const FIRST_INPUTS_REPORT_S: f64 = 10.0;
 
 /// Why a robot's saved state was not taken. Nothing of it was.
 #[derive(Debug, thiserror::Error)]
@@ -117,7 +125,15 @@ impl Robot {
         let build = BuildOptions { base_dir: Some(loaded.base_dir()), map_origin: setup.map_origin };
         let tree = build_executor(role, registry, &robot_id, start, build)?;
         let tick_hz = if setup.tick_hz.is_finite() && setup.tick_hz > 0.0 { setup.tick_hz } else { 10.0 };
-        Ok(Robot { runtime, tree, pose_input: setup.pose_input, tick_hz, persist: role.persist.clone() })
+        Ok(Robot {
+            runtime,
+            tree,
+            pose_input: setup.pose_input,
+            tick_hz,
+            persist: role.persist.clone(),
+            waiting_since: None,
+            wait_reported: false,
+        })
     }
 
     // --- identity -------------------------------------------------------------------------------
@@ -244,13 +260,44 @@ impl Robot {
     /// (success or failure) stays finished: it is not ticked again and the robot commands
     /// nothing, so a mission's `all_trees_done` sees every robot done together. A role that
     /// should run again says so with `repeat`. Upkeep ([`Self::maintain`]) goes on.
+    ///
+    /// The tree does not start before the robot's first inputs ([`Self::has_first_inputs`]): on
+    /// a robot the processes and topics come up in any order, and a tree ticked first would see
+    /// no pose, fail its first node and, finished, stay failed. Until then the tree stays idle,
+    /// the robot commands nothing, and a wait longer than [`FIRST_INPUTS_REPORT_S`] is reported
+    /// once.
     pub fn tick(&mut self, now: Time, observer: Option<&mut dyn TreeObserver>) -> Status {
         self.runtime.begin_tick();
         let last = self.tree.status();
         if last.is_done() {
             return last;
         }
+        if !self.has_first_inputs() {
+            let since = *self.waiting_since.get_or_insert(now);
+            if !self.wait_reported && now.secs_since(since) >= FIRST_INPUTS_REPORT_S {
+                self.wait_reported = true;
+                let missing = match self.kind() {
+                    RobotKind::Ugv => "odometry and a pose estimate",
+                    _ => "a pose",
+                };
+                self.runtime.report(format!(
+                    "tree not started: no {missing} after {FIRST_INPUTS_REPORT_S:.0} s (it starts when they arrive)"
+                ));
+            }
+            return last;
+        }
         self.tree.tick(now, &mut self.runtime, observer)
+    }
+
+    /// Whether the inputs the tree needs to start have arrived: a UGV's odometry and pose
+    /// estimate, a UAV's pose (GPS); a basestation has none to wait for (its position is
+    /// surveyed).
+    pub fn has_first_inputs(&self) -> bool {
+        match self.kind() {
+            RobotKind::Ugv => self.runtime.odometry().is_some() && self.runtime.pose().is_some(),
+            RobotKind::Uav => self.runtime.pose().is_some(),
+            RobotKind::Basestation => true,
+        }
     }
 
     /// Halts the tree (mission end, robot killed): running nodes stop and clean up.
@@ -349,5 +396,60 @@ impl Robot {
     /// The tree's executor, mutable (adapters inject blackboard entries and events).
     pub fn tree_mut(&mut self) -> &mut TreeExecutor<RobotRuntime> {
         &mut self.tree
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use spomp_behaviors::mission::load_mission_str;
+    use spomp_core::{ClassTable, GridSpec, Odometry, Pose2};
+
+    use super::*;
+
+    /// A UGV whose role fails at its first tick (as a drive does that finds no pose).
+    fn robot_failing_at_once() -> Robot {
+        let text = "mission: first-inputs\n\
+             team:\n  - { id: ugv1, kind: ugv, role: r, priority: 1, start: { x_m: 5, y_m: 5 }, localization: { mode: ground_truth } }\n\
+             roles:\n  r: { tree: { fail: } }\n\
+             complete_when: time_limit\ntime_limit_s: 100\n";
+        let loaded =
+            load_mission_str(text, std::path::Path::new("first.yaml"), &crate::registry(), &Default::default());
+        assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
+        let area = OperatingArea {
+            classes: ClassTable::default_table(),
+            grid: GridSpec::new(Point2::new(0.0, 0.0), 0.5, 40, 40),
+            prior_map: None,
+        };
+        Robot::from_mission(&loaded, "ugv1", &area, 1, &crate::registry()).unwrap()
+    }
+
+    /// Issue 32: on a robot the processes come up in any order; a tree ticked before the first
+    /// odometry and pose failed at once and, finished, stayed failed for the whole mission.
+    #[test]
+    fn the_tree_does_not_start_before_the_robots_first_inputs() {
+        let mut r = robot_failing_at_once();
+        let t = |s: f64| Time::from_secs_f64(s);
+        assert!(!r.has_first_inputs());
+        assert!(!r.tick(t(0.0), None).is_done(), "not started without inputs");
+        assert!(r.take_problems().iter().all(|p| !p.contains("tree not started")));
+        // A long wait is reported once.
+        assert!(!r.tick(t(FIRST_INPUTS_REPORT_S + 1.0), None).is_done());
+        assert!(!r.tick(t(FIRST_INPUTS_REPORT_S + 2.0), None).is_done());
+        let waits: Vec<String> = r.take_problems().into_iter().filter(|p| p.contains("tree not started")).collect();
+        assert_eq!(waits.len(), 1, "{waits:?}");
+        assert!(r.command().is_none_or(|c| c == Twist2::ZERO));
+        // Odometry alone is not enough for a UGV: its pose too.
+        r.on_odometry(Odometry { stamp: t(12.0), ..Default::default() });
+        assert!(!r.tick(t(12.0), None).is_done());
+        r.on_external_pose(PoseEstimate {
+            stamp: t(12.1),
+            pose: Pose2::new(5.0, 5.0, 0.0),
+            confidence: 1.0,
+            ..Default::default()
+        });
+        assert!(r.has_first_inputs());
+        assert_eq!(r.tick(t(12.1), None), Status::Failure, "the tree runs once the inputs are in");
     }
 }

@@ -9,7 +9,7 @@
 //!       terrain: { inflation_m: 0.9 }  # spomp-local-planner TerrainParams
 //!       control: { max_speed_mps: 1.0 }  # DwaParams
 //!       global_planner: { learning: off, graph_updates: off, sharing: all }
-//!       watchdog: { stuck_timeout_s: 45 }
+//!       watchdog: { stuck_timeout_s: 45, no_progress_timeout_s: 120 }
 //! ```
 //!
 //! Every default and every validity rule is the skill's own: a profile is a named set of the
@@ -45,13 +45,19 @@ pub enum NavigationProfile {
 pub struct WatchdogParams {
     /// A driving node (`navigate_to`, `navigate_local`, `return_home`) that made less than 1 m
     /// of progress for this long is stuck (a node's own `stuck_timeout_s` port overrides it),
-    /// seconds.
+    /// seconds. A `navigate_to` or `return_home` whose robot has not moved at all (odometry
+    /// within 0.25 m) for this long fails with `no_progress`.
     pub stuck_timeout_s: f64,
+    /// A `navigate_to` or `return_home` whose robot has not come 1 m nearer its target (straight
+    /// line, the best distance so far) for this long fails with `no_progress`, however often it
+    /// replanned: replans extend the time limit, this bound they do not (`navigate_to`'s own
+    /// `no_progress_timeout_s` port overrides it), seconds.
+    pub no_progress_timeout_s: f64,
 }
 
 impl Default for WatchdogParams {
     fn default() -> Self {
-        WatchdogParams { stuck_timeout_s: 30.0 }
+        WatchdogParams { stuck_timeout_s: 30.0, no_progress_timeout_s: 120.0 }
     }
 }
 
@@ -60,6 +66,12 @@ impl WatchdogParams {
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
         if !(self.stuck_timeout_s.is_finite() && self.stuck_timeout_s > 0.0 && self.stuck_timeout_s <= 86_400.0) {
             return Err(("stuck_timeout_s", "must be in (0, 86400] seconds".into()));
+        }
+        if !(self.no_progress_timeout_s.is_finite()
+            && self.no_progress_timeout_s > 0.0
+            && self.no_progress_timeout_s <= 86_400.0)
+        {
+            return Err(("no_progress_timeout_s", "must be in (0, 86400] seconds".into()));
         }
         Ok(())
     }

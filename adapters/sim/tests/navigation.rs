@@ -380,3 +380,37 @@ fn facing_a_curb_it_takes_the_ramp_to_a_goal_on_the_sidewalk() {
         );
     }
 }
+
+/// Issue 33's recovery: a robot nose to a wall (0.3 m from it, facing it) backs up over the
+/// free street behind it, and turns in place; neither touches anything.
+#[test]
+fn back_up_reverses_over_free_ground_and_spin_turns_in_place() {
+    let mut w = street();
+    fill(&mut w, (30.0, 31.0), (-6.0, 6.0), BUILDING, 10.0);
+    let start = Pose2::new(29.2, 0.0, 0.0);
+    let tree = "sequence: [ { wait: { duration_s: 1.5 } }, { back_up: { distance_m: 1.5, speed_mps: 0.3 } }, { spin: { angle_deg: -120 } } ]";
+    let mut run = one_node("back-up", w, start, tree, false);
+    let status = run.run(40.0);
+    assert_eq!(status, Status::Success, "{}", run.summary());
+    let p = run.ugv.pose();
+    assert!(p.x < 29.2 - 1.4 && p.x > 29.2 - 2.0 && p.y.abs() < 0.1, "backed straight: {}", run.summary());
+    assert!((p.yaw + 120f64.to_radians()).abs() < 0.15, "turned clockwise 120°: yaw {:.2}", p.yaw);
+    assert_eq!(run.ugv.collisions(), 0, "{}", run.summary());
+    assert_eq!(run.rt.command(), Some(Twist2::ZERO));
+}
+
+/// Backing up is never blind: with a wall 1 m behind, the robot does not reverse 1.5 m into it;
+/// the node fails at once, saying why, and the robot stays put.
+#[test]
+fn back_up_refuses_ground_behind_that_is_not_known_safe() {
+    let mut w = street();
+    fill(&mut w, (20.0, 21.0), (-6.0, 6.0), BUILDING, 10.0);
+    let start = Pose2::new(22.0, 0.0, 0.0);
+    let tree = "sequence: [ { wait: { duration_s: 1.5 } }, { back_up: { distance_m: 1.5 } } ]";
+    let mut run = one_node("back-up-blocked", w, start, tree, false);
+    let status = run.run(20.0);
+    assert_eq!(status, Status::Failure, "{}", run.summary());
+    assert!(run.position().x > 21.9, "it did not move back: {}", run.summary());
+    assert_eq!(run.ugv.collisions(), 0, "{}", run.summary());
+    assert!(run.reports.iter().any(|r| r.contains("not backing up blind")), "{:?}", run.reports);
+}

@@ -1,4 +1,4 @@
-//! Generic leaves: waiting, flags, events, mission time.
+//! Generic leaves: waiting, flags, string checks, events, mission time.
 
 use std::sync::Arc;
 
@@ -41,6 +41,16 @@ pub fn register_generic<E>(r: &mut NodeRegistry<E>) {
         "Succeeds if the boolean `flag` is true; fails if false or never written.",
         vec![PortSpec::input("flag", Bool, "Entry to read.")],
         |p| Ok(Box::new(CheckFlag { flag: p.get("flag") })),
+    ));
+    r.register(NodeTypeSpec::leaf(
+        "check_string",
+        Condition,
+        "Succeeds if the string entry `value` equals `equals` (e.g. a driving node's `failure_reason` is `no_progress`); fails if it differs or was never written.",
+        vec![
+            PortSpec::input("value", Str, "Entry to read."),
+            PortSpec::input("equals", Str, "The string it must equal."),
+        ],
+        |p| Ok(Box::new(CheckString { value: p.get("value"), equals: p.get("equals") })),
     ));
     r.register(NodeTypeSpec::leaf(
         "raise_event",
@@ -114,6 +124,20 @@ struct CheckFlag {
 impl<E> Behavior<E> for CheckFlag {
     fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if self.flag.get::<bool>(ctx.blackboard) == Some(true) { Status::Success } else { Status::Failure }
+    }
+}
+
+struct CheckString {
+    value: Binding,
+    equals: Binding,
+}
+
+impl<E> Behavior<E> for CheckString {
+    fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
+        match (self.value.get::<Arc<str>>(ctx.blackboard), self.equals.get::<Arc<str>>(ctx.blackboard)) {
+            (Some(v), Some(e)) if v == e => Status::Success,
+            _ => Status::Failure,
+        }
     }
 }
 

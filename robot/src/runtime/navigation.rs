@@ -369,6 +369,10 @@ impl NavStack {
                 for (scan, own) in self.scans_since_planner_left.drain(..) {
                     let _ = planner.add_scan(&scan, own);
                 }
+                // Edges failed while the copy was out (no-ops for those it already knew).
+                for &(a, b) in &self.blocked_edges {
+                    planner.mark_failed_edge(a, b);
+                }
                 self.global = *planner;
                 if let Some(v) = map_version {
                     self.map_version_seen = Some(v);
@@ -389,12 +393,17 @@ impl NavStack {
         self.global.nodes().next().is_some()
     }
 
-    /// Records that the robot could not get across the edge between `a` and `b`.
+    /// Records that the robot could not get across the edge between `a` and `b`: the global
+    /// planner marks the edge failed from experience (`GlobalPlanner::mark_failed_edge`: removed
+    /// for good, its own observation locks it), so no later plan of any node sends the robot
+    /// back the same way. The record is kept here as well, to be given again to a planner copy
+    /// that was out for upkeep ([`NavStack::begin_planner_work`]) when it comes back.
     pub fn block_edge(&mut self, a: NodeId, b: NodeId) {
         let key = if a.0 <= b.0 { (a, b) } else { (b, a) };
         if !self.blocked_edges.contains(&key) {
             self.blocked_edges.push(key);
         }
+        self.global.mark_failed_edge(a, b);
     }
 
     /// Plans from `from` to `to` on the global planner, avoiding the edges the robot recorded as

@@ -84,6 +84,21 @@ impl EdgeExperience {
     }
 }
 
+impl EdgeExperience {
+    /// The robot itself failed to drive the edge (it made no progress along it): the most
+    /// direct of its own observations, so the edge is marked not_trav and locked at once, as
+    /// its own not_trav scans lock an edge (removed for good). Already locked: nothing changes.
+    pub fn failed_drive(&mut self) -> Transition {
+        if self.locked {
+            return Transition::None;
+        }
+        self.state = EdgeState::NotTrav;
+        self.locked = true;
+        self.trav_streak = 0;
+        Transition::Removed
+    }
+}
+
 /// Per-cell votes from scans: +1 inside a safe region, −1 just beyond a known obstacle; each scan
 /// votes at most once per cell.
 ///
@@ -177,6 +192,19 @@ mod tests {
         assert_eq!(e.observe(NotTrav, true, &p), Transition::Removed);
         assert!(e.locked);
         assert_eq!(e.observe(Trav, true, &p), Transition::None, "locked forever");
+    }
+
+    #[test]
+    fn a_failed_drive_locks_the_edge_not_trav_at_once() {
+        let p = ExperienceParams::default();
+        let mut e = EdgeExperience::default();
+        e.observe(Trav, true, &p);
+        e.observe(Trav, true, &p);
+        assert_eq!(e.state, EdgeState::Trav);
+        assert_eq!(e.failed_drive(), Transition::Removed);
+        assert!(e.locked && e.state == EdgeState::NotTrav);
+        assert_eq!(e.observe(Trav, false, &p), Transition::None, "no scan brings it back");
+        assert_eq!(e.failed_drive(), Transition::None);
     }
 
     #[test]

@@ -185,6 +185,42 @@ fn own_observations_of_a_roadblock_remove_the_edge_and_the_path_reroutes() {
 }
 
 #[test]
+fn an_edge_the_robot_failed_to_drive_is_never_planned_again() {
+    let map = ring_map();
+    let mut p = planner(GlobalPlannerParams::default(), &map);
+    let path = p.plan(RING_START, RING_GOAL).unwrap();
+    assert!(!goes_north(&path));
+    let (edge, pose) = pose_before_block(&p, &path);
+    let k = path.edges.iter().position(|&e| e == edge).unwrap();
+    let (a, b) = (path.nodes[k], path.nodes[k + 1]);
+    // The scans saw the way open (trav): experience of the drive overrules them.
+    let open_scan = synthetic::raycast_scan("ugv1", Time::ZERO, pose, 720, 30.0, 0.25, synthetic::city_probe(&map));
+    p.add_scan(&open_scan, true).unwrap();
+    p.add_scan(&open_scan, true).unwrap();
+    assert_eq!(p.edge_state(edge), Some(EdgeState::Trav));
+    assert!(p.mark_failed_edge(b, a), "either order names the edge");
+    assert_eq!(p.edge_state(edge), None, "removed");
+    assert!(p.edge_between(a, b).is_none());
+    assert!(!p.mark_failed_edge(a, b), "already gone");
+    assert!(goes_north(&p.plan(RING_START, RING_GOAL).unwrap()), "not sent back the same way");
+    // Neither the robot's own scans nor a map update bring it back.
+    p.add_scan(&open_scan, true).unwrap();
+    let mut newer = map.clone();
+    newer.version += 1;
+    newer.rgb[0] = [1, 2, 3];
+    p.update_map(&newer).unwrap();
+    assert!(p.edge_between(a, b).is_none());
+    assert!(goes_north(&p.plan(RING_START, RING_GOAL).unwrap()));
+
+    // With graph updates off (the paper's ablation) experience changes nothing.
+    let mut params = GlobalPlannerParams::default();
+    params.experience.graph_updates = false;
+    let mut frozen = planner(params, &map);
+    assert!(!frozen.mark_failed_edge(a, b));
+    assert_eq!(frozen.plan(RING_START, RING_GOAL).unwrap(), path);
+}
+
+#[test]
 fn other_robots_evidence_never_removes_an_edge() {
     let map = ring_map();
     let mut p = planner(GlobalPlannerParams::default(), &map);

@@ -89,6 +89,9 @@ impl DwaParams {
     }
 }
 
+/// Spacing of the points [`Dwa::reverse_step`] checks behind the robot, metres.
+const REVERSE_CHECK_SPACING_M: f64 = 0.05;
+
 /// The DWA controller. Holds only its parameters; a step allocates nothing.
 #[derive(Clone, Debug)]
 pub struct Dwa {
@@ -134,6 +137,43 @@ impl Dwa {
             (clip_v(v - p.max_accel_mps2 * dt), clip_v(v + p.max_accel_mps2 * dt)),
             (clip_w(w - p.max_angular_accel_radps2 * dt), clip_w(w + p.max_angular_accel_radps2 * dt)),
         )
+    }
+
+    /// A recovery step backwards: the command that reverses straight at up to `speed_mps`
+    /// (within one control period of acceleration from `current`), or `None` when the ground
+    /// behind is not known safe. Normal control ([`Dwa::step_in_region`]) never reverses; a
+    /// recovery behaviour that backs a wedged robot out uses this instead, and it must still not
+    /// drive blind: every point of the straight line from the robot (`robot`, its pose in the
+    /// region's frame) to `distance_m` behind it, plus the controller's `lookahead_m`, must lie
+    /// in the safe region (sampled every 5 cm).
+    pub fn reverse_step(
+        &self,
+        current: Twist2,
+        robot: Pose2,
+        distance_m: f64,
+        speed_mps: f64,
+        region: &SafeRegion,
+    ) -> Option<Twist2> {
+        let p = &self.params;
+        let finite_pose = robot.x.is_finite() && robot.y.is_finite() && robot.yaw.is_finite();
+        let usable = distance_m.is_finite() && distance_m >= 0.0 && speed_mps.is_finite() && speed_mps > 0.0;
+        if !(finite_pose && usable) {
+            return None;
+        }
+        let reach = distance_m + p.lookahead_m;
+        let samples = (reach / REVERSE_CHECK_SPACING_M).ceil().max(1.0) as usize;
+        let (s, c) = robot.yaw.sin_cos();
+        let clear = (1..=samples).all(|k| {
+            let back = reach * k as f64 / samples as f64;
+            region.contains(Point2::new(robot.x - c * back, robot.y - s * back))
+        });
+        if !clear {
+            return None;
+        }
+        let dt = 1.0 / p.rate_hz;
+        let v = if current.v.is_finite() { current.v } else { 0.0 };
+        let target = -speed_mps.min(p.max_speed_mps);
+        Some(Twist2 { v: v + (target - v).clamp(-p.max_accel_mps2 * dt, p.max_accel_mps2 * dt), omega: 0.0 })
     }
 
     /// One control step with the region in the robot's current frame: `goal` is the local goal
@@ -204,5 +244,35 @@ impl Dwa {
         }
         self.last_cost = best.0;
         best.1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+
+    /// A region of 8 bins, 5 m everywhere but `behind_m` straight behind (bin 4, azimuth π).
+    fn region(behind_m: f32) -> SafeRegion {
+        let mut ranges = [5.0f32; 8];
+        ranges[4] = behind_m;
+        SafeRegion::from_ranges(&ranges, &[false; 8], 1.0).unwrap()
+    }
+
+    #[test]
+    fn reversing_needs_known_safe_ground_behind() {
+        let dwa = Dwa::new(DwaParams::default()).unwrap();
+        let open = dwa.reverse_step(Twist2::ZERO, Pose2::default(), 1.5, 0.3, &region(5.0)).unwrap();
+        assert!(open.v < 0.0 && open.v >= -0.3 && open.omega == 0.0, "{open:?}");
+        // An obstacle 1 m behind: no backing 1.5 m into it.
+        assert!(dwa.reverse_step(Twist2::ZERO, Pose2::default(), 1.5, 0.3, &region(1.0)).is_none());
+        // Turned around since the panorama (facing −x): "behind" is the open side ahead of it.
+        let turned = Pose2::new(0.0, 0.0, std::f64::consts::PI);
+        assert!(dwa.reverse_step(Twist2::ZERO, turned, 1.5, 0.3, &region(1.0)).is_some());
+        // Accelerates within the window: from standstill, one period of 2 m/s² at 10 Hz.
+        let slow = dwa.reverse_step(Twist2::ZERO, Pose2::default(), 1.5, 1.0, &region(5.0)).unwrap();
+        assert!((slow.v + 0.2).abs() < 1e-9, "{slow:?}");
+        assert!(dwa.reverse_step(Twist2::ZERO, Pose2::default(), f64::NAN, 0.3, &region(5.0)).is_none());
     }
 }

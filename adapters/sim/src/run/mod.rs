@@ -36,7 +36,7 @@ use spomp_behaviors::mission::{LoadedMission, MissionFile};
 use spomp_behaviors::trace::{Recorder, TransitionRecord};
 use spomp_core::{
     AerialMap, GoalId, Odometry, PanoramaFrame, PanoramaGeometry, Point2, Pose2, PoseEstimate, ReachabilityScan,
-    RobotId, RobotKind, Time, Twist2,
+    RobotId, RobotKind, Time, Twist2, normalize_angle,
 };
 use spomp_mapping::{CompressionParams, PngLevel};
 use spomp_robot::runtime::{FinishedWork, WorkKind};
@@ -173,6 +173,14 @@ pub enum SimEvent {
         /// Visitor.
         by: String,
     },
+    /// The simulator refused a UGV's commanded motion for [`STUCK_AFTER_S`] on end (wedged: every
+    /// move collides); counted in its summary's `stuck_events` and reported as a problem.
+    RobotStuck {
+        /// Robot id.
+        robot: String,
+        /// Where (ground truth), metres.
+        position: [f64; 2],
+    },
     /// A robot was killed (fault injection).
     RobotKilled {
         /// Robot id.
@@ -301,6 +309,16 @@ struct SimRobot {
     map_shown: Option<u64>,
     /// The other UGVs' bodies this step, as obstacles for this one (a UGV's; reused).
     other_bodies: Vec<Obstacle>,
+    /// Since when every commanded motion of this UGV was refused (none moved it), and whether
+    /// that stretch was counted as a stuck event yet.
+    refused_since: Option<Time>,
+    refusal_counted: bool,
+    /// Times the simulator refused its commanded motion for [`STUCK_AFTER_S`] on end.
+    stuck_events: u64,
+    /// Where and since when it has stood still (within [`MOTIONLESS_RADIUS_M`]) while its tree
+    /// drove it (sampled once a second), and the longest such stretch, seconds.
+    still_since: Option<(Point2, Time)>,
+    longest_still_driving_s: f64,
 }
 
 impl SimRobot {
@@ -522,6 +540,14 @@ fn join_on_rayon(a: &mut (dyn FnMut() + Send), b: &mut (dyn FnMut() + Send)) {
 /// Most bytes a link can bank for later (a few full map versions).
 const MAX_LINK_CREDIT_BYTES: u64 = 32 * 1024 * 1024;
 
+/// A UGV whose every commanded motion was refused for this long is stuck (a counted event and
+/// a problem), seconds.
+pub const STUCK_AFTER_S: f64 = 5.0;
+
+/// A robot that stays within this distance of where it stood is motionless (summary's
+/// `longest_motionless_driving_s`), metres.
+pub const MOTIONLESS_RADIUS_M: f64 = 0.25;
+
 /// Most distinct problem messages kept in a summary.
 const MAX_PROBLEMS: usize = 200;
 
@@ -624,6 +650,11 @@ impl Simulation {
                 external: false,
                 map_shown: None,
                 other_bodies: Vec::new(),
+                refused_since: None,
+                refusal_counted: false,
+                stuck_events: 0,
+                still_since: None,
+                longest_still_driving_s: 0.0,
             });
         }
         let time_limit_s = options.time_limit_s.unwrap_or(mission.time_limit_s);
@@ -785,6 +816,7 @@ impl Simulation {
         }
         self.apply_kills(observer);
         self.move_bodies(dt);
+        self.report_stuck(observer);
         self.sense(observer);
         self.exchange_work(observer);
         if now >= self.next_sync {
@@ -815,6 +847,7 @@ impl Simulation {
             for r in &mut self.robots {
                 r.trajectory.push(r.truth().position());
             }
+            self.track_still();
             self.track_goals(observer);
             self.show_maps(observer);
             self.check_end(observer);
@@ -836,6 +869,46 @@ impl Simulation {
                 observer.on_map(&r.id, now, map.map());
                 r.map_shown = published;
                 self.map_shown = true;
+            }
+        }
+    }
+
+    /// Counts and reports each UGV whose commanded motion the simulator has refused for
+    /// [`STUCK_AFTER_S`] on end: never a silent refusal.
+    fn report_stuck(&mut self, observer: &mut dyn SimObserver) {
+        let now = self.now;
+        for r in &mut self.robots {
+            let Some(since) = r.refused_since else { continue };
+            if r.refusal_counted || now.secs_since(since) < STUCK_AFTER_S {
+                continue;
+            }
+            r.refusal_counted = true;
+            r.stuck_events += 1;
+            let at = r.truth().position();
+            let message = format!(
+                "simulator: stuck at ({:.1}, {:.1}): every commanded motion refused for {STUCK_AFTER_S:.0} s (wedged against obstacles)",
+                at.x, at.y
+            );
+            observer.on_problem(&r.id, now, &message);
+            note_problem(&mut self.problems, &r.id, message, now);
+            observer.on_event(now, &SimEvent::RobotStuck { robot: r.id.to_string(), position: [at.x, at.y] });
+        }
+    }
+
+    /// Once a second: the time each robot has stood still while its tree drove it (a velocity
+    /// command in force, or a drive with a planned path running).
+    fn track_still(&mut self) {
+        let now = self.now;
+        for r in &mut self.robots {
+            let driving = r.alive()
+                && r.kind == RobotKind::Ugv
+                && (r.command.v.abs() > 1e-3 || r.command.omega.abs() > 1e-3 || r.robot.planned_path().is_some());
+            let here = r.truth().position();
+            match r.still_since {
+                Some((at, since)) if driving && at.distance(here) <= MOTIONLESS_RADIUS_M => {
+                    r.longest_still_driving_s = r.longest_still_driving_s.max(now.secs_since(since));
+                }
+                _ => r.still_since = driving.then_some((here, now)),
             }
         }
     }
@@ -881,7 +954,18 @@ impl Simulation {
                     ugv_index += 1;
                     let cmd = if alive { r.command } else { Twist2::ZERO };
                     others_than(&self.obstacles, own, &mut r.other_bodies);
-                    ugv.step_among(world, cmd, dt, &r.other_bodies);
+                    let before = ugv.pose();
+                    let step = ugv.step_among(world, cmd, dt, &r.other_bodies);
+                    // A command the body did not follow at all: refused (a collision is counted
+                    // once per contact; a robot wedged in contact is refused step after step).
+                    let commanded = cmd.v.abs() > 1e-3 || cmd.omega.abs() > 1e-3;
+                    let moved = step.moved_m > 1e-6 || normalize_angle(ugv.pose().yaw - before.yaw).abs() > 1e-6;
+                    if commanded && step.blocked && step.moved_m <= 1e-6 {
+                        r.refused_since.get_or_insert(self.now);
+                    } else if moved {
+                        r.refused_since = None;
+                        r.refusal_counted = false;
+                    }
                 }
                 Body::Uav { uav, flying_to, .. } => {
                     if !alive {
@@ -1458,6 +1542,8 @@ impl Simulation {
                     heading_to_goal_fraction: if end_s > 0.0 { heading / end_s } else { 0.0 },
                     travel_time_s: travel_time_s(&r.trajectory),
                     collisions,
+                    stuck_events: r.stuck_events,
+                    longest_motionless_driving_s: r.longest_still_driving_s,
                     localization: match r.kind {
                         RobotKind::Ugv => r.pose_input.name().to_string(),
                         RobotKind::Uav => "gps".to_string(),

@@ -95,6 +95,15 @@ pub struct RobotSummary {
     pub travel_time_s: Option<f64>,
     /// Times it drove into an obstacle.
     pub collisions: u64,
+    /// Times the simulator refused its commanded motion for `STUCK_AFTER_S` (5 s) on end
+    /// (wedged: every move collides), each also reported as a problem (UGVs).
+    #[serde(default)]
+    pub stuck_events: u64,
+    /// Longest time it stood still (within 0.25 m, sampled once a second) while its tree was
+    /// driving it (a velocity command in force, or a drive with a planned path running),
+    /// seconds (UGVs).
+    #[serde(default)]
+    pub longest_motionless_driving_s: f64,
     /// Where its pose came from: `cross_view`, `ground_truth` or `gps`.
     pub localization: String,
     /// Localization error against ground truth, per panorama (UGVs).

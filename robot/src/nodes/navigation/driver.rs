@@ -12,6 +12,9 @@ pub(super) enum Reason {
     NoPath,
     Stuck,
     TimeLimit,
+    /// The robot came no nearer its target within the no-progress bound, or did not move at all
+    /// for the stuck timeout: what recovery behaviours (`back_up`, `spin`) are for.
+    NoProgress,
     NoNavigation,
 }
 
@@ -21,6 +24,7 @@ impl Reason {
             Reason::NoPath => "no_path",
             Reason::Stuck => "stuck",
             Reason::TimeLimit => "time_limit",
+            Reason::NoProgress => "no_progress",
             Reason::NoNavigation => "no_navigation",
         }
     }
@@ -51,6 +55,13 @@ pub(super) struct Driver {
     /// point, and when: a robot that stays near one point is stuck, whatever its route says.
     pub(super) pinned_at: Option<Point2>,
     pub(super) pinned_since: Time,
+    /// Nearest the robot came to the target (straight line), and when it last got
+    /// [`PROGRESS_MARGIN_M`] nearer: the no-progress bound, which replans do not reset.
+    pub(super) closest_m: f64,
+    pub(super) closest_at: Time,
+    /// Odometry position the robot has stayed within [`MOTIONLESS_RADIUS_M`] of, and since when.
+    pub(super) still_at: Option<Point2>,
+    pub(super) still_since: Time,
 }
 
 impl Driver {
@@ -65,6 +76,10 @@ impl Driver {
             best_at: Time::ZERO,
             pinned_at: None,
             pinned_since: Time::ZERO,
+            closest_m: f64::INFINITY,
+            closest_at: Time::ZERO,
+            still_at: None,
+            still_since: Time::ZERO,
         }
     }
 
@@ -82,7 +97,46 @@ impl Driver {
         self.best_at = now;
         self.pinned_at = None;
         self.pinned_since = now;
+        self.closest_m = f64::INFINITY;
+        self.closest_at = now;
+        self.still_at = None;
+        self.still_since = now;
         Ok(())
+    }
+
+    /// The no-progress check of a drive toward a target `distance_m` away (straight line), with
+    /// the robot's odometry position `odom`: why the drive makes no progress, if it does not.
+    /// Two signs: the robot has not come [`PROGRESS_MARGIN_M`] nearer the target than its best
+    /// for `bound_s`, whatever the route did meanwhile; or its odometry has stayed within
+    /// [`MOTIONLESS_RADIUS_M`] for `still_s` (wedged: commands are given, nothing moves).
+    pub(super) fn no_progress(
+        &mut self,
+        now: Time,
+        distance_m: f64,
+        odom: Option<Point2>,
+        bound_s: f64,
+        still_s: f64,
+    ) -> Option<String> {
+        if distance_m.is_finite() && (distance_m < self.closest_m - PROGRESS_MARGIN_M || !self.closest_m.is_finite()) {
+            self.closest_m = distance_m;
+            self.closest_at = now;
+        }
+        if let Some(p) = odom
+            && self.still_at.is_none_or(|a| a.distance(p) > MOTIONLESS_RADIUS_M)
+        {
+            self.still_at = Some(p);
+            self.still_since = now;
+        }
+        if now.secs_since(self.closest_at) > bound_s {
+            return Some(format!(
+                "no progress: no nearer than {:.1} m to the target for {bound_s:.0} s",
+                self.closest_m
+            ));
+        }
+        if now.secs_since(self.still_since) > still_s {
+            return Some(format!("no progress: the robot has not moved for {still_s:.0} s"));
+        }
+        None
     }
 
     /// Feeds the watchdog the remaining distance and the robot's position; true when no

@@ -50,11 +50,13 @@ use spomp_behaviors::registry::{Category, NodeRegistry, NodeTypeSpec, PortBindin
 
 mod driver;
 mod navigator;
+mod recovery;
 mod route;
 mod tuning;
 
 use driver::{Driver, Reason, Step};
 use navigator::{Limit, Navigator, Request};
+use recovery::register_recovery;
 use route::Route;
 use tuning::{Overrides, Tuning};
 
@@ -62,6 +64,10 @@ use tuning::{Overrides, Tuning};
 pub const PROGRESS_MARGIN_M: f64 = 1.0;
 /// `navigate_to` replans at least this often even when the path looks valid, seconds.
 pub const REPLAN_PERIOD_S: f64 = 10.0;
+
+/// A robot whose odometry stays within this distance of one point for the stuck timeout has
+/// not moved at all (wedged: its commands are refused), metres.
+pub const MOTIONLESS_RADIUS_M: f64 = 0.25;
 
 /// A robot that stays within this distance of one point ...
 pub const PINNED_RADIUS_M: f64 = 2.0;
@@ -77,27 +83,30 @@ const CLEARANCE_HALF_WIDTH_M: f64 = 1.0;
 /// How far beyond the last look-ahead point (plus the look-ahead) the path is searched, metres.
 const PROJECTION_WINDOW_M: f64 = 20.0;
 
-/// Registers the navigation nodes.
+/// Registers the navigation nodes (the recovery behaviours `back_up` and `spin` too).
 pub fn register_navigation(r: &mut NodeRegistry<RobotRuntime>) {
     use Category::Action;
     use PortType::{Float, Params, Point, String as Str};
     use RobotKind::Ugv;
 
+    register_recovery(r);
+
     r.register(
         NodeTypeSpec::leaf(
             "navigate_to",
             Action,
-            "Plans a path on the robot's traversability graph from its pose to `target`, follows it by giving the local planner the farthest path point within `lookahead_m` that the path reaches without leaving that circle and whose straight line (widened to 1 m either side at the point) crosses no curb the aerial map shows unless the path does (a path up a curb ramp is followed, not cut across the curb) (local goal per panorama, DWA at every tick), and replans when an edge of the path is removed or the path's cost rises after a reachability scan (checked at every panorama), and every 10 s; replans keep the edge being driven (they search from the node ahead, keeping the rest of an edge routed around a curb). When the remaining path length has not shrunk by 1 m for `stuck_timeout_s` on a graph edge, the robot marks that edge blocked for itself and replans from the node behind (a blockage the scans could not judge). A robot that stays within 2 m of one point for twice `stuck_timeout_s` is stuck too: it backs out along its own trail to the newest trail point from which the graph has a path (so does any plan from a place the graph has no path from, such as a node whose edges were all removed). Success within `tolerance_m`; Failure (reason in `failure_reason`) when there is no path (`no_path`, also when a blocked path has no alternative), when stuck with no edge to give up (`stuck`), or past the time limit (`time_limit`): `time_limit_s` if given, else `time_per_m_s` (unset: the mission's `goals.time_limit_per_m_s`) × the planned path length, counted from the start and extended by a replan forced by a blocked or costlier path to now + `time_per_m_s` × the new length. With no aerial map yet (empty graph) it drives toward the target with the local planner alone (time limit from the straight-line distance) and plans as soon as a graph exists. A target where the robot's map has no data yet (a goal another robot found in a map version that has not reached this one) is approached over the graph to the reachable node nearest it, then straight on with the local planner alone. Writes the robot's planned path and publishes its end on the team state; finishing or halting stops the robot and clears both.",
+            "Plans a path on the robot's traversability graph from its pose to `target`, follows it by giving the local planner the farthest path point within `lookahead_m` that the path reaches without leaving that circle and whose straight line (widened to 1 m either side at the point) crosses no curb the aerial map shows unless the path does (a path up a curb ramp is followed, not cut across the curb) (local goal per panorama, DWA at every tick), and replans when an edge of the path is removed or the path's cost rises after a reachability scan (checked at every panorama), and every 10 s; replans keep the edge being driven (they search from the node ahead, keeping the rest of an edge routed around a curb). When the remaining path length has not shrunk by 1 m for `stuck_timeout_s` on a graph edge, the robot marks that edge failed on its global planner and replans from the node behind (a blockage the scans could not judge). A robot that stays within 2 m of one point for twice `stuck_timeout_s` is stuck too: it backs out along its own trail to the newest trail point from which the graph has a path (so does any plan from a place the graph has no path from, such as a node whose edges were all removed). Success within `tolerance_m`; Failure (reason in `failure_reason`) when there is no path (`no_path`, also when a blocked path has no alternative), when stuck with no edge to give up (`stuck`), when it makes no progress (`no_progress`: not 1 m nearer the target than its best for `no_progress_timeout_s`, replans or not, or its odometry not 0.25 m from one point for `stuck_timeout_s`; the edge being driven is marked failed on the robot's global planner, which then plans around it), or past the time limit (`time_limit`): `time_limit_s` if given, else `time_per_m_s` (unset: the mission's `goals.time_limit_per_m_s`) × the planned path length, counted from the start and extended by a replan forced by a blocked or costlier path to now + `time_per_m_s` × the new length. With no aerial map yet (empty graph) it drives toward the target with the local planner alone (time limit from the straight-line distance) and plans as soon as a graph exists. A target where the robot's map has no data yet (a goal another robot found in a map version that has not reached this one) is approached over the graph to the reachable node nearest it, then straight on with the local planner alone. Writes the robot's planned path and publishes its end on the team state; finishing or halting stops the robot and clears both.",
             vec![
                 PortSpec::input("target", Point, "Where to go (map frame)."),
                 PortSpec::input("tolerance_m", Float, "Arrival radius, metres.").with_default(json!(2.0)),
                 PortSpec::optional("time_limit_s", Float, "Fixed time limit, seconds; overrides `time_per_m_s`."),
                 PortSpec::optional("time_per_m_s", Float, "Time limit per metre of planned path, s/m; unset: the mission's `goals.time_limit_per_m_s`."),
                 PortSpec::optional("stuck_timeout_s", Float, "Fail as stuck after this long without 1 m of progress along the path, seconds; unset: the robot's `navigation.watchdog.stuck_timeout_s` (30 s unless the mission says otherwise)."),
+                PortSpec::optional("no_progress_timeout_s", Float, "Fail with `no_progress` when the robot has not come 1 m nearer the target (straight line, best so far) for this long, whatever the replans did, seconds; unset: the robot's `navigation.watchdog.no_progress_timeout_s` (120 s unless the mission says otherwise)."),
                 PortSpec::input("lookahead_m", Float, "Distance ahead along the global path of the waypoint given to the local planner, metres.").with_default(json!(8.0)),
                 PortSpec::optional("global_planner", Params, "Only `search: { replan_cost_rise_ratio }` (the robot's graph, learning and experience are shared by all nodes and set in its navigation parameters)."),
                 PortSpec::optional("local_planner", Params, "Overrides of `local_goal` and `dwa` (spomp-local-planner) over the robot's parameters, for this node; `terrain` is the robot's."),
-                PortSpec::output("failure_reason", Str, "Why it failed: no_path, stuck or time_limit (no_navigation: the robot has no navigation stack)."),
+                PortSpec::output("failure_reason", Str, "Why it failed: no_path, stuck, no_progress or time_limit (no_navigation: the robot has no navigation stack)."),
             ],
             |p| Ok(Box::new(NavigateTo::new(p)?)),
         )
@@ -130,7 +139,7 @@ pub fn register_navigation(r: &mut NodeRegistry<RobotRuntime>) {
                 PortSpec::input("min_distance_m", Float, "Only move if farther than this from home, metres.").with_default(json!(5.0)),
                 PortSpec::input("tolerance_m", Float, "Arrival radius, metres.").with_default(json!(2.0)),
                 PortSpec::optional("stuck_timeout_s", Float, "Fail as stuck after this long without 1 m of progress, seconds; unset: the robot's `navigation.watchdog.stuck_timeout_s`."),
-                PortSpec::output("failure_reason", Str, "Why it failed: no_path, stuck or time_limit."),
+                PortSpec::output("failure_reason", Str, "Why it failed: no_path, stuck, no_progress or time_limit."),
             ],
             |p| Ok(Box::new(ReturnHome::new(p)?)),
         )
@@ -146,6 +155,12 @@ pub fn register_navigation(r: &mut NodeRegistry<RobotRuntime>) {
 /// The robot's own stuck timeout (`navigation.watchdog`), for nodes that do not set one.
 fn robot_stuck_timeout_s(rt: &RobotRuntime) -> f64 {
     rt.nav().map_or_else(|| WatchdogParams::default().stuck_timeout_s, |n| n.params.watchdog.stuck_timeout_s)
+}
+
+/// The robot's own no-progress bound (`navigation.watchdog`), for nodes that do not set one.
+fn robot_no_progress_timeout_s(rt: &RobotRuntime) -> f64 {
+    rt.nav()
+        .map_or_else(|| WatchdogParams::default().no_progress_timeout_s, |n| n.params.watchdog.no_progress_timeout_s)
 }
 
 fn number(binding: &Binding, ctx: &mut Ctx<'_>, node: &str, port: &str, default: f64) -> Option<f64> {
@@ -228,6 +243,7 @@ struct NavigateTo {
     time_limit: Binding,
     time_per_m: Binding,
     stuck_timeout: Binding,
+    no_progress_timeout: Binding,
     lookahead: Binding,
     failure_reason: Binding,
     nav: Navigator,
@@ -241,6 +257,7 @@ impl NavigateTo {
             time_limit: p.get("time_limit_s"),
             time_per_m: p.get("time_per_m_s"),
             stuck_timeout: p.get("stuck_timeout_s"),
+            no_progress_timeout: p.get("no_progress_timeout_s"),
             lookahead: p.get("lookahead_m"),
             failure_reason: p.get("failure_reason"),
             nav: Navigator::new(Overrides::from_ports(p, true)?),
@@ -253,9 +270,10 @@ impl Behavior<RobotRuntime> for NavigateTo {
         const NODE: &str = "navigate_to";
         let now = ctx.now;
         let Some(target) = target_of(&self.target, ctx, NODE) else { return Status::Failure };
-        let (Some(tolerance_m), Some(stuck_timeout_s), Some(lookahead_m)) = (
+        let (Some(tolerance_m), Some(stuck_timeout_s), Some(no_progress_timeout_s), Some(lookahead_m)) = (
             number(&self.tolerance, ctx, NODE, "tolerance_m", 2.0),
             number(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", robot_stuck_timeout_s(ctx.env)),
+            number(&self.no_progress_timeout, ctx, NODE, "no_progress_timeout_s", robot_no_progress_timeout_s(ctx.env)),
             number(&self.lookahead, ctx, NODE, "lookahead_m", 8.0),
         ) else {
             return Status::Failure;
@@ -280,7 +298,7 @@ impl Behavior<RobotRuntime> for NavigateTo {
             (None, Some(k)) => Limit::PerMetre(k),
             (None, None) => Limit::PerMetre(rt.goal_time_per_m_s()),
         };
-        let req = Request { target, tolerance_m, limit, stuck_timeout_s, lookahead_m };
+        let req = Request { target, tolerance_m, limit, stuck_timeout_s, no_progress_timeout_s, lookahead_m };
         run_navigation(&mut self.nav, prev, rt, bb, now, &req, NODE, &self.failure_reason)
     }
 
@@ -336,6 +354,7 @@ impl Behavior<RobotRuntime> for ReturnHome {
             tolerance_m,
             limit: Limit::PerMetre(rt.goal_time_per_m_s()),
             stuck_timeout_s,
+            no_progress_timeout_s: robot_no_progress_timeout_s(rt),
             lookahead_m: 8.0,
         };
         run_navigation(&mut self.nav, prev, rt, bb, now, &req, NODE, &self.failure_reason)
@@ -608,6 +627,45 @@ mod tests {
         assert!(!d.stuck(t(9.0), None, 18.9, 10.0), "a metre restarts the window");
         assert!(!d.stuck(t(18.0), None, 18.5, 10.0));
         assert!(d.stuck(t(19.5), None, 18.5, 10.0));
+    }
+
+    #[test]
+    fn no_progress_is_bounded_whatever_the_replans_do() {
+        let mut d = Driver::new(Overrides::default());
+        let t = |s: f64| Time::from_secs_f64(s);
+        let at = |x: f64| Some(Point2::new(x, 0.0));
+        d.closest_at = t(0.0);
+        d.still_since = t(0.0);
+        // The robot drives back and forth (never still) while replans keep restarting the stuck
+        // window and extending the time limit: it never gets 1 m nearer than 40 m.
+        for k in 0..120 {
+            let s = k as f64;
+            d.restart_watchdog(t(s), 100.0);
+            let distance = 40.0 + 5.0 * (s * 0.3).sin().abs();
+            let why = d.no_progress(t(s), distance, at(3.0 * (s * 0.3).sin()), 120.0, 30.0);
+            assert!(why.is_none(), "within the bound at {s} s: {why:?}");
+        }
+        let why = d.no_progress(t(121.0), 40.5, at(1.0), 120.0, 30.0).unwrap();
+        assert!(why.contains("no nearer than 40.0 m"), "{why}");
+        // Getting a metre nearer restarts the bound.
+        let mut nearer = Driver::new(Overrides::default());
+        for k in 0..300 {
+            let s = k as f64;
+            assert!(nearer.no_progress(t(s), 300.0 - s, at(s), 120.0, 30.0).is_none());
+        }
+    }
+
+    #[test]
+    fn a_robot_that_does_not_move_at_all_makes_no_progress_after_the_stuck_timeout() {
+        let mut d = Driver::new(Overrides::default());
+        let t = |s: f64| Time::from_secs_f64(s);
+        // Wedged: odometry within a few centimetres (turning in place), the target as far.
+        for k in 0..30 {
+            let s = k as f64;
+            assert!(d.no_progress(t(s), 50.0, Some(Point2::new(0.01 * (s % 3.0), 0.0)), 120.0, 30.0).is_none());
+        }
+        let why = d.no_progress(t(30.5), 50.0, Some(Point2::new(0.02, 0.0)), 120.0, 30.0).unwrap();
+        assert!(why.contains("has not moved for 30 s"), "{why}");
     }
 
     #[test]

@@ -34,6 +34,8 @@ pub(super) struct Request {
     pub(super) tolerance_m: f64,
     pub(super) limit: Limit,
     pub(super) stuck_timeout_s: f64,
+    /// The no-progress bound ([`Driver::no_progress`]), seconds.
+    pub(super) no_progress_timeout_s: f64,
     pub(super) lookahead_m: f64,
 }
 
@@ -264,6 +266,22 @@ impl Navigator {
         let here = pose.pose.position();
         if here.distance(req.target) <= req.tolerance_m {
             return Step::Arrived;
+        }
+        let odom = rt.odometry().map(|o| o.pose.position());
+        if let Some(why) = self.driver.no_progress(
+            now,
+            here.distance(req.target),
+            odom,
+            req.no_progress_timeout_s,
+            req.stuck_timeout_s,
+        ) {
+            // The edge being driven is the one it failed to drive: the planner learns it.
+            if let Some(nav) = rt.nav_mut()
+                && let (Some(a), Some(b)) = (self.behind, self.ahead)
+            {
+                nav.block_edge(a, b);
+            }
+            return Step::Failed(Reason::NoProgress, why);
         }
         if let Err(e) = self.maybe_replan(rt, now, here, req) {
             return Step::Failed(Reason::NoPath, format!("path blocked and no other path: {e}"));

@@ -87,6 +87,39 @@ impl GlobalPlanner {
         voted
     }
 
+    /// Removes edge `e` for good: a map update never brings the pair back.
+    fn remove_for_good(&mut self, e: EdgeIndex<u32>) {
+        if let Some((a, b)) = self.graph.edge_endpoints(e) {
+            let key = pair(a, b);
+            self.removed_pairs.insert(key);
+            self.edge_of_pair.remove(&key);
+        }
+        self.graph.remove_edge(e);
+    }
+
+    /// Records that this robot failed to drive the edge between `a` and `b` (its navigation
+    /// made no progress along it): its own experience, so the edge is marked not_trav and
+    /// locked, removed for good as the robot's own not_trav scans remove an edge, and no later
+    /// plan sends the robot back the same way. Other robots' scans cannot bring it back (only
+    /// own observations lock, and a locked edge never changes). Routed edges (through a curb
+    /// ramp) too: the scans cannot judge those, but a drive along one can. Off with graph
+    /// updates off (`experience.graph_updates`, the paper's ablation). Returns whether an edge
+    /// was removed (false when the pair is no live edge).
+    pub fn mark_failed_edge(&mut self, a: NodeId, b: NodeId) -> bool {
+        if !self.params.experience.graph_updates {
+            return false;
+        }
+        let key = if a.0 < b.0 { (a.0, b.0) } else { (b.0, a.0) };
+        let Some(&e) = self.edge_of_pair.get(&key) else { return false };
+        let Some(d) = self.graph.edge_weight_mut(e) else { return false };
+        if d.experience.failed_drive() != Transition::Removed {
+            return false;
+        }
+        self.remove_for_good(e);
+        self.refresh_heuristic_rate();
+        true
+    }
+
     pub(super) fn judge_edges(&mut self, region: &StarRegion, own: bool, update: &mut ScanUpdate) {
         let x = &self.params.experience;
         let judging = Judging {
@@ -142,12 +175,7 @@ impl GlobalPlanner {
                 Transition::Removed => {
                     update.edges_changed += 1;
                     update.edges_removed += 1;
-                    if let Some((a, b)) = self.graph.edge_endpoints(e) {
-                        let key = pair(a, b);
-                        self.removed_pairs.insert(key);
-                        self.edge_of_pair.remove(&key);
-                    }
-                    self.graph.remove_edge(e);
+                    self.remove_for_good(e);
                 }
             }
         }
