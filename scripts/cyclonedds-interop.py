@@ -242,11 +242,15 @@ def main():
         if rosout_r is None and now - start > 3.0:
             rosout_r = DataReader(dp, rosout_topic, qos=rosout_qos)
         if rosout_r is not None:
-            logs.extend(rosout_r.take(N=1000))
+            logs.extend(e for e in rosout_r.take(N=1000) if isinstance(e, Log))
         for t in tf_r.take(N=50):
+            if not isinstance(t, TFMessage):
+                continue
             for ts in t.transforms:
                 tf_pairs.add((ts.header.frame_id, ts.child_frame_id))
         for c in cmd_r.take(N=50):
+            if not isinstance(c, TwistStamped):
+                continue
             commands.append((c.twist.linear.x, c.twist.angular.z))
             cmd_frames.add(c.header.frame_id)
         # The robot drives straight ahead at the commanded speed.
@@ -256,7 +260,7 @@ def main():
 
     out, err = proc.communicate(timeout=60)
     if rosout_r is not None:
-        logs.extend(rosout_r.take(N=1000))
+        logs.extend(e for e in rosout_r.take(N=1000) if isinstance(e, Log))
     if proc.returncode != 0:
         print(f"spomp run failed ({proc.returncode}):\n{err}", file=sys.stderr)
         return 1
