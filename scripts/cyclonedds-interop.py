@@ -4,8 +4,13 @@ plays the robot's drivers for `spomp run`.
 
 It publishes odometry, a panorama (depth + labels) and a ground-truth pose in the standard ROS 2
 types, encoded by Cyclone from its own definitions of them, and subscribes to spomp's velocity
-commands. It passes when spomp decodes every input (its report counts them, none malformed) and
-commands the robot forward toward its goal, decoded by Cyclone.
+commands (`geometry_msgs/TwistStamped`, the default `ros2.cmd_vel_type`, as Jazzy's
+diff_drive_controller takes them), to `/tf` and, with rcl's `/rosout` profile (reliable,
+transient local, depth 1000), to `/rosout`. It passes when spomp decodes every input (its report
+counts them, none malformed), commands the robot forward toward its goal in its body frame,
+publishes `map → ugv1/odom`, and every node transition reaches the transient-local `/rosout`
+reader — which joins late, after spomp started, as a late joiner does. The labels arrive in a
+frame other than the configured sensor frame: spomp must say so (`frame_mismatches`).
 
 Loopback only: Cyclone is bound to 127.0.0.1 without multicast, spomp runs with
 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, on a domain of this test's own.
@@ -101,6 +106,41 @@ class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
 
 
 @dataclass
+class TwistStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TwistStamped_"):
+    header: Header
+    twist: Twist
+
+
+@dataclass
+class Transform(IdlStruct, typename="geometry_msgs::msg::dds_::Transform_"):
+    translation: Vector3
+    rotation: Quaternion
+
+
+@dataclass
+class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformStamped_"):
+    header: Header
+    child_frame_id: str
+    transform: Transform
+
+
+@dataclass
+class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
+    transforms: sequence[TransformStamped]
+
+
+@dataclass
+class Log(IdlStruct, typename="rcl_interfaces::msg::dds_::Log_"):
+    stamp: Time
+    level: uint8
+    name: str
+    msg: str
+    file: str
+    function: str
+    line: uint32
+
+
+@dataclass
 class TwistWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::TwistWithCovariance_"):
     twist: Twist
     covariance: array[float64, 36]
@@ -145,7 +185,9 @@ def flat_ground_panorama(stamp):
             labels.append(label)
     hdr = Header(stamp=stamp, frame_id="ugv1/lidar")
     d = Image(header=hdr, height=ROWS, width=COLS, encoding="mono16", is_bigendian=0, step=COLS * 2, data=list(depth))
-    s = Image(header=hdr, height=ROWS, width=COLS, encoding="mono8", is_bigendian=0, step=COLS, data=list(labels))
+    # A frame the mission does not configure: spomp uses the labels and reports the mismatch.
+    wrong = Header(stamp=stamp, frame_id="camera")
+    s = Image(header=wrong, height=ROWS, width=COLS, encoding="mono8", is_bigendian=0, step=COLS, data=list(labels))
     return d, s
 
 
@@ -165,7 +207,16 @@ def main():
     depth_w = DataWriter(dp, Topic(dp, "rt/ugv1/panorama/depth", Image), qos=reliable)
     sem_w = DataWriter(dp, Topic(dp, "rt/ugv1/panorama/semantic", Image), qos=reliable)
     pose_w = DataWriter(dp, Topic(dp, "rt/ugv1/pose_in", PoseStamped), qos=reliable)
-    cmd_r = DataReader(dp, Topic(dp, "rt/ugv1/cmd_vel", Twist), qos=best_effort)
+    cmd_r = DataReader(dp, Topic(dp, "rt/ugv1/cmd_vel", TwistStamped), qos=best_effort)
+    tf_r = DataReader(dp, Topic(dp, "rt/tf", TFMessage), qos=best_effort)
+    # rcl's /rosout profile; created after spomp started, so it joins late.
+    rosout_qos = Qos(Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=100)),
+                     Policy.Durability.TransientLocal, Policy.History.KeepLast(1000))
+    rosout_topic = Topic(dp, "rt/rosout", Log)
+    rosout_r = None
+    logs = []
+    tf_pairs = set()
+    cmd_frames = set()
 
     start = time.time()
     x = 0.0
@@ -188,14 +239,28 @@ def main():
             d, s = flat_ground_panorama(stamp)
             depth_w.write(d)
             sem_w.write(s)
+        if rosout_r is None and now - start > 3.0:
+            rosout_r = DataReader(dp, rosout_topic, qos=rosout_qos)
+        if rosout_r is not None:
+            logs.extend(e for e in rosout_r.take(N=1000) if isinstance(e, Log))
+        for t in tf_r.take(N=50):
+            if not isinstance(t, TFMessage):
+                continue
+            for ts in t.transforms:
+                tf_pairs.add((ts.header.frame_id, ts.child_frame_id))
         for c in cmd_r.take(N=50):
-            commands.append((c.linear.x, c.angular.z))
+            if not isinstance(c, TwistStamped):
+                continue
+            commands.append((c.twist.linear.x, c.twist.angular.z))
+            cmd_frames.add(c.header.frame_id)
         # The robot drives straight ahead at the commanded speed.
         if commands:
             x += max(0.0, commands[-1][0]) * 0.05
         time.sleep(0.05)
 
     out, err = proc.communicate(timeout=60)
+    if rosout_r is not None:
+        logs.extend(e for e in rosout_r.take(N=1000) if isinstance(e, Log))
     if proc.returncode != 0:
         print(f"spomp run failed ({proc.returncode}):\n{err}", file=sys.stderr)
         return 1
@@ -213,6 +278,22 @@ def main():
     if len(commands) < 20:
         problems.append(f"Cyclone DDS decoded {len(commands)} velocity commands from spomp")
     forward = [v for v, _ in commands if v > 0.05]
+    if cmd_frames != {"ugv1/base_link"}:
+        problems.append(f"velocity commands stamped in frames {cmd_frames}, expected ugv1/base_link")
+    if ("map", "ugv1/odom") not in tf_pairs:
+        problems.append(f"no map -> ugv1/odom on /tf: {tf_pairs}")
+    transitions = [entry for entry in logs if " -> " in entry.msg]
+    if not transitions:
+        problems.append(f"the late transient-local /rosout reader got no node transition ({len(logs)} entries)")
+    else:
+        ticks = [int(e.msg.split("(tick ")[1].split(",")[0]) for e in transitions if "(tick " in e.msg]
+        if not ticks or min(ticks) > 1:
+            problems.append(f"the late /rosout reader missed the first tick's transitions: first {transitions[0].msg}")
+    if any(entry.name != "ugv1.spomp" for entry in logs):
+        problems.append(f"rosout logger names: {sorted({entry.name for entry in logs})}")
+    mismatches = report.get("frame_mismatches", {})
+    if mismatches.get("/ugv1/panorama/semantic header.frame_id") != "camera":
+        problems.append(f"spomp did not report the labels' frame `camera`: {mismatches}")
     if not forward:
         problems.append(f"spomp never commanded the robot forward toward its goal: {commands[-10:]}")
     if problems:
@@ -221,7 +302,9 @@ def main():
         return 1
     print(f"cyclonedds interop: {received['odometry']} odometry, {received['panoramas']} panoramas, "
           f"{received['poses']} poses into spomp; {len(commands)} commands out "
-          f"({len(forward)} forward, up to {max(forward):.2f} m/s)")
+          f"({len(forward)} forward, up to {max(forward):.2f} m/s, TwistStamped in ugv1/base_link); "
+          f"/tf map -> ugv1/odom; {len(transitions)} transitions on /rosout to a late transient-local reader; "
+          f"frame mismatch reported")
     return 0
 
 

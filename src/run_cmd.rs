@@ -15,7 +15,7 @@ use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::{
     FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, Time, Twist2,
 };
-use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
+use spomp_mcap::{Recorder, RecorderOptions, RobotConventions, SafeFile};
 use spomp_robot::seam::SeamInput;
 use spomp_robot::{Robot, RobotRuntime, RobotSetup};
 use spomp_ros2::{RobotNode, RunObserver, RunSettings};
@@ -187,6 +187,13 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         None => None,
     };
     let options = RecorderOptions { panorama_downsample: 1, ..RecorderOptions::default() };
+    // The log names, types and frames the robot's messages as its ROS 2 side does.
+    let conventions = RobotConventions {
+        frames: settings.frames.clone(),
+        cmd_vel_type: settings.cmd_vel_type,
+        tf: settings.topics.get("tf").to_string(),
+        tf_static: settings.topics.get("tf_static").to_string(),
+    };
     if !args.json {
         errln!(
             "spomp run: robot {} on DDS domain {} ({}), {}; Ctrl-C stops it",
@@ -207,6 +214,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     let (report, error) = match (&args.record, live) {
         (Some(path), live) => {
             let mut rec = Recorder::create(path, options).with_context(|| format!("creating {}", path.display()))?;
+            rec.set_conventions(&args.robot, conventions);
             // In lockstep the farm's hello says whether the heavy skills run in the background:
             // the setup is written once it came.
             if let Some(info) = run_info.as_ref().filter(|_| !args.lockstep) {
@@ -222,6 +230,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
             // Only the live view wants the messages: recorded into nothing, uncompressed.
             let options = RecorderOptions { compress: false, ..options };
             let mut rec = Recorder::new(Discard::default(), options).context("starting the live view's recorder")?;
+            rec.set_conventions(&args.robot, conventions);
             rec.set_tap(Box::new(tap));
             drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref(), None)?
         }
@@ -321,11 +330,22 @@ impl<W: Write + Seek> RunObserver for RecordingObserver<W> {
     }
 
     fn on_panorama(&mut self, robot: &str, frame: &PanoramaFrame) {
-        self.record(|r| r.panorama(robot, frame.stamp, &frame.depth, Some(&frame.semantic)));
+        self.record(|r| {
+            r.sensor_mount(robot, frame.stamp, frame.sensor_height_m)?;
+            r.panorama(robot, frame.stamp, &frame.depth, Some(&frame.semantic))
+        });
     }
 
     fn on_external_pose(&mut self, robot: &str, estimate: &PoseEstimate) {
-        self.record(|r| r.pose(robot, estimate.stamp, estimate.pose, 0.0));
+        self.record(|r| r.pose_in(robot, estimate.stamp, estimate.pose, 0.0));
+    }
+
+    fn on_tf(&mut self, topic: &str, time: Time, msg: &spomp_core::ros::TfMessage) {
+        self.record(|r| r.transform(topic, time, msg));
+    }
+
+    fn on_frame_mismatch(&mut self, robot: &str, message: &str) {
+        errln!("warning: robot {robot}: {message}");
     }
 
     fn on_command(&mut self, robot: &str, now: Time, cmd: Twist2) {
@@ -338,12 +358,7 @@ impl<W: Write + Seek> RunObserver for RecordingObserver<W> {
     }
 
     fn on_estimate(&mut self, robot: &str, estimate: &PoseEstimate) {
-        let topic = format!("/{robot}/pose_estimate");
-        let msg = spomp_core::ros::PoseStamped {
-            header: spomp_core::ros::Header::new(estimate.stamp, "map"),
-            pose: spomp_core::ros::Pose::from_pose2(estimate.pose, 0.0),
-        };
-        self.record(|r| r.log(&topic, estimate.stamp, &msg));
+        self.record(|r| r.estimate(robot, estimate));
     }
 
     fn on_transitions(&mut self, robot: &str, records: &[TransitionRecord]) {

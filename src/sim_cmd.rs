@@ -503,12 +503,14 @@ fn run_trial(
             // Only the live view wants the messages: recorded into nothing, uncompressed.
             let options = RecorderOptions { compress: false, ..RecorderOptions::default() };
             let mut rec = Recorder::new(Discard::default(), options).context("starting the live view's recorder")?;
+            set_log_conventions(&mut rec, mission);
             rec.set_tap(Box::new(tap));
             run_observed(sim, Some(rec), settings, stop)?.0
         }
         (false, live) => {
             let mut rec = Recorder::create(&mcap_path, RecorderOptions::default())
                 .with_context(|| format!("creating {}", mcap_path.display()))?;
+            set_log_conventions(&mut rec, mission);
             if let Some(info) = &run_info {
                 rec.run_info(info).with_context(|| format!("writing the run's setup to {}", mcap_path.display()))?;
             }
@@ -525,6 +527,21 @@ fn run_trial(
     };
     write_trial_outputs(&result, &trial_dir)?;
     Ok(result.summary)
+}
+
+/// Names and frames each robot's messages as its ROS 2 side would (its `ros2:` settings), so a
+/// farm's log and a bag recorded from its DDS topics agree.
+fn set_log_conventions<W: Write + Seek>(rec: &mut Recorder<W>, mission: &spomp_behaviors::mission::MissionFile) {
+    for r in &mission.team {
+        let topics = spomp_ros2::TopicNames::resolve(&r.id, r.ros2.as_ref());
+        let conventions = spomp_mcap::RobotConventions {
+            frames: spomp_ros2::frames::resolve(r.ros2.as_ref(), &topics),
+            cmd_vel_type: r.ros2.as_ref().map(|s| s.cmd_vel_type).unwrap_or_default(),
+            tf: topics.get("tf").to_string(),
+            tf_static: topics.get("tf_static").to_string(),
+        };
+        rec.set_conventions(&r.id, conventions);
+    }
 }
 
 fn write_trial_outputs(result: &RunResult, trial_dir: &Path) -> Result<()> {
@@ -666,14 +683,7 @@ impl<W: Write + Seek> SimObserver for RunObserver<W> {
             r.pose(robot.as_str(), now, state.truth, state.z_m)?;
             r.tf(robot.as_str(), now, state.truth, state.z_m)?;
             if let Some(est) = state.estimate {
-                r.log(
-                    &format!("/{robot}/pose_estimate"),
-                    now,
-                    &spomp_core::ros::PoseStamped {
-                        header: spomp_core::ros::Header::new(now, "map"),
-                        pose: spomp_core::ros::Pose::from_pose2(est.pose, state.z_m),
-                    },
-                )?;
+                r.estimate(robot.as_str(), &spomp_core::PoseEstimate { stamp: now, ..est })?;
             }
             if state.kind == RobotKind::Ugv {
                 r.command(robot.as_str(), now, state.command)?;
@@ -695,7 +705,10 @@ impl<W: Write + Seek> SimObserver for RunObserver<W> {
             return;
         }
         self.last_pano.insert(robot.clone(), frame.stamp.nanos);
-        self.record(|r| r.panorama(robot.as_str(), frame.stamp, &frame.depth, Some(&frame.semantic)));
+        self.record(|r| {
+            r.sensor_mount(robot.as_str(), frame.stamp, frame.sensor_height_m)?;
+            r.panorama(robot.as_str(), frame.stamp, &frame.depth, Some(&frame.semantic))
+        });
         if let Some(dir) = &self.settings.panos_dir {
             let saved = output_path(dir, &format!("{robot}-{:06}.png", frame.stamp.nanos / 1_000_000_000))
                 .and_then(|path| crate::world_cmd::save_depth_png(&frame.depth, DEFAULT_RANGE_SCALE_M, &path));

@@ -59,7 +59,7 @@ fn a_viewer_subscribes_to_a_live_run_and_decodes_its_messages_with_the_advertise
     viewer.wait_for_channels(&["/tf", "/ugv1/cmd_vel"], WAIT).unwrap();
     for (topic, name, definition) in [
         ("/tf", ros::TfMessage::TYPE_NAME, ros::TfMessage::DEFINITION),
-        ("/ugv1/cmd_vel", ros::Twist::TYPE_NAME, ros::Twist::DEFINITION),
+        ("/ugv1/cmd_vel", ros::TwistStamped::TYPE_NAME, ros::TwistStamped::DEFINITION),
     ] {
         let c = &viewer.channels[topic];
         assert_eq!(
@@ -89,7 +89,9 @@ fn a_viewer_subscribes_to_a_live_run_and_decodes_its_messages_with_the_advertise
             "/tf" => {
                 let tf: ros::TfMessage = decode_cdr(&m.topic, &m.data).unwrap();
                 let t = &tf.transforms[0];
-                assert_eq!(t.header.frame_id, "map");
+                // `map → R/odom` and `R/odom → R/base_link` (a robot with odometry), or
+                // `map → R/base_link`.
+                assert!(t.header.frame_id == "map" || t.header.frame_id.ends_with("/odom"), "{t:?}");
                 // The log time is the simulated time of the message's stamp.
                 let stamp_ns = t.header.stamp.sec as u64 * 1_000_000_000 + u64::from(t.header.stamp.nanosec);
                 assert_eq!(m.log_time_ns, stamp_ns);
@@ -100,7 +102,7 @@ fn a_viewer_subscribes_to_a_live_run_and_decodes_its_messages_with_the_advertise
                 *frames.entry(t.child_frame_id.clone()).or_default() += 1;
             }
             "/ugv1/cmd_vel" => {
-                let twist: ros::Twist = decode_cdr(&m.topic, &m.data).unwrap();
+                let twist = decode_cdr::<ros::TwistStamped>(&m.topic, &m.data).unwrap().twist;
                 assert!(twist.linear.x.is_finite() && twist.linear.x.abs() <= 1.5 + 1e-9, "{twist:?}");
                 assert!(twist.angular.z.abs() <= 1.0 + 1e-9, "{twist:?}");
                 commands.push(twist.linear.x);
@@ -158,9 +160,14 @@ fn the_log_carries_what_a_person_watching_needs() {
     let tf = on("/tf");
     let children: std::collections::BTreeSet<String> = tf
         .iter()
-        .map(|m| decode_cdr::<ros::TfMessage>(&m.topic, &m.data).unwrap().transforms[0].child_frame_id.clone())
+        .flat_map(|m| decode_cdr::<ros::TfMessage>(&m.topic, &m.data).unwrap().transforms)
+        .map(|t| t.child_frame_id)
         .collect();
-    assert_eq!(children.into_iter().collect::<Vec<_>>(), ["base/base_link", "ugv1/base_link", "ugv2/base_link"]);
+    // The basestation has no odometry: its body hangs from `map`; the UGVs' from their `odom`.
+    assert_eq!(
+        children.into_iter().collect::<Vec<_>>(),
+        ["base/base_link", "ugv1/base_link", "ugv1/odom", "ugv2/base_link", "ugv2/odom"]
+    );
     assert_eq!(tf[0].schema, ros::TfMessage::TYPE_NAME);
 
     // The prior map, once: known cells scaled by traversability, unknown −1.
@@ -225,12 +232,12 @@ fn a_robot_run_over_ros2_is_served_live_too() {
     let drain = std::thread::spawn(move || for _ in stderr.lines() {});
     let mut viewer = Viewer::connect(addr, WAIT).unwrap();
     viewer.wait_for_channels(&["/ugv1/cmd_vel"], WAIT).unwrap();
-    assert_eq!(viewer.channels["/ugv1/cmd_vel"].schema_name, ros::Twist::TYPE_NAME);
+    assert_eq!(viewer.channels["/ugv1/cmd_vel"].schema_name, ros::TwistStamped::TYPE_NAME);
     viewer.subscribe(&["/ugv1/cmd_vel"]).unwrap();
     for _ in 0..5 {
         let m = viewer.next_message(WAIT).unwrap();
         assert_eq!(m.topic, "/ugv1/cmd_vel");
-        let twist: ros::Twist = decode_cdr(&m.topic, &m.data).unwrap();
+        let twist = decode_cdr::<ros::TwistStamped>(&m.topic, &m.data).unwrap().twist;
         assert_eq!((twist.linear.x, twist.angular.z), (0.0, 0.0), "stale inputs: a stop command");
     }
     run.kill().unwrap();

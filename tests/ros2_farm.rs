@@ -9,6 +9,7 @@
 //! DDS stays on this machine: `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` restricts both processes
 //! to 127.0.0.1, and each test uses a domain id of its own.
 
+mod log_checks;
 mod processes;
 
 use std::path::{Path, PathBuf};
@@ -159,6 +160,13 @@ fn a_ugv_driven_by_a_separate_spomp_run_process_in_lockstep_reaches_its_goals_as
     );
     assert_eq!(report["malformed_inputs"], 0, "{report:#}");
 
+    // The robot's log holds each topic with its DDS type, and the whole tf tree: the robot's
+    // `map → odom`, `odom → base_link` from its odometry, the sensor mount.
+    let messages = log_checks::read(&robot_log);
+    log_checks::assert_topic_types(&messages, "ugv1", &["odom", "cmd_vel", "pose_estimate", "reachability", "tf"]);
+    let frames = log_checks::assert_tf_tree_connects(&messages, "ugv1");
+    assert!(frames.contains("ugv1/lidar") && frames.contains("ugv1/base_link"), "{frames:?}");
+
     // The robot's own log replays: a fresh robot fed the recorded inputs decides the same.
     let replay =
         spomp().args(["replay"]).arg(&robot_log).args(["--robot", "ugv1", "--json"]).output().expect("replay runs");
@@ -281,7 +289,7 @@ fn applied_commands(log: &Path) -> Vec<(f64, f64)> {
         .into_iter()
         .filter(|m| m.topic == "/ugv1/cmd_vel")
         .map(|m| {
-            let t: ros::Twist = spomp_mcap::decode_cdr(&m.topic, &m.data).expect("twist");
+            let t = spomp_mcap::decode_cdr::<ros::TwistStamped>(&m.topic, &m.data).expect("twist").twist;
             (m.log_time as f64 * 1e-9, t.linear.x.abs() + t.angular.z.abs())
         })
         .collect()

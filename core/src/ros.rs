@@ -20,6 +20,54 @@ pub trait RosMessage: Serialize {
     const DEFINITION: &'static str;
 }
 
+/// One of a robot's ROS 2 topics: what spomp's ROS 2 side publishes or takes, and what its logs
+/// and live view carry under the same name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RobotTopic {
+    /// The role: the key a mission's `ros2.topics` renames it by.
+    pub role: &'static str,
+    /// Default name, relative to the robot's namespace (`/<id>` by default); absolute names are
+    /// global.
+    pub name: &'static str,
+    /// Its message type (`package/msg/Type`), on DDS, in logs and in the live view alike.
+    pub type_name: &'static str,
+}
+
+const fn topic(role: &'static str, name: &'static str, type_name: &'static str) -> RobotTopic {
+    RobotTopic { role, name, type_name }
+}
+
+/// Every robot topic, in one table: the ROS 2 adapter names and types its publishers and
+/// subscriptions from it, the recorder its channels (a test compares what each creates).
+/// `cmd_vel` has the default command type (`ros2.cmd_vel_type` may choose `Twist`).
+pub const ROBOT_TOPICS: &[RobotTopic] = &[
+    topic("odom", "odom", Odometry::TYPE_NAME),
+    topic("panorama/depth", "panorama/depth", Image::TYPE_NAME),
+    topic("panorama/semantic", "panorama/semantic", Image::TYPE_NAME),
+    topic("gps", "gps/fix", NavSatFix::TYPE_NAME),
+    topic("pose_in", "pose_in", PoseStamped::TYPE_NAME),
+    topic("camera/tiles", "camera/tiles", GridMap::TYPE_NAME),
+    topic("cmd_vel", "cmd_vel", TwistStamped::TYPE_NAME),
+    topic("setpoint", "setpoint_position/local", PoseStamped::TYPE_NAME),
+    topic("pose_estimate", "pose_estimate", PoseWithCovarianceStamped::TYPE_NAME),
+    topic("path", "path", Path::TYPE_NAME),
+    topic("goals", "goals", MarkerArray::TYPE_NAME),
+    topic("reachability", "reachability", LaserScan::TYPE_NAME),
+    topic("diagnostics", "/diagnostics", DiagnosticArray::TYPE_NAME),
+    topic("estop", "estop", BoolMsg::TYPE_NAME),
+    topic("team/in", "team/in", BytesMsg::TYPE_NAME),
+    topic("team/out", "team/out", BytesMsg::TYPE_NAME),
+    // Global by default (one tree, frames prefixed); `tf`/`tf_static` without the `/` give each
+    // robot a tree of its own (Nav2's multi-robot bringup), with unprefixed frames.
+    topic("tf", "/tf", TfMessage::TYPE_NAME),
+    topic("tf_static", "/tf_static", TfMessage::TYPE_NAME),
+];
+
+/// The row of `role` in [`ROBOT_TOPICS`].
+pub fn robot_topic(role: &str) -> Option<&'static RobotTopic> {
+    ROBOT_TOPICS.iter().find(|t| t.role == role)
+}
+
 /// `builtin_interfaces/Time`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct RosTime {
@@ -123,6 +171,50 @@ pub struct Twist {
     pub linear: Vector3,
     /// Angular velocity.
     pub angular: Vector3,
+}
+
+/// `geometry_msgs/TwistStamped`: a velocity command with its time and body frame (what
+/// ros2_control's `diff_drive_controller` takes).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TwistStamped {
+    /// Header (stamp, the robot's body frame).
+    pub header: Header,
+    /// The command.
+    pub twist: Twist,
+}
+
+/// The frame ids of one robot's tf tree (REP-105): what its messages name and its transforms
+/// join. The ROS 2 adapter resolves them from the mission's `ros2:` settings; logs of robots
+/// without them use [`RobotFrames::prefixed`] (the adapter's default for a robot in its own
+/// namespace), so a log and a live robot name the same frames.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RobotFrames {
+    /// The world-fixed frame.
+    pub map: String,
+    /// The odometry frame.
+    pub odom: String,
+    /// The body frame.
+    pub base_link: String,
+    /// The panorama sensor's frame.
+    pub sensor: String,
+}
+
+impl RobotFrames {
+    /// `map`, `<prefix>odom`, `<prefix>base_link`, `<prefix>lidar`.
+    pub fn with_prefix(prefix: &str) -> Self {
+        RobotFrames {
+            map: "map".into(),
+            odom: format!("{prefix}odom"),
+            base_link: format!("{prefix}base_link"),
+            sensor: format!("{prefix}lidar"),
+        }
+    }
+
+    /// Frames prefixed with the robot's id: `map`, `<robot>/odom`, `<robot>/base_link`,
+    /// `<robot>/lidar`.
+    pub fn prefixed(robot: &str) -> Self {
+        RobotFrames::with_prefix(&format!("{robot}/"))
+    }
 }
 
 /// A fixed `float64[36]` covariance (serde derives stop at 32 elements).
@@ -714,11 +806,13 @@ impl GridMap {
 /// Messages of spomp's own data, built once here for every adapter that speaks ROS 2 (the MCAP
 /// recorder and the ROS 2 adapter), so a log and a live robot carry the same bytes.
 impl Odometry {
-    /// `robot`'s odometry: pose in `<robot>/odom`, twist in `<robot>/base_link`.
-    pub fn from_odometry(robot: &str, odom: &crate::motion::Odometry, stamp: RosTime) -> Self {
+    /// A robot's odometry: pose in `frames.odom`, twist in `frames.base_link`; `pose_sigma`
+    /// (x, y, yaw) and `twist_sigma` (v, ω) are the 1σ uncertainties placed on the covariance
+    /// diagonals (z, roll, pitch: a large variance — planar odometry does not measure them).
+    pub fn from_odometry(frames: &RobotFrames, odom: &crate::motion::Odometry, stamp: RosTime) -> Self {
         let mut msg = Odometry {
-            header: Header { stamp, frame_id: format!("{robot}/odom") },
-            child_frame_id: format!("{robot}/base_link"),
+            header: Header { stamp, frame_id: frames.odom.clone() },
+            child_frame_id: frames.base_link.clone(),
             ..Default::default()
         };
         msg.pose.pose = Pose::from_pose2(odom.pose, 0.0);
@@ -726,7 +820,31 @@ impl Odometry {
         msg.twist.twist.angular.z = odom.twist.omega;
         msg
     }
+
+    /// Sets the covariance diagonals from 1σ uncertainties: pose (x, y, yaw) and twist
+    /// (linear x, angular z); the axes planar odometry does not measure get [`UNMEASURED_VARIANCE`].
+    pub fn with_sigmas(mut self, pose: [f64; 3], twist: [f64; 2]) -> Self {
+        let mut p = [0.0; 36];
+        let mut t = [0.0; 36];
+        for k in 0..6 {
+            p[k * 6 + k] = UNMEASURED_VARIANCE;
+            t[k * 6 + k] = UNMEASURED_VARIANCE;
+        }
+        for (k, s) in [(0usize, pose[0]), (1, pose[1]), (5, pose[2])] {
+            p[k * 6 + k] = s * s;
+        }
+        for (k, s) in [(0usize, twist[0]), (5, twist[1])] {
+            t[k * 6 + k] = s * s;
+        }
+        self.pose.covariance = Covariance36(p);
+        self.twist.covariance = Covariance36(t);
+        self
+    }
 }
+
+/// Variance of an axis a message does not measure (z, roll, pitch of planar motion), as
+/// robot_localization and Nav2 read it: large, not zero (zero claims certainty).
+pub const UNMEASURED_VARIANCE: f64 = 1e6;
 
 impl Twist {
     /// A planar velocity command (`linear.x`, `angular.z`).
@@ -738,22 +856,34 @@ impl Twist {
     }
 }
 
+impl TwistStamped {
+    /// A planar velocity command at `stamp` in the body frame `base_link`.
+    pub fn from_twist2(cmd: crate::motion::Twist2, base_link: &str, stamp: RosTime) -> Self {
+        TwistStamped { header: Header { stamp, frame_id: base_link.into() }, twist: Twist::from_twist2(cmd) }
+    }
+}
+
 impl LaserScan {
-    /// A reachability scan in `<robot>/base_link`: bin i at angle −i·2π/N, range = safe distance,
-    /// intensity 1 where a known obstacle ends the bin.
-    pub fn from_reachability(scan: &crate::scan::ReachabilityScan, stamp: RosTime) -> Self {
+    /// A reachability scan in the body frame `base_link`: bin i at angle −i·2π/N, range = safe
+    /// distance, intensity 1 where a known obstacle ends the bin. Per REP-117 `range_max` is
+    /// fixed ([`crate::scan::REACHABILITY_RANGE_MAX_M`], above any reach) and `range_min` is the
+    /// floor, 0, so every bin is a valid reading (laser_geometry and rviz keep
+    /// `range_min ≤ r < range_max`); a range that would reach `range_max` is held just below it.
+    pub fn from_reachability(scan: &crate::scan::ReachabilityScan, base_link: &str, stamp: RosTime) -> Self {
         let n = scan.bins().max(1);
         let step = -(std::f64::consts::TAU / n as f64) as f32;
+        let max = crate::scan::REACHABILITY_RANGE_MAX_M;
+        let below_max = max * (1.0 - f32::EPSILON);
         LaserScan {
-            header: Header { stamp, frame_id: format!("{}/base_link", scan.robot) },
+            header: Header { stamp, frame_id: base_link.into() },
             angle_min: 0.0,
             angle_max: step * (n as f32 - 1.0),
             angle_increment: step,
             time_increment: 0.0,
             scan_time: 0.0,
             range_min: 0.0,
-            range_max: scan.range_m.iter().copied().fold(0.0, f32::max),
-            ranges: scan.range_m.clone(),
+            range_max: max,
+            ranges: scan.range_m.iter().map(|&r| if r.is_finite() { r.clamp(0.0, below_max) } else { 0.0 }).collect(),
             intensities: scan.obstacle.iter().map(|&o| if o { 1.0 } else { 0.0 }).collect(),
         }
     }
@@ -868,17 +998,57 @@ impl MarkerArray {
 }
 
 impl TfMessage {
-    /// `<robot>/base_link` in `map` at `pose`, `z` metres up.
-    pub fn base_in_map(robot: &str, pose: Pose2, z: f64, stamp: RosTime) -> Self {
+    /// `frames.base_link` in `frames.map` at `pose`, `z` metres up.
+    pub fn base_in_map(frames: &RobotFrames, pose: Pose2, z: f64, stamp: RosTime) -> Self {
+        TfMessage { transforms: vec![TransformStamped::planar(&frames.map, &frames.base_link, pose, z, stamp)] }
+    }
+}
+
+impl TfMessage {
+    /// The `map → odom` transform that puts the odometry pose `odom` at the map pose
+    /// `estimate`: T(map←odom) = T(map←base) · T(odom←base)⁻¹.
+    pub fn map_to_odom(frames: &RobotFrames, estimate: Pose2, odom: Pose2, stamp: RosTime) -> Self {
+        let yaw = estimate.yaw - odom.yaw;
+        let (s, c) = yaw.sin_cos();
+        let x = estimate.x - (c * odom.x - s * odom.y);
+        let y = estimate.y - (s * odom.x + c * odom.y);
         TfMessage {
-            transforms: vec![TransformStamped {
-                header: Header { stamp, frame_id: "map".into() },
-                child_frame_id: format!("{robot}/base_link"),
-                transform: Transform {
-                    translation: Vector3 { x: pose.x, y: pose.y, z },
-                    rotation: Quaternion::from_yaw(pose.yaw),
-                },
-            }],
+            transforms: vec![TransformStamped::planar(&frames.map, &frames.odom, Pose2::new(x, y, yaw), 0.0, stamp)],
+        }
+    }
+}
+
+impl PoseWithCovarianceStamped {
+    /// A pose estimate in `map`: x, y, yaw variances placed in the 6 × 6 matrix; z, roll,
+    /// pitch unknown ([`UNMEASURED_VARIANCE`]).
+    pub fn from_estimate(est: &crate::motion::PoseEstimate, map: &str, stamp: RosTime) -> Self {
+        let mut cov = [0.0; 36];
+        let axes = [0usize, 1, 5];
+        for (i, &a) in axes.iter().enumerate() {
+            for (j, &b) in axes.iter().enumerate() {
+                cov[a * 6 + b] = est.covariance[i * 3 + j];
+            }
+        }
+        for k in [2usize, 3, 4] {
+            cov[k * 6 + k] = UNMEASURED_VARIANCE;
+        }
+        PoseWithCovarianceStamped {
+            header: Header { stamp, frame_id: map.into() },
+            pose: PoseWithCovariance { pose: Pose::from_pose2(est.pose, 0.0), covariance: Covariance36(cov) },
+        }
+    }
+}
+
+impl TransformStamped {
+    /// `child` in `parent` at the planar pose `pose`, `z` metres up.
+    pub fn planar(parent: &str, child: &str, pose: Pose2, z: f64, stamp: RosTime) -> Self {
+        TransformStamped {
+            header: Header { stamp, frame_id: parent.into() },
+            child_frame_id: child.into(),
+            transform: Transform {
+                translation: Vector3 { x: pose.x, y: pose.y, z },
+                rotation: Quaternion::from_yaw(pose.yaw),
+            },
         }
     }
 }
@@ -944,6 +1114,11 @@ impl RosMessage for Twist {
         "Vector3 linear\nVector3 angular\n",
         dependency!("geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n")
     );
+}
+
+impl RosMessage for TwistStamped {
+    const TYPE_NAME: &'static str = "geometry_msgs/msg/TwistStamped";
+    const DEFINITION: &'static str = concat!("std_msgs/Header header\nTwist twist\n", header_deps!(), twist_deps!());
 }
 
 impl RosMessage for Odometry {
@@ -1126,6 +1301,7 @@ mod tests {
             GridMap::DEFINITION,
             PoseStamped::DEFINITION,
             Odometry::DEFINITION,
+            TwistStamped::DEFINITION,
             Path::DEFINITION,
             Image::DEFINITION,
             PoseWithCovarianceStamped::DEFINITION,
@@ -1199,7 +1375,8 @@ mod tests {
 
     #[test]
     fn a_robot_body_transform_is_its_pose_in_map() {
-        let tf = TfMessage::base_in_map("ugv1", Pose2::new(1.0, -2.0, 0.5), 0.3, RosTime::default());
+        let tf =
+            TfMessage::base_in_map(&RobotFrames::prefixed("ugv1"), Pose2::new(1.0, -2.0, 0.5), 0.3, RosTime::default());
         let t = &tf.transforms[0];
         assert_eq!((t.header.frame_id.as_str(), t.child_frame_id.as_str()), ("map", "ugv1/base_link"));
         assert_eq!((t.transform.translation.x, t.transform.translation.y, t.transform.translation.z), (1.0, -2.0, 0.3));

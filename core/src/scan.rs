@@ -7,6 +7,11 @@ use crate::geometry::{Point2, Pose2};
 use crate::ids::RobotId;
 use crate::time::Time;
 
+/// The `range_max` of a reachability scan as a `sensor_msgs/LaserScan`, metres: fixed and above
+/// any reach (a panorama's depth ends at 128 m in its 16-bit form, and terrain analysis well
+/// before), so every bin is a valid reading to ROS tools (REP-117).
+pub const REACHABILITY_RANGE_MAX_M: f32 = 1000.0;
+
 /// S(φ): per azimuth bin (one per panorama column, same angle convention), how far the robot
 /// knows the ground to be safe, and whether a known obstacle ends that safe stretch (otherwise
 /// the unknown begins there).

@@ -1,7 +1,8 @@
 //! A spomp run, live, over the Foxglove WebSocket protocol. The `foxglove` crate negotiates it
 //! under its current name, subprotocol `foxglove.sdk.v1` — on the wire the same protocol as
-//! `foxglove.websocket.v1` (serverInfo, advertise, subscribe, binary message data); the
-//! Foxglove app offers both names, and so does Lichtblick since late 2025.
+//! `foxglove.websocket.v1` (serverInfo, advertise, subscribe, binary message data). Viewers
+//! from before the rename offer only the old name, which the crate refuses; a front of this
+//! crate's own takes them too (`front`), so every current viewer connects.
 //!
 //! [`LiveServer`] serves ROS 2 channels: each message arrives as its topic, its ROS 2 type and
 //! `ros2msg` definition, its log time and its CDR bytes — the way spomp's MCAP recorder writes
@@ -19,6 +20,7 @@ use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex, PoisonError};
 
+mod front;
 #[cfg(test)]
 mod tests;
 #[cfg(any(test, feature = "viewer"))]
@@ -33,8 +35,8 @@ pub const DEFAULT_ADDR: SocketAddr = SocketAddr::new(std::net::IpAddr::V4(std::n
 /// The WebSocket subprotocol the server accepts (see the crate documentation).
 pub const SUBPROTOCOL: &str = "foxglove.sdk.v1";
 
-/// The protocol's original name, which viewers offer beside [`SUBPROTOCOL`]; the server does
-/// not accept it alone.
+/// The protocol's original name: viewers from before the rename offer only it, and the server
+/// takes it (answering with it) as well as [`SUBPROTOCOL`].
 pub const LEGACY_SUBPROTOCOL: &str = "foxglove.websocket.v1";
 
 /// Schema encoding of every channel: ROS 2 message definitions.
@@ -101,6 +103,8 @@ impl ServerListener for LatchedReplay {
 pub struct LiveServer {
     context: Arc<Context>,
     handle: Option<WebSocketServerHandle>,
+    /// Where viewers connect; it hands them to the crate's server (see `front`).
+    front: Option<front::Front>,
     addr: SocketAddr,
     channels: HashMap<String, Arc<RawChannel>>,
     latched: LatchedMessages,
@@ -117,22 +121,28 @@ impl LiveServer {
         let context = Context::new();
         let latched = LatchedMessages::default();
         let listener = Arc::new(LatchedReplay { context: context.clone(), latched: latched.clone() });
-        let host = match addr {
-            SocketAddr::V4(a) => a.ip().to_string(),
-            SocketAddr::V6(a) => format!("[{}]", a.ip()),
-        };
+        // The crate's server listens on loopback only, behind the front.
         let handle = WebSocketServer::new()
             .context(&context)
             .name(name)
-            .bind(host, addr.port())
+            .bind("127.0.0.1", 0)
             .capabilities([Capability::Time])
             .listener(listener)
             .start_blocking()
             .map_err(|e| LiveError::Start { addr, message: e.to_string() })?;
-        let bound = SocketAddr::new(addr.ip(), handle.port());
+        let backend = SocketAddr::from(([127, 0, 0, 1], handle.port()));
+        let front = match front::Front::start(addr, backend) {
+            Ok(f) => f,
+            Err(e) => {
+                handle.stop().wait_blocking();
+                return Err(LiveError::Start { addr, message: e.to_string() });
+            }
+        };
+        let bound = front.local_addr();
         Ok(LiveServer {
             context,
             handle: Some(handle),
+            front: Some(front),
             addr: bound,
             channels: HashMap::new(),
             latched,
@@ -200,6 +210,9 @@ impl LiveServer {
     }
 
     fn shut_down(&mut self) {
+        if let Some(mut front) = self.front.take() {
+            front.stop();
+        }
         if let Some(handle) = self.handle.take() {
             handle.stop().wait_blocking();
         }

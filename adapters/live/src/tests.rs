@@ -92,3 +92,27 @@ fn an_address_in_use_is_an_error_naming_it() {
     let Err(e) = LiveServer::start(first.local_addr(), "spomp") else { panic!("a second server on the same port") };
     assert!(e.to_string().contains(&first.local_addr().to_string()), "{e}");
 }
+
+/// A viewer offering only `name` connects, is answered with `name`, and gets the server's
+/// channels and messages.
+fn a_viewer_offering_only(name: &str) {
+    let mut server = LiveServer::start(loopback_any_port(), "spomp").unwrap();
+    server.publish("/map", "std_msgs/msg/String", STRING_DEFINITION, 7, &cdr_string("map"), true).unwrap();
+    let mut viewer = Viewer::connect_offering(server.local_addr(), &[name], WAIT).unwrap();
+    assert_eq!(viewer.server_info["name"], "spomp");
+    viewer.wait_for_channels(&["/map"], WAIT).unwrap();
+    viewer.subscribe(&["/map"]).unwrap();
+    let m = viewer.next_message(WAIT).unwrap();
+    assert_eq!((m.topic.as_str(), m.data), ("/map", cdr_string("map")));
+    server.stop();
+}
+
+#[test]
+fn a_viewer_offering_only_the_current_name_connects() {
+    a_viewer_offering_only(SUBPROTOCOL);
+}
+
+#[test]
+fn a_viewer_offering_only_the_original_name_connects() {
+    a_viewer_offering_only(LEGACY_SUBPROTOCOL);
+}

@@ -97,10 +97,16 @@ impl Viewer {
     /// Connects to `addr` asking for the Foxglove subprotocol and reads the server's
     /// `serverInfo`. Reads block for at most `timeout`.
     pub fn connect(addr: SocketAddr, timeout: Duration) -> Result<Viewer, ViewerError> {
+        Viewer::connect_offering(addr, &[SUBPROTOCOL, LEGACY_SUBPROTOCOL], timeout)
+    }
+
+    /// Connects offering the subprotocols `offered` (a viewer from before the protocol's rename
+    /// offers only [`LEGACY_SUBPROTOCOL`]); the server must choose one of them.
+    pub fn connect_offering(addr: SocketAddr, offered: &[&str], timeout: Duration) -> Result<Viewer, ViewerError> {
         let mut request = format!("ws://{addr}").into_client_request()?;
-        let offered = format!("{SUBPROTOCOL}, {LEGACY_SUBPROTOCOL}");
-        let offered = HeaderValue::from_str(&offered).map_err(|e| ViewerError::Protocol(e.to_string()))?;
-        request.headers_mut().insert("Sec-WebSocket-Protocol", offered);
+        let offered_list = offered.join(", ");
+        let offered_header = HeaderValue::from_str(&offered_list).map_err(|e| ViewerError::Protocol(e.to_string()))?;
+        request.headers_mut().insert("Sec-WebSocket-Protocol", offered_header);
         let stream = TcpStream::connect_timeout(&addr, timeout)?;
         stream.set_read_timeout(Some(timeout))?;
         let (socket, response) = tungstenite::client(request, stream).map_err(|e| match e {
@@ -108,7 +114,7 @@ impl Viewer {
             tungstenite::HandshakeError::Interrupted(_) => ViewerError::Timeout("the handshake".into()),
         })?;
         let protocol = response.headers().get("Sec-WebSocket-Protocol").and_then(|v| v.to_str().ok());
-        if protocol != Some(SUBPROTOCOL) {
+        if !protocol.is_some_and(|p| offered.contains(&p)) {
             return Err(ViewerError::Protocol(format!("the server chose subprotocol {protocol:?}")));
         }
         let mut viewer = Viewer {

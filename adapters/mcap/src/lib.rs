@@ -5,13 +5,18 @@
 //! definition, so `ros2 bag`, Foxglove and the Python `mcap-ros2-support` decoder read the files
 //! as they are.
 //!
-//! Topics (per robot `R`): `/R/pose` (PoseStamped, map frame), `/R/odom` (Odometry),
-//! `/R/cmd_vel` (Twist), `/R/panorama/depth` (Image mono16, 1/512 m per count),
-//! `/R/panorama/semantic` (Image mono8 class labels), `/R/reachability` (LaserScan),
-//! `/R/path` (Path), `/R/bt` (Log: node transitions), `/R/active_path` (String: the running
-//! nodes without a running child, when that changes), `/team/state` (String: JSON team-state
-//! changes), `/mission/status` (String: JSON). What a person watching needs: `/tf` (TFMessage:
-//! `map` → `R/base_link`), `/map` (OccupancyGrid: the aerial map as it grows), `/goals`
+//! Topics (per robot `R`), each with the type its ROS 2 topic has (`spomp_core::ros::ROBOT_TOPICS`):
+//! `/R/pose` (PoseStamped, map frame: the simulator's truth), `/R/pose_in` (PoseStamped: a pose
+//! input as received), `/R/pose_estimate` (PoseWithCovarianceStamped), `/R/odom` (Odometry),
+//! `/R/cmd_vel` (TwistStamped, or Twist where the robot's `ros2.cmd_vel_type` says so),
+//! `/R/panorama/depth` (Image mono16, 1/512 m per count), `/R/panorama/semantic` (Image mono8
+//! class labels), `/R/reachability` (LaserScan, REP-117 limits), `/R/path` (Path), `/R/bt`
+//! (Log: node transitions), `/R/active_path` (String: the running nodes without a running
+//! child, when that changes), `/team/state` (String: JSON team-state changes), `/mission/status`
+//! (String: JSON). What a person watching needs: the whole tf tree — `/tf` (TFMessage: `map →
+//! R/odom`, `R/odom → R/base_link`; `map → R/base_link` for a robot without odometry) and
+//! `/tf_static` (`R/base_link → R/lidar`), in the robot's frames and tf topics
+//! ([`RobotConventions`]) — `/map` (OccupancyGrid: the aerial map as it grows), `/goals`
 //! (MarkerArray: goals, claims, visits). A [`MessageTap`] receives every message as written
 //! (the live view).
 //!
@@ -26,7 +31,7 @@ mod safe;
 mod seam;
 
 pub use read::{LogCheck, LogMessage, McapLog, ReadError, check_log, decode_cdr, recover_log};
-pub use record::{MessageTap, MessageType, RecordError, Recorder, RecorderOptions, encode_cdr};
+pub use record::{MessageTap, MessageType, RecordError, Recorder, RecorderOptions, RobotConventions, encode_cdr};
 pub use safe::SafeFile;
 pub use seam::{
     AREA_ATTACHMENT, AreaRecord, OpenLog, RUN_METADATA, ReplayLog, RunInfo, SeamCall, SeamCallMsg, TeamOut, TickOutput,

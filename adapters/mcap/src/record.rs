@@ -8,9 +8,10 @@ use std::sync::atomic::{AtomicU8, Ordering};
 
 use byteorder::LittleEndian;
 use spomp_behaviors::Status;
+use spomp_behaviors::mission::schema::CmdVelType;
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::{DEFAULT_RANGE_SCALE_M, range_to_count};
-use spomp_core::ros::{self, RosMessage};
+use spomp_core::ros::{self, RobotFrames, RosMessage};
 use spomp_core::{AerialMap, ClassTable, DepthPanorama, Pose2, ReachabilityScan, SemanticPanorama, Time, Twist2};
 
 use crate::safe::{FLUSH_CHUNK, FLUSH_IGNORE, FLUSH_LAST, SafeFile};
@@ -80,7 +81,34 @@ impl MessageType {
 /// Topics whose messages hold until the next one (see [`MessageTap::message`]).
 const MAP_TOPIC: &str = "/map";
 const GOALS_TOPIC: &str = "/goals";
-const TF_TOPIC: &str = "/tf";
+
+/// How a robot's messages are named and typed in the log: as its ROS 2 side names them
+/// (`spomp_ros2` resolves them from the mission's `ros2:` settings), so a bag recorded from DDS
+/// and spomp's own log hold the same types under the same names, in the same frames.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RobotConventions {
+    /// Frame ids.
+    pub frames: RobotFrames,
+    /// Type of `cmd_vel`.
+    pub cmd_vel_type: CmdVelType,
+    /// The tf topic.
+    pub tf: String,
+    /// The static tf topic.
+    pub tf_static: String,
+}
+
+impl RobotConventions {
+    /// The ROS 2 side's defaults for a robot in its own namespace: frames prefixed with its id,
+    /// `TwistStamped` commands, the global `/tf` and `/tf_static`.
+    pub fn defaults(robot: &str) -> Self {
+        RobotConventions {
+            frames: RobotFrames::prefixed(robot),
+            cmd_vel_type: CmdVelType::default(),
+            tf: "/tf".into(),
+            tf_static: "/tf_static".into(),
+        }
+    }
+}
 
 /// Recording options.
 #[derive(Debug, Clone)]
@@ -122,6 +150,13 @@ pub struct Recorder<W: Write + Seek> {
     running: HashMap<String, BTreeSet<String>>,
     /// Each robot's active path as last written.
     active_paths: HashMap<String, String>,
+    /// Each robot's names and frames (defaults until set).
+    conventions: HashMap<String, RobotConventions>,
+    /// Each robot's newest odometry pose, for `map → odom`.
+    odom_pose: HashMap<String, Pose2>,
+    /// The sensor mounts written, by static tf topic (each write repeats them all: a latched
+    /// topic keeps only its last message).
+    mounts: BTreeMap<String, Vec<ros::TransformStamped>>,
 }
 
 impl Recorder<SafeFile> {
@@ -167,6 +202,9 @@ impl<W: Write + Seek> Recorder<W> {
             tap: None,
             running: HashMap::new(),
             active_paths: HashMap::new(),
+            conventions: HashMap::new(),
+            odom_pose: HashMap::new(),
+            mounts: BTreeMap::new(),
         })
     }
 
@@ -240,22 +278,81 @@ impl<W: Write + Seek> Recorder<W> {
         Ok(())
     }
 
+    /// Names and frames of `robot`'s messages from now on (default: [`RobotConventions::defaults`]).
+    pub fn set_conventions(&mut self, robot: &str, conventions: RobotConventions) {
+        self.conventions.insert(robot.to_string(), conventions);
+    }
+
+    /// The names and frames of `robot`'s messages.
+    pub fn conventions(&self, robot: &str) -> RobotConventions {
+        self.conventions.get(robot).cloned().unwrap_or_else(|| RobotConventions::defaults(robot))
+    }
+
     /// A map-frame pose (`/R/pose`).
     pub fn pose(&mut self, robot: &str, time: Time, pose: Pose2, z: f64) -> Result<(), RecordError> {
-        let msg = ros::PoseStamped { header: ros::Header::new(time, "map"), pose: ros::Pose::from_pose2(pose, z) };
-        self.log(&format!("/{robot}/pose"), time, &msg)
+        self.pose_on(robot, "pose", time, pose, z)
     }
 
-    /// Odometry (`/R/odom`).
+    /// A map-frame pose input as the robot received it (`/R/pose_in`, its ROS 2 topic).
+    pub fn pose_in(&mut self, robot: &str, time: Time, pose: Pose2, z: f64) -> Result<(), RecordError> {
+        self.pose_on(robot, "pose_in", time, pose, z)
+    }
+
+    fn pose_on(&mut self, robot: &str, name: &str, time: Time, pose: Pose2, z: f64) -> Result<(), RecordError> {
+        let map = self.conventions(robot).frames.map;
+        let msg = ros::PoseStamped { header: ros::Header::new(time, map), pose: ros::Pose::from_pose2(pose, z) };
+        self.log(&format!("/{robot}/{name}"), time, &msg)
+    }
+
+    /// The robot's pose estimate (`/R/pose_estimate`, PoseWithCovarianceStamped as on DDS).
+    pub fn estimate(&mut self, robot: &str, estimate: &spomp_core::PoseEstimate) -> Result<(), RecordError> {
+        let map = self.conventions(robot).frames.map;
+        let msg = ros::PoseWithCovarianceStamped::from_estimate(estimate, &map, estimate.stamp.into());
+        self.log(&format!("/{robot}/pose_estimate"), estimate.stamp, &msg)
+    }
+
+    /// Odometry (`/R/odom`) and the `odom → base_link` transform it gives on the robot's tf
+    /// topic (what its driver broadcasts), so odometry and everything in the body frame can be
+    /// placed.
     pub fn odometry(&mut self, robot: &str, odom: &spomp_core::Odometry) -> Result<(), RecordError> {
-        let msg = ros::Odometry::from_odometry(robot, odom, odom.stamp.into());
-        self.log(&format!("/{robot}/odom"), odom.stamp, &msg)
+        let c = self.conventions(robot);
+        let stamp = odom.stamp.into();
+        self.log(&format!("/{robot}/odom"), odom.stamp, &ros::Odometry::from_odometry(&c.frames, odom, stamp))?;
+        self.odom_pose.insert(robot.to_string(), odom.pose);
+        let tf = ros::TransformStamped::planar(&c.frames.odom, &c.frames.base_link, odom.pose, 0.0, stamp);
+        self.log(&c.tf, odom.stamp, &ros::TfMessage { transforms: vec![tf] })
     }
 
-    /// A velocity command (`/R/cmd_vel`).
+    /// The panorama sensor's mount (`base_link → sensor`, `height_m` above the body) on the
+    /// robot's static tf topic, once per robot; each write repeats every mount of that topic.
+    pub fn sensor_mount(&mut self, robot: &str, time: Time, height_m: f64) -> Result<(), RecordError> {
+        let c = self.conventions(robot);
+        let mounts = self.mounts.entry(c.tf_static.clone()).or_default();
+        if mounts.iter().any(|m| m.child_frame_id == c.frames.sensor) {
+            return Ok(());
+        }
+        let origin = Pose2::new(0.0, 0.0, 0.0);
+        mounts.push(ros::TransformStamped::planar(
+            &c.frames.base_link,
+            &c.frames.sensor,
+            origin,
+            height_m,
+            time.into(),
+        ));
+        let msg = ros::TfMessage { transforms: mounts.clone() };
+        self.log_message(&c.tf_static, time, &msg, true)
+    }
+
+    /// A velocity command (`/R/cmd_vel`, of the robot's command type).
     pub fn command(&mut self, robot: &str, time: Time, cmd: Twist2) -> Result<(), RecordError> {
-        let msg = ros::Twist::from_twist2(cmd);
-        self.log(&format!("/{robot}/cmd_vel"), time, &msg)
+        let c = self.conventions(robot);
+        let topic = format!("/{robot}/cmd_vel");
+        match c.cmd_vel_type {
+            CmdVelType::Twist => self.log(&topic, time, &ros::Twist::from_twist2(cmd)),
+            CmdVelType::TwistStamped => {
+                self.log(&topic, time, &ros::TwistStamped::from_twist2(cmd, &c.frames.base_link, time.into()))
+            }
+        }
     }
 
     /// A panorama, downsampled (`/R/panorama/depth` as mono16 counts of 1/512 m,
@@ -270,7 +367,7 @@ impl<W: Write + Seek> Recorder<W> {
         let k = self.options.panorama_downsample.max(1);
         let g = depth.geometry;
         let (rows, cols) = (g.rows.div_ceil(k), g.cols.div_ceil(k));
-        let frame = format!("{robot}/lidar");
+        let frame = self.conventions(robot).frames.sensor;
         let mut data = Vec::with_capacity(rows * cols * 2);
         for r in (0..g.rows).step_by(k) {
             for c in (0..g.cols).step_by(k) {
@@ -331,7 +428,7 @@ impl<W: Write + Seek> Recorder<W> {
             }
         }
         let img = ros::Image {
-            header: ros::Header::new(time, format!("{robot}/lidar")),
+            header: ros::Header::new(time, self.conventions(robot).frames.sensor),
             height: rows as u32,
             width: cols as u32,
             encoding: "mono8".into(),
@@ -343,9 +440,10 @@ impl<W: Write + Seek> Recorder<W> {
     }
 
     /// A reachability scan (`/R/reachability`, LaserScan in the robot frame: bin i at angle
-    /// −i·2π/N, intensity 1 where a known obstacle ends the bin).
+    /// −i·2π/N, intensity 1 where a known obstacle ends the bin; REP-117 limits).
     pub fn reachability(&mut self, scan: &ReachabilityScan) -> Result<(), RecordError> {
-        let msg = ros::LaserScan::from_reachability(scan, scan.stamp.into());
+        let base_link = self.conventions(scan.robot.as_str()).frames.base_link;
+        let msg = ros::LaserScan::from_reachability(scan, &base_link, scan.stamp.into());
         self.log(&format!("/{}/reachability", scan.robot), scan.stamp, &msg)
     }
 
@@ -372,10 +470,26 @@ impl<W: Write + Seek> Recorder<W> {
         self.active_path(robot, records)
     }
 
-    /// A robot's body in the map frame on `/tf` (`map` → `<robot>/base_link`), so 3D views place
-    /// its scans, markers and model.
+    /// A robot's body in the map frame on its tf topic, so 3D views place its scans, markers
+    /// and model: `map → odom` where the robot has odometry (the transform that puts its newest
+    /// odometry pose at `pose`; [`Recorder::odometry`] writes `odom → base_link`), otherwise
+    /// `map → base_link` — one tree, each frame with one parent.
     pub fn tf(&mut self, robot: &str, time: Time, pose: Pose2, z: f64) -> Result<(), RecordError> {
-        self.log(TF_TOPIC, time, &ros::TfMessage::base_in_map(robot, pose, z, time.into()))
+        let c = self.conventions(robot);
+        let msg = match self.odom_pose.get(robot) {
+            Some(&odom) => {
+                let mut tf = ros::TfMessage::map_to_odom(&c.frames, pose, odom, time.into());
+                tf.transforms[0].transform.translation.z = z;
+                tf
+            }
+            None => ros::TfMessage::base_in_map(&c.frames, pose, z, time.into()),
+        };
+        self.log(&c.tf, time, &msg)
+    }
+
+    /// A transform as the robot published it, on `topic`.
+    pub fn transform(&mut self, topic: &str, time: Time, msg: &ros::TfMessage) -> Result<(), RecordError> {
+        self.log(topic, time, msg)
     }
 
     /// The aerial map as it grows (`/map`, OccupancyGrid in `map`: class rank as cost 0–100,

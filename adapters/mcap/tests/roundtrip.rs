@@ -74,6 +74,13 @@ fn messages_round_trip_with_ros2_schemas() {
     let s: LaserScan = decode_cdr(&scan.topic, &scan.data).unwrap();
     assert_eq!(s.ranges, vec![1.0, 2.0, 3.0, 4.0]);
     assert_eq!(s.intensities, vec![1.0, 0.0, 0.0, 1.0]);
+    // REP-117: a fixed range_max above every reach, range_min the floor, so laser_geometry and
+    // rviz (which keep range_min ≤ r < range_max) keep every bin — the longest one too.
+    assert_eq!((s.range_min, s.range_max), (0.0, spomp_core::scan::REACHABILITY_RANGE_MAX_M));
+    assert!(s.ranges.iter().all(|r| (s.range_min..s.range_max).contains(r)));
+    assert_eq!(s.header.frame_id, "ugv1/base_link");
+    let cmd = msgs.iter().find(|m| m.topic == "/ugv1/cmd_vel").unwrap();
+    assert_eq!(cmd.schema, "geometry_msgs/msg/TwistStamped", "the default command type, as on DDS");
 
     let bt = msgs.iter().find(|m| m.topic == "/ugv1/bt").unwrap();
     let l: Log = decode_cdr(&bt.topic, &bt.data).unwrap();

@@ -1,12 +1,14 @@
 //! Between spomp's types and the ROS 2 messages of [`spomp_core::ros`] (the recorder's own).
 //!
-//! Frames follow REP-105 with the robot id as prefix: `map`, `<id>/odom`, `<id>/base_link`,
-//! `<id>/lidar`; units follow REP-103 (metres, radians, x forward / east, z up).
+//! Frames follow REP-105, named by the robot's [`RobotFrames`] (`crate::frames`: `map`,
+//! `<prefix>odom`, `<prefix>base_link`, `<prefix>lidar` by default); units follow REP-103
+//! (metres, radians, x forward / east, z up).
 
 use std::sync::Arc;
 
 use spomp_core::panorama::range_to_count;
 use spomp_core::ros;
+use spomp_core::ros::RobotFrames;
 use spomp_core::{
     ClassId, DepthPanorama, FlightCommand, Odometry, PanoramaGeometry, Point2, Pose2, PoseEstimate, ReachabilityScan,
     SemanticPanorama, Time, Twist2, UNKNOWN_CLASS,
@@ -67,13 +69,39 @@ pub fn odometry_from_ros(msg: &ros::Odometry, base: &TimeBase) -> Result<Odometr
 }
 
 /// `nav_msgs/Odometry` from robot odometry.
-pub fn odometry_to_ros(robot: &str, odom: &Odometry, base: &TimeBase) -> ros::Odometry {
-    ros::Odometry::from_odometry(robot, odom, base.to_ros(odom.stamp))
+pub fn odometry_to_ros(frames: &RobotFrames, odom: &Odometry, base: &TimeBase) -> ros::Odometry {
+    ros::Odometry::from_odometry(frames, odom, base.to_ros(odom.stamp))
+}
+
+/// The `odom → base_link` transform of an odometry pose (what a robot's driver broadcasts).
+pub fn odom_to_base(frames: &RobotFrames, odom: &Odometry, base: &TimeBase) -> ros::TfMessage {
+    let stamp = base.to_ros(odom.stamp);
+    ros::TfMessage {
+        transforms: vec![ros::TransformStamped::planar(&frames.odom, &frames.base_link, odom.pose, 0.0, stamp)],
+    }
+}
+
+/// The static `base_link → sensor` transform: the panorama sensor `height_m` above the body
+/// origin, axes aligned (what `robot_state_publisher` sends on `tf_static`).
+pub fn sensor_mount(frames: &RobotFrames, height_m: f64, stamp: Time, base: &TimeBase) -> ros::TfMessage {
+    let mount = ros::TransformStamped::planar(
+        &frames.base_link,
+        &frames.sensor,
+        Pose2::new(0.0, 0.0, 0.0),
+        height_m,
+        base.to_ros(stamp),
+    );
+    ros::TfMessage { transforms: vec![mount] }
 }
 
 /// A velocity command as `geometry_msgs/Twist`.
 pub fn twist_to_ros(cmd: Twist2) -> ros::Twist {
     ros::Twist::from_twist2(cmd)
+}
+
+/// A velocity command as `geometry_msgs/TwistStamped` in the body frame.
+pub fn twist_stamped_to_ros(cmd: Twist2, frames: &RobotFrames, stamp: Time, base: &TimeBase) -> ros::TwistStamped {
+    ros::TwistStamped::from_twist2(cmd, &frames.base_link, base.to_ros(stamp))
 }
 
 /// A velocity command from `geometry_msgs/Twist` (non-finite values are refused).
@@ -88,10 +116,16 @@ pub fn twist_from_ros(msg: &ros::Twist) -> Result<Twist2, ConvertError> {
 
 /// A UAV position setpoint (`geometry_msgs/PoseStamped` in `map`, as a PX4/MAVROS offboard bridge
 /// takes it: x east, y north, z up), facing the direction of travel from `from`.
-pub fn setpoint_to_ros(cmd: &FlightCommand, from: Option<Point2>, stamp: Time, base: &TimeBase) -> ros::PoseStamped {
+pub fn setpoint_to_ros(
+    cmd: &FlightCommand,
+    from: Option<Point2>,
+    map: &str,
+    stamp: Time,
+    base: &TimeBase,
+) -> ros::PoseStamped {
     let yaw = from.map_or(0.0, |p| (cmd.target.y - p.y).atan2(cmd.target.x - p.x));
     ros::PoseStamped {
-        header: ros::Header { stamp: base.to_ros(stamp), frame_id: "map".into() },
+        header: ros::Header { stamp: base.to_ros(stamp), frame_id: map.into() },
         pose: ros::Pose::from_pose2(Pose2::new(cmd.target.x, cmd.target.y, yaw), cmd.altitude_m),
     }
 }
@@ -108,9 +142,9 @@ pub fn pose_from_ros(msg: &ros::PoseStamped, base: &TimeBase) -> Result<PoseEsti
 }
 
 /// A map-frame pose as `geometry_msgs/PoseStamped`.
-pub fn pose_to_ros(pose: Pose2, z: f64, stamp: Time, base: &TimeBase) -> ros::PoseStamped {
+pub fn pose_to_ros(pose: Pose2, z: f64, map: &str, stamp: Time, base: &TimeBase) -> ros::PoseStamped {
     ros::PoseStamped {
-        header: ros::Header { stamp: base.to_ros(stamp), frame_id: "map".into() },
+        header: ros::Header { stamp: base.to_ros(stamp), frame_id: map.into() },
         pose: ros::Pose::from_pose2(pose, z),
     }
 }
@@ -220,15 +254,15 @@ pub fn depth_from_ros(img: &ros::Image, v_fov_rad: f64, scale_m: f64) -> Result<
     Ok(DepthPanorama { geometry, range_m })
 }
 
-/// A depth panorama as a `mono16` image of range counts.
-pub fn depth_to_ros(robot: &str, depth: &DepthPanorama, scale_m: f64, stamp: Time, base: &TimeBase) -> ros::Image {
+/// A depth panorama as a `mono16` image of range counts in the sensor frame `frame`.
+pub fn depth_to_ros(frame: &str, depth: &DepthPanorama, scale_m: f64, stamp: Time, base: &TimeBase) -> ros::Image {
     let g = depth.geometry;
     let mut data = Vec::with_capacity(g.len() * 2);
     for &m in &depth.range_m {
         data.extend_from_slice(&range_to_count(m, scale_m).to_le_bytes());
     }
     ros::Image {
-        header: ros::Header { stamp: base.to_ros(stamp), frame_id: format!("{robot}/lidar") },
+        header: ros::Header { stamp: base.to_ros(stamp), frame_id: frame.into() },
         height: g.rows as u32,
         width: g.cols as u32,
         encoding: "mono16".into(),
@@ -257,11 +291,11 @@ pub fn semantic_from_ros(img: &ros::Image, v_fov_rad: f64, classes: usize) -> Re
     Ok(SemanticPanorama { geometry, class })
 }
 
-/// Semantic labels as a `mono8` image.
-pub fn semantic_to_ros(robot: &str, sem: &SemanticPanorama, stamp: Time, base: &TimeBase) -> ros::Image {
+/// Semantic labels as a `mono8` image in the sensor frame `frame`.
+pub fn semantic_to_ros(frame: &str, sem: &SemanticPanorama, stamp: Time, base: &TimeBase) -> ros::Image {
     let g = sem.geometry;
     ros::Image {
-        header: ros::Header { stamp: base.to_ros(stamp), frame_id: format!("{robot}/lidar") },
+        header: ros::Header { stamp: base.to_ros(stamp), frame_id: frame.into() },
         height: g.rows as u32,
         width: g.cols as u32,
         encoding: "mono8".into(),
@@ -273,67 +307,47 @@ pub fn semantic_to_ros(robot: &str, sem: &SemanticPanorama, stamp: Time, base: &
 
 /// The pose estimate as `geometry_msgs/PoseWithCovarianceStamped` in `map` (x, y, yaw
 /// variances placed in the 6 × 6 matrix; z, roll, pitch unknown).
-pub fn estimate_to_ros(est: &PoseEstimate, base: &TimeBase) -> ros::PoseWithCovarianceStamped {
-    let mut cov = [0.0; 36];
-    let map = [0usize, 1, 5];
-    for (i, &a) in map.iter().enumerate() {
-        for (j, &b) in map.iter().enumerate() {
-            cov[a * 6 + b] = est.covariance[i * 3 + j];
-        }
-    }
-    for k in [2usize, 3, 4] {
-        cov[k * 6 + k] = 1e6;
-    }
-    ros::PoseWithCovarianceStamped {
-        header: ros::Header { stamp: base.to_ros(est.stamp), frame_id: "map".into() },
-        pose: ros::PoseWithCovariance {
-            pose: ros::Pose::from_pose2(est.pose, 0.0),
-            covariance: ros::Covariance36(cov),
-        },
-    }
+pub fn estimate_to_ros(est: &PoseEstimate, map: &str, base: &TimeBase) -> ros::PoseWithCovarianceStamped {
+    ros::PoseWithCovarianceStamped::from_estimate(est, map, base.to_ros(est.stamp))
 }
 
-/// The `map → <id>/odom` transform that puts the odometry pose at the estimate:
+/// The `map → odom` transform that puts the odometry pose at the estimate:
 /// T(map←odom) = T(map←base) · T(odom←base)⁻¹.
-pub fn map_to_odom(robot: &str, estimate: Pose2, odom: Pose2, stamp: Time, base: &TimeBase) -> ros::TfMessage {
-    let yaw = estimate.yaw - odom.yaw;
-    let (s, c) = yaw.sin_cos();
-    let x = estimate.x - (c * odom.x - s * odom.y);
-    let y = estimate.y - (s * odom.x + c * odom.y);
-    ros::TfMessage {
-        transforms: vec![ros::TransformStamped {
-            header: ros::Header { stamp: base.to_ros(stamp), frame_id: "map".into() },
-            child_frame_id: format!("{robot}/odom"),
-            transform: ros::Transform {
-                translation: ros::Vector3 { x, y, z: 0.0 },
-                rotation: ros::Quaternion::from_yaw(yaw),
-            },
-        }],
-    }
+pub fn map_to_odom(frames: &RobotFrames, estimate: Pose2, odom: Pose2, stamp: Time, base: &TimeBase) -> ros::TfMessage {
+    ros::TfMessage::map_to_odom(frames, estimate, odom, base.to_ros(stamp))
 }
 
 /// A planned path as `nav_msgs/Path` in `map`.
-pub fn path_to_ros(points: &[Point2], stamp: Time, base: &TimeBase) -> ros::Path {
-    ros::Path::from_points(points, base.to_ros(stamp))
+pub fn path_to_ros(points: &[Point2], map: &str, stamp: Time, base: &TimeBase) -> ros::Path {
+    let mut path = ros::Path::from_points(points, base.to_ros(stamp));
+    path.header.frame_id = map.into();
+    for p in &mut path.poses {
+        p.header.frame_id = map.into();
+    }
+    path
 }
 
-/// A reachability scan as `sensor_msgs/LaserScan` in `<id>/base_link` (bin i at angle −i·2π/N,
-/// intensity 1 where a known obstacle ends the bin) — the recorder's layout.
-pub fn scan_to_ros(scan: &ReachabilityScan, base: &TimeBase) -> ros::LaserScan {
-    ros::LaserScan::from_reachability(scan, base.to_ros(scan.stamp))
+/// A reachability scan as `sensor_msgs/LaserScan` in the body frame (bin i at angle −i·2π/N,
+/// intensity 1 where a known obstacle ends the bin; REP-117 limits) — the recorder's layout.
+pub fn scan_to_ros(scan: &ReachabilityScan, frames: &RobotFrames, base: &TimeBase) -> ros::LaserScan {
+    ros::LaserScan::from_reachability(scan, &frames.base_link, base.to_ros(scan.stamp))
 }
 
 /// Goals and claims as `visualization_msgs/MarkerArray`: one cylinder per goal (grey open,
 /// orange claimed, green visited) and a text label with its id and holder. The first marker
 /// deletes all earlier ones, so goals that merged disappear.
-pub fn goals_to_ros(goals: &[GoalView], stamp: Time, base: &TimeBase) -> ros::MarkerArray {
+pub fn goals_to_ros(goals: &[GoalView], map: &str, stamp: Time, base: &TimeBase) -> ros::MarkerArray {
     let goals = goals.iter().map(|g| ros::GoalMarkerInput {
         id: &g.id,
         position: g.position,
         claimed_by: g.claimant.as_ref().map(|c| c.robot.as_str()),
         visited_by: g.visited.as_ref().map(|(_, r)| r.as_str()),
     });
-    ros::MarkerArray::goals(goals, base.to_ros(stamp))
+    let mut markers = ros::MarkerArray::goals(goals, base.to_ros(stamp));
+    for m in &mut markers.markers {
+        m.header.frame_id = map.into();
+    }
+    markers
 }
 
 /// Wraps a depth and a semantic panorama of one instant into a frame.

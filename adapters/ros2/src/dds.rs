@@ -74,6 +74,8 @@ pub struct DdsNode {
     // The context must outlive the node's entities; both are kept here.
     _context: Context,
     node: ros2_client::Node,
+    /// Every topic an entity was created on, with its type (`package/msg/Type`).
+    topics: Vec<(String, &'static str)>,
 }
 
 impl DdsNode {
@@ -87,12 +89,19 @@ impl DdsNode {
         let participant = builder.build().map_err(|e| DdsError::Create(format!("participant: {e:?}")))?;
         let context = Context::from_domain_participant(participant).map_err(|e| DdsError::Create(format!("{e:?}")))?;
         let ns = if namespace.is_empty() { "/" } else { namespace };
+        // rosout off: ros2-client's own `/rosout` writer would be a second writer of the topic
+        // beside the node's (`rosout_qos`), with another QoS.
         let node_name = NodeName::new(ns, name)
             .map_err(|e| DdsError::Name { name: format!("{ns}/{name}"), reason: format!("{e:?}") })?;
         let node = context
-            .new_node(node_name, NodeOptions::new().enable_rosout(true).start_parameter_services(false))
+            .new_node(node_name, NodeOptions::new().enable_rosout(false).start_parameter_services(false))
             .map_err(|e| DdsError::Create(format!("node: {e:?}")))?;
-        Ok(DdsNode { _context: context, node })
+        Ok(DdsNode { _context: context, node, topics: Vec::new() })
+    }
+
+    /// Every topic a publisher or subscription was created on, with its message type, in order.
+    pub fn topics(&self) -> &[(String, &'static str)] {
+        &self.topics
     }
 
     /// A publisher of `M` on the absolute topic `topic`.
@@ -117,6 +126,7 @@ impl DdsNode {
         qos: &QosProfile,
     ) -> Result<ros2_client::dds::rustdds::Topic, DdsError> {
         let name = topic_name(topic)?;
+        self.topics.push((topic.to_string(), M::TYPE_NAME));
         self.node
             .create_topic(&name, message_type::<M>(), qos)
             .map_err(|e| DdsError::Create(format!("topic {topic}: {e:?}")))
@@ -150,6 +160,15 @@ pub fn sensor_qos(depth: usize) -> QosProfile {
 /// Commands and state the robot publishes: reliable, newest only.
 pub fn state_qos(depth: usize) -> QosProfile {
     QosProfile::publisher_default().history(History::KeepLast { depth })
+}
+
+/// rcl's `/rosout` profile (`rcl_qos_profile_rosout_default`): reliable, transient local, keep
+/// last 1000 — so a reader with rcl's profile matches, and one that joins late still gets the
+/// last 1000 entries. rcl also sets a 10 s lifespan; it is left out (the transitions are the
+/// mission's record, worth having for a viewer that connects later; lifespan does not enter
+/// QoS matching).
+pub fn rosout_qos() -> QosProfile {
+    latched_qos(1000)
 }
 
 /// Reliable and latched: a late subscriber gets the last `depth` samples (`/tf`-like state).

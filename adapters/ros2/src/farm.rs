@@ -3,11 +3,12 @@
 //! `spomp run` processes that drive them. Everything here is in spomp's types, so the simulator
 //! needs no ROS 2 knowledge (the CLI connects the two).
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 
 use ros2_client::{Publisher, Subscription};
-use spomp_behaviors::mission::schema::Ros2Spec;
+use spomp_behaviors::mission::schema::{CmdVelType, Ros2Spec};
 use spomp_core::ros;
+use spomp_core::ros::RobotFrames;
 use spomp_core::{FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, Point2, PoseEstimate, Time, Twist2};
 use spomp_teamstate::GoalView;
 
@@ -38,7 +39,10 @@ struct FarmRobot {
     pose_in: Publisher<ros::PoseStamped>,
     tiles: Publisher<ros::GridMap>,
     team_in: Publisher<ros::BytesMsg>,
-    cmd_vel: Subscription<ros::Twist>,
+    cmd_vel: CmdVelReader,
+    frames: RobotFrames,
+    /// The robot's tf topic (a key of `FarmLink::tf`).
+    tf_topic: String,
     setpoint: Subscription<ros::PoseStamped>,
     team_out: Subscription<ros::BytesMsg>,
     status: Subscription<ros::StringMsg>,
@@ -53,10 +57,30 @@ struct FarmRobot {
     lockstep: Option<FarmLockstep>,
 }
 
+/// A robot's velocity commands, of the type its settings choose.
+enum CmdVelReader {
+    Twist(Subscription<ros::Twist>),
+    Stamped(Subscription<ros::TwistStamped>),
+}
+
+impl CmdVelReader {
+    /// The next command (`Ok(None)`: none waiting; `Err`: one that did not decode).
+    fn take(&self) -> Result<Option<ros::Twist>, ()> {
+        match self {
+            CmdVelReader::Twist(s) => s.take().map(|m| m.map(|(t, _)| t)).map_err(|_| ()),
+            CmdVelReader::Stamped(s) => s.take().map(|m| m.map(|(t, _)| t.twist)).map_err(|_| ()),
+        }
+    }
+}
+
 /// The ROS 2 link of a simulator whose robots are driven by `spomp run` processes.
 pub struct FarmLink {
     robots: Vec<FarmRobot>,
     clock: Publisher<ros::Clock>,
+    /// `odom → base_link` of the robots, one writer per tf topic.
+    tf: BTreeMap<String, Publisher<ros::TfMessage>>,
+    /// The sensor mounts (`base_link → sensor`), one latched writer per tf_static topic.
+    _tf_static: BTreeMap<String, Publisher<ros::TfMessage>>,
     outbox: VecDeque<TeamPacket>,
     malformed: u64,
     // Entities before the node: they are dropped first.
@@ -73,17 +97,32 @@ impl FarmLink {
         let mut node = DdsNode::new(dds, "/", "spomp_sim")?;
         let clock = node.publisher(CLOCK_TOPIC, &state_qos(1))?;
         let mut out = Vec::new();
+        let mut tf = BTreeMap::new();
+        let mut mounts: BTreeMap<String, Vec<ros::TransformStamped>> = BTreeMap::new();
         for (id, spec) in robots {
             let t = TopicNames::resolve(id, spec.as_ref());
+            let frames = crate::frames::resolve(spec.as_ref(), &t);
+            let ros_spec = spec.clone().unwrap_or_default();
+            if !tf.contains_key(t.get("tf")) {
+                tf.insert(t.get("tf").to_string(), node.publisher(t.get("tf"), &state_qos(100))?);
+            }
+            let mount = convert::sensor_mount(&frames, ros_spec.sensor_height_m, Time::ZERO, &TimeBase::SIMULATED);
+            mounts.entry(t.get("tf_static").to_string()).or_default().extend(mount.transforms);
+            let cmd_vel = match ros_spec.cmd_vel_type {
+                CmdVelType::Twist => CmdVelReader::Twist(node.subscription(t.get("cmd_vel"), &sensor_qos(1))?),
+                CmdVelType::TwistStamped => CmdVelReader::Stamped(node.subscription(t.get("cmd_vel"), &sensor_qos(1))?),
+            };
             out.push(FarmRobot {
                 id: id.clone(),
+                cmd_vel,
+                frames,
+                tf_topic: t.get("tf").to_string(),
                 odom: node.publisher(t.get("odom"), &state_qos(20))?,
                 depth: node.publisher(t.get("panorama/depth"), &state_qos(2))?,
                 semantic: node.publisher(t.get("panorama/semantic"), &state_qos(2))?,
                 pose_in: node.publisher(t.get("pose_in"), &state_qos(5))?,
                 tiles: node.publisher(t.get("camera/tiles"), &state_qos(64))?,
                 team_in: node.publisher(t.get("team/in"), &state_qos(64))?,
-                cmd_vel: node.subscription(t.get("cmd_vel"), &sensor_qos(1))?,
                 setpoint: node.subscription(t.get("setpoint"), &sensor_qos(1))?,
                 team_out: node.subscription(t.get("team/out"), &sensor_qos(64))?,
                 // Reliable and latched like the robot's writer: the status a robot published
@@ -102,7 +141,23 @@ impl FarmLink {
                 lockstep: if lockstep { Some(FarmLockstep::new(&mut node, id, &t)?) } else { None },
             });
         }
-        Ok(FarmLink { robots: out, clock, outbox: VecDeque::new(), malformed: 0, _node: node })
+        // As tf2's static broadcaster: every mount of a topic in one latched message, so a
+        // late reader gets them all (a writer keeps only its last message).
+        let mut tf_static = BTreeMap::new();
+        for (topic, transforms) in mounts {
+            let w: Publisher<ros::TfMessage> = node.publisher(&topic, &latched_qos(1))?;
+            let _ = w.publish(ros::TfMessage { transforms });
+            tf_static.insert(topic, w);
+        }
+        Ok(FarmLink {
+            robots: out,
+            clock,
+            tf,
+            _tf_static: tf_static,
+            outbox: VecDeque::new(),
+            malformed: 0,
+            _node: node,
+        })
     }
 
     fn robot(&self, id: &str) -> Option<&FarmRobot> {
@@ -203,10 +258,15 @@ impl FarmLink {
         let _ = self.clock.publish(ros::Clock { clock: now.into() });
     }
 
-    /// Publishes a robot's odometry.
+    /// Publishes a robot's odometry, and `odom → base_link` on its tf topic as its driver
+    /// would.
     pub fn publish_odometry(&self, id: &str, odom: &Odometry) {
         if let Some(r) = self.robot(id) {
-            let _ = r.odom.publish(convert::odometry_to_ros(id, odom, &TimeBase::SIMULATED));
+            let base = TimeBase::SIMULATED;
+            let _ = r.odom.publish(convert::odometry_to_ros(&r.frames, odom, &base));
+            if let Some(w) = self.tf.get(&r.tf_topic) {
+                let _ = w.publish(convert::odom_to_base(&r.frames, odom, &base));
+            }
         }
     }
 
@@ -214,8 +274,9 @@ impl FarmLink {
     pub fn publish_panorama(&self, id: &str, frame: &PanoramaFrame) {
         if let Some(r) = self.robot(id) {
             let base = TimeBase::SIMULATED;
-            let _ = r.depth.publish(convert::depth_to_ros(id, &frame.depth, r.depth_scale_m, frame.stamp, &base));
-            let _ = r.semantic.publish(convert::semantic_to_ros(id, &frame.semantic, frame.stamp, &base));
+            let sensor = &r.frames.sensor;
+            let _ = r.depth.publish(convert::depth_to_ros(sensor, &frame.depth, r.depth_scale_m, frame.stamp, &base));
+            let _ = r.semantic.publish(convert::semantic_to_ros(sensor, &frame.semantic, frame.stamp, &base));
         }
     }
 
@@ -223,7 +284,8 @@ impl FarmLink {
     /// asks for it).
     pub fn publish_pose(&self, id: &str, est: &PoseEstimate, z_m: f64) {
         if let Some(r) = self.robot(id) {
-            let _ = r.pose_in.publish(convert::pose_to_ros(est.pose, z_m, est.stamp, &TimeBase::SIMULATED));
+            let msg = convert::pose_to_ros(est.pose, z_m, &r.frames.map, est.stamp, &TimeBase::SIMULATED);
+            let _ = r.pose_in.publish(msg);
         }
     }
 
@@ -232,7 +294,7 @@ impl FarmLink {
         if let Some(r) = self.robot(id) {
             let stamp = TimeBase::SIMULATED.to_ros(now);
             for tile in tiles {
-                let _ = r.tiles.publish(ros::GridMap::from_tile(tile, grid, "map", stamp));
+                let _ = r.tiles.publish(ros::GridMap::from_tile(tile, grid, &r.frames.map, stamp));
             }
         }
     }
@@ -242,7 +304,7 @@ impl FarmLink {
         for r in &mut self.robots {
             loop {
                 match r.cmd_vel.take() {
-                    Ok(Some((msg, _))) => match convert::twist_from_ros(&msg) {
+                    Ok(Some(msg)) => match convert::twist_from_ros(&msg) {
                         Ok(cmd) => r.command = Some((cmd, now)),
                         Err(_) => self.malformed += 1,
                     },

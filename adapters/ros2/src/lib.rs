@@ -16,6 +16,7 @@ pub mod clock;
 pub mod convert;
 pub mod dds;
 pub mod farm;
+pub mod frames;
 pub mod lockstep;
 
 pub mod pairing;

@@ -17,6 +17,7 @@ use std::time::{Duration, Instant};
 
 use ros2_client::{Publisher, Subscription};
 use serde::Serialize;
+use spomp_behaviors::mission::schema::CmdVelType;
 use spomp_behaviors::trace::{Recorder, TransitionRecord};
 use spomp_core::ros;
 use spomp_core::{
@@ -29,12 +30,13 @@ use spomp_teamstate::TierSet;
 
 use crate::clock::{TimeBase, ros_nanos, wall_nanos};
 use crate::convert;
-use crate::dds::{DdsError, DdsNode, latched_qos, sensor_qos, state_qos};
+use crate::dds::{DdsError, DdsNode, latched_qos, rosout_qos, sensor_qos, state_qos};
+use crate::frames::{FrameCheck, FrameField};
 use crate::lockstep::{self, LockstepIn, LockstepOut, Op, Reply, StepDone};
 use crate::pairing::{OdometryHistory, PanoramaPairer};
 use crate::settings::RunSettings;
 use crate::team::{StateSink, TeamChannel};
-use crate::topics::{CLOCK_TOPIC, ROSOUT_TOPIC, TF_TOPIC};
+use crate::topics::{CLOCK_TOPIC, ROSOUT_TOPIC};
 use crate::workers::{SkillWorkers, WorkOutcome};
 
 /// What a run produced, for the CLI's recorder (`--record`) and tests. Every method has an
@@ -60,6 +62,11 @@ pub trait RunObserver {
     fn on_path(&mut self, _robot: &str, _now: Time, _path: &[Point2]) {}
     /// A problem the robot met, or an input that was refused.
     fn on_problem(&mut self, _robot: &str, _now: Time, _message: &str) {}
+    /// A transform the robot published on `topic` (its tf topic), at robot time `time`.
+    fn on_tf(&mut self, _topic: &str, _time: Time, _msg: &ros::TfMessage) {}
+    /// An input named a frame other than the configured one (once per topic, field and frame
+    /// found): the tf tree it implies would not connect. Also an `on_problem`.
+    fn on_frame_mismatch(&mut self, _robot: &str, _message: &str) {}
     /// Every call made on the robot's seam, in order, with what it answered: what a replay
     /// feeds a fresh robot (`spomp run --record` logs them, as `spomp sim --replayable` does).
     fn on_seam(&mut self, _robot: &RobotId, _now: Time, _call: SeamInput<'_>) {}
@@ -161,6 +168,9 @@ pub struct RunReport {
     /// Messages on the ROS 2 `team/in` topic ignored because the team state goes over the
     /// team link.
     pub team_in_ignored: u64,
+    /// Inputs that named a frame other than the configured one: `topic field` → the frame id
+    /// last found (a `/diagnostics` warning while any is here).
+    pub frame_mismatches: std::collections::BTreeMap<String, String>,
 }
 
 /// The longest reason kept in `team_rejected_why`, characters (a refusal quotes names a sender
@@ -241,8 +251,14 @@ struct Inputs {
     clock: Option<Subscription<ros::Clock>>,
 }
 
+/// The velocity command's writer, of the type the robot's settings choose.
+enum CmdVelWriter {
+    Twist(Publisher<ros::Twist>),
+    Stamped(Publisher<ros::TwistStamped>),
+}
+
 struct Outputs {
-    cmd_vel: Publisher<ros::Twist>,
+    cmd_vel: CmdVelWriter,
     setpoint: Publisher<ros::PoseStamped>,
     estimate: Publisher<ros::PoseWithCovarianceStamped>,
     tf: Publisher<ros::TfMessage>,
@@ -270,7 +286,7 @@ pub struct RobotNode {
     lockstep: Option<(Subscription<LockstepIn>, Publisher<LockstepOut>)>,
     inputs: Inputs,
     outputs: Outputs,
-    _node: DdsNode,
+    node: DdsNode,
 }
 
 /// Wall-clock budget of one pass when nothing arrives: the loop sleeps this long at most.
@@ -305,14 +321,18 @@ impl RobotNode {
             clock: if settings.use_sim_time { Some(node.subscription(CLOCK_TOPIC, &sensor_qos(1))?) } else { None },
         };
         let outputs = Outputs {
-            cmd_vel: node.publisher(t.get("cmd_vel"), &state_qos(1))?,
+            cmd_vel: match settings.cmd_vel_type {
+                CmdVelType::Twist => CmdVelWriter::Twist(node.publisher(t.get("cmd_vel"), &state_qos(1))?),
+                CmdVelType::TwistStamped => CmdVelWriter::Stamped(node.publisher(t.get("cmd_vel"), &state_qos(1))?),
+            },
             setpoint: node.publisher(t.get("setpoint"), &state_qos(1))?,
             estimate: node.publisher(t.get("pose_estimate"), &state_qos(1))?,
-            tf: node.publisher(TF_TOPIC, &state_qos(100))?,
+            tf: node.publisher(t.get("tf"), &state_qos(100))?,
             path: node.publisher(t.get("path"), &latched_qos(1))?,
             goals: node.publisher(t.get("goals"), &latched_qos(1))?,
             scan: node.publisher(t.get("reachability"), &state_qos(1))?,
-            rosout: node.publisher(ROSOUT_TOPIC, &state_qos(1000))?,
+            // The only `/rosout` writer of the process, with rcl's QoS (see `rosout_qos`).
+            rosout: node.publisher(ROSOUT_TOPIC, &rosout_qos())?,
             diagnostics: node.publisher(t.get("diagnostics"), &state_qos(10))?,
             team_out: node.publisher(t.get("team/out"), &state_qos(64))?,
             status: node.publisher(&settings.topics.status(), &latched_qos(1))?,
@@ -324,6 +344,7 @@ impl RobotNode {
             )),
             None => None,
         };
+        check_topic_types(&settings, node.topics()).map_err(DdsError::Create)?;
         Ok(RobotNode {
             robot,
             workers,
@@ -334,8 +355,13 @@ impl RobotNode {
             outputs,
             team_channel: None,
             state_sink: None,
-            _node: node,
+            node,
         })
+    }
+
+    /// Every topic the node publishes or takes, with its message type.
+    pub fn topic_types(&self) -> &[(String, &'static str)] {
+        self.node.topics()
     }
 
     /// The robot.
@@ -882,6 +908,9 @@ impl RobotNode {
         let base = state.base;
         while let Some(msg) = take(&self.inputs.odom, &mut state.report.malformed_inputs) {
             got = true;
+            let topic = self.settings.topics.get("odom");
+            self.check_frame(state, observer, topic, "header.frame_id", &msg.header.frame_id, FrameField::Odom);
+            self.check_frame(state, observer, topic, "child_frame_id", &msg.child_frame_id, FrameField::BaseLink);
             match convert::odometry_from_ros(&msg, &base) {
                 Ok(odom) => {
                     state.report.received.odometry += 1;
@@ -896,6 +925,8 @@ impl RobotNode {
         }
         while let Some(msg) = take(&self.inputs.depth, &mut state.report.malformed_inputs) {
             got = true;
+            let topic = self.settings.topics.get("panorama/depth");
+            self.check_frame(state, observer, topic, "header.frame_id", &msg.header.frame_id, FrameField::Sensor);
             match convert::depth_from_ros(&msg, self.settings.v_fov_rad, self.settings.depth_scale_m) {
                 Ok(d) => {
                     if let Some(pair) = state.pairer.push_depth(base.to_robot(msg.header.stamp), d) {
@@ -907,6 +938,8 @@ impl RobotNode {
         }
         while let Some(msg) = take(&self.inputs.semantic, &mut state.report.malformed_inputs) {
             got = true;
+            let topic = self.settings.topics.get("panorama/semantic");
+            self.check_frame(state, observer, topic, "header.frame_id", &msg.header.frame_id, FrameField::Sensor);
             let classes = self.robot.runtime().classes().classes.len();
             match convert::semantic_from_ros(&msg, self.settings.v_fov_rad, classes) {
                 Ok(s) => {
@@ -934,6 +967,8 @@ impl RobotNode {
         }
         while let Some(msg) = take(&self.inputs.pose_in, &mut state.report.malformed_inputs) {
             got = true;
+            let topic = self.settings.topics.get("pose_in");
+            self.check_frame(state, observer, topic, "header.frame_id", &msg.header.frame_id, FrameField::Map);
             match convert::pose_from_ros(&msg, &base) {
                 Ok(est) => self.external_pose(state, est, observer),
                 Err(e) => state.refuse(id.as_str(), observer, &e.to_string()),
@@ -1002,6 +1037,27 @@ impl RobotNode {
         got
     }
 
+    /// Checks a frame id an input names (see [`FrameCheck`]): a mismatch is a warning on
+    /// `/rosout`, on `/diagnostics` (from then on) and to the observer, once per value.
+    fn check_frame(
+        &self,
+        state: &mut LoopState,
+        observer: &mut dyn RunObserver,
+        topic: &str,
+        field: &'static str,
+        found: &str,
+        expected: FrameField,
+    ) {
+        let Some(why) = state.frame_check.check(topic, field, found, expected) else { return };
+        let id = self.robot.id().as_str();
+        let now = state.now().unwrap_or(Time::ZERO);
+        state.report.frame_mismatches.insert(format!("{topic} {field}"), found.to_string());
+        observer.on_frame_mismatch(id, &why);
+        observer.on_problem(id, now, &why);
+        self.log(now, 30, why.clone());
+        state.last_problem = Some(why);
+    }
+
     fn external_pose(&mut self, state: &mut LoopState, est: PoseEstimate, observer: &mut dyn RunObserver) {
         state.report.received.poses += 1;
         state.position_rx = state.now();
@@ -1026,11 +1082,17 @@ impl RobotNode {
                 let cmd = if safe { None } else { self.robot.flight() };
                 let here = self.robot.pose().map(|p| p.pose);
                 let msg = match (&cmd, here) {
-                    (Some(c), _) => Some(convert::setpoint_to_ros(c, here.map(|p| p.position()), now, &state.base)),
+                    (Some(c), _) => Some(convert::setpoint_to_ros(
+                        c,
+                        here.map(|p| p.position()),
+                        &self.settings.frames.map,
+                        now,
+                        &state.base,
+                    )),
                     // Hover: hold where it is (a setpoint stream must not stop in offboard mode).
                     (None, Some(p)) => {
                         let alt = state.last_altitude_m.unwrap_or(0.0);
-                        Some(convert::pose_to_ros(p, alt, now, &state.base))
+                        Some(convert::pose_to_ros(p, alt, &self.settings.frames.map, now, &state.base))
                     }
                     (None, None) => None,
                 };
@@ -1044,7 +1106,14 @@ impl RobotNode {
             }
             _ => {
                 let cmd = if safe { Twist2::ZERO } else { self.robot.command().unwrap_or(Twist2::ZERO) };
-                let _ = self.outputs.cmd_vel.publish(convert::twist_to_ros(cmd));
+                match &self.outputs.cmd_vel {
+                    CmdVelWriter::Twist(w) => {
+                        let _ = w.publish(convert::twist_to_ros(cmd));
+                    }
+                    CmdVelWriter::Stamped(w) => {
+                        let _ = w.publish(convert::twist_stamped_to_ros(cmd, &self.settings.frames, now, &state.base));
+                    }
+                }
                 observer.on_command(id.as_str(), now, cmd);
             }
         }
@@ -1067,8 +1136,8 @@ impl RobotNode {
             let msg = ros::Log {
                 stamp: r.time.into(),
                 level: 20,
-                name: format!("{id}/{}", r.path),
-                msg: format!("{} -> {} (tick {}, node {})", r.from, r.to, r.tick, r.node_id),
+                name: self.logger_name(),
+                msg: format!("{}: {} -> {} (tick {}, node {})", r.path, r.from, r.to, r.tick, r.node_id),
                 ..Default::default()
             };
             let _ = self.outputs.rosout.publish(msg);
@@ -1076,11 +1145,18 @@ impl RobotNode {
         transitions.records.clear();
     }
 
+    /// The node's logger name as rcl forms it: namespace and node name joined by `.`
+    /// (`ugv1.spomp`).
+    fn logger_name(&self) -> String {
+        let ns = self.settings.topics.namespace().trim_matches('/').replace('/', ".");
+        if ns.is_empty() { "spomp".into() } else { format!("{ns}.spomp") }
+    }
+
     fn log(&self, now: Time, level: u8, msg: String) {
         let _ = self.outputs.rosout.publish(ros::Log {
             stamp: now.into(),
             level,
-            name: self.robot.id().to_string(),
+            name: self.logger_name(),
             msg,
             ..Default::default()
         });
@@ -1093,7 +1169,7 @@ impl RobotNode {
         {
             state.last_scan = Some(scan.stamp);
             observer.on_scan(scan);
-            let _ = self.outputs.scan.publish(convert::scan_to_ros(scan, &state.base));
+            let _ = self.outputs.scan.publish(convert::scan_to_ros(scan, &self.settings.frames, &state.base));
         }
     }
 
@@ -1105,10 +1181,12 @@ impl RobotNode {
         {
             state.last_estimate = Some(est.stamp);
             observer.on_estimate(id.as_str(), &est);
-            let _ = self.outputs.estimate.publish(convert::estimate_to_ros(&est, &state.base));
+            let frames = &self.settings.frames;
+            let _ = self.outputs.estimate.publish(convert::estimate_to_ros(&est, &frames.map, &state.base));
             if let Some(odom) = state.history.pose_at(est.stamp) {
-                let _ =
-                    self.outputs.tf.publish(convert::map_to_odom(id.as_str(), est.pose, odom, est.stamp, &state.base));
+                let tf = convert::map_to_odom(frames, est.pose, odom, est.stamp, &state.base);
+                observer.on_tf(self.settings.topics.get("tf"), est.stamp, &tf);
+                let _ = self.outputs.tf.publish(tf);
             }
         }
         let path = self.robot.planned_path().unwrap_or(&[]);
@@ -1116,7 +1194,7 @@ impl RobotNode {
             state.last_path_len = path.len();
             state.last_path_start = path.first().copied();
             observer.on_path(id.as_str(), now, path);
-            let _ = self.outputs.path.publish(convert::path_to_ros(path, now, &state.base));
+            let _ = self.outputs.path.publish(convert::path_to_ros(path, &self.settings.frames.map, now, &state.base));
         }
     }
 
@@ -1166,7 +1244,7 @@ impl RobotNode {
     fn publish_status(&mut self, state: &mut LoopState, now: Time, reason: StopReason, wall: Duration) {
         let id = self.robot.id().clone();
         let goals = self.robot.team().goals();
-        let _ = self.outputs.goals.publish(convert::goals_to_ros(goals, now, &state.base));
+        let _ = self.outputs.goals.publish(convert::goals_to_ros(goals, &self.settings.frames.map, now, &state.base));
         let status = MissionStatus {
             robot: id.as_str(),
             time_s: now.as_secs_f64(),
@@ -1179,12 +1257,15 @@ impl RobotNode {
         }
         let report = self.with_link_figures(state.snapshot(&self.robot, wall));
         let level = match reason {
-            StopReason::None if state.last_problem.is_none() => 0,
+            StopReason::None if state.last_problem.is_none() && report.frame_mismatches.is_empty() => 0,
             StopReason::None | StopReason::EStop => 1,
             _ => 2,
         };
         let message = match reason {
-            StopReason::None => state.last_problem.take().unwrap_or_else(|| "running".into()),
+            StopReason::None => state.last_problem.take().unwrap_or_else(|| match report.frame_mismatches.len() {
+                0 => "running".into(),
+                n => format!("running; {n} input frame id(s) differ from the configured frames (see frame_mismatches)"),
+            }),
             other => format!("stopped: {}", serde_json::to_string(&other).unwrap_or_default().trim_matches('"')),
         };
         let mut values = vec![kv("tree", &report.tree_status)];
@@ -1207,6 +1288,23 @@ impl RobotNode {
         };
         let _ = self.outputs.diagnostics.publish(msg);
     }
+}
+
+/// Checks every topic the node created against the one topic table
+/// ([`spomp_core::ros::ROBOT_TOPICS`], which the recorder names and types its channels from):
+/// one type per topic name on DDS and in logs. `cmd_vel` is of the type the settings choose.
+pub fn check_topic_types(settings: &RunSettings, created: &[(String, &'static str)]) -> Result<(), String> {
+    for t in spomp_core::ros::ROBOT_TOPICS {
+        let expected = match (t.role, settings.cmd_vel_type) {
+            ("cmd_vel", CmdVelType::Twist) => <ros::Twist as ros::RosMessage>::TYPE_NAME,
+            _ => t.type_name,
+        };
+        let name = settings.topics.get(t.role);
+        if let Some((_, found)) = created.iter().find(|(topic, ty)| topic == name && *ty != expected) {
+            return Err(format!("topic {name} ({}) created as {found}, the topic table says {expected}", t.role));
+        }
+    }
+    Ok(())
 }
 
 fn kv(key: &str, value: &str) -> ros::KeyValue {
@@ -1288,6 +1386,7 @@ struct LoopState {
     odom_latency: VecDeque<f64>,
     panorama_latency: VecDeque<f64>,
     report: RunReport,
+    frame_check: FrameCheck,
 }
 
 /// How long the lockstep loop sleeps when no call is waiting.
@@ -1383,6 +1482,7 @@ impl LoopState {
             odom_latency: VecDeque::new(),
             panorama_latency: VecDeque::new(),
             report: RunReport::default(),
+            frame_check: FrameCheck::new(settings.frames.clone(), settings.setting_path.clone()),
         }
     }
 
@@ -1487,6 +1587,32 @@ fn percentiles(samples: &VecDeque<f64>) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_node_refuses_a_topic_whose_type_is_not_the_tables() {
+        let yaml = include_str!("../../../tests/missions/ros2/interop.yaml");
+        let mut mission: spomp_behaviors::mission::schema::MissionFile =
+            serde_saphyr::from_str(yaml).expect("the fixture parses");
+        let settings = RunSettings::from_mission(&mission, "ugv1", None).expect("settings");
+        let created = |pairs: &[(&str, &'static str)]| -> Vec<(String, &'static str)> {
+            pairs.iter().map(|(t, ty)| (t.to_string(), *ty)).collect()
+        };
+        let right = created(&[
+            ("/ugv1/cmd_vel", "geometry_msgs/msg/TwistStamped"),
+            ("/ugv1/pose_estimate", "geometry_msgs/msg/PoseWithCovarianceStamped"),
+            ("/tf", "tf2_msgs/msg/TFMessage"),
+        ]);
+        assert_eq!(check_topic_types(&settings, &right), Ok(()));
+        let wrong = created(&[("/ugv1/pose_estimate", "geometry_msgs/msg/PoseStamped")]);
+        let why = check_topic_types(&settings, &wrong).expect_err("a second type for pose_estimate");
+        assert!(why.contains("/ugv1/pose_estimate") && why.contains("PoseWithCovarianceStamped"), "{why}");
+        // The command type the settings choose.
+        let spec = mission.team.iter_mut().find(|r| r.id == "ugv1").and_then(|r| r.ros2.as_mut()).expect("ros2");
+        spec.cmd_vel_type = CmdVelType::Twist;
+        let twist = RunSettings::from_mission(&mission, "ugv1", None).expect("settings");
+        assert!(check_topic_types(&twist, &right).is_err());
+        assert_eq!(check_topic_types(&twist, &created(&[("/ugv1/cmd_vel", "geometry_msgs/msg/Twist")])), Ok(()));
+    }
 
     #[test]
     fn percentiles_of_a_known_series() {

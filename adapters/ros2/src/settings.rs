@@ -1,7 +1,8 @@
 //! What `spomp run` needs to know beyond the robot itself: names, DDS, input formats, limits.
 
-use spomp_behaviors::mission::schema::MissionFile;
+use spomp_behaviors::mission::schema::{CmdVelType, MissionFile};
 use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
+use spomp_core::ros::RobotFrames;
 
 use crate::dds::DdsSettings;
 use crate::topics::TopicNames;
@@ -24,6 +25,12 @@ pub struct RunSettings {
     pub robot: String,
     /// Topic names.
     pub topics: TopicNames,
+    /// Frame ids of the robot's messages and transforms.
+    pub frames: RobotFrames,
+    /// Type of the velocity command on `cmd_vel`.
+    pub cmd_vel_type: CmdVelType,
+    /// Where the robot's settings are in the mission (`team[1] (ugv1) ros2`), for diagnostics.
+    pub setting_path: String,
     /// DDS domain and interfaces.
     pub dds: DdsSettings,
     /// Stop when odometry is older than this, seconds.
@@ -62,7 +69,7 @@ impl RunSettings {
     /// overrides the mission's, and the ROS 2 environment (`ROS_DOMAIN_ID`,
     /// `ROS_AUTOMATIC_DISCOVERY_RANGE`) overrides both where set.
     pub fn from_mission(mission: &MissionFile, id: &str, domain_id: Option<u16>) -> Result<Self, SettingsError> {
-        let spec = mission.team.iter().find(|r| r.id == id).ok_or_else(|| {
+        let (index, spec) = mission.team.iter().enumerate().find(|(_, r)| r.id == id).ok_or_else(|| {
             SettingsError::UnknownRobot(
                 id.into(),
                 mission.team.iter().map(|r| r.id.as_str()).collect::<Vec<_>>().join(", "),
@@ -73,9 +80,20 @@ impl RunSettings {
         if let Some(d) = domain_id {
             dds.domain_id = d;
         }
+        let topics = TopicNames::resolve(id, spec.ros2.as_ref());
+        let frames = crate::frames::resolve(spec.ros2.as_ref(), &topics);
+        let setting_path = format!("team[{index}] ({id}) ros2");
+        if let Some((a, b, frame)) = crate::frames::collision(&frames) {
+            return Err(SettingsError::Invalid(format!(
+                "{setting_path}: frames `{a}` and `{b}` are both `{frame}` (set `frames.{b}` or `frame_prefix`)"
+            )));
+        }
         Ok(RunSettings {
             robot: id.into(),
-            topics: TopicNames::resolve(id, spec.ros2.as_ref()),
+            topics,
+            frames,
+            cmd_vel_type: ros.cmd_vel_type,
+            setting_path,
             dds,
             odometry_timeout_s: ros.odometry_timeout_s,
             panorama_timeout_s: ros.panorama_timeout_s,

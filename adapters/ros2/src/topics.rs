@@ -5,28 +5,10 @@ use std::collections::BTreeMap;
 use spomp_behaviors::mission::schema::Ros2Spec;
 
 /// Default topic of each role, relative to the robot's namespace (an absolute name stays as
-/// it is). The roles are the keys a mission's `ros2.topics` may rename.
-pub const DEFAULT_TOPICS: &[(&str, &str)] = &[
-    ("odom", "odom"),
-    ("panorama/depth", "panorama/depth"),
-    ("panorama/semantic", "panorama/semantic"),
-    ("gps", "gps/fix"),
-    ("pose_in", "pose_in"),
-    ("camera/tiles", "camera/tiles"),
-    ("cmd_vel", "cmd_vel"),
-    ("setpoint", "setpoint_position/local"),
-    ("pose_estimate", "pose_estimate"),
-    ("path", "path"),
-    ("goals", "goals"),
-    ("reachability", "reachability"),
-    ("diagnostics", "/diagnostics"),
-    ("estop", "estop"),
-    ("team/in", "team/in"),
-    ("team/out", "team/out"),
-];
+/// it is), with its type: [`spomp_core::ros::ROBOT_TOPICS`], the table the recorder shares. The
+/// roles are the keys a mission's `ros2.topics` may rename.
+pub use spomp_core::ros::ROBOT_TOPICS;
 
-/// Global topics every robot shares.
-pub const TF_TOPIC: &str = "/tf";
 /// Node transitions and problems.
 pub const ROSOUT_TOPIC: &str = "/rosout";
 /// Simulated time.
@@ -51,11 +33,17 @@ impl TopicNames {
             None => format!("/{id}"),
         };
         let mut names = BTreeMap::new();
-        for &(role, default) in DEFAULT_TOPICS {
-            let chosen = spec.and_then(|s| s.topics.get(role)).map_or(default, String::as_str);
-            names.insert(role, qualify(&namespace, chosen));
+        for t in ROBOT_TOPICS {
+            let chosen = spec.and_then(|s| s.topics.get(t.role)).map_or(t.name, String::as_str);
+            names.insert(t.role, qualify(&namespace, chosen));
         }
         TopicNames { namespace, names }
+    }
+
+    /// Whether the robot's tf topics are its own (under its namespace or renamed) rather than
+    /// the global `/tf` every robot shares.
+    pub fn tf_is_global(&self) -> bool {
+        self.get("tf") == "/tf"
     }
 
     /// The namespace (`/ugv1`; empty for the root).
@@ -66,7 +54,7 @@ impl TopicNames {
     /// Full name of a role's topic.
     ///
     /// # Panics
-    /// Never for the roles of [`DEFAULT_TOPICS`]; a role outside them is a programming error.
+    /// Never for the roles of [`ROBOT_TOPICS`]; a role outside them is a programming error.
     pub fn get(&self, role: &str) -> &str {
         self.names.get(role).map_or("/invalid_topic_role", String::as_str)
     }
@@ -96,7 +84,7 @@ mod tests {
 
     #[test]
     fn the_mission_language_accepts_exactly_these_roles() {
-        let ours: Vec<&str> = DEFAULT_TOPICS.iter().map(|(role, _)| *role).collect();
+        let ours: Vec<&str> = ROBOT_TOPICS.iter().map(|t| t.role).collect();
         assert_eq!(ours, spomp_behaviors::mission::load::ROS2_TOPIC_ROLES);
     }
 
@@ -107,6 +95,8 @@ mod tests {
         assert_eq!(t.get("cmd_vel"), "/ugv1/cmd_vel");
         assert_eq!(t.get("diagnostics"), "/diagnostics");
         assert_eq!(t.status(), "/ugv1/team/status");
+        assert_eq!((t.get("tf"), t.get("tf_static")), ("/tf", "/tf_static"));
+        assert!(t.tf_is_global());
     }
 
     #[test]
@@ -116,6 +106,10 @@ mod tests {
         assert_eq!(t.get("odom"), "/odometry/filtered");
         assert_eq!(t.get("cmd_vel"), "/husky/base/cmd_vel");
         assert_eq!(t.get("path"), "/husky/path");
+        let nav2 = spec("namespace: robot1\ntopics: { tf: tf, tf_static: tf_static }\n");
+        let t = TopicNames::resolve("ugv1", Some(&nav2));
+        assert_eq!((t.get("tf"), t.get("tf_static")), ("/robot1/tf", "/robot1/tf_static"));
+        assert!(!t.tf_is_global());
         let root = spec("namespace: /\n");
         assert_eq!(TopicNames::resolve("ugv1", Some(&root)).get("odom"), "/odom");
     }

@@ -852,6 +852,8 @@ pub const ROS2_TOPIC_ROLES: &[&str] = &[
     "estop",
     "team/in",
     "team/out",
+    "tf",
+    "tf_static",
 ];
 
 fn check_ros2(ros: &super::schema::Ros2Spec, idx: &str, bad: &mut impl FnMut(&[&str], String)) {
@@ -922,6 +924,34 @@ fn check_ros2(ros: &super::schema::Ros2Spec, idx: &str, bad: &mut impl FnMut(&[&
     {
         bad(&["team", idx, "ros2", "namespace"], format!("`{ns}` is not a ROS 2 namespace"));
     }
+    if let Some(prefix) = &ros.frame_prefix
+        && !(prefix.is_empty() || valid_frame_id(prefix.strip_suffix('/').unwrap_or(prefix)))
+    {
+        bad(
+            &["team", idx, "ros2", "frame_prefix"],
+            format!("`{prefix}` is not a frame prefix (frame-id tokens, no leading `/`; empty for none)"),
+        );
+    }
+    let mut seen: Vec<(&str, &str)> = Vec::new();
+    for (field, id) in ros.frames.given() {
+        if !valid_frame_id(id) {
+            bad(
+                &["team", idx, "ros2", "frames", field],
+                format!("`{id}` is not a frame id (tf2: letters, digits, `_`, `/` separators, no leading `/`)"),
+            );
+        } else if let Some((other, _)) = seen.iter().find(|(_, o)| *o == id) {
+            bad(
+                &["team", idx, "ros2", "frames", field],
+                format!("`{id}` is also `frames.{other}`: each frame of the tf tree needs its own id"),
+            );
+        }
+        seen.push((field, id));
+    }
+}
+
+/// A tf2 frame id: a ROS name without the leading `/` (tf2 refuses one).
+pub fn valid_frame_id(id: &str) -> bool {
+    !id.starts_with('/') && valid_ros_name(id)
 }
 
 /// A ROS 2 topic or namespace name: `/`-separated tokens of letters, digits and `_`, no token

@@ -218,6 +218,59 @@ pub struct Ros2Spec {
     /// (east = +x, north = +y) around this point. Without it, NavSatFix input is refused.
     #[serde(default)]
     pub gps_origin: Option<GpsOrigin>,
+    /// Type of the velocity command on `cmd_vel`: `twist_stamped` (default: what ros2_control's
+    /// `diff_drive_controller` takes — on Jazzy only that — and Nav2's stamped default) or
+    /// `twist` (Gazebo's diff-drive bridge, teleop tools, older drivers).
+    #[serde(default)]
+    pub cmd_vel_type: CmdVelType,
+    /// Prefix of the default `odom`, `base_link` and sensor frame ids (never of `map`). Default:
+    /// the namespace (`ugv1/`, `husky/`) while tf is the global `/tf`, none when the robot's tf
+    /// topics are namespaced (each robot then has a tree of its own, as in Nav2's multi-robot
+    /// bringup) or the namespace is the root.
+    #[serde(default)]
+    pub frame_prefix: Option<String>,
+    /// Frame ids, each replacing its default (REP-105: `map`, `odom`, `base_link`; the panorama
+    /// sensor's `lidar`), used as written (no prefix).
+    #[serde(default)]
+    pub frames: FramesSpec,
+}
+
+/// Type of a robot's velocity command on `cmd_vel`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum CmdVelType {
+    /// `geometry_msgs/Twist`.
+    Twist,
+    /// `geometry_msgs/TwistStamped` (stamp and `base_link` frame in the header).
+    #[default]
+    TwistStamped,
+}
+
+/// Frame ids of a robot, each replacing its default (see [`Ros2Spec::frames`]).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FramesSpec {
+    /// The world-fixed frame of the estimate, paths, goals and setpoints (default `map`).
+    #[serde(default)]
+    pub map: Option<String>,
+    /// The odometry frame (default `<prefix>odom`).
+    #[serde(default)]
+    pub odom: Option<String>,
+    /// The robot's body frame (default `<prefix>base_link`).
+    #[serde(default)]
+    pub base_link: Option<String>,
+    /// The panorama sensor's frame (default `<prefix>lidar`).
+    #[serde(default)]
+    pub sensor: Option<String>,
+}
+
+impl FramesSpec {
+    /// Every frame given, as (field, id).
+    pub fn given(&self) -> impl Iterator<Item = (&'static str, &str)> {
+        [("map", &self.map), ("odom", &self.odom), ("base_link", &self.base_link), ("sensor", &self.sensor)]
+            .into_iter()
+            .filter_map(|(k, v)| v.as_deref().map(|v| (k, v)))
+    }
 }
 
 impl Default for Ros2Spec {
@@ -234,6 +287,9 @@ impl Default for Ros2Spec {
             sensor_height_m: default_sensor_height(),
             use_sim_time: false,
             gps_origin: None,
+            cmd_vel_type: CmdVelType::default(),
+            frame_prefix: None,
+            frames: FramesSpec::default(),
         }
     }
 }
