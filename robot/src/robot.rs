@@ -421,6 +421,7 @@ mod tests {
             classes: ClassTable::default_table(),
             grid: GridSpec::new(Point2::new(0.0, 0.0), 0.5, 40, 40),
             prior_map: None,
+            map_origin: None,
         };
         Robot::from_mission(&loaded, "ugv1", &area, 1, &crate::registry()).unwrap()
     }
