@@ -949,7 +949,7 @@ mod tests {
         assert_eq!(c.uav_distance_m, (2000.0, 1800.0));
         assert_eq!(c.uav_distance_ratio, Some(0.9));
         assert_eq!(c.pairs.iter().map(|p| p.identical).collect::<Vec<_>>(), [false, true]);
-        let md = deployed_markdown(&[c.clone()]);
+        let md = deployed_markdown(std::slice::from_ref(c));
         assert!(md.contains("| c | zenoh | 2 | 5.00 | 4.50 | 0.900 |"), "{md}");
         assert!(md.contains("c/3 (zenoh)"), "{md}");
         // No deployed rows: no section.

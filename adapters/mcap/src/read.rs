@@ -288,12 +288,49 @@ fn scan_data(bytes: &[u8]) -> Result<(LogCheck, usize), ReadError> {
         }
         at += 9 + body.len();
     }
+    // The walk stopped at a record the file does not hold whole, yet the file ends as a closed
+    // log does (a footer, then the magic): no crash leaves that, a damaged length field does.
+    if check.bad_record.is_none() && !check.closed && record_at(bytes, at).is_none() && ends_closed(bytes) {
+        check.bad_record =
+            Some((at as u64, "record length runs past the data section of a closed log (a damaged length)".into()));
+        check.dropped_chunks = count_chunks_after(bytes, at);
+    }
     check.readable_bytes = at as u64;
     check.lost_bytes = (bytes.len() - at) as u64;
     if check.closed || bytes[at..].first() == Some(&OP_DATA_END) {
         check.lost_bytes = 0;
     }
     Ok((check, at))
+}
+
+/// The file ends with a footer record and the MCAP magic, as a log that was closed does.
+fn ends_closed(bytes: &[u8]) -> bool {
+    bytes.len() >= MAGIC_LEN + FOOTER_LEN + MAGIC_LEN
+        && bytes[bytes.len() - MAGIC_LEN..] == crate::safe::MAGIC[..]
+        && bytes[bytes.len() - MAGIC_LEN - FOOTER_LEN] == OP_FOOTER
+        && read_u64(bytes, bytes.len() - MAGIC_LEN - FOOTER_LEN + 1) == Some(20)
+}
+
+/// Chunks at or after byte `at`, as the summary's chunk index lists them (0 when the footer
+/// points at no summary or the index does not read).
+fn count_chunks_after(bytes: &[u8], at: usize) -> usize {
+    const OP_CHUNK_INDEX: u8 = 0x08;
+    let footer = bytes.len() - MAGIC_LEN - FOOTER_LEN;
+    let Some(start) =
+        read_u64(bytes, footer + 9).and_then(|s| usize::try_from(s).ok()).filter(|&s| s != 0 && s < footer)
+    else {
+        return 0;
+    };
+    let summary = &bytes[start..footer];
+    let mut n = 0;
+    let mut i = 0;
+    while let Some((opcode, body)) = record_at(summary, i) {
+        // A chunk index begins with the message start and end times, then the chunk's offset.
+        let offset = read_u64(body, 16).and_then(|o| usize::try_from(o).ok());
+        n += usize::from(opcode == OP_CHUNK_INDEX && offset.is_some_and(|o| o >= at));
+        i += 9 + body.len();
+    }
+    n
 }
 
 /// Verifies the footer's summary CRC (when set): it covers the summary section (or nothing when

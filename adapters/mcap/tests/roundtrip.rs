@@ -209,6 +209,30 @@ fn an_attachment_without_room_for_its_crc_is_corrupt_not_a_panic() {
 }
 
 /// Offset of the first top-level chunk record (opcode 6) after the magic.
+/// Regression (CI, `tests/cli_harden.rs` bit flips): a flipped bit in the length of the
+/// message index after a chunk made the record run past the data section, and `log check` took
+/// the closed log for one a crash cut short ("not closed", exit 0). A closed log whose records
+/// stop making sense is corrupt.
+#[test]
+fn a_damaged_record_length_in_a_closed_log_is_corruption_not_a_cut() {
+    let bytes = sample_log();
+    assert!(spomp_mcap::check_log(&bytes).unwrap().intact());
+    let chunk = first_chunk(&bytes);
+    let chunk_len = u64::from_le_bytes(bytes[chunk + 1..chunk + 9].try_into().unwrap()) as usize;
+    let index = chunk + 9 + chunk_len;
+    assert_eq!(bytes[index], 0x07, "a message index follows the chunk");
+    let mut damaged = bytes.clone();
+    damaged[index + 2] ^= 1 << 4; // the length grows by 4096 × 256: past the end of the file
+    let check = spomp_mcap::check_log(&damaged).unwrap();
+    assert!(!check.intact(), "{check:?}");
+    let (offset, why) = check.bad_record.clone().unwrap();
+    assert_eq!(offset, index as u64);
+    assert!(why.contains("damaged length"), "{why}");
+    // A log that really was cut short inside that record stays a cut, not corruption.
+    let cut = spomp_mcap::check_log(&bytes[..index + 20]).unwrap();
+    assert!(cut.intact() && !cut.closed, "{cut:?}");
+}
+
 fn first_chunk(bytes: &[u8]) -> usize {
     let mut pos = 8;
     while bytes[pos] != 0x06 {
