@@ -37,7 +37,12 @@ fn valid_fixtures_and_shipped_experiments_load() {
         assert!(loaded.is_valid(), "{}: {:#?}", f.display(), loaded.diagnostics);
         let file = loaded.file.as_ref().unwrap();
         assert_eq!(loaded.configurations.len(), file.configurations.len());
-        assert_eq!(loaded.trials.len(), file.configurations.len() * file.seeds.values().len());
+        // Every configuration × seed in-process, and again once per team channel it also runs
+        // deployed over.
+        let deployed_runs: usize = file.configurations.iter().map(|c| c.deployed.len()).sum();
+        let seeds = file.seeds.values().len();
+        assert_eq!(loaded.trials.len(), (file.configurations.len() + deployed_runs) * seeds);
+        assert_eq!(loaded.trials.iter().filter(|t| t.deployed.is_some()).count(), deployed_runs * seeds);
     }
 }
 
