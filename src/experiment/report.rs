@@ -290,7 +290,6 @@ Trials run as robots run them (`--deployed`): the simulator as a lockstep \
          in-process | deployed | ratio | identical | with process problems |"
     );
     let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
-    let ratio = |r: Option<f64>| r.map_or_else(|| "—".to_string(), |r| format!("{r:.3}"));
     for c in comparisons {
         let _ = writeln!(
             md,
@@ -300,10 +299,10 @@ Trials run as robots run them (`--deployed`): the simulator as a lockstep \
             c.pairs.len(),
             fmt_num(c.clusters_visited.0),
             fmt_num(c.clusters_visited.1),
-            ratio(c.clusters_ratio),
+            fmt_ratio(c.clusters_ratio),
             fmt_num(c.uav_distance_m.0),
             fmt_num(c.uav_distance_m.1),
-            ratio(c.uav_distance_ratio),
+            fmt_ratio(c.uav_distance_ratio),
             c.pairs.iter().filter(|p| p.identical).count(),
             c.pairs.iter().filter(|p| !p.process_problems.is_empty()).count()
         );
@@ -449,7 +448,6 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>, json: bool) -> Result<ExitCo
             out!("  {:<8} {}", c.verdict, c.claim.name);
         }
         for c in &comparisons {
-            let ratio = |r: Option<f64>| r.map_or_else(|| "—".to_string(), |r| format!("{r:.3}"));
             out!(
                 "  deployed ({}) {}: {} seeds; clusters visited {} vs {} in-process (×{}), UAV distance ×{}",
                 c.channel,
@@ -457,8 +455,8 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>, json: bool) -> Result<ExitCo
                 c.pairs.len(),
                 fmt_num(c.clusters_visited.1),
                 fmt_num(c.clusters_visited.0),
-                ratio(c.clusters_ratio),
-                ratio(c.uav_distance_ratio)
+                fmt_ratio(c.clusters_ratio),
+                fmt_ratio(c.uav_distance_ratio)
             );
         }
         if !left_out.is_empty() {
@@ -486,6 +484,11 @@ fn stats_table(meta: &ExperimentMeta, rows: &[TrialRow]) -> Table {
         }
     }
     t
+}
+
+/// A deployed/in-process ratio to three decimals, `—` when there is none.
+fn fmt_ratio(r: Option<f64>) -> String {
+    r.map_or_else(|| "—".to_string(), |r| format!("{r:.3}"))
 }
 
 fn fmt_num(v: f64) -> String {
