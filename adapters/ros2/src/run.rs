@@ -10,7 +10,7 @@
 //! its position) while odometry or panoramas are stale, while the e-stop is engaged, and once at
 //! shutdown.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -279,6 +279,9 @@ pub struct RobotNode {
     peers: Vec<RobotId>,
     /// The team link, when messages go between processes rather than over ROS 2 topics.
     team_channel: Option<Box<dyn TeamChannel>>,
+    /// Unused team-state budget per peer, bytes, carried from period to period while the peer
+    /// stays reachable (see [`carry_team_credit`]).
+    team_credit: BTreeMap<RobotId, usize>,
     /// Where the resume state goes, and how often (seconds).
     state_sink: Option<(StateSink, f64)>,
     // Entities before the node: they are dropped first.
@@ -354,6 +357,7 @@ impl RobotNode {
             inputs,
             outputs,
             team_channel: None,
+            team_credit: BTreeMap::new(),
             state_sink: None,
             node,
         })
@@ -1199,33 +1203,40 @@ impl RobotNode {
     }
 
     fn send_team(&mut self, now: Time, observer: &mut dyn RunObserver) {
+        let budget = self.settings.team_budget_bytes;
         if let Some(channel) = self.team_channel.as_mut() {
-            // One message per tier, highest first, within the link's budget for the period;
-            // only to peers the link reaches now.
+            // One message per tier, highest first, within the link's credit; only to peers the
+            // link reaches now.
             let reachable = channel.reachable();
+            carry_team_credit(&mut self.team_credit, self.peers.iter().filter(|p| reachable.contains(*p)), budget);
             for peer in self.peers.iter().filter(|p| reachable.contains(*p)) {
-                let mut left = self.settings.team_budget_bytes;
+                let Some(left) = self.team_credit.get_mut(peer) else { continue };
                 for tier in crate::team::TIERS {
                     let tiers = TierSet::only(tier);
-                    let sent = self.robot.team_message_for(peer, tiers, left);
-                    let call = SeamInput::TeamOut { to: peer, tiers, budget_bytes: left, sent: sent.as_deref() };
+                    let sent = self.robot.team_message_for(peer, tiers, *left);
+                    let call = SeamInput::TeamOut { to: peer, tiers, budget_bytes: *left, sent: sent.as_deref() };
                     observer.on_seam(self.robot.id(), now, call);
                     if let Some(bytes) = sent {
-                        left = left.saturating_sub(bytes.len());
+                        *left = left.saturating_sub(bytes.len());
                         channel.send(peer, tier, bytes);
                     }
                 }
             }
             return;
         }
+        // Over ROS 2 topics the farm's radio decides what arrives; this side cannot tell when a
+        // link drops, so the credit is kept for every peer (within the cap).
+        carry_team_credit(&mut self.team_credit, self.peers.iter(), budget);
         for peer in &self.peers {
-            let budget_bytes = self.settings.team_budget_bytes;
+            let Some(left) = self.team_credit.get_mut(peer) else { continue };
+            let budget_bytes = *left;
             let sent = self.robot.team_message_for(peer, TierSet::ALL, budget_bytes);
             let call = SeamInput::TeamOut { to: peer, tiers: TierSet::ALL, budget_bytes, sent: sent.as_deref() };
             observer.on_seam(self.robot.id(), now, call);
             let Some(bytes) = sent else {
                 continue;
             };
+            *left = left.saturating_sub(bytes.len());
             let msg = ros::BytesMsg {
                 layout: ros::MultiArrayLayout {
                     dim: vec![ros::MultiArrayDimension {
@@ -1584,9 +1595,85 @@ fn percentiles(samples: &VecDeque<f64>) -> (f64, f64) {
     (at(0.5), at(0.99))
 }
 
+/// Most team-state bytes a link may bank for later: a few full map versions (as the
+/// simulator's radio model).
+const MAX_TEAM_CREDIT_BYTES: usize = 32 * 1024 * 1024;
+
+/// Starts a send period: every peer in `up` gets `budget` bytes more credit, capped at
+/// [`MAX_TEAM_CREDIT_BYTES`]; peers not in `up` lose theirs. Unused budget carries over so a
+/// record larger than one period's budget (a map version) goes out after enough periods, as on
+/// a real link and as in the simulator's radio model; without it such a record is never sent
+/// and a sync that waits for it never completes.
+fn carry_team_credit<'a>(credit: &mut BTreeMap<RobotId, usize>, up: impl Iterator<Item = &'a RobotId>, budget: usize) {
+    let mut next = BTreeMap::new();
+    for peer in up {
+        let carried = credit.get(peer).copied().unwrap_or(0);
+        next.insert(peer.clone(), carried.saturating_add(budget).min(MAX_TEAM_CREDIT_BYTES.max(budget)));
+    }
+    *credit = next;
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Periods of one robot's team sync towards a peer over a link of `budget` bytes per
+    /// period, with (`carry`) or without the unused budget carried: how many periods until the
+    /// peer holds a map version larger than one period's budget (None: not within 20).
+    fn periods_until_map_arrives(budget: usize, carry: bool) -> Option<usize> {
+        use spomp_teamstate::{TeamState, TeamStateParams};
+        let (a, b) = (RobotId::new("uav1"), RobotId::new("ugv1"));
+        let mut sender = TeamState::new(a.clone(), 0, TeamStateParams::default()).expect("sender");
+        let mut receiver = TeamState::new(b.clone(), 1, TeamStateParams::default()).expect("receiver");
+        // 2.5 budgets of bytes that do not compress, as a PNG map layer.
+        let blob: Vec<u8> = (0..budget * 5 / 2).map(|i| (i as u32).wrapping_mul(2_654_435_761).to_le_bytes()[3]).collect();
+        sender.add_map_version(1, Time::from_secs_f64(1.0), blob).expect("map version");
+        let mut credit = BTreeMap::new();
+        for period in 1..=20 {
+            if !carry {
+                credit.clear();
+            }
+            carry_team_credit(&mut credit, [&b].into_iter(), budget);
+            let left = credit.get_mut(&b).expect("credit for a reachable peer");
+            for tier in crate::team::TIERS {
+                if let Some(msg) = sender.make_sync(&b, TierSet::only(tier), *left) {
+                    let bytes = msg.encode();
+                    *left = left.saturating_sub(bytes.len());
+                    receiver.apply_bytes(&a, &bytes).expect("a good message");
+                }
+            }
+            if receiver.newest_map().is_some() {
+                return Some(period);
+            }
+        }
+        None
+    }
+
+    #[test]
+    fn a_map_version_larger_than_one_periods_budget_goes_out_after_enough_periods() {
+        // Regression: `spomp run` gave every period a fresh budget, so over the Zenoh link a map
+        // version above 1 MB (the shipped mission's bandwidth) never went out, the UAV's syncs
+        // never completed and the UGVs never saw the map's later clusters.
+        assert_eq!(periods_until_map_arrives(100_000, false), None);
+        assert_eq!(periods_until_map_arrives(100_000, true), Some(3));
+    }
+
+    #[test]
+    fn team_credit_is_capped_and_lost_when_the_peer_is_out_of_reach() {
+        let (p, q) = (RobotId::new("ugv1"), RobotId::new("ugv2"));
+        let mut credit = BTreeMap::new();
+        for _ in 0..100 {
+            carry_team_credit(&mut credit, [&p, &q].into_iter(), 1_000_000);
+        }
+        assert_eq!(credit.get(&p), Some(&MAX_TEAM_CREDIT_BYTES));
+        carry_team_credit(&mut credit, [&q].into_iter(), 1_000_000);
+        assert_eq!(credit.get(&p), None);
+        carry_team_credit(&mut credit, [&p, &q].into_iter(), 1_000_000);
+        assert_eq!(credit.get(&p), Some(&1_000_000));
+        // A budget above the cap is never cut below one period's worth.
+        carry_team_credit(&mut credit, [&p].into_iter(), 64 * 1024 * 1024);
+        assert_eq!(credit.get(&p), Some(&(64 * 1024 * 1024)));
+    }
 
     #[test]
     fn the_node_refuses_a_topic_whose_type_is_not_the_tables() {

@@ -800,6 +800,9 @@ impl TeamState {
             0
         };
         let per_record = if signed { 1 + SIGNATURE_BYTES } else { 0 };
+        // A message above the receivers' limit would be refused whole (the team shares params):
+        // however much the link could carry, one message stays within it.
+        let byte_budget = byte_budget.min(self.params.max_message_bytes);
         let mut used = HEADER_BYTES + postcard::experimental::serialized_size(&msg).unwrap_or(0) + 5 + trailer;
         let mut sent: Vec<(KeyNo, u64)> = Vec::new();
         for (no, rec) in candidates {

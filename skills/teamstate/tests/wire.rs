@@ -88,3 +88,28 @@ fn bytes_by_tier_split_the_whole_message_by_what_its_records_are() {
     let len = encode(&only_goals).len();
     assert_eq!(only_goals.bytes_by_tier(len), [len as u64, 0, 0]);
 }
+
+#[test]
+fn a_message_never_exceeds_the_limit_receivers_enforce_however_large_the_budget() {
+    // Regression: with link credit carried over (up to 32 MB) a sync message could outgrow
+    // max_message_bytes (16 MB by default) and be refused whole by every receiver.
+    let params = TeamStateParams { max_message_bytes: 3_000, ..TeamStateParams::default() };
+    let mut a = spomp_teamstate::TeamState::new(id("ugv1"), 1, params.clone()).unwrap();
+    let mut b = spomp_teamstate::TeamState::new(id("ugv2"), 2, params).unwrap();
+    for i in 0..12 {
+        a.add_scan(scan("ugv1", 3.0 * i as f64, 0.0, i as f64)).unwrap();
+    }
+    let mut messages = 0;
+    while let Some(m) = a.make_sync(&id("ugv2"), TierSet::ALL, usize::MAX) {
+        let bytes = encode(&m);
+        assert!(bytes.len() <= 3_000, "{} bytes", bytes.len());
+        b.apply_bytes(&id("ugv1"), &bytes).unwrap();
+        if let Some(back) = b.make_sync(&id("ugv1"), TierSet::ALL, usize::MAX) {
+            a.apply(&id("ugv2"), &back).unwrap();
+        }
+        messages += 1;
+        assert!(messages < 100, "the sync does not end");
+    }
+    assert!(messages > 1, "the scans needed more than one message");
+    assert_eq!(b.records().filter(|r| matches!(r.body, RecordBody::Scan(_))).count(), 12);
+}
