@@ -14,7 +14,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use spomp_behaviors::mission::MissionFile;
-use spomp_core::{FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, PoseEstimate, RobotId, Time, Twist2};
+use spomp_core::{
+    FlightCommand, GridSpec, MapTile, Odometry, OdometryCovariance, PanoramaFrame, PoseEstimate, RobotId, Time, Twist2,
+};
 use spomp_robot::seam::tier_bits;
 use spomp_ros2::lockstep::{Hello, LockstepError, Op, PROTOCOL, StepDone};
 use spomp_ros2::{DdsSettings, FarmLink};
@@ -320,6 +322,13 @@ impl ExternalDrivers for FarmDrivers {
         match self.lockstep {
             Some(_) => self.call(robot, Op::Odometry(*odom)),
             None => self.link.publish_odometry(robot.as_str(), odom),
+        }
+    }
+
+    fn odometry_with_covariance(&mut self, robot: &RobotId, odom: &Odometry, covariance: &OdometryCovariance) {
+        match self.lockstep {
+            Some(_) => self.call(robot, Op::Odometry(*odom)),
+            None => self.link.publish_odometry_with_covariance(robot.as_str(), odom, covariance),
         }
     }
 

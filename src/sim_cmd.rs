@@ -539,6 +539,8 @@ fn set_log_conventions<W: Write + Seek>(rec: &mut Recorder<W>, mission: &spomp_b
             cmd_vel_type: r.ros2.as_ref().map(|s| s.cmd_vel_type).unwrap_or_default(),
             tf: topics.get("tf").to_string(),
             tf_static: topics.get("tf_static").to_string(),
+            depth_encoding: r.ros2.as_ref().map(|s| s.depth_encoding).unwrap_or_default(),
+            depth_scale_m: r.ros2.as_ref().and_then(|s| s.depth_scale_m),
         };
         rec.set_conventions(&r.id, conventions);
     }

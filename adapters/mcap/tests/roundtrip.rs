@@ -65,10 +65,10 @@ fn messages_round_trip_with_ros2_schemas() {
 
     let depth = msgs.iter().find(|m| m.topic == "/ugv1/panorama/depth").unwrap();
     let img: Image = decode_cdr(&depth.topic, &depth.data).unwrap();
-    // Downsampled by 4: 2 × 4 pixels of mono16.
-    assert_eq!((img.height, img.width, img.encoding.as_str(), img.step), (2, 4, "mono16", 8));
-    let second = u16::from_le_bytes([img.data[2], img.data[3]]);
-    assert_eq!(second, 512, "pixel (0, 4) is 1.0 m = 512 counts");
+    // Downsampled by 4: 2 × 4 pixels of REP-118's canonical 32FC1 (metres).
+    assert_eq!((img.height, img.width, img.encoding.as_str(), img.step), (2, 4, "32FC1", 16));
+    let second = f32::from_le_bytes([img.data[4], img.data[5], img.data[6], img.data[7]]);
+    assert_eq!(second, 1.0, "pixel (0, 4) is 1.0 m");
 
     let scan = msgs.iter().find(|m| m.topic == "/ugv1/reachability").unwrap();
     let s: LaserScan = decode_cdr(&scan.topic, &scan.data).unwrap();
