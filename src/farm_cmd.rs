@@ -155,6 +155,15 @@ impl FarmDrivers {
                 dds.domain_id,
                 if options.lockstep.is_some() { "--lockstep" } else { "--use-sim-time" },
             );
+            if !dds.interfaces.is_empty() {
+                let ports = dds.rtps_ports();
+                errln!(
+                    "note: {} (this domain: ports {}-{})",
+                    spomp_ros2::dds::RECEIVE_ON_ALL_INTERFACES,
+                    ports.start(),
+                    ports.end()
+                );
+            }
         }
         let wait = Duration::from_secs_f64(options.wait_s);
         let driven: Vec<String> = match &options.lockstep {

@@ -122,7 +122,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     if !args.interfaces.is_empty() {
         settings.dds.interfaces = args.interfaces.clone();
     }
-    let node = format!("{}/spomp", settings.topics.namespace().trim_end_matches('/'));
+    let node = format!("{}/{}", settings.topics.namespace().trim_end_matches('/'), spomp_core::ros::ROBOT_NODE_NAME);
     let read = |p: &std::path::Path| std::fs::read_to_string(p).map_err(|e| e.to_string());
     let ros_args = match crate::ros_args::parse(&args.ros_args, &node, &read) {
         Ok(r) => r,
@@ -215,6 +215,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         tf_static: settings.topics.get("tf_static").to_string(),
         depth_encoding: settings.depth_encoding,
         depth_scale_m: settings.depth_scale_m,
+        logger: spomp_core::ros::rcl_logger_name(settings.topics.namespace(), spomp_core::ros::ROBOT_NODE_NAME),
     };
     if !args.json {
         errln!(
@@ -232,6 +233,15 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
                 (None, false) => "wall-clock time",
             },
         );
+        if !settings.dds.interfaces.is_empty() {
+            let ports = settings.dds.rtps_ports();
+            errln!(
+                "note: {} (this domain: ports {}-{})",
+                spomp_ros2::dds::RECEIVE_ON_ALL_INTERFACES,
+                ports.start(),
+                ports.end()
+            );
+        }
     }
     let (report, error) = match (&args.record, live) {
         (Some(path), live) => {
@@ -400,14 +410,6 @@ impl<W: Write + Seek> RunObserver for RecordingObserver<W> {
     }
 
     fn on_problem(&mut self, robot: &str, now: Time, message: &str) {
-        let topic = format!("/{robot}/rosout");
-        let msg = spomp_core::ros::Log {
-            stamp: now.into(),
-            level: 30,
-            name: robot.to_string(),
-            msg: message.to_string(),
-            ..Default::default()
-        };
-        self.record(|r| r.log(&topic, now, &msg));
+        self.record(|r| r.problem(robot, now, message));
     }
 }

@@ -63,6 +63,17 @@ pub const ROBOT_TOPICS: &[RobotTopic] = &[
     topic("tf_static", "/tf_static", TfMessage::TYPE_NAME),
 ];
 
+/// The name of a robot's ROS 2 node (in the robot's namespace: `/ugv1/spomp`).
+pub const ROBOT_NODE_NAME: &str = "spomp";
+
+/// A node's logger name as rcl forms it, and so its `/rosout` entries' `name`: the namespace
+/// without its leading `/`, then the node name, joined by `.` (`/ugv1` + `spomp` →
+/// `ugv1.spomp`, `/team/ugv1` → `team.ugv1.spomp`, the root → `spomp`).
+pub fn rcl_logger_name(namespace: &str, node: &str) -> String {
+    let ns = namespace.trim_matches('/').replace('/', ".");
+    if ns.is_empty() { node.to_string() } else { format!("{ns}.{node}") }
+}
+
 /// The row of `role` in [`ROBOT_TOPICS`].
 pub fn robot_topic(role: &str) -> Option<&'static RobotTopic> {
     ROBOT_TOPICS.iter().find(|t| t.role == role)
@@ -1433,6 +1444,14 @@ mod tests {
         let d = Odometry::default().with_sigmas([0.2, 0.3, 0.02], [0.01, 0.03]).pose.covariance.0;
         assert!((d[0] - 0.04).abs() < 1e-15 && (d[7] - 0.09).abs() < 1e-15 && (d[35] - 0.0004).abs() < 1e-15);
         assert_eq!(d[1], 0.0);
+    }
+
+    #[test]
+    fn logger_names_are_dotted_as_rcl_makes_them() {
+        assert_eq!(rcl_logger_name("/ugv1", ROBOT_NODE_NAME), "ugv1.spomp");
+        assert_eq!(rcl_logger_name("/team/ugv1/", "spomp"), "team.ugv1.spomp");
+        assert_eq!(rcl_logger_name("/", "spomp"), "spomp");
+        assert_eq!(rcl_logger_name("", "spomp"), "spomp");
     }
 
     #[test]

@@ -98,6 +98,9 @@ pub struct RobotConventions {
     pub depth_encoding: DepthEncoding,
     /// Metres per count of an integer depth encoding (`None`: the encoding's default).
     pub depth_scale_m: Option<f64>,
+    /// The logger name of the robot's `/R/rosout` entries: its ROS 2 node's, in rcl's dotted
+    /// form (`ugv1.spomp`), as on DDS `/rosout`.
+    pub logger: String,
 }
 
 impl RobotConventions {
@@ -111,6 +114,7 @@ impl RobotConventions {
             tf_static: "/tf_static".into(),
             depth_encoding: DepthEncoding::default(),
             depth_scale_m: None,
+            logger: ros::rcl_logger_name(&format!("/{robot}"), ros::ROBOT_NODE_NAME),
         }
     }
 }
@@ -439,6 +443,19 @@ impl<W: Write + Seek> Recorder<W> {
     /// A planned path (`/R/path`).
     pub fn path(&mut self, robot: &str, time: Time, points: &[spomp_core::Point2]) -> Result<(), RecordError> {
         self.log(&format!("/{robot}/path"), time, &ros::Path::from_points(points, time.into()))
+    }
+
+    /// A problem a node or skill reported (`/R/rosout`, a warning under the robot's logger
+    /// name, as its ROS 2 node logs it on `/rosout`).
+    pub fn problem(&mut self, robot: &str, time: Time, message: &str) -> Result<(), RecordError> {
+        let msg = ros::Log {
+            stamp: time.into(),
+            level: 30,
+            name: self.conventions(robot).logger,
+            msg: message.to_string(),
+            ..Default::default()
+        };
+        self.log(&format!("/{robot}/rosout"), time, &msg)
     }
 
     /// Behaviour-node transitions (`/R/bt`, one Log each: name = node path, msg = `from -> to`).

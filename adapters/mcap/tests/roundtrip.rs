@@ -258,3 +258,26 @@ fn obstacle_mask_keeps_single_pixels_when_downsampled() {
     let lit: Vec<usize> = img.data.iter().enumerate().filter(|(_, v)| **v == 255).map(|(i, _)| i).collect();
     assert_eq!(lit, vec![4 + 3]);
 }
+
+#[test]
+fn problems_are_logged_under_the_robots_rcl_logger_name() {
+    let mut buf = Cursor::new(Vec::new());
+    let mut rec = Recorder::new(&mut buf, RecorderOptions::default()).unwrap();
+    rec.problem("ugv1", Time::from_millis(100), "planner: no path").unwrap();
+    let mut husky = spomp_mcap::RobotConventions::defaults("ugv2");
+    husky.logger = spomp_core::ros::rcl_logger_name("/fleet/husky", spomp_core::ros::ROBOT_NODE_NAME);
+    rec.set_conventions("ugv2", husky);
+    rec.problem("ugv2", Time::from_millis(200), "e-stop").unwrap();
+    rec.finish().unwrap();
+    let msgs = McapLog::from_bytes(buf.into_inner()).messages().unwrap();
+    let names: Vec<(String, String)> =
+        msgs.iter().map(|m| (m.topic.clone(), decode_cdr::<Log>(&m.topic, &m.data).unwrap().name)).collect();
+    // As rcl names a node's logger (and as the robot's DDS /rosout entries are named): dots.
+    assert_eq!(
+        names,
+        vec![
+            ("/ugv1/rosout".to_string(), "ugv1.spomp".to_string()),
+            ("/ugv2/rosout".to_string(), "fleet.husky.spomp".to_string())
+        ]
+    );
+}
