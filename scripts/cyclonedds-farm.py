@@ -63,8 +63,7 @@ def main():
          "--time-limit-s", "40", "--json", "--out", out],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
     run = subprocess.Popen(
-        [spomp, "run", MISSION, "--robot", "ugv1", "--json", "--domain-id", d, "--ros-args", "-p",
-         "use_sim_time:=true"],
+        [spomp, "run", MISSION, "--robot", "ugv1", "--use-sim-time", "--json", "--domain-id", d],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
 
     dp = DomainParticipant(DOMAIN)
