@@ -2,8 +2,9 @@
 """Interop with a DDS implementation that is not ours: Eclipse Cyclone DDS (PyPI `cyclonedds`)
 plays the robot's drivers for `spomp run`.
 
-It publishes odometry, a panorama (depth + labels) and a ground-truth pose in the standard ROS 2
-types, encoded by Cyclone from its own definitions of them, and subscribes to spomp's velocity
+It publishes odometry, a panorama (depth in REP-118's `32FC1` metres, and labels) and a
+ground-truth pose in the standard ROS 2 types, encoded by Cyclone from its own definitions of
+them, and subscribes to spomp's velocity
 commands (`geometry_msgs/TwistStamped`, the default `ros2.cmd_vel_type`, as Jazzy's
 diff_drive_controller takes them), to `/tf` and, with rcl's `/rosout` profile (reliable,
 transient local, depth 1000), to `/rosout`. It passes when spomp decodes every input (its report
@@ -21,10 +22,10 @@ ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, on a domain of this test's own.
 import json
 import math
 import os
+import struct
 import subprocess
 import sys
 import time
-from dataclasses import dataclass, field
 
 DOMAIN = 150 + os.getpid() % 50
 os.environ["CYCLONEDDS_URI"] = (
@@ -36,155 +37,39 @@ os.environ["CYCLONEDDS_URI"] = (
 )
 
 from cyclonedds.domain import DomainParticipant  # noqa: E402
-from cyclonedds.idl import IdlStruct  # noqa: E402
-from cyclonedds.idl.types import array, float32, float64, int32, sequence, uint8, uint32  # noqa: E402
 from cyclonedds.pub import DataWriter  # noqa: E402
 from cyclonedds.sub import DataReader  # noqa: E402
 from cyclonedds.topic import Topic  # noqa: E402
 from cyclonedds.core import Qos, Policy  # noqa: E402
 from cyclonedds.util import duration  # noqa: E402
 
-
-# The ROS 2 interface definitions, written out independently of spomp's (DDS type names as
-# rmw implementations register them).
-@dataclass
-class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
-    sec: int32
-    nanosec: uint32
-
-
-@dataclass
-class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
-    stamp: Time
-    frame_id: str
-
-
-@dataclass
-class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
-    x: float64
-    y: float64
-    z: float64
-
-
-@dataclass
-class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
-    x: float64
-    y: float64
-    z: float64
-
-
-@dataclass
-class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
-    x: float64
-    y: float64
-    z: float64
-    w: float64
-
-
-@dataclass
-class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
-    position: Point
-    orientation: Quaternion
-
-
-@dataclass
-class PoseStamped(IdlStruct, typename="geometry_msgs::msg::dds_::PoseStamped_"):
-    header: Header
-    pose: Pose
-
-
-@dataclass
-class PoseWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
-    pose: Pose
-    covariance: array[float64, 36]
-
-
-@dataclass
-class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
-    linear: Vector3
-    angular: Vector3
-
-
-@dataclass
-class TwistStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TwistStamped_"):
-    header: Header
-    twist: Twist
-
-
-@dataclass
-class Transform(IdlStruct, typename="geometry_msgs::msg::dds_::Transform_"):
-    translation: Vector3
-    rotation: Quaternion
-
-
-@dataclass
-class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformStamped_"):
-    header: Header
-    child_frame_id: str
-    transform: Transform
-
-
-@dataclass
-class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
-    transforms: sequence[TransformStamped]
-
-
-@dataclass
-class Log(IdlStruct, typename="rcl_interfaces::msg::dds_::Log_"):
-    stamp: Time
-    level: uint8
-    name: str
-    msg: str
-    file: str
-    function: str
-    line: uint32
-
-
-@dataclass
-class TwistWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::TwistWithCovariance_"):
-    twist: Twist
-    covariance: array[float64, 36]
-
-
-@dataclass
-class Odometry(IdlStruct, typename="nav_msgs::msg::dds_::Odometry_"):
-    header: Header
-    child_frame_id: str
-    pose: PoseWithCovariance
-    twist: TwistWithCovariance
-
-
-@dataclass
-class Image(IdlStruct, typename="sensor_msgs::msg::dds_::Image_"):
-    header: Header
-    height: uint32
-    width: uint32
-    encoding: str
-    is_bigendian: uint8
-    step: uint32
-    data: sequence[uint8]
+# The ROS 2 types, written out independently of spomp's.
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from cyclonedds_types import (  # noqa: E402
+    Header, Image, Log, Odometry, Point, Pose, PoseStamped, PoseWithCovariance, Quaternion, TFMessage, Time,
+    Twist, TwistStamped, TwistWithCovariance, Vector3)
 
 
 ROWS, COLS, VFOV = 64, 512, math.pi / 2
 SENSOR_HEIGHT = 0.4
-SCALE = 1.0 / 512.0
 
 
 def flat_ground_panorama(stamp):
-    """Open flat ground: rows below the horizon see the ground at h / sin(-elevation), rows
-    above it see nothing; labels: 1 (the default table's road) where there is ground."""
+    """Open flat ground: rows below the horizon see the ground at h / sin(-elevation) metres, rows
+    above it see nothing (+inf); labels: 1 (the default table's road) where there is ground."""
     depth = bytearray()
     labels = bytearray()
     for r in range(ROWS):
         elev = VFOV / 2 - r * VFOV / (ROWS - 1)
-        rng = SENSOR_HEIGHT / math.sin(-elev) if elev < -0.02 else 0.0
-        count = 0 if rng <= 0 or rng > 60 else min(65535, round(rng / SCALE))
-        label = 1 if count else 0
+        rng = SENSOR_HEIGHT / math.sin(-elev) if elev < -0.02 else math.inf
+        rng = rng if rng <= 60 else math.inf
+        label = 1 if math.isfinite(rng) else 0
         for _ in range(COLS):
-            depth += count.to_bytes(2, "little")
+            depth += struct.pack("<f", rng)
             labels.append(label)
     hdr = Header(stamp=stamp, frame_id="ugv1/lidar")
-    d = Image(header=hdr, height=ROWS, width=COLS, encoding="mono16", is_bigendian=0, step=COLS * 2, data=list(depth))
+    # REP-118's canonical depth: 32FC1 metres, +inf where nothing returns (REP-117).
+    d = Image(header=hdr, height=ROWS, width=COLS, encoding="32FC1", is_bigendian=0, step=COLS * 4, data=list(depth))
     # A frame the mission does not configure: spomp uses the labels and reports the mismatch.
     wrong = Header(stamp=stamp, frame_id="camera")
     s = Image(header=wrong, height=ROWS, width=COLS, encoding="mono8", is_bigendian=0, step=COLS, data=list(labels))

@@ -14,7 +14,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use spomp_behaviors::mission::MissionFile;
-use spomp_core::{FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, PoseEstimate, RobotId, Time, Twist2};
+use spomp_core::{
+    FlightCommand, GridSpec, MapTile, Odometry, OdometryCovariance, PanoramaFrame, PoseEstimate, RobotId, Time, Twist2,
+};
 use spomp_robot::seam::tier_bits;
 use spomp_ros2::lockstep::{Hello, LockstepError, Op, PROTOCOL, StepDone};
 use spomp_ros2::{DdsSettings, FarmLink};
@@ -153,6 +155,15 @@ impl FarmDrivers {
                 dds.domain_id,
                 if options.lockstep.is_some() { "--lockstep" } else { "--use-sim-time" },
             );
+            if !dds.interfaces.is_empty() {
+                let ports = dds.rtps_ports();
+                errln!(
+                    "note: {} (this domain: ports {}-{})",
+                    spomp_ros2::dds::RECEIVE_ON_ALL_INTERFACES,
+                    ports.start(),
+                    ports.end()
+                );
+            }
         }
         let wait = Duration::from_secs_f64(options.wait_s);
         let driven: Vec<String> = match &options.lockstep {
@@ -320,6 +331,13 @@ impl ExternalDrivers for FarmDrivers {
         match self.lockstep {
             Some(_) => self.call(robot, Op::Odometry(*odom)),
             None => self.link.publish_odometry(robot.as_str(), odom),
+        }
+    }
+
+    fn odometry_with_covariance(&mut self, robot: &RobotId, odom: &Odometry, covariance: &OdometryCovariance) {
+        match self.lockstep {
+            Some(_) => self.call(robot, Op::Odometry(*odom)),
+            None => self.link.publish_odometry_with_covariance(robot.as_str(), odom, covariance),
         }
     }
 

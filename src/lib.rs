@@ -43,6 +43,7 @@ mod memory_stage;
 mod output;
 mod plan_cmd;
 mod replay_cmd;
+mod ros_args;
 mod run_cmd;
 mod sim_cmd;
 mod sim_plots;

@@ -40,6 +40,12 @@ pub struct RunArgs {
     /// Take time from `/clock` (a simulator's), whatever the mission says.
     #[arg(long)]
     pub use_sim_time: bool,
+    /// ROS 2 arguments, as `ros2 run` and launch files pass them, up to `--` or the end:
+    /// `-p use_sim_time:=true` and `--params-file FILE` (its `use_sim_time`). Anything else is
+    /// refused: the robot's other settings are in the mission's `ros2:` section.
+    #[arg(long = "ros-args", value_name = "ARG", num_args = 0.., allow_hyphen_values = true,
+          value_terminator = "--", action = clap::ArgAction::Append)]
+    pub ros_args: Vec<String>,
     /// Follow a `spomp sim --ros2 --lockstep` farm: take each step's inputs from it, tick, and
     /// answer, so the farm's time advances only when this robot is done (implies
     /// --use-sim-time; the robot's --seed must be the farm's).
@@ -115,6 +121,20 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     };
     if !args.interfaces.is_empty() {
         settings.dds.interfaces = args.interfaces.clone();
+    }
+    let node = format!("{}/{}", settings.topics.namespace().trim_end_matches('/'), spomp_core::ros::ROBOT_NODE_NAME);
+    let read = |p: &std::path::Path| std::fs::read_to_string(p).map_err(|e| e.to_string());
+    let ros_args = match crate::ros_args::parse(&args.ros_args, &node, &read) {
+        Ok(r) => r,
+        Err(e) => {
+            errln!("error: {e}");
+            return Ok(ExitCode::from(2));
+        }
+    };
+    // The command line's flag and the ROS parameter override the mission, as a launch file's
+    // `use_sim_time` overrides a node's own default.
+    if let Some(sim) = ros_args.use_sim_time {
+        settings.use_sim_time = sim;
     }
     settings.use_sim_time |= args.use_sim_time || args.lockstep;
     if args.topics {
@@ -193,6 +213,9 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         cmd_vel_type: settings.cmd_vel_type,
         tf: settings.topics.get("tf").to_string(),
         tf_static: settings.topics.get("tf_static").to_string(),
+        depth_encoding: settings.depth_encoding,
+        depth_scale_m: settings.depth_scale_m,
+        logger: spomp_core::ros::rcl_logger_name(settings.topics.namespace(), spomp_core::ros::ROBOT_NODE_NAME),
     };
     if !args.json {
         errln!(
@@ -210,6 +233,15 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
                 (None, false) => "wall-clock time",
             },
         );
+        if !settings.dds.interfaces.is_empty() {
+            let ports = settings.dds.rtps_ports();
+            errln!(
+                "note: {} (this domain: ports {}-{})",
+                spomp_ros2::dds::RECEIVE_ON_ALL_INTERFACES,
+                ports.start(),
+                ports.end()
+            );
+        }
     }
     let (report, error) = match (&args.record, live) {
         (Some(path), live) => {
@@ -378,14 +410,6 @@ impl<W: Write + Seek> RunObserver for RecordingObserver<W> {
     }
 
     fn on_problem(&mut self, robot: &str, now: Time, message: &str) {
-        let topic = format!("/{robot}/rosout");
-        let msg = spomp_core::ros::Log {
-            stamp: now.into(),
-            level: 30,
-            name: robot.to_string(),
-            msg: message.to_string(),
-            ..Default::default()
-        };
-        self.record(|r| r.log(&topic, now, &msg));
+        self.record(|r| r.problem(robot, now, message));
     }
 }

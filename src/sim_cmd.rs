@@ -539,6 +539,9 @@ fn set_log_conventions<W: Write + Seek>(rec: &mut Recorder<W>, mission: &spomp_b
             cmd_vel_type: r.ros2.as_ref().map(|s| s.cmd_vel_type).unwrap_or_default(),
             tf: topics.get("tf").to_string(),
             tf_static: topics.get("tf_static").to_string(),
+            depth_encoding: r.ros2.as_ref().map(|s| s.depth_encoding).unwrap_or_default(),
+            depth_scale_m: r.ros2.as_ref().and_then(|s| s.depth_scale_m),
+            logger: spomp_core::ros::rcl_logger_name(topics.namespace(), spomp_core::ros::ROBOT_NODE_NAME),
         };
         rec.set_conventions(&r.id, conventions);
     }
@@ -783,21 +786,7 @@ impl<W: Write + Seek> SimObserver for RunObserver<W> {
     }
 
     fn on_problem(&mut self, robot: &RobotId, now: Time, message: &str) {
-        self.record(|r| {
-            r.log(
-                &format!("/{robot}/rosout"),
-                now,
-                &spomp_core::ros::Log {
-                    stamp: now.into(),
-                    level: 30,
-                    name: robot.to_string(),
-                    msg: message.to_string(),
-                    file: String::new(),
-                    function: String::new(),
-                    line: 0,
-                },
-            )
-        });
+        self.record(|r| r.problem(robot.as_str(), now, message));
     }
 }
 

@@ -31,6 +31,17 @@ fn a_simulator_log_has_the_dds_types_and_a_connected_tf_tree() {
     let expected: std::collections::BTreeSet<String> =
         ["ugv1/odom", "ugv1/base_link", "ugv1/lidar"].iter().map(|s| s.to_string()).collect();
     assert_eq!(frames, expected);
+    // Depth in REP-118's canonical encoding: metres, +inf where nothing returned.
+    let depth = depth_image(&messages);
+    assert_eq!((depth.encoding.as_str(), depth.step), ("32FC1", depth.width * 4));
+    let ranges: Vec<f32> = depth.data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    assert!(ranges.iter().any(|r| r.is_finite() && *r > 0.3 && *r < 60.0), "the ground is seen");
+    assert!(ranges.iter().all(|r| *r == f32::INFINITY || (r.is_finite() && *r > 0.0)), "no zeros or NaN");
+}
+
+fn depth_image(messages: &[spomp_mcap::LogMessage]) -> spomp_core::ros::Image {
+    let m = messages.iter().find(|m| m.topic == "/ugv1/panorama/depth").expect("a depth panorama");
+    spomp_mcap::decode_cdr(&m.topic, &m.data).unwrap()
 }
 
 #[test]
@@ -43,7 +54,7 @@ fn a_simulator_log_names_the_frames_and_tf_topics_of_the_robots_settings() {
     .unwrap()
     .replace(
         "ros2: { use_sim_time: true,",
-        "ros2: { namespace: robot1, topics: { tf: tf, tf_static: tf_static }, cmd_vel_type: twist, use_sim_time: true,",
+        "ros2: { namespace: robot1, topics: { tf: tf, tf_static: tf_static }, cmd_vel_type: twist, depth_encoding: mono16, use_sim_time: true,",
     );
     assert!(mission.contains("namespace: robot1"), "the fixture changed");
     let path = dir.path().join("nav2.yaml");
@@ -56,4 +67,7 @@ fn a_simulator_log_names_the_frames_and_tf_topics_of_the_robots_settings() {
     assert_eq!((odom.header.frame_id.as_str(), odom.child_frame_id.as_str()), ("odom", "base_link"));
     let cmd = messages.iter().find(|m| m.topic == "/ugv1/cmd_vel").expect("commands");
     assert_eq!(cmd.schema, "geometry_msgs/msg/Twist", "the robot's command type");
+    // The earlier encoding, kept as an option: counts of 1/512 m.
+    let depth = depth_image(&messages);
+    assert_eq!((depth.encoding.as_str(), depth.step), ("mono16", depth.width * 2));
 }

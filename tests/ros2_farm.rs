@@ -166,6 +166,10 @@ fn a_ugv_driven_by_a_separate_spomp_run_process_in_lockstep_reaches_its_goals_as
     log_checks::assert_topic_types(&messages, "ugv1", &["odom", "cmd_vel", "pose_estimate", "reachability", "tf"]);
     let frames = log_checks::assert_tf_tree_connects(&messages, "ugv1");
     assert!(frames.contains("ugv1/lidar") && frames.contains("ugv1/base_link"), "{frames:?}");
+    // `--record` writes depth as the farm publishes it: REP-118's 32FC1 by default.
+    let depth = messages.iter().find(|m| m.topic == "/ugv1/panorama/depth").expect("the robot logs its panoramas");
+    let depth: ros::Image = spomp_mcap::decode_cdr(&depth.topic, &depth.data).expect("an image");
+    assert_eq!((depth.encoding.as_str(), depth.step), ("32FC1", depth.width * 4));
 
     // The robot's own log replays: a fresh robot fed the recorded inputs decides the same.
     let replay =

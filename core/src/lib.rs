@@ -22,7 +22,7 @@ pub use geo::GeoPoint;
 pub use geometry::{Point2, Pose2, normalize_angle};
 pub use grid::{Cell, Grid, GridSpec};
 pub use ids::{GoalId, RobotId, RobotKind};
-pub use motion::{FlightCommand, Odometry, PoseEstimate, Twist2};
+pub use motion::{FlightCommand, Odometry, OdometryCovariance, PoseEstimate, Twist2};
 pub use panorama::{DepthPanorama, PanoramaFrame, PanoramaGeometry, SemanticPanorama};
 pub use scan::ReachabilityScan;
 pub use time::Time;

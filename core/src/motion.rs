@@ -30,6 +30,16 @@ pub struct Odometry {
     pub twist: Twist2,
 }
 
+/// The uncertainty of an odometry reading, as its source's noise model gives it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct OdometryCovariance {
+    /// Row-major 3 × 3 covariance of the pose (x, y, yaw) in the odometry frame: m², m·rad,
+    /// rad². It grows with the distance driven (dead reckoning).
+    pub pose: [f64; 9],
+    /// Variances of the measured velocity: forward (m²/s²) and turn rate (rad²/s²).
+    pub twist: [f64; 2],
+}
+
 /// A pose estimate in the map frame, with uncertainty.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PoseEstimate {

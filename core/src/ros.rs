@@ -63,6 +63,17 @@ pub const ROBOT_TOPICS: &[RobotTopic] = &[
     topic("tf_static", "/tf_static", TfMessage::TYPE_NAME),
 ];
 
+/// The name of a robot's ROS 2 node (in the robot's namespace: `/ugv1/spomp`).
+pub const ROBOT_NODE_NAME: &str = "spomp";
+
+/// A node's logger name as rcl forms it, and so its `/rosout` entries' `name`: the namespace
+/// without its leading `/`, then the node name, joined by `.` (`/ugv1` + `spomp` →
+/// `ugv1.spomp`, `/team/ugv1` → `team.ugv1.spomp`, the root → `spomp`).
+pub fn rcl_logger_name(namespace: &str, node: &str) -> String {
+    let ns = namespace.trim_matches('/').replace('/', ".");
+    if ns.is_empty() { node.to_string() } else { format!("{ns}.{node}") }
+}
+
 /// The row of `role` in [`ROBOT_TOPICS`].
 pub fn robot_topic(role: &str) -> Option<&'static RobotTopic> {
     ROBOT_TOPICS.iter().find(|t| t.role == role)
@@ -823,19 +834,37 @@ impl Odometry {
 
     /// Sets the covariance diagonals from 1σ uncertainties: pose (x, y, yaw) and twist
     /// (linear x, angular z); the axes planar odometry does not measure get [`UNMEASURED_VARIANCE`].
-    pub fn with_sigmas(mut self, pose: [f64; 3], twist: [f64; 2]) -> Self {
+    pub fn with_sigmas(self, pose: [f64; 3], twist: [f64; 2]) -> Self {
+        let mut planar = [0.0; 9];
+        for (k, s) in pose.iter().enumerate() {
+            planar[k * 3 + k] = s * s;
+        }
+        self.with_covariance(&crate::motion::OdometryCovariance {
+            pose: planar,
+            twist: [twist[0] * twist[0], twist[1] * twist[1]],
+        })
+    }
+
+    /// Sets both covariances from a planar one: the pose's (x, y, yaw) block, correlations
+    /// included, into rows and columns x, y, yaw (0, 1, 5) of the 6 × 6 matrix, the twist's
+    /// variances into linear x and angular z; the axes planar odometry does not measure (z,
+    /// roll, pitch; lateral and vertical velocity, roll and pitch rates) get
+    /// [`UNMEASURED_VARIANCE`].
+    pub fn with_covariance(mut self, cov: &crate::motion::OdometryCovariance) -> Self {
+        const AXES: [usize; 3] = [0, 1, 5];
         let mut p = [0.0; 36];
         let mut t = [0.0; 36];
         for k in 0..6 {
             p[k * 6 + k] = UNMEASURED_VARIANCE;
             t[k * 6 + k] = UNMEASURED_VARIANCE;
         }
-        for (k, s) in [(0usize, pose[0]), (1, pose[1]), (5, pose[2])] {
-            p[k * 6 + k] = s * s;
+        for (i, &a) in AXES.iter().enumerate() {
+            for (j, &b) in AXES.iter().enumerate() {
+                p[a * 6 + b] = cov.pose[i * 3 + j];
+            }
         }
-        for (k, s) in [(0usize, twist[0]), (5, twist[1])] {
-            t[k * 6 + k] = s * s;
-        }
+        t[0] = cov.twist[0];
+        t[5 * 6 + 5] = cov.twist[1];
         self.pose.covariance = Covariance36(p);
         self.twist.covariance = Covariance36(t);
         self
@@ -885,6 +914,109 @@ impl LaserScan {
             range_max: max,
             ranges: scan.range_m.iter().map(|&r| if r.is_finite() { r.clamp(0.0, below_max) } else { 0.0 }).collect(),
             intensities: scan.obstacle.iter().map(|&o| if o { 1.0 } else { 0.0 }).collect(),
+        }
+    }
+}
+
+/// How a depth panorama travels as a `sensor_msgs/Image` (`ros2.depth_encoding`).
+///
+/// The default is REP-118's canonical form, `32FC1` in metres: the one form every depth
+/// consumer must read (depth_image_proc, rviz's DepthCloud, Foxglove's colour maps), with no
+/// range ceiling — a `16UC1` millimetre image stops at 65.535 m, short of a lidar panorama's
+/// reach. `16UC1` (REP-118's raw OpenNI form, millimetres) and `mono16` (spomp's earlier form,
+/// counts of 1/512 m up to 128 m, half the bytes of `32FC1`) stay available for drivers that
+/// produce them. Each pixel is the range along its ray (a panorama has no optical axis).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+pub enum DepthEncoding {
+    /// `32FC1`: metres as 32-bit floats; no return is +∞ (REP-117's "nothing within range").
+    #[default]
+    #[serde(rename = "32FC1")]
+    Float32Metres,
+    /// `16UC1`: unsigned counts, millimetres unless `depth_scale_m` says otherwise; 0 = no
+    /// return.
+    #[serde(rename = "16UC1")]
+    Uint16,
+    /// `mono16`: unsigned counts of `depth_scale_m`, 1/512 m unless set; 0 = no return.
+    #[serde(rename = "mono16")]
+    Mono16,
+}
+
+impl DepthEncoding {
+    /// Every encoding, the default first.
+    pub const ALL: [DepthEncoding; 3] = [DepthEncoding::Float32Metres, DepthEncoding::Uint16, DepthEncoding::Mono16];
+
+    /// The `sensor_msgs/Image` encoding string.
+    pub fn name(self) -> &'static str {
+        match self {
+            DepthEncoding::Float32Metres => "32FC1",
+            DepthEncoding::Uint16 => "16UC1",
+            DepthEncoding::Mono16 => "mono16",
+        }
+    }
+
+    /// The encoding an image's `encoding` field names, if it is a depth encoding.
+    pub fn from_name(name: &str) -> Option<Self> {
+        DepthEncoding::ALL.into_iter().find(|e| e.name() == name)
+    }
+
+    /// Metres per count when no scale is configured: 1 mm for `16UC1` (REP-118), 1/512 m for
+    /// `mono16`; `None` for `32FC1` (metres as they are).
+    pub fn default_scale_m(self) -> Option<f64> {
+        match self {
+            DepthEncoding::Float32Metres => None,
+            DepthEncoding::Uint16 => Some(0.001),
+            DepthEncoding::Mono16 => Some(crate::panorama::DEFAULT_RANGE_SCALE_M),
+        }
+    }
+
+    /// Bytes of one pixel.
+    pub fn bytes_per_pixel(self) -> usize {
+        match self {
+            DepthEncoding::Float32Metres => 4,
+            DepthEncoding::Uint16 | DepthEncoding::Mono16 => 2,
+        }
+    }
+}
+
+impl Image {
+    /// A depth panorama as an image in `encoding` (`scale_m`: metres per count of the integer
+    /// encodings, `None` for the encoding's default), keeping every `every`-th row and column
+    /// (1 = full size). Little-endian; no return (0, negative, not finite) becomes +∞ in
+    /// `32FC1` and count 0 otherwise.
+    pub fn from_depth(
+        header: Header,
+        depth: &crate::panorama::DepthPanorama,
+        encoding: DepthEncoding,
+        scale_m: Option<f64>,
+        every: usize,
+    ) -> Self {
+        let k = every.max(1);
+        let g = depth.geometry;
+        let (rows, cols) = (g.rows.div_ceil(k), g.cols.div_ceil(k));
+        let scale = scale_m.or(encoding.default_scale_m()).unwrap_or(1.0);
+        let mut data = Vec::with_capacity(rows * cols * encoding.bytes_per_pixel());
+        for r in (0..g.rows).step_by(k) {
+            for c in (0..g.cols).step_by(k) {
+                let m = depth.range_m.get(r * g.cols + c).copied().unwrap_or(0.0);
+                match encoding {
+                    DepthEncoding::Float32Metres => {
+                        let v = if m.is_finite() && m > 0.0 { m } else { f32::INFINITY };
+                        data.extend_from_slice(&v.to_le_bytes());
+                    }
+                    DepthEncoding::Uint16 | DepthEncoding::Mono16 => {
+                        data.extend_from_slice(&crate::panorama::range_to_count(m, scale).to_le_bytes());
+                    }
+                }
+            }
+        }
+        Image {
+            header,
+            height: rows as u32,
+            width: cols as u32,
+            encoding: encoding.name().into(),
+            is_bigendian: 0,
+            step: (cols * encoding.bytes_per_pixel()) as u32,
+            data,
         }
     }
 }
@@ -1288,6 +1420,48 @@ impl RosMessage for BytesMsg {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn planar_covariance_lands_on_x_y_yaw_with_its_correlations() {
+        let cov = crate::motion::OdometryCovariance {
+            pose: [0.04, 0.01, 0.002, 0.01, 0.09, -0.003, 0.002, -0.003, 0.0004],
+            twist: [0.0001, 0.0009],
+        };
+        let m = Odometry::default().with_covariance(&cov);
+        let p = m.pose.covariance.0;
+        let at = |r: usize, c: usize| p[r * 6 + c];
+        assert_eq!([at(0, 0), at(0, 1), at(0, 5)], [0.04, 0.01, 0.002]);
+        assert_eq!([at(1, 0), at(1, 1), at(1, 5)], [0.01, 0.09, -0.003]);
+        assert_eq!([at(5, 0), at(5, 1), at(5, 5)], [0.002, -0.003, 0.0004]);
+        for k in [2, 3, 4] {
+            assert_eq!(at(k, k), UNMEASURED_VARIANCE, "z, roll, pitch are not measured");
+            assert_eq!(at(k, 0), 0.0);
+        }
+        let t = m.twist.covariance.0;
+        assert_eq!((t[0], t[35]), (0.0001, 0.0009));
+        assert_eq!(t[7], UNMEASURED_VARIANCE, "lateral velocity is not measured");
+        // with_sigmas is the diagonal case.
+        let d = Odometry::default().with_sigmas([0.2, 0.3, 0.02], [0.01, 0.03]).pose.covariance.0;
+        assert!((d[0] - 0.04).abs() < 1e-15 && (d[7] - 0.09).abs() < 1e-15 && (d[35] - 0.0004).abs() < 1e-15);
+        assert_eq!(d[1], 0.0);
+    }
+
+    #[test]
+    fn logger_names_are_dotted_as_rcl_makes_them() {
+        assert_eq!(rcl_logger_name("/ugv1", ROBOT_NODE_NAME), "ugv1.spomp");
+        assert_eq!(rcl_logger_name("/team/ugv1/", "spomp"), "team.ugv1.spomp");
+        assert_eq!(rcl_logger_name("/", "spomp"), "spomp");
+        assert_eq!(rcl_logger_name("", "spomp"), "spomp");
+    }
+
+    #[test]
+    fn depth_encodings_name_themselves_as_images_do() {
+        for e in DepthEncoding::ALL {
+            assert_eq!(DepthEncoding::from_name(e.name()), Some(e));
+        }
+        assert_eq!(DepthEncoding::default().name(), "32FC1", "REP-118's canonical form by default");
+        assert_eq!(DepthEncoding::from_name("mono8"), None);
+    }
 
     #[test]
     fn time_converts_to_sec_and_nanosec() {

@@ -9,7 +9,8 @@
 //! `/R/pose` (PoseStamped, map frame: the simulator's truth), `/R/pose_in` (PoseStamped: a pose
 //! input as received), `/R/pose_estimate` (PoseWithCovarianceStamped), `/R/odom` (Odometry),
 //! `/R/cmd_vel` (TwistStamped, or Twist where the robot's `ros2.cmd_vel_type` says so),
-//! `/R/panorama/depth` (Image mono16, 1/512 m per count), `/R/panorama/semantic` (Image mono8
+//! `/R/panorama/depth` (Image in the robot's depth encoding, REP-118's `32FC1` metres by
+//! default), `/R/panorama/semantic` (Image mono8
 //! class labels), `/R/reachability` (LaserScan, REP-117 limits), `/R/path` (Path), `/R/bt`
 //! (Log: node transitions), `/R/active_path` (String: the running nodes without a running
 //! child, when that changes), `/team/state` (String: JSON team-state changes), `/mission/status`

@@ -10,8 +10,7 @@ use byteorder::LittleEndian;
 use spomp_behaviors::Status;
 use spomp_behaviors::mission::schema::CmdVelType;
 use spomp_behaviors::trace::TransitionRecord;
-use spomp_core::panorama::{DEFAULT_RANGE_SCALE_M, range_to_count};
-use spomp_core::ros::{self, RobotFrames, RosMessage};
+use spomp_core::ros::{self, DepthEncoding, RobotFrames, RosMessage};
 use spomp_core::{AerialMap, ClassTable, DepthPanorama, Pose2, ReachabilityScan, SemanticPanorama, Time, Twist2};
 
 use crate::safe::{FLUSH_CHUNK, FLUSH_IGNORE, FLUSH_LAST, SafeFile};
@@ -85,7 +84,7 @@ const GOALS_TOPIC: &str = "/goals";
 /// How a robot's messages are named and typed in the log: as its ROS 2 side names them
 /// (`spomp_ros2` resolves them from the mission's `ros2:` settings), so a bag recorded from DDS
 /// and spomp's own log hold the same types under the same names, in the same frames.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RobotConventions {
     /// Frame ids.
     pub frames: RobotFrames,
@@ -95,6 +94,13 @@ pub struct RobotConventions {
     pub tf: String,
     /// The static tf topic.
     pub tf_static: String,
+    /// Encoding of `/R/panorama/depth` (the robot's `ros2.depth_encoding`).
+    pub depth_encoding: DepthEncoding,
+    /// Metres per count of an integer depth encoding (`None`: the encoding's default).
+    pub depth_scale_m: Option<f64>,
+    /// The logger name of the robot's `/R/rosout` entries: its ROS 2 node's, in rcl's dotted
+    /// form (`ugv1.spomp`), as on DDS `/rosout`.
+    pub logger: String,
 }
 
 impl RobotConventions {
@@ -106,6 +112,9 @@ impl RobotConventions {
             cmd_vel_type: CmdVelType::default(),
             tf: "/tf".into(),
             tf_static: "/tf_static".into(),
+            depth_encoding: DepthEncoding::default(),
+            depth_scale_m: None,
+            logger: ros::rcl_logger_name(&format!("/{robot}"), ros::ROBOT_NODE_NAME),
         }
     }
 }
@@ -355,8 +364,8 @@ impl<W: Write + Seek> Recorder<W> {
         }
     }
 
-    /// A panorama, downsampled (`/R/panorama/depth` as mono16 counts of 1/512 m,
-    /// `/R/panorama/semantic` as mono8 labels).
+    /// A panorama, downsampled (`/R/panorama/depth` in the robot's depth encoding, `32FC1`
+    /// metres by default; `/R/panorama/semantic` as mono8 labels).
     pub fn panorama(
         &mut self,
         robot: &str,
@@ -365,30 +374,14 @@ impl<W: Write + Seek> Recorder<W> {
         semantic: Option<&SemanticPanorama>,
     ) -> Result<(), RecordError> {
         let k = self.options.panorama_downsample.max(1);
-        let g = depth.geometry;
-        let (rows, cols) = (g.rows.div_ceil(k), g.cols.div_ceil(k));
-        let frame = self.conventions(robot).frames.sensor;
-        let mut data = Vec::with_capacity(rows * cols * 2);
-        for r in (0..g.rows).step_by(k) {
-            for c in (0..g.cols).step_by(k) {
-                let m = depth.range_m.get(r * g.cols + c).copied().unwrap_or(0.0);
-                let count = range_to_count(m, DEFAULT_RANGE_SCALE_M);
-                data.extend_from_slice(&count.to_le_bytes());
-            }
-        }
-        let img = ros::Image {
-            header: ros::Header::new(time, frame.clone()),
-            height: rows as u32,
-            width: cols as u32,
-            encoding: "mono16".into(),
-            is_bigendian: 0,
-            step: (cols * 2) as u32,
-            data,
-        };
+        let c = self.conventions(robot);
+        let frame = c.frames.sensor;
+        let header = ros::Header::new(time, frame.clone());
+        let img = ros::Image::from_depth(header, depth, c.depth_encoding, c.depth_scale_m, k);
         self.log(&format!("/{robot}/panorama/depth"), time, &img)?;
         if let Some(sem) = semantic {
             let sg = sem.geometry;
-            let mut data = Vec::with_capacity(rows * cols);
+            let mut data = Vec::with_capacity(sg.rows.div_ceil(k) * sg.cols.div_ceil(k));
             for r in (0..sg.rows).step_by(k) {
                 for c in (0..sg.cols).step_by(k) {
                     data.push(sem.class.get(r * sg.cols + c).copied().unwrap_or(spomp_core::UNKNOWN_CLASS));
@@ -450,6 +443,19 @@ impl<W: Write + Seek> Recorder<W> {
     /// A planned path (`/R/path`).
     pub fn path(&mut self, robot: &str, time: Time, points: &[spomp_core::Point2]) -> Result<(), RecordError> {
         self.log(&format!("/{robot}/path"), time, &ros::Path::from_points(points, time.into()))
+    }
+
+    /// A problem a node or skill reported (`/R/rosout`, a warning under the robot's logger
+    /// name, as its ROS 2 node logs it on `/rosout`).
+    pub fn problem(&mut self, robot: &str, time: Time, message: &str) -> Result<(), RecordError> {
+        let msg = ros::Log {
+            stamp: time.into(),
+            level: 30,
+            name: self.conventions(robot).logger,
+            msg: message.to_string(),
+            ..Default::default()
+        };
+        self.log(&format!("/{robot}/rosout"), time, &msg)
     }
 
     /// Behaviour-node transitions (`/R/bt`, one Log each: name = node path, msg = `from -> to`).

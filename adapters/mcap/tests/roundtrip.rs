@@ -65,10 +65,10 @@ fn messages_round_trip_with_ros2_schemas() {
 
     let depth = msgs.iter().find(|m| m.topic == "/ugv1/panorama/depth").unwrap();
     let img: Image = decode_cdr(&depth.topic, &depth.data).unwrap();
-    // Downsampled by 4: 2 × 4 pixels of mono16.
-    assert_eq!((img.height, img.width, img.encoding.as_str(), img.step), (2, 4, "mono16", 8));
-    let second = u16::from_le_bytes([img.data[2], img.data[3]]);
-    assert_eq!(second, 512, "pixel (0, 4) is 1.0 m = 512 counts");
+    // Downsampled by 4: 2 × 4 pixels of REP-118's canonical 32FC1 (metres).
+    assert_eq!((img.height, img.width, img.encoding.as_str(), img.step), (2, 4, "32FC1", 16));
+    let second = f32::from_le_bytes([img.data[4], img.data[5], img.data[6], img.data[7]]);
+    assert_eq!(second, 1.0, "pixel (0, 4) is 1.0 m");
 
     let scan = msgs.iter().find(|m| m.topic == "/ugv1/reachability").unwrap();
     let s: LaserScan = decode_cdr(&scan.topic, &scan.data).unwrap();
@@ -257,4 +257,27 @@ fn obstacle_mask_keeps_single_pixels_when_downsampled() {
     assert_eq!((img.height, img.width, img.encoding.as_str()), (2, 4, "mono8"));
     let lit: Vec<usize> = img.data.iter().enumerate().filter(|(_, v)| **v == 255).map(|(i, _)| i).collect();
     assert_eq!(lit, vec![4 + 3]);
+}
+
+#[test]
+fn problems_are_logged_under_the_robots_rcl_logger_name() {
+    let mut buf = Cursor::new(Vec::new());
+    let mut rec = Recorder::new(&mut buf, RecorderOptions::default()).unwrap();
+    rec.problem("ugv1", Time::from_millis(100), "planner: no path").unwrap();
+    let mut husky = spomp_mcap::RobotConventions::defaults("ugv2");
+    husky.logger = spomp_core::ros::rcl_logger_name("/fleet/husky", spomp_core::ros::ROBOT_NODE_NAME);
+    rec.set_conventions("ugv2", husky);
+    rec.problem("ugv2", Time::from_millis(200), "e-stop").unwrap();
+    rec.finish().unwrap();
+    let msgs = McapLog::from_bytes(buf.into_inner()).messages().unwrap();
+    let names: Vec<(String, String)> =
+        msgs.iter().map(|m| (m.topic.clone(), decode_cdr::<Log>(&m.topic, &m.data).unwrap().name)).collect();
+    // As rcl names a node's logger (and as the robot's DDS /rosout entries are named): dots.
+    assert_eq!(
+        names,
+        vec![
+            ("/ugv1/rosout".to_string(), "ugv1.spomp".to_string()),
+            ("/ugv2/rosout".to_string(), "fleet.husky.spomp".to_string())
+        ]
+    );
 }

@@ -6,9 +6,8 @@
 
 use std::sync::Arc;
 
-use spomp_core::panorama::range_to_count;
 use spomp_core::ros;
-use spomp_core::ros::RobotFrames;
+use spomp_core::ros::{DepthEncoding, RobotFrames};
 use spomp_core::{
     ClassId, DepthPanorama, FlightCommand, Odometry, PanoramaGeometry, Point2, Pose2, PoseEstimate, ReachabilityScan,
     SemanticPanorama, Time, Twist2, UNKNOWN_CLASS,
@@ -214,62 +213,50 @@ fn check_image(img: &ros::Image, topic: &'static str, bytes_per_pixel: u32) -> R
     Ok(())
 }
 
-/// A depth panorama from a `16UC1`/`mono16` image of range counts (`scale_m` metres per count,
-/// 0 = no return) or a `32FC1` image of metres.
-pub fn depth_from_ros(img: &ros::Image, v_fov_rad: f64, scale_m: f64) -> Result<DepthPanorama, ConvertError> {
+/// A depth panorama from an image in any [`DepthEncoding`], read by its own `encoding` field:
+/// `32FC1` metres (non-finite or ≤ 0 = no return), `16UC1` and `mono16` counts of `scale_m`
+/// metres (`None`: 1 mm for `16UC1` per REP-118, 1/512 m for `mono16`; 0 = no return).
+pub fn depth_from_ros(img: &ros::Image, v_fov_rad: f64, scale_m: Option<f64>) -> Result<DepthPanorama, ConvertError> {
+    let encoding = DepthEncoding::from_name(&img.encoding).ok_or_else(|| ConvertError::Encoding {
+        topic: "panorama/depth",
+        expected: "32FC1, 16UC1 or mono16",
+        found: img.encoding.clone(),
+    })?;
+    check_image(img, "panorama/depth", encoding.bytes_per_pixel() as u32)?;
     let geometry = PanoramaGeometry { rows: img.height as usize, cols: img.width as usize, v_fov_rad };
     let mut range_m = Vec::with_capacity(geometry.len());
-    match img.encoding.as_str() {
-        "16UC1" | "mono16" => {
-            check_image(img, "panorama/depth", 2)?;
-            for r in 0..geometry.rows {
-                let row = &img.data[r * img.step as usize..][..geometry.cols * 2];
-                for px in row.chunks_exact(2) {
-                    let bytes = [px[0], px[1]];
-                    let count =
-                        if img.is_bigendian != 0 { u16::from_be_bytes(bytes) } else { u16::from_le_bytes(bytes) };
-                    range_m.push((f64::from(count) * scale_m) as f32);
-                }
-            }
-        }
-        "32FC1" => {
-            check_image(img, "panorama/depth", 4)?;
-            for r in 0..geometry.rows {
-                let row = &img.data[r * img.step as usize..][..geometry.cols * 4];
-                for px in row.chunks_exact(4) {
-                    let bytes = [px[0], px[1], px[2], px[3]];
-                    let v = if img.is_bigendian != 0 { f32::from_be_bytes(bytes) } else { f32::from_le_bytes(bytes) };
-                    range_m.push(if v.is_finite() && v > 0.0 { v } else { 0.0 });
-                }
-            }
-        }
-        other => {
-            return Err(ConvertError::Encoding {
-                topic: "panorama/depth",
-                expected: "16UC1, mono16 or 32FC1",
-                found: other.into(),
-            });
+    let bpp = encoding.bytes_per_pixel();
+    let big = img.is_bigendian != 0;
+    let scale = scale_m.or(encoding.default_scale_m()).unwrap_or(1.0);
+    for r in 0..geometry.rows {
+        let row = &img.data[r * img.step as usize..][..geometry.cols * bpp];
+        for px in row.chunks_exact(bpp) {
+            let m = if let [a, b, c, d] = *px {
+                let v = if big { f32::from_be_bytes([a, b, c, d]) } else { f32::from_le_bytes([a, b, c, d]) };
+                if v.is_finite() && v > 0.0 { v } else { 0.0 }
+            } else {
+                let bytes = [px[0], px[1]];
+                let count = if big { u16::from_be_bytes(bytes) } else { u16::from_le_bytes(bytes) };
+                (f64::from(count) * scale) as f32
+            };
+            range_m.push(m);
         }
     }
     Ok(DepthPanorama { geometry, range_m })
 }
 
-/// A depth panorama as a `mono16` image of range counts in the sensor frame `frame`.
-pub fn depth_to_ros(frame: &str, depth: &DepthPanorama, scale_m: f64, stamp: Time, base: &TimeBase) -> ros::Image {
-    let g = depth.geometry;
-    let mut data = Vec::with_capacity(g.len() * 2);
-    for &m in &depth.range_m {
-        data.extend_from_slice(&range_to_count(m, scale_m).to_le_bytes());
-    }
-    ros::Image {
-        header: ros::Header { stamp: base.to_ros(stamp), frame_id: frame.into() },
-        height: g.rows as u32,
-        width: g.cols as u32,
-        encoding: "mono16".into(),
-        is_bigendian: 0,
-        step: (g.cols * 2) as u32,
-        data,
-    }
+/// A depth panorama as an image in `encoding` in the sensor frame `frame` (`scale_m`: metres
+/// per count of an integer encoding, `None` for its default).
+pub fn depth_to_ros(
+    frame: &str,
+    depth: &DepthPanorama,
+    encoding: DepthEncoding,
+    scale_m: Option<f64>,
+    stamp: Time,
+    base: &TimeBase,
+) -> ros::Image {
+    let header = ros::Header { stamp: base.to_ros(stamp), frame_id: frame.into() };
+    ros::Image::from_depth(header, depth, encoding, scale_m, 1)
 }
 
 /// Semantic labels from a `mono8`/`8UC1` image; labels beyond the class table become unknown.
@@ -366,5 +353,68 @@ pub fn frame(
         sensor_height_m,
         depth: Arc::new(depth),
         semantic: Arc::new(semantic),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn panorama() -> DepthPanorama {
+        // No return, near, mid, beyond 16UC1's 65.535 m, not finite.
+        let range_m = vec![0.0, 0.5, 12.25, 70.0, f32::NAN, -1.0];
+        DepthPanorama { geometry: PanoramaGeometry { rows: 2, cols: 3, v_fov_rad: 1.0 }, range_m }
+    }
+
+    fn round_trip(encoding: DepthEncoding, scale_m: Option<f64>) -> (ros::Image, Vec<f32>) {
+        let img = depth_to_ros("ugv1/lidar", &panorama(), encoding, scale_m, Time::ZERO, &TimeBase::SIMULATED);
+        let back = depth_from_ros(&img, 1.0, scale_m).expect("decodes");
+        (img, back.range_m)
+    }
+
+    #[test]
+    fn float_metres_keep_every_range_and_mark_no_return_infinite() {
+        let (img, back) = round_trip(DepthEncoding::Float32Metres, None);
+        assert_eq!((img.encoding.as_str(), img.step, img.data.len()), ("32FC1", 12, 24));
+        let first = f32::from_le_bytes([img.data[0], img.data[1], img.data[2], img.data[3]]);
+        assert_eq!(first, f32::INFINITY, "REP-117: no return is +inf");
+        assert_eq!(back, vec![0.0, 0.5, 12.25, 70.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn millimetres_per_rep_118_saturate_at_65_m() {
+        let (img, back) = round_trip(DepthEncoding::Uint16, None);
+        assert_eq!(img.encoding, "16UC1");
+        assert_eq!(u16::from_le_bytes([img.data[4], img.data[5]]), 12_250, "12.25 m = 12250 mm");
+        assert_eq!(back, vec![0.0, 0.5, 12.25, 65.535, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn mono16_keeps_its_1_512_m_counts_and_reads_as_before() {
+        let (img, back) = round_trip(DepthEncoding::Mono16, None);
+        assert_eq!(img.encoding, "mono16");
+        assert_eq!(u16::from_le_bytes([img.data[2], img.data[3]]), 256, "0.5 m = 256 counts of 1/512 m");
+        assert_eq!(back, vec![0.0, 0.5, 12.25, 70.0, 0.0, 0.0]);
+        // A configured scale applies to both integer encodings.
+        let (img, back) = round_trip(DepthEncoding::Mono16, Some(0.01));
+        assert_eq!(u16::from_le_bytes([img.data[4], img.data[5]]), 1225);
+        assert_eq!(back[2], 12.25);
+    }
+
+    #[test]
+    fn big_endian_images_and_other_encodings() {
+        let mut img =
+            depth_to_ros("s", &panorama(), DepthEncoding::Float32Metres, None, Time::ZERO, &TimeBase::SIMULATED);
+        for px in img.data.chunks_exact_mut(4) {
+            px.reverse();
+        }
+        img.is_bigendian = 1;
+        assert_eq!(depth_from_ros(&img, 1.0, None).unwrap().range_m[2], 12.25);
+        img.encoding = "rgb8".into();
+        let e = depth_from_ros(&img, 1.0, None).unwrap_err();
+        assert!(e.to_string().contains("expected encoding 32FC1, 16UC1 or mono16, found `rgb8`"), "{e}");
+        img.encoding = "32FC1".into();
+        img.data.truncate(10);
+        assert!(matches!(depth_from_ros(&img, 1.0, None), Err(ConvertError::Size { .. })));
     }
 }

@@ -26,12 +26,35 @@ pub enum DdsError {
 }
 
 /// Where DDS may talk.
+///
+/// `interfaces` restricts what is sent and advertised, not what is received: RustDDS (0.15, under
+/// ros2-client 0.12) binds its four receive sockets — discovery and user traffic, unicast and
+/// multicast — to `0.0.0.0` with no option to choose an address, and filters only the multicast
+/// group joins and the locators it advertises. A peer that is told nothing of this robot cannot
+/// find it through another interface, but a datagram sent there to its port still arrives.
+/// [`RECEIVE_ON_ALL_INTERFACES`] is the notice `spomp run` and `spomp sim --ros2` print; the
+/// remedy (a host firewall rule or a network namespace) is in `docs/robots.md`.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct DdsSettings {
     /// DDS domain id.
     pub domain_id: u16,
     /// Only these local addresses carry multicast discovery and are advertised; empty = all.
     pub interfaces: Vec<IpAddr>,
+}
+
+/// What a user restricting DDS to some interfaces must know (see [`DdsSettings`]).
+pub const RECEIVE_ON_ALL_INTERFACES: &str = "DDS advertises and sends on the chosen interfaces only, but its receive \
+     sockets listen on every interface (RustDDS binds 0.0.0.0); to refuse DDS traffic elsewhere, \
+     firewall UDP ports 7400+250·domain … +249 on the other interfaces or run in a network namespace \
+     (docs/robots.md, \"DDS interfaces\")";
+
+impl DdsSettings {
+    /// The ports of this domain's RTPS traffic (RTPS 2.5 §9.6.2.3: port base 7400, 250 per
+    /// domain; discovery and user traffic of up to 120 participants), for a firewall rule.
+    pub fn rtps_ports(&self) -> std::ops::RangeInclusive<u32> {
+        let base = 7400 + 250 * u32::from(self.domain_id);
+        base..=base + 249
+    }
 }
 
 impl DdsSettings {

@@ -8,8 +8,10 @@ use std::collections::{BTreeMap, VecDeque};
 use ros2_client::{Publisher, Subscription};
 use spomp_behaviors::mission::schema::{CmdVelType, Ros2Spec};
 use spomp_core::ros;
-use spomp_core::ros::RobotFrames;
-use spomp_core::{FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, Point2, PoseEstimate, Time, Twist2};
+use spomp_core::ros::{DepthEncoding, RobotFrames};
+use spomp_core::{
+    FlightCommand, GridSpec, MapTile, Odometry, OdometryCovariance, PanoramaFrame, Point2, PoseEstimate, Time, Twist2,
+};
 use spomp_teamstate::GoalView;
 
 use crate::clock::TimeBase;
@@ -46,7 +48,8 @@ struct FarmRobot {
     setpoint: Subscription<ros::PoseStamped>,
     team_out: Subscription<ros::BytesMsg>,
     status: Subscription<ros::StringMsg>,
-    depth_scale_m: f64,
+    depth_encoding: DepthEncoding,
+    depth_scale_m: Option<f64>,
     /// Newest velocity command and the simulated time it arrived.
     command: Option<(Twist2, Time)>,
     /// Newest setpoint and the simulated time it arrived.
@@ -130,10 +133,8 @@ impl FarmLink {
                 // reader a robot that reported once at time zero, while the clock waited for it,
                 // was never seen).
                 status: node.subscription(&t.status(), &latched_qos(1))?,
-                depth_scale_m: spec
-                    .as_ref()
-                    .and_then(|s| s.depth_scale_m)
-                    .unwrap_or(spomp_core::panorama::DEFAULT_RANGE_SCALE_M),
+                depth_encoding: ros_spec.depth_encoding,
+                depth_scale_m: ros_spec.depth_scale_m,
                 command: None,
                 setpoint_cmd: None,
                 goals: Vec::new(),
@@ -259,23 +260,45 @@ impl FarmLink {
     }
 
     /// Publishes a robot's odometry, and `odom → base_link` on its tf topic as its driver
-    /// would.
+    /// would (covariances zero: see [`FarmLink::publish_odometry_with_covariance`]).
     pub fn publish_odometry(&self, id: &str, odom: &Odometry) {
+        self.publish_odom(id, odom, None);
+    }
+
+    /// Publishes a robot's odometry with the covariances of the simulator's noise model, and
+    /// `odom → base_link` on its tf topic, as its driver would.
+    pub fn publish_odometry_with_covariance(&self, id: &str, odom: &Odometry, covariance: &OdometryCovariance) {
+        self.publish_odom(id, odom, Some(covariance));
+    }
+
+    fn publish_odom(&self, id: &str, odom: &Odometry, covariance: Option<&OdometryCovariance>) {
         if let Some(r) = self.robot(id) {
             let base = TimeBase::SIMULATED;
-            let _ = r.odom.publish(convert::odometry_to_ros(&r.frames, odom, &base));
+            let msg = convert::odometry_to_ros(&r.frames, odom, &base);
+            let _ = r.odom.publish(match covariance {
+                Some(c) => msg.with_covariance(c),
+                None => msg,
+            });
             if let Some(w) = self.tf.get(&r.tf_topic) {
                 let _ = w.publish(convert::odom_to_base(&r.frames, odom, &base));
             }
         }
     }
 
-    /// Publishes a robot's panorama: depth (`mono16` counts) and labels (`mono8`), same stamp.
+    /// Publishes a robot's panorama: depth (in its `ros2.depth_encoding`, `32FC1` metres by
+    /// default) and labels (`mono8`), same stamp.
     pub fn publish_panorama(&self, id: &str, frame: &PanoramaFrame) {
         if let Some(r) = self.robot(id) {
             let base = TimeBase::SIMULATED;
             let sensor = &r.frames.sensor;
-            let _ = r.depth.publish(convert::depth_to_ros(sensor, &frame.depth, r.depth_scale_m, frame.stamp, &base));
+            let _ = r.depth.publish(convert::depth_to_ros(
+                sensor,
+                &frame.depth,
+                r.depth_encoding,
+                r.depth_scale_m,
+                frame.stamp,
+                &base,
+            ));
             let _ = r.semantic.publish(convert::semantic_to_ros(sensor, &frame.semantic, frame.stamp, &base));
         }
     }

@@ -309,7 +309,7 @@ impl RobotNode {
             robot.set_background_skills(true);
         }
         let workers = SkillWorkers::start(robot.id().as_str())?;
-        let mut node = DdsNode::new(&settings.dds, settings.topics.namespace(), "spomp")?;
+        let mut node = DdsNode::new(&settings.dds, settings.topics.namespace(), ros::ROBOT_NODE_NAME)?;
         let t = &settings.topics;
         let inputs = Inputs {
             odom: node.subscription(t.get("odom"), &sensor_qos(20))?,
@@ -1152,8 +1152,7 @@ impl RobotNode {
     /// The node's logger name as rcl forms it: namespace and node name joined by `.`
     /// (`ugv1.spomp`).
     fn logger_name(&self) -> String {
-        let ns = self.settings.topics.namespace().trim_matches('/').replace('/', ".");
-        if ns.is_empty() { "spomp".into() } else { format!("{ns}.spomp") }
+        ros::rcl_logger_name(self.settings.topics.namespace(), ros::ROBOT_NODE_NAME)
     }
 
     fn log(&self, now: Time, level: u8, msg: String) {

@@ -1,8 +1,7 @@
 //! What `spomp run` needs to know beyond the robot itself: names, DDS, input formats, limits.
 
 use spomp_behaviors::mission::schema::{CmdVelType, MissionFile};
-use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
-use spomp_core::ros::RobotFrames;
+use spomp_core::ros::{DepthEncoding, RobotFrames};
 
 use crate::dds::DdsSettings;
 use crate::topics::TopicNames;
@@ -37,8 +36,10 @@ pub struct RunSettings {
     pub odometry_timeout_s: f64,
     /// Stop when the newest panorama is older than this, seconds.
     pub panorama_timeout_s: f64,
-    /// Metres per depth count.
-    pub depth_scale_m: f64,
+    /// Encoding of the robot's depth images (what its logs record; any is read).
+    pub depth_encoding: DepthEncoding,
+    /// Metres per count of integer depth images (`None`: the encoding's default).
+    pub depth_scale_m: Option<f64>,
     /// Vertical field of view of the panorama images, radians.
     pub v_fov_rad: f64,
     /// Sensor height above ground, metres.
@@ -97,7 +98,8 @@ impl RunSettings {
             dds,
             odometry_timeout_s: ros.odometry_timeout_s,
             panorama_timeout_s: ros.panorama_timeout_s,
-            depth_scale_m: ros.depth_scale_m.unwrap_or(DEFAULT_RANGE_SCALE_M),
+            depth_encoding: ros.depth_encoding,
+            depth_scale_m: ros.depth_scale_m,
             v_fov_rad: ros.panorama_v_fov_deg.to_radians(),
             sensor_height_m: ros.sensor_height_m,
             use_sim_time: ros.use_sim_time,

@@ -6,7 +6,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use spomp_core::{Odometry, Point2, Pose2, Time, Twist2, normalize_angle};
+use spomp_core::{Odometry, OdometryCovariance, Point2, Pose2, Time, Twist2, normalize_angle};
 
 use crate::error::SimError;
 use crate::terrain::{Obstacle, UgvLimits};
@@ -262,8 +262,17 @@ pub struct OdometryModel {
     scale: f64,
     last_true: Pose2,
     odom: Pose2,
+    /// Covariance of `odom` (x, y, yaw), propagated step by step from the noise model.
+    pose_cov: [f64; 9],
+    /// Variances of the last step's velocity under the noise model (forward, turn rate).
+    twist_var: [f64; 2],
     rng: ChaCha8Rng,
 }
+
+/// The least variance the odometry's covariance reports (1 mm², (1 mrad)², (1 mm/s)²): the
+/// model's is exactly zero before the robot moves, and a zero claims a certainty that
+/// robot_localization and Nav2 read as a configuration mistake.
+pub const MIN_ODOMETRY_VARIANCE: f64 = 1e-6;
 
 impl OdometryModel {
     /// Odometry of a robot whose true pose is `true_start`; `noise_scale` multiplies every
@@ -275,6 +284,8 @@ impl OdometryModel {
             scale,
             last_true: true_start,
             odom: Pose2::default(),
+            pose_cov: [0.0; 9],
+            twist_var: [0.0; 2],
             rng: ChaCha8Rng::seed_from_u64(seed),
         }
     }
@@ -285,18 +296,48 @@ impl OdometryModel {
         self.last_true = true_pose;
         let dist = delta.x.hypot(delta.y);
         let turn = delta.yaw.abs();
-        let p = &self.params;
+        let p = self.params.clone();
         let mut gauss = |std: f64| -> f64 {
             let z: f64 = self.rng.sample(StandardNormal);
             z * std * self.scale
         };
-        let noisy = Pose2::new(
-            delta.x + gauss(p.translation_std_per_m * dist),
-            delta.y + gauss(p.translation_std_per_m * dist),
-            delta.yaw + gauss(p.rotation_std_per_rad * turn + p.rotation_std_per_m * dist),
-        );
+        let std_t = p.translation_std_per_m * dist;
+        let std_r = p.rotation_std_per_rad * turn + p.rotation_std_per_m * dist;
+        let noisy = Pose2::new(delta.x + gauss(std_t), delta.y + gauss(std_t), delta.yaw + gauss(std_r));
+        self.propagate(noisy, [std_t * self.scale, std_t * self.scale, std_r * self.scale]);
         self.odom = self.odom.compose(noisy);
+        // The velocity the noisy increments imply: the same rates per metre and radian, per
+        // second of motion.
+        let (v, w) = (twist.v.abs(), twist.omega.abs());
+        let std_v = p.translation_std_per_m * v * self.scale;
+        let std_w = (p.rotation_std_per_rad * w + p.rotation_std_per_m * v) * self.scale;
+        self.twist_var = [std_v * std_v, std_w * std_w];
         Odometry { stamp, pose: self.odom, twist }
+    }
+
+    /// First-order propagation of the pose covariance through `odom ⊕ step`:
+    /// Σ' = Jₓ Σ Jₓᵀ + Jᵤ Q Jᵤᵀ, with Q = diag(`step_std`²) the step's noise in the body frame.
+    fn propagate(&mut self, step: Pose2, step_std: [f64; 3]) {
+        let (s, c) = self.odom.yaw.sin_cos();
+        let jx = [1.0, 0.0, -s * step.x - c * step.y, 0.0, 1.0, c * step.x - s * step.y, 0.0, 0.0, 1.0];
+        let ju = [c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0];
+        let q = [step_std[0].powi(2), 0.0, 0.0, 0.0, step_std[1].powi(2), 0.0, 0.0, 0.0, step_std[2].powi(2)];
+        let a = mul3(&mul3(&jx, &self.pose_cov), &transpose3(&jx));
+        let b = mul3(&mul3(&ju, &q), &transpose3(&ju));
+        for k in 0..9 {
+            self.pose_cov[k] = a[k] + b[k];
+        }
+    }
+
+    /// The uncertainty of the latest reading under the noise model: the pose covariance grown
+    /// over everything driven since the start, the velocity's from the last step's motion;
+    /// each variance at least [`MIN_ODOMETRY_VARIANCE`].
+    pub fn covariance(&self) -> OdometryCovariance {
+        let mut pose = self.pose_cov;
+        for k in 0..3 {
+            pose[k * 3 + k] = pose[k * 3 + k].max(MIN_ODOMETRY_VARIANCE);
+        }
+        OdometryCovariance { pose, twist: self.twist_var.map(|v| v.max(MIN_ODOMETRY_VARIANCE)) }
     }
 
     /// The latest odometry-frame pose.
@@ -308,6 +349,22 @@ impl OdometryModel {
     pub fn carried_to(&mut self, true_pose: Pose2) {
         self.last_true = true_pose;
     }
+}
+
+/// Product of two row-major 3 × 3 matrices.
+fn mul3(a: &[f64; 9], b: &[f64; 9]) -> [f64; 9] {
+    let mut m = [0.0; 9];
+    for r in 0..3 {
+        for c in 0..3 {
+            m[r * 3 + c] = (0..3).map(|k| a[r * 3 + k] * b[k * 3 + c]).sum();
+        }
+    }
+    m
+}
+
+/// Transpose of a row-major 3 × 3 matrix.
+fn transpose3(a: &[f64; 9]) -> [f64; 9] {
+    [a[0], a[3], a[6], a[1], a[4], a[7], a[2], a[5], a[8]]
 }
 
 /// Noise of the "ground truth with noise" pose source (the paper's simulation mode for
@@ -361,5 +418,98 @@ impl NoisyPoseSource {
         covariance[4] = sp * sp;
         covariance[8] = sy * sy;
         spomp_core::PoseEstimate { stamp, pose, covariance, confidence: 1.0 }
+    }
+}
+
+#[cfg(test)]
+mod odometry_covariance_tests {
+    use super::*;
+
+    /// The true path: 10 m ahead, a quarter turn to the left, 10 m ahead, in 0.1 s steps at
+    /// 1 m/s and 0.5 rad/s.
+    fn path() -> Vec<(Pose2, Twist2)> {
+        let mut out = Vec::new();
+        let mut p = Pose2::new(3.0, -2.0, 0.4);
+        for _ in 0..100 {
+            p = p.compose(Pose2::new(0.1, 0.0, 0.0));
+            out.push((p, Twist2 { v: 1.0, omega: 0.0 }));
+        }
+        for _ in 0..31 {
+            p = p.compose(Pose2::new(0.0, 0.0, 0.05));
+            out.push((p, Twist2 { v: 0.0, omega: 0.5 }));
+        }
+        for _ in 0..100 {
+            p = p.compose(Pose2::new(0.1, 0.0, 0.0));
+            out.push((p, Twist2 { v: 1.0, omega: 0.0 }));
+        }
+        out
+    }
+
+    #[test]
+    fn propagated_covariance_matches_the_spread_of_many_noisy_runs() {
+        let params = OdometryNoiseParams::default();
+        let start = Pose2::new(3.0, -2.0, 0.4);
+        let path = path();
+        let runs = 3000;
+        let mut ends = Vec::with_capacity(runs);
+        let mut predicted = None;
+        for seed in 0..runs as u64 {
+            let mut m = OdometryModel::new(params.clone(), 1.0, start, seed);
+            let mut last = Odometry::default();
+            for (i, (p, t)) in path.iter().enumerate() {
+                last = m.update(Time::from_secs_f64(i as f64 * 0.1), *p, *t);
+            }
+            ends.push(last.pose);
+            predicted.get_or_insert(m.covariance());
+        }
+        let predicted = predicted.expect("runs");
+        let n = runs as f64;
+        let mean = |f: &dyn Fn(&Pose2) -> f64| ends.iter().map(f).sum::<f64>() / n;
+        let (mx, my, myaw) = (mean(&|p| p.x), mean(&|p| p.y), mean(&|p| p.yaw));
+        let d = |p: &Pose2| [p.x - mx, p.y - my, p.yaw - myaw];
+        let mut empirical = [0.0; 9];
+        for p in &ends {
+            let e = d(p);
+            for r in 0..3 {
+                for c in 0..3 {
+                    empirical[r * 3 + c] += e[r] * e[c] / (n - 1.0);
+                }
+            }
+        }
+        // Diagonals within 10 % (3000 samples: a variance's sampling error is ~2.6 %), the
+        // x–yaw and y–yaw correlations (the largest off-diagonal terms) within 0.1 of it.
+        for k in [0, 4, 8] {
+            let rel = (predicted.pose[k] - empirical[k]).abs() / empirical[k];
+            assert!(rel < 0.1, "entry {k}: predicted {} vs empirical {}", predicted.pose[k], empirical[k]);
+        }
+        for (a, b, k) in [(0, 8, 2), (4, 8, 5)] {
+            let corr = |m: &[f64; 9]| m[k] / (m[a] * m[b]).sqrt();
+            assert!(
+                (corr(&predicted.pose) - corr(&empirical)).abs() < 0.1,
+                "correlation {k}: {} vs {}",
+                corr(&predicted.pose),
+                corr(&empirical)
+            );
+        }
+        // Driving straight at 1 m/s in the last step: only the translation and per-metre
+        // heading terms.
+        let v = 0.01_f64.powi(2);
+        assert!((predicted.twist[0] - v).abs() < 1e-12, "{:?}", predicted.twist);
+        assert!((predicted.twist[1] - 0.002_f64.powi(2)).abs() < 1e-12, "{:?}", predicted.twist);
+    }
+
+    #[test]
+    fn a_robot_that_has_not_moved_reports_the_floor_not_zero() {
+        let mut m = OdometryModel::new(OdometryNoiseParams::default(), 1.0, Pose2::default(), 1);
+        m.update(Time::ZERO, Pose2::default(), Twist2::ZERO);
+        let c = m.covariance();
+        assert_eq!([c.pose[0], c.pose[4], c.pose[8]], [MIN_ODOMETRY_VARIANCE; 3]);
+        assert_eq!(c.twist, [MIN_ODOMETRY_VARIANCE; 2]);
+        // Perfect odometry (noise scale 0) stays at the floor however far it drives.
+        let mut perfect = OdometryModel::new(OdometryNoiseParams::default(), 0.0, Pose2::default(), 1);
+        for (i, (p, t)) in path().iter().enumerate() {
+            perfect.update(Time::from_secs_f64(i as f64 * 0.1), *p, *t);
+        }
+        assert_eq!(perfect.covariance().pose[0], MIN_ODOMETRY_VARIANCE);
     }
 }

@@ -876,6 +876,15 @@ fn check_ros2(ros: &super::schema::Ros2Spec, idx: &str, bad: &mut impl FnMut(&[&
     {
         bad(&["team", idx, "ros2", "depth_scale_m"], format!("expected metres per count in (0, 1], found {scale}"));
     }
+    if ros.depth_scale_m.is_some() && ros.depth_encoding.default_scale_m().is_none() {
+        bad(
+            &["team", idx, "ros2", "depth_scale_m"],
+            format!(
+                "a scale applies to integer depth images; depth_encoding is {} (metres): set depth_encoding: 16UC1 or mono16, or remove depth_scale_m",
+                ros.depth_encoding.name()
+            ),
+        );
+    }
     if let Some(o) = &ros.gps_origin {
         if !(o.latitude_deg.is_finite() && o.latitude_deg.abs() <= 90.0) {
             bad(

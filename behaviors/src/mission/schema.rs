@@ -10,6 +10,7 @@ use std::collections::BTreeMap;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use spomp_core::RobotKind;
+pub use spomp_core::ros::DepthEncoding;
 
 /// A mission file.
 #[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
@@ -201,7 +202,14 @@ pub struct Ros2Spec {
     /// Stop when the newest panorama is older than this, seconds.
     #[serde(default = "default_panorama_timeout")]
     pub panorama_timeout_s: f64,
-    /// Metres per count of a `16UC1`/`mono16` depth image (0 means no return).
+    /// Encoding of the robot's depth images (`sensor_msgs/Image`): `32FC1` (default: REP-118's
+    /// canonical metres), `16UC1` (REP-118's millimetres) or `mono16` (counts of 1/512 m,
+    /// spomp's earlier form). A simulator farm publishes this one and logs record it; `spomp
+    /// run` reads any of the three by the image's own `encoding` field.
+    #[serde(default)]
+    pub depth_encoding: DepthEncoding,
+    /// Metres per count of a `16UC1`/`mono16` depth image (default: 0.001 for `16UC1`, 1/512
+    /// for `mono16`; 0 counts mean no return). Only with an integer `depth_encoding`.
     #[serde(default)]
     pub depth_scale_m: Option<f64>,
     /// Vertical field of view of the panorama images, degrees (rows spread evenly over it,
@@ -282,6 +290,7 @@ impl Default for Ros2Spec {
             interfaces: Vec::new(),
             odometry_timeout_s: default_odometry_timeout(),
             panorama_timeout_s: default_panorama_timeout(),
+            depth_encoding: DepthEncoding::default(),
             depth_scale_m: None,
             panorama_v_fov_deg: default_v_fov(),
             sensor_height_m: default_sensor_height(),

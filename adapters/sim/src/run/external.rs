@@ -12,7 +12,9 @@
 //! message out and in, the tick — and the step's outcome ([`DrivenStep`]) before the simulator
 //! goes on: the run is then the one the simulator makes with the robots inside it.
 
-use spomp_core::{FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, PoseEstimate, RobotId, Time, Twist2};
+use spomp_core::{
+    FlightCommand, GridSpec, MapTile, Odometry, OdometryCovariance, PanoramaFrame, PoseEstimate, RobotId, Time, Twist2,
+};
 use spomp_teamstate::{GoalView, TierSet};
 
 /// What a driven robot in lockstep did in a step ([`ExternalDrivers::end_step`]).
@@ -52,6 +54,12 @@ pub trait ExternalDrivers {
     fn begin_step(&mut self, now: Time);
     /// A driven robot's odometry.
     fn odometry(&mut self, robot: &RobotId, odom: &Odometry);
+    /// A driven robot's odometry with its uncertainty under the simulator's noise model (what a
+    /// driver publishing `nav_msgs/Odometry` fills in); by default the odometry alone.
+    fn odometry_with_covariance(&mut self, robot: &RobotId, odom: &Odometry, covariance: &OdometryCovariance) {
+        let _ = covariance;
+        self.odometry(robot, odom);
+    }
     /// A driven robot's panorama.
     fn panorama(&mut self, robot: &RobotId, frame: &PanoramaFrame);
     /// A map-frame pose for a driven robot (ground truth or GPS where the mission asks).

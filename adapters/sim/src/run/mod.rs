@@ -1074,7 +1074,7 @@ impl Simulation {
                     let truth = ugv.pose();
                     let odom = odometry.update(now, truth, ugv.twist());
                     observer.on_odometry(&r.id, &odom);
-                    d.odometry(&r.id, &odom);
+                    d.odometry_with_covariance(&r.id, &odom, &odometry.covariance());
                     if let Some(src) = truth_source.as_mut() {
                         d.pose(&r.id, &src.estimate(now, truth), ugv.base_elevation_m() as f64);
                     }
