@@ -13,7 +13,10 @@ use assert_cmd::Command;
 use spomp::experiment::rows::{TrialRow, read_rows};
 use spomp::experiment::spec::TeamChannel;
 
-const EXPERIMENT: &str = "tests/experiments/deployed.yaml";
+/// The experiment, named as a user in its folder names it: without a folder (regression: the
+/// robots' processes were then given an empty `--allow-dir` and every one refused to start).
+const EXPERIMENT: &str = "deployed.yaml";
+const EXPERIMENT_DIR: &str = "tests/experiments";
 
 fn spomp() -> Command {
     let mut c = Command::cargo_bin("spomp").unwrap();
@@ -25,6 +28,7 @@ fn spomp() -> Command {
 
 fn run(out: &Path, extra: &[&str]) -> serde_json::Value {
     let o = spomp()
+        .current_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join(EXPERIMENT_DIR))
         .args(["experiment", EXPERIMENT, "--json", "--jobs", "2", "--out"])
         .arg(out)
         .args(extra)

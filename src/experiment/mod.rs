@@ -358,7 +358,9 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
     let failures: Mutex<Vec<String>> = Mutex::new(Vec::new());
     let written = std::sync::atomic::AtomicUsize::new(0);
     let next = std::sync::atomic::AtomicUsize::new(0);
-    let mut allow_dirs: Vec<PathBuf> = file.parent().map(Path::to_path_buf).into_iter().collect();
+    // The experiment's folder (`.` for a file named without one: an empty path is no argument).
+    let file_dir = file.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let mut allow_dirs: Vec<PathBuf> = vec![file_dir.to_path_buf()];
     allow_dirs.extend(args.allow_dirs.iter().cloned());
     let work_dir = out_dir.join("deployed");
     let deployment = deployed::Deployment { allow_dirs: &allow_dirs, work_dir: &work_dir };

@@ -1625,7 +1625,8 @@ mod tests {
         let mut sender = TeamState::new(a.clone(), 0, TeamStateParams::default()).expect("sender");
         let mut receiver = TeamState::new(b.clone(), 1, TeamStateParams::default()).expect("receiver");
         // 2.5 budgets of bytes that do not compress, as a PNG map layer.
-        let blob: Vec<u8> = (0..budget * 5 / 2).map(|i| (i as u32).wrapping_mul(2_654_435_761).to_le_bytes()[3]).collect();
+        let blob: Vec<u8> =
+            (0..budget * 5 / 2).map(|i| (i as u32).wrapping_mul(2_654_435_761).to_le_bytes()[3]).collect();
         sender.add_map_version(1, Time::from_secs_f64(1.0), blob).expect("map version");
         let mut credit = BTreeMap::new();
         for period in 1..=20 {
