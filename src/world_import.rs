@@ -1085,10 +1085,16 @@ fn cut_curbs(map: &mut AerialMap, table: &ClassTable, spacing_m: f64) -> usize {
 }
 
 /// An `f64` ordered for the heap (distances: finite, non-negative).
-#[derive(Clone, Copy, PartialEq, PartialOrd)]
+#[derive(Clone, Copy, PartialEq)]
 struct Ordered(f64);
 
 impl Eq for Ordered {}
+
+impl PartialOrd for Ordered {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
 
 impl Ord for Ordered {
     fn cmp(&self, other: &Self) -> std::cmp::Ordering {
