@@ -574,7 +574,7 @@ fn markdown(meta: &ExperimentMeta, rows: &[TrialRow], table: &Table, claims: &[C
         }
         let _ = writeln!(
             md,
-            "\nA verdict compares means only; the weakest step (the smallest difference between neighbours in units \
+            "\nA verdict compares means (a bound marked \"every trial\": each trial's value); the weakest step (the smallest difference between neighbours in units \
              of their combined standard error) below 2 says the order could be noise.\n"
         );
     }
