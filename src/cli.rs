@@ -277,6 +277,10 @@ enum WorldCommand {
         /// mission finds), as the table names it: a site's table may call it `car`.
         #[arg(long, default_value = "vehicle", value_name = "NAME")]
         vehicle_class: String,
+        /// Curb cuts (ramps) this far apart along every curb, metres; 0: none, a curb stands
+        /// wherever a raised class meets a lower one.
+        #[arg(long, default_value_t = world_import::DEFAULT_RAMP_SPACING_M, value_name = "M")]
+        ramp_spacing_m: f64,
         /// Import even if the resolution looks implausible or most colours match no class.
         #[arg(long)]
         force: bool,
@@ -338,6 +342,7 @@ fn run_world(action: WorldCommand) -> anyhow::Result<ExitCode> {
             start_near,
             starts,
             vehicle_class,
+            ramp_spacing_m,
             force,
             out,
             json,
@@ -357,6 +362,7 @@ fn run_world(action: WorldCommand) -> anyhow::Result<ExitCode> {
                 start_near,
                 starts,
                 vehicle_class,
+                ramp_spacing_m,
                 force,
                 out,
                 json,

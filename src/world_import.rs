@@ -10,6 +10,12 @@
 //! - Elevation comes from the classes: each class's `height_m` in the table, else the world
 //!   loader's default height for its name (building 12 m, vehicle 1.5 m, grass_sidewalk 0.15 m, …),
 //!   so a sidewalk next to a road is a curb step, as in generated cities.
+//! - Curb cuts: a class map shows no ramps or driveways, yet a real site has them wherever
+//!   people and vehicles cross a curb. Every curb (a step of at most [`CURB_MAX_M`] between two
+//!   passable classes) gets a ramp every `--ramp-spacing-m` metres along it (default
+//!   [`DEFAULT_RAMP_SPACING_M`]; at least one on every stretch of curb, 0 for none): the raised
+//!   side slopes down to the lower ground over [`RAMP_RUN_M`], as the generated cities' ramps do,
+//!   and the class (and the colour the robots see) stays. Between ramps the curb stands.
 //! - The colour layer is the class colours (anti-aliasing removed).
 //! - Vehicle clusters (scoring ground truth) are what the goal detector finds with its default
 //!   settings in the whole map, when the table has a `vehicle` class.
@@ -80,6 +86,24 @@ pub const NO_DATA_CLASS: &str = "no_data";
 /// 5), so planners never route through them and no robot starts there.
 pub const NO_DATA_HEIGHT_M: f32 = 3.0;
 
+/// The highest step between two passable classes that is taken for a curb (and gets curb cuts);
+/// higher steps (bushes, parked cars, walls) are not ramped, metres.
+pub const CURB_MAX_M: f32 = 0.3;
+
+/// Curb cuts are about this far apart along a curb by default, metres: a campus has a ramp or
+/// a driveway at every crossing, path, lot entrance and parking aisle. (On the yard site, 20 m
+/// left the gravel yard's curbs, 50 m long, with two or three cuts each, and 3 of 60 clusters
+/// unvisited in 900 s.)
+pub const DEFAULT_RAMP_SPACING_M: f64 = 10.0;
+
+/// A curb cut slopes from the lower ground up to the curb's height over this run, metres
+/// (0.15 m over 1.5 m: a 10 % ramp, within what the simulated UGV climbs).
+pub const RAMP_RUN_M: f64 = 1.5;
+
+/// Half the width of a curb cut along the curb at the kerb line, metres (a 6 m wide cut, its
+/// sides flared: the cut narrows to about 5 m at the top).
+pub const RAMP_HALF_WIDTH_M: f64 = 3.0;
+
 /// A car seen from above is about this wide, metres (and 4.5 m long).
 pub const CAR_WIDTH_M: f64 = 2.0;
 
@@ -126,6 +150,8 @@ pub struct ImportArgs {
     pub starts: usize,
     /// The class whose clusters are the world's vehicle clusters.
     pub vehicle_class: String,
+    /// Curb cuts are this far apart along each curb, metres (0: none, curbs everywhere).
+    pub ramp_spacing_m: f64,
     /// Import even when the resolution looks implausible or most colours match no class.
     pub force: bool,
     /// Output world folder.
@@ -843,6 +869,10 @@ pub struct ImportRecord {
     pub colours: ColourMatch,
     /// The typical width of the raster's vehicle blobs, metres (see [`vehicle_width_m`]).
     pub vehicle_width_m: Option<f64>,
+    /// Spacing of the curb cuts, metres (0: none).
+    pub ramp_spacing_m: f64,
+    /// Curb cuts made.
+    pub curb_cuts: usize,
     /// What the class-table reader assumed.
     pub notes: Vec<String>,
 }
@@ -885,6 +915,9 @@ pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
         );
     }
 
+    if !(a.ramp_spacing_m.is_finite() && a.ramp_spacing_m >= 0.0) {
+        bail!("--ramp-spacing-m must be a non-negative distance in metres (0: no curb cuts), got {}", a.ramp_spacing_m);
+    }
     let cell_m = a.cell_m.unwrap_or(res);
     let (lo, hi) = spomp_sim::RESOLUTION_RANGE_M;
     if !(cell_m.is_finite() && (lo..=hi).contains(&cell_m)) {
@@ -906,6 +939,7 @@ pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
         map.elevation[i] = classes.heights_m[class as usize];
     }
     map.version = 1;
+    let curb_cuts = if a.ramp_spacing_m > 0.0 { cut_curbs(&mut map, &classes.table, a.ramp_spacing_m) } else { 0 };
     let clusters = vehicle_clusters(&map, &classes.table, &a.vehicle_class);
     let mut world =
         World::new(map, classes.table.clone(), WorldMeta { vehicle_clusters: clusters, ..WorldMeta::default() })
@@ -935,9 +969,137 @@ pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
         colour_tolerance: a.colour_tolerance,
         colours,
         vehicle_width_m,
+        ramp_spacing_m: a.ramp_spacing_m,
+        curb_cuts,
         notes: classes.notes,
     };
     Ok((world, record))
+}
+
+/// Makes curb cuts (see the module notes): picks cut centres on the raised side of every curb,
+/// [`RAMP_HALF_WIDTH_M`]-wide patches about `spacing_m` apart (scanning the curb cells in order,
+/// a cell becomes a centre when no centre is nearer than the spacing, so every stretch of curb
+/// gets one), and lowers the raised cells near each centre to a ramp: a cell `d` metres from
+/// the lower ground takes the lower ground's height plus `d / RAMP_RUN_M` of the step. Returns
+/// how many cuts were made.
+fn cut_curbs(map: &mut AerialMap, table: &ClassTable, spacing_m: f64) -> usize {
+    use std::cmp::Reverse;
+    use std::collections::BinaryHeap;
+    let spec = map.spec;
+    let (w, h) = (spec.width as usize, spec.height as usize);
+    let res = spec.resolution_m;
+    let mut passable = [false; 256];
+    for c in &table.classes {
+        passable[c.index as usize] = c.rank < 5 && !c.ignored;
+    }
+    let ground = |i: usize| passable[map.class[i] as usize];
+    let neighbours = |i: usize| {
+        let (x, y) = (i % w, i / w);
+        [(x > 0).then(|| i - 1), (x + 1 < w).then(|| i + 1), (y > 0).then(|| i - w), (y + 1 < h).then(|| i + w)]
+    };
+    // Whether `hi` stands a curb above `lo`.
+    let curb = |hi: f32, lo: f32| hi - lo > 1e-3 && hi - lo <= CURB_MAX_M;
+    // The lower ground at each curb, and how far (metres) each raised cell near one lies from it,
+    // with the height of that lower ground: a Dijkstra over raised cells out to the ramp's reach.
+    let reach = RAMP_HALF_WIDTH_M + RAMP_RUN_M;
+    let mut dist = vec![f64::INFINITY; w * h];
+    let mut low = vec![0.0f32; w * h];
+    let mut heap = BinaryHeap::new();
+    let mut curb_cells = Vec::new();
+    for i in 0..w * h {
+        if !ground(i) {
+            continue;
+        }
+        let e = map.elevation[i];
+        let lower = neighbours(i).into_iter().flatten().filter(|&j| ground(j) && curb(e, map.elevation[j]));
+        if let Some(lo) = lower.map(|j| map.elevation[j]).reduce(f32::min) {
+            curb_cells.push(i);
+            // The raised cell's centre is half a cell from the kerb line.
+            let d = 0.5 * res;
+            if d < dist[i] {
+                dist[i] = d;
+                low[i] = lo;
+                heap.push(Reverse((Ordered(d), i)));
+            }
+        }
+    }
+    while let Some(Reverse((d, i))) = heap.pop() {
+        let d = d.0;
+        if d > dist[i] {
+            continue;
+        }
+        let (x, y) = ((i % w) as i64, (i / w) as i64);
+        for (dx, dy) in [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1)] {
+            let (nx, ny) = (x + dx, y + dy);
+            if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                continue;
+            }
+            let j = ny as usize * w + nx as usize;
+            // Spread over raised ground of the same curb (a curb's height above its low side).
+            if !ground(j) || !curb(map.elevation[j], low[i]) {
+                continue;
+            }
+            let nd = d + if dx != 0 && dy != 0 { res * std::f64::consts::SQRT_2 } else { res };
+            if nd < dist[j] && nd <= reach {
+                dist[j] = nd;
+                low[j] = low[i];
+                heap.push(Reverse((Ordered(nd), j)));
+            }
+        }
+    }
+    // Cut centres, about `spacing_m` apart: a coarse bucket grid finds the nearby ones.
+    let bucket = spacing_m.max(res);
+    let mut buckets: HashMap<(i64, i64), Vec<Point2>> = HashMap::new();
+    let mut centres = Vec::new();
+    for &i in &curb_cells {
+        let p = Point2::new((i % w) as f64 * res, (i / w) as f64 * res);
+        let (bx, by) = ((p.x / bucket).floor() as i64, (p.y / bucket).floor() as i64);
+        let near = (-1..=1).any(|ox| {
+            (-1..=1)
+                .any(|oy| buckets.get(&(bx + ox, by + oy)).is_some_and(|v| v.iter().any(|q| q.distance(p) < spacing_m)))
+        });
+        if !near {
+            buckets.entry((bx, by)).or_default().push(p);
+            centres.push(i);
+        }
+    }
+    // Each cut: the raised cells within its reach of the centre slope down to the lower ground.
+    let r_cells = (reach / res).ceil() as i64;
+    let original = map.elevation.clone();
+    for &c in &centres {
+        let (cx, cy) = ((c % w) as i64, (c / w) as i64);
+        for y in (cy - r_cells).max(0)..=(cy + r_cells).min(h as i64 - 1) {
+            for x in (cx - r_cells).max(0)..=(cx + r_cells).min(w as i64 - 1) {
+                let k = y as usize * w + x as usize;
+                let along = res * (((x - cx) * (x - cx) + (y - cy) * (y - cy)) as f64).sqrt();
+                if !dist[k].is_finite() || along > reach || dist[k] > RAMP_RUN_M {
+                    continue;
+                }
+                let share = ((dist[k] - 0.5 * res) / RAMP_RUN_M).clamp(0.0, 1.0) as f32;
+                let ramp = low[k] + (original[k] - low[k]) * share;
+                map.elevation[k] = map.elevation[k].min(ramp);
+            }
+        }
+    }
+    centres.len()
+}
+
+/// An `f64` ordered for the heap (distances: finite, non-negative).
+#[derive(Clone, Copy, PartialEq)]
+struct Ordered(f64);
+
+impl Eq for Ordered {}
+
+impl PartialOrd for Ordered {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Ordered {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&other.0)
+    }
 }
 
 fn describe_top(c: &ColourMatch) -> String {
@@ -981,6 +1143,7 @@ pub fn import(a: &ImportArgs) -> Result<ExitCode> {
                 "no_data": record.colours.no_data,
             },
             "vehicle_width_m": record.vehicle_width_m,
+            "curb_cuts": record.curb_cuts,
             "notes": record.notes,
             "vehicle_clusters": world.meta.vehicle_clusters,
             "start_poses": world.meta.start_poses,
@@ -1021,6 +1184,13 @@ pub fn import(a: &ImportArgs) -> Result<ExitCode> {
         }
         if let Some(v) = record.vehicle_width_m {
             out!("vehicles are {v:.1} m wide (median over the vehicle blobs; a car is about {CAR_WIDTH_M} m)");
+        }
+        if record.ramp_spacing_m > 0.0 {
+            out!(
+                "{} curb cuts, about {} m apart along the curbs (--ramp-spacing-m)",
+                record.curb_cuts,
+                record.ramp_spacing_m
+            );
         }
         for (i, s) in world.meta.start_poses.iter().enumerate() {
             out!("start pose {i}: {{ x_m: {:.2}, y_m: {:.2}, yaw_deg: {:.0} }}", s.x, s.y, s.yaw.to_degrees());
@@ -1289,5 +1459,34 @@ mod tests {
         let grass = World::flat(spec, t.table, 3, 0.15).unwrap_or_else(|e| panic!("{e}"));
         let on_grass = start_poses(&grass, Point2::new(0.0, 0.0), 2);
         assert!(on_grass.iter().all(|s| grass.class_at(s.position()) == Some(3)));
+    }
+
+    #[test]
+    fn curbs_get_cuts_so_a_lot_behind_a_grass_strip_is_reachable() {
+        let t = table();
+        // 60 m × 20 m: road for y < 8 m, a 1 m grass strip (a curb on both sides), then a lot
+        // (road class) for y ≥ 9 m.
+        let spec = GridSpec::new(Point2::new(0.0, 0.0), 0.5, 120, 40);
+        let mut map = AerialMap::unknown(spec);
+        for i in 0..spec.len() {
+            let strip = (16..18).contains(&(i / 120));
+            map.class[i] = if strip { 3 } else { 0 };
+            map.elevation[i] = t.heights_m[map.class[i] as usize];
+        }
+        let reach = |map: &AerialMap| {
+            let world =
+                World::new(map.clone(), t.table.clone(), WorldMeta::default()).unwrap_or_else(|e| panic!("{e}"));
+            let cells = spomp_sim::reachable_cells(&world, &spomp_sim::UgvLimits::default(), Point2::new(30.0, 3.0));
+            *cells.at(spec.cell_at(Point2::new(30.0, 15.0)).unwrap_or_else(|| panic!("off the map")))
+        };
+        assert!(!reach(&map), "without cuts the strip is a wall of curbs");
+        let cuts = cut_curbs(&mut map, &t.table, 20.0);
+        // About one cut per 20 m of each side of the strip, the two sides' cuts overlapping.
+        assert!((3..=8).contains(&cuts), "{cuts}");
+        assert!(reach(&map), "the cuts lead over the strip");
+        // Between the cuts the curb stands; no cell rose.
+        let raised = (0..spec.len()).filter(|&i| map.elevation[i] > 0.149).count();
+        assert!(raised > 0 && raised < 240, "{raised}");
+        assert!(map.elevation.iter().all(|&e| e <= 0.15 + 1e-6));
     }
 }

@@ -97,6 +97,15 @@ pub fn check_claim(claim: &Claim, rows: &[TrialRow]) -> ClaimResult {
     let Some(means) = stats.iter().map(|s| s.map(|s| s.mean)).collect::<Option<Vec<f64>>>() else {
         return ClaimResult { claim: claim.clone(), stats, verdict: "no data", weakest_step_se: None };
     };
+    let bound = claim.value.unwrap_or(f64::NAN);
+    // The values a bound is held on: each configuration's mean, or with `each_trial` the
+    // extreme trial of each (the smallest for `at_least`, the largest for `at_most`).
+    let bounded = |low: bool| -> Vec<f64> {
+        if !claim.each_trial {
+            return means.clone();
+        }
+        stats.iter().flatten().map(|s| if low { s.min } else { s.max }).collect()
+    };
     let holds = match claim.expect {
         Expect::Increasing => means.windows(2).all(|w| w[1] > w[0]),
         Expect::Decreasing => means.windows(2).all(|w| w[1] < w[0]),
@@ -105,9 +114,11 @@ pub fn check_claim(claim: &Claim, rows: &[TrialRow]) -> ClaimResult {
             let first = means[0];
             means.iter().all(|m| (m - first).abs() <= tol * first.abs().max(f64::EPSILON))
         }
+        Expect::AtLeast => bounded(true).iter().all(|v| *v >= bound),
+        Expect::AtMost => bounded(false).iter().all(|v| *v <= bound),
     };
     let weakest_step_se = match claim.expect {
-        Expect::Similar => None,
+        Expect::Similar | Expect::AtLeast | Expect::AtMost => None,
         _ => stats
             .windows(2)
             .filter_map(|w| match (w[0], w[1]) {
@@ -535,6 +546,12 @@ fn markdown(meta: &ExperimentMeta, rows: &[TrialRow], table: &Table, claims: &[C
                 Expect::Increasing => "increasing".to_string(),
                 Expect::Decreasing => "decreasing".to_string(),
                 Expect::Similar => format!("similar (±{:.0} %)", c.claim.tolerance.unwrap_or(0.1) * 100.0),
+                Expect::AtLeast | Expect::AtMost => format!(
+                    "{} {}{}",
+                    if c.claim.expect == Expect::AtLeast { "≥" } else { "≤" },
+                    fmt_num(c.claim.value.unwrap_or(f64::NAN)),
+                    if c.claim.each_trial { " (every trial)" } else { "" }
+                ),
             };
             let values: Vec<String> = c
                 .claim
@@ -557,7 +574,7 @@ fn markdown(meta: &ExperimentMeta, rows: &[TrialRow], table: &Table, claims: &[C
         }
         let _ = writeln!(
             md,
-            "\nA verdict compares means only; the weakest step (the smallest difference between neighbours in units \
+            "\nA verdict compares means (a bound marked \"every trial\": each trial's value); the weakest step (the smallest difference between neighbours in units \
              of their combined standard error) below 2 says the order could be noise.\n"
         );
     }
@@ -878,6 +895,8 @@ mod tests {
             expect,
             over: over.iter().map(|s| s.to_string()).collect(),
             tolerance: None,
+            value: None,
+            each_trial: false,
         }
     }
 
@@ -920,6 +939,8 @@ mod tests {
             bytes_sent: 0,
             travel_time_s: None,
             tree_status: "running".into(),
+            stuck_events: 0,
+            longest_motionless_driving_s: 0.0,
         }
     }
 
@@ -978,5 +999,24 @@ mod tests {
         let step = check_claim(&claim(Expect::Increasing, Metric::GoalsVisited, &["a", "b"]), &rows).weakest_step_se;
         // Means 3 and 6, sds √2 each, n 2 each: se of the difference is √2, the step 3/√2.
         assert!((step.unwrap() - 3.0 / 2f64.sqrt()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn bounds_hold_on_the_means_or_on_every_trial() {
+        // a: goals 2 and 4 (mean 3); b: 5 and 7 (mean 6).
+        let rows = vec![row("a", 1, 2), row("a", 2, 4), row("b", 1, 5), row("b", 2, 7)];
+        let bound = |expect, value, each_trial, over: &[&str]| {
+            let mut c = claim(expect, Metric::GoalsVisited, over);
+            c.value = Some(value);
+            c.each_trial = each_trial;
+            check_claim(&c, &rows)
+        };
+        assert_eq!(bound(Expect::AtLeast, 3.0, false, &["a", "b"]).verdict, "holds");
+        assert_eq!(bound(Expect::AtLeast, 3.0, true, &["a", "b"]).verdict, "fails", "a's seed 1 visited 2");
+        assert_eq!(bound(Expect::AtLeast, 5.0, true, &["b"]).verdict, "holds");
+        assert_eq!(bound(Expect::AtMost, 6.0, false, &["a", "b"]).verdict, "holds");
+        assert_eq!(bound(Expect::AtMost, 6.0, true, &["b"]).verdict, "fails", "b's seed 2 visited 7");
+        assert_eq!(bound(Expect::AtMost, 6.0, true, &["zz"]).verdict, "no data");
+        assert_eq!(bound(Expect::AtMost, 6.0, false, &["b"]).weakest_step_se, None);
     }
 }

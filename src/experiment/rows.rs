@@ -49,6 +49,13 @@ pub struct RobotRow {
     /// whose tree ends — a `navigate_to` — got there.
     #[serde(default)]
     pub tree_status: String,
+    /// Times the simulator refused every commanded motion of this UGV for its stuck timeout
+    /// (rows written before the field existed read 0).
+    #[serde(default)]
+    pub stuck_events: u64,
+    /// Longest time this UGV stood still while its tree was driving it, seconds.
+    #[serde(default)]
+    pub longest_motionless_driving_s: f64,
 }
 
 /// One trial's row.
@@ -130,6 +137,11 @@ impl TrialRow {
         self.clusters_visited.unwrap_or(self.goals_visited) as f64
     }
 
+    /// The UGVs' rows.
+    fn ugv_rows(&self) -> impl Iterator<Item = &RobotRow> {
+        self.robots.iter().filter(|r| r.kind == "ugv")
+    }
+
     /// Distance flown by the team's UAVs, metres (their sum).
     pub fn uav_distance_m(&self) -> f64 {
         self.robots.iter().filter(|r| r.kind == "uav").map(|r| r.distance_m).sum()
@@ -161,6 +173,8 @@ impl TrialRow {
                 Metric::TimeToGoalS => kth(&r.visit_times_s),
                 Metric::BytesSent => Some(r.bytes_sent as f64),
                 Metric::TravelTimeS => r.travel_time_s,
+                Metric::StuckEvents => Some(r.stuck_events as f64),
+                Metric::LongestMotionlessDrivingS => Some(r.longest_motionless_driving_s),
                 _ => None,
             };
         }
@@ -176,6 +190,10 @@ impl TrialRow {
             Metric::BytesSent => Some(self.bytes_sent as f64),
             Metric::BytesSentScans => Some(self.bytes_sent_scans as f64),
             Metric::TravelTimeS => mean(self.robots.iter().filter(|r| r.kind == "ugv").filter_map(|r| r.travel_time_s)),
+            Metric::StuckEvents => Some(self.ugv_rows().map(|r| r.stuck_events).sum::<u64>() as f64),
+            Metric::LongestMotionlessDrivingS => {
+                Some(self.ugv_rows().map(|r| r.longest_motionless_driving_s).fold(0.0, f64::max))
+            }
             Metric::WallS => Some(self.wall_s),
         }
     }
@@ -269,6 +287,8 @@ pub fn row_of(
                 bytes_sent: bytes.full.get(&r.id).copied().unwrap_or(0) + bytes.small.get(&r.id).copied().unwrap_or(0),
                 tree_status: r.tree_status.clone(),
                 travel_time_s: r.travel_time_s,
+                stuck_events: r.stuck_events,
+                longest_motionless_driving_s: r.longest_motionless_driving_s,
             }
         })
         .collect();
@@ -492,6 +512,8 @@ mod tests {
                 bytes_sent: 30,
                 tree_status: "running".into(),
                 travel_time_s: Some(90.0),
+                stuck_events: 1,
+                longest_motionless_driving_s: 12.0,
             }],
             deployed: None,
             process_problems: Vec::new(),

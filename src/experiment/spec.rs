@@ -215,8 +215,9 @@ pub struct CommsOverride {
     pub ugv_to_ugv: Option<bool>,
 }
 
-/// A directional claim over configurations: the means of `metric` over seeds, in the order of
-/// `over`, are expected to rise, fall, or stay alike.
+/// A claim over configurations: the means of `metric` over seeds, in the order of `over`, are
+/// expected to rise, fall or stay alike; or each configuration's mean (or, with `each_trial`,
+/// every trial's value) is expected at least or at most a bound (an acceptance threshold).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Claim {
@@ -234,11 +235,19 @@ pub struct Claim {
     pub robot: Option<String>,
     /// How the means relate along `over`.
     pub expect: Expect,
-    /// Configuration names, at least two, in the order the expectation reads them.
+    /// Configuration names in the order the expectation reads them: at least two, one is
+    /// enough for `at_least` and `at_most`.
     pub over: Vec<String>,
     /// With `similar`: largest relative difference from the first mean (default 0.1).
     #[serde(default)]
     pub tolerance: Option<f64>,
+    /// With `at_least` / `at_most` (required there): the bound, in the metric's unit.
+    #[serde(default)]
+    pub value: Option<f64>,
+    /// With `at_least` / `at_most`: hold the bound on every trial's value instead of each
+    /// configuration's mean (default false).
+    #[serde(default)]
+    pub each_trial: bool,
 }
 
 /// How a claim's means relate.
@@ -251,6 +260,10 @@ pub enum Expect {
     Decreasing,
     /// Every mean is within `tolerance` (relative) of the first.
     Similar,
+    /// Every mean (with `each_trial`, every trial's value) is at least `value`.
+    AtLeast,
+    /// Every mean (with `each_trial`, every trial's value) is at most `value`.
+    AtMost,
 }
 
 /// A per-trial metric.
@@ -281,13 +294,19 @@ pub enum Metric {
     /// Seconds from a robot's first motion to its last: for a robot sent on one trip, the trip
     /// (mean over UGVs; a robot's own with `robot`).
     TravelTimeS,
+    /// Stuck events: times the simulator refused every commanded motion of a UGV for its stuck
+    /// timeout (sum over UGVs; a robot's own with `robot`).
+    StuckEvents,
+    /// Longest time a UGV stood still while its tree was driving it, seconds (the largest over
+    /// UGVs; a robot's own with `robot`).
+    LongestMotionlessDrivingS,
     /// Wall-clock seconds of the trial.
     WallS,
 }
 
 impl Metric {
     /// Every metric, in report order.
-    pub const ALL: [Metric; 12] = [
+    pub const ALL: [Metric; 14] = [
         Metric::GoalsVisited,
         Metric::VisitedFraction,
         Metric::TimeToGoalS,
@@ -299,6 +318,8 @@ impl Metric {
         Metric::BytesSent,
         Metric::BytesSentScans,
         Metric::TravelTimeS,
+        Metric::StuckEvents,
+        Metric::LongestMotionlessDrivingS,
         Metric::WallS,
     ];
 
@@ -316,6 +337,8 @@ impl Metric {
             Metric::BytesSent => "bytes_sent",
             Metric::BytesSentScans => "bytes_sent_scans",
             Metric::TravelTimeS => "travel_time_s",
+            Metric::StuckEvents => "stuck_events",
+            Metric::LongestMotionlessDrivingS => "longest_motionless_driving_s",
             Metric::WallS => "wall_s",
         }
     }
@@ -331,6 +354,8 @@ impl Metric {
                 | Metric::TimeToGoalS
                 | Metric::BytesSent
                 | Metric::TravelTimeS
+                | Metric::StuckEvents
+                | Metric::LongestMotionlessDrivingS
         )
     }
 }
@@ -607,8 +632,21 @@ fn check_file(file: &ExperimentFile, p: &mut Problems<'_>) {
     }
     for (i, claim) in file.claims.iter().enumerate() {
         let at = |k: &str| vec![key("claims"), PathSeg::Index(i), key(k)];
-        if claim.over.len() < 2 {
+        let bound = matches!(claim.expect, Expect::AtLeast | Expect::AtMost);
+        if claim.over.len() < 2 && !bound {
             p.at(&at("over"), Stage::Schema, "a claim compares at least two configurations");
+        }
+        if claim.over.is_empty() && bound {
+            p.at(&at("over"), Stage::Schema, "a claim names at least one configuration");
+        }
+        match (bound, claim.value) {
+            (true, None) => p.at(&at("value"), Stage::Schema, "`at_least` and `at_most` need the bound `value`"),
+            (true, Some(v)) if !v.is_finite() => p.at(&at("value"), Stage::Schema, "expected a finite number"),
+            (false, Some(_)) => p.at(&at("value"), Stage::Schema, "`value` goes with `expect: at_least` or `at_most`"),
+            _ => {}
+        }
+        if claim.each_trial && !bound {
+            p.at(&at("each_trial"), Stage::Schema, "`each_trial` goes with `expect: at_least` or `at_most`");
         }
         for (j, name) in claim.over.iter().enumerate() {
             if !file.configurations.iter().any(|c| &c.name == name) {
@@ -633,7 +671,7 @@ fn check_file(file: &ExperimentFile, p: &mut Problems<'_>) {
             (Expect::Similar, Some(t)) if !(t.is_finite() && t >= 0.0) => {
                 p.at(&at("tolerance"), Stage::Schema, "expected a non-negative relative tolerance (0.1 = 10 %)");
             }
-            (Expect::Increasing | Expect::Decreasing, Some(_)) => {
+            (Expect::Increasing | Expect::Decreasing | Expect::AtLeast | Expect::AtMost, Some(_)) => {
                 p.at(&at("tolerance"), Stage::Schema, "`tolerance` goes with `expect: similar`");
             }
             _ => {}

@@ -35,8 +35,8 @@ use spomp_behaviors::mission::schema::CompleteWhen;
 use spomp_behaviors::mission::{LoadedMission, MissionFile};
 use spomp_behaviors::trace::{Recorder, TransitionRecord};
 use spomp_core::{
-    AerialMap, GoalId, Odometry, PanoramaFrame, PanoramaGeometry, Point2, Pose2, PoseEstimate, ReachabilityScan,
-    RobotId, RobotKind, Time, Twist2, normalize_angle,
+    AerialMap, ClassId, GoalId, Odometry, PanoramaFrame, PanoramaGeometry, Point2, Pose2, PoseEstimate,
+    ReachabilityScan, RobotId, RobotKind, Time, Twist2, normalize_angle,
 };
 use spomp_mapping::{CompressionParams, PngLevel};
 use spomp_robot::runtime::{FinishedWork, WorkKind};
@@ -391,6 +391,9 @@ pub struct Simulation {
     problems: BTreeMap<(String, String), ProblemCount>,
     outcome: Option<Outcome>,
     obstacles: Vec<Obstacle>,
+    /// The class the UGVs' bodies show as in each other's panoramas: the vehicle class as the
+    /// world's table names it (through the mission's `classes:`), resolved once at setup.
+    ugv_body_class: ClassId,
     /// What drives the robots driven from outside, if any are.
     drivers: Option<Box<dyn ExternalDrivers>>,
     /// Messages driven robots sent, waiting for the next radio period.
@@ -548,6 +551,10 @@ pub const STUCK_AFTER_S: f64 = 5.0;
 /// `longest_motionless_driving_s`), metres.
 pub const MOTIONLESS_RADIUS_M: f64 = 0.25;
 
+/// The vehicle class's index in the built-in table: what UGV bodies show as in a world whose
+/// table has no vehicle class at all.
+const BUILTIN_VEHICLE_CLASS: ClassId = 4;
+
 /// Most distinct problem messages kept in a summary.
 const MAX_PROBLEMS: usize = 200;
 
@@ -570,6 +577,12 @@ impl Simulation {
         let faults = faults_for_mission(&mission, &options.faults);
         let radio = Radio::new(radio_for_mission(&mission), &faults)?;
         let area = operating_area(&mission, &world);
+        // Through the mission's mapping: looked up by the built-in name alone, a renamed table's
+        // bodies (`Car`) fell back to index 4, another class there (the yard's grass).
+        let ugv_body_class = spomp_robot::class_names::ClassNames::new(&mission, world.classes())
+            .resolve("vehicle")
+            .and_then(|name| world.classes().by_name(&name))
+            .map_or(BUILTIN_VEHICLE_CLASS, |c| c.index);
         let mut robots = Vec::with_capacity(mission.team.len());
         for (i, spec) in mission.team.iter().enumerate() {
             let robot_error =
@@ -683,6 +696,7 @@ impl Simulation {
             problems: BTreeMap::new(),
             outcome: None,
             obstacles: Vec::new(),
+            ugv_body_class,
             drivers: None,
             driven_outbox: Vec::new(),
             pacer: None,
@@ -940,7 +954,7 @@ impl Simulation {
                     radius_m: ugv.params().limits.radius_m,
                     bottom_m: base,
                     top_m: base + 0.8,
-                    class: self.world.classes().by_name("vehicle").map(|c| c.index).unwrap_or(4),
+                    class: self.ugv_body_class,
                 });
             }
         }
