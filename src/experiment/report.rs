@@ -194,7 +194,8 @@ pub struct DeployedPair {
     pub uav_distance_m: (f64, f64),
     /// Goals visited: in-process, deployed.
     pub goals_visited: (usize, usize),
-    /// Whether the deployed row equals the in-process one field for field but wall time.
+    /// Whether the deployed row equals the in-process one field for field but wall time, with no
+    /// process problems (a trial whose processes failed was simulated by the farm, not deployed).
     pub identical: bool,
     /// The deployed trial's process problems.
     pub process_problems: Vec<String>,
@@ -252,7 +253,7 @@ pub fn deployed_comparisons(configurations: &[String], rows: &[TrialRow]) -> Vec
                     clusters_visited: (i.clusters_or_goals_visited(), d.clusters_or_goals_visited()),
                     uav_distance_m: (i.uav_distance_m(), d.uav_distance_m()),
                     goals_visited: (i.goals_visited, d.goals_visited),
-                    identical: bare(i) == bare(d),
+                    identical: d.process_problems.is_empty() && bare(i) == bare(d),
                     process_problems: d.process_problems.clone(),
                 });
             }
@@ -964,7 +965,7 @@ mod tests {
         let mut dc = deployed(&a, 1, 1.0);
         dc.seed = 3;
         dc.process_problems = vec!["ugv2 dropped at 5.0 s".into()];
-        let c = deployed_comparisons(&["c".into()], &[a, b, da, db, dc]);
+        let c = deployed_comparisons(&["c".into()], &[a, b.clone(), da, db.clone(), dc]);
         assert_eq!(c.len(), 1);
         let c = &c[0];
         assert_eq!((c.channel, c.pairs.len(), c.unpaired_seeds.clone()), (TeamChannel::Zenoh, 2, vec![3]));
@@ -973,6 +974,12 @@ mod tests {
         assert_eq!(c.uav_distance_m, (2000.0, 1800.0));
         assert_eq!(c.uav_distance_ratio, Some(0.9));
         assert_eq!(c.pairs.iter().map(|p| p.identical).collect::<Vec<_>>(), [false, true]);
+        // Regression: processes that never ran leave the farm simulating the robots, a row equal
+        // to the in-process one; that is no evidence of identity.
+        let mut failed = db.clone();
+        failed.process_problems = vec!["ugv1's process exited with exit status: 2".into()];
+        let f = deployed_comparisons(&["c".into()], &[b.clone(), failed]);
+        assert_eq!(f[0].pairs.iter().map(|p| p.identical).collect::<Vec<_>>(), [false]);
         let md = deployed_markdown(std::slice::from_ref(c));
         assert!(md.contains("| c | zenoh | 2 | 5.00 | 4.50 | 0.900 |"), "{md}");
         assert!(md.contains("c/3 (zenoh)"), "{md}");
