@@ -362,6 +362,13 @@ fn a_uav_driven_over_ros2_maps_the_city_for_the_team() {
     let trial = &summary["runs"][0];
     assert_eq!(trial["outcome"], "complete", "{summary:#}");
     assert!(trial["goals_visited"].as_u64().unwrap_or(0) >= 1, "{summary:#}");
+    // Regression: a position setpoint carries no speed, and the farm flew the UAV at the
+    // simulator's 5 m/s default instead of the mission's 10 m/s (half the survey when paced).
+    // The speed now travels on `setpoint_position/speed`; in-process this UAV averages 9.8 m/s
+    // over its flying time.
+    let uav = trial["robots"].as_array().and_then(|r| r.iter().find(|r| r["id"] == "uav1")).expect("uav1");
+    let (flown, flying) = (uav["distance_m"].as_f64().unwrap_or(0.0), uav["travel_time_s"].as_f64().unwrap_or(0.0));
+    assert!(flying > 0.0 && flown / flying > 6.0, "the UAV flew {flown:.0} m in {flying:.0} s: {summary:#}");
     let report: serde_json::Value = serde_json::from_str(&run_out).expect("run prints its figures as JSON");
     assert!(report["received"]["camera_tiles"].as_u64().unwrap_or(0) > 100, "{report:#}");
     assert!(report["received"]["poses"].as_u64().unwrap_or(0) > 100, "{report:#}");

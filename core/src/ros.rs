@@ -49,6 +49,7 @@ pub const ROBOT_TOPICS: &[RobotTopic] = &[
     topic("camera/tiles", "camera/tiles", GridMap::TYPE_NAME),
     topic("cmd_vel", "cmd_vel", TwistStamped::TYPE_NAME),
     topic("setpoint", "setpoint_position/local", PoseStamped::TYPE_NAME),
+    topic("setpoint_speed", "setpoint_position/speed", Float64Msg::TYPE_NAME),
     topic("pose_estimate", "pose_estimate", PoseWithCovarianceStamped::TYPE_NAME),
     topic("path", "path", Path::TYPE_NAME),
     topic("goals", "goals", MarkerArray::TYPE_NAME),
@@ -608,6 +609,14 @@ pub struct DiagnosticArray {
 pub struct BoolMsg {
     /// Value.
     pub data: bool,
+}
+
+/// `std_msgs/Float64`: a UAV's commanded horizontal speed toward its setpoint, m/s (a position
+/// setpoint carries none; as Nav2's `speed_limit`, the limit travels beside the goal).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Float64Msg {
+    /// Value.
+    pub data: f64,
 }
 
 /// `rosgraph_msgs/Clock`: simulated time on `/clock`.
@@ -1389,6 +1398,11 @@ impl RosMessage for DiagnosticArray {
 impl RosMessage for BoolMsg {
     const TYPE_NAME: &'static str = "std_msgs/msg/Bool";
     const DEFINITION: &'static str = "bool data\n";
+}
+
+impl RosMessage for Float64Msg {
+    const TYPE_NAME: &'static str = "std_msgs/msg/Float64";
+    const DEFINITION: &'static str = "float64 data\n";
 }
 
 impl RosMessage for Clock {

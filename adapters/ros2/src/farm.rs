@@ -46,6 +46,9 @@ struct FarmRobot {
     /// The robot's tf topic (a key of `FarmLink::tf`).
     tf_topic: String,
     setpoint: Subscription<ros::PoseStamped>,
+    setpoint_speed: Subscription<ros::Float64Msg>,
+    /// The newest commanded speed toward the setpoint, m/s (`None`: none heard).
+    speed_mps: Option<f64>,
     team_out: Subscription<ros::BytesMsg>,
     status: Subscription<ros::StringMsg>,
     depth_encoding: DepthEncoding,
@@ -127,6 +130,8 @@ impl FarmLink {
                 tiles: node.publisher(t.get("camera/tiles"), &state_qos(64))?,
                 team_in: node.publisher(t.get("team/in"), &state_qos(64))?,
                 setpoint: node.subscription(t.get("setpoint"), &sensor_qos(1))?,
+                setpoint_speed: node.subscription(t.get("setpoint_speed"), &sensor_qos(1))?,
+                speed_mps: None,
                 team_out: node.subscription(t.get("team/out"), &sensor_qos(64))?,
                 // Reliable and latched like the robot's writer: the status a robot published
                 // before discovery matched the two is still delivered (with a volatile, best-effort
@@ -335,6 +340,14 @@ impl FarmLink {
                     Err(_) => self.malformed += 1,
                 }
             }
+            // The speed first: a setpoint taken in this pass flies at the speed sent with it.
+            loop {
+                match r.setpoint_speed.take() {
+                    Ok(Some((msg, _))) if msg.data.is_finite() && msg.data > 0.0 => r.speed_mps = Some(msg.data),
+                    Ok(Some(_)) | Err(_) => self.malformed += 1,
+                    Ok(None) => break,
+                }
+            }
             loop {
                 match r.setpoint.take() {
                     Ok(Some((msg, _))) => {
@@ -343,7 +356,8 @@ impl FarmLink {
                             let cmd = FlightCommand {
                                 target: Point2::new(p.x, p.y),
                                 altitude_m: p.z,
-                                speed_mps: f64::INFINITY,
+                                // Without a speed the simulated UAV keeps the one it has.
+                                speed_mps: r.speed_mps.unwrap_or(f64::INFINITY),
                             };
                             r.setpoint_cmd = Some((cmd, now));
                         } else {

@@ -260,6 +260,7 @@ enum CmdVelWriter {
 struct Outputs {
     cmd_vel: CmdVelWriter,
     setpoint: Publisher<ros::PoseStamped>,
+    setpoint_speed: Publisher<ros::Float64Msg>,
     estimate: Publisher<ros::PoseWithCovarianceStamped>,
     tf: Publisher<ros::TfMessage>,
     path: Publisher<ros::Path>,
@@ -329,6 +330,7 @@ impl RobotNode {
                 CmdVelType::TwistStamped => CmdVelWriter::Stamped(node.publisher(t.get("cmd_vel"), &state_qos(1))?),
             },
             setpoint: node.publisher(t.get("setpoint"), &state_qos(1))?,
+            setpoint_speed: node.publisher(t.get("setpoint_speed"), &state_qos(1))?,
             estimate: node.publisher(t.get("pose_estimate"), &state_qos(1))?,
             tf: node.publisher(t.get("tf"), &state_qos(100))?,
             path: node.publisher(t.get("path"), &latched_qos(1))?,
@@ -1102,6 +1104,11 @@ impl RobotNode {
                 };
                 if let Some(c) = &cmd {
                     state.last_altitude_m = Some(c.altitude_m);
+                    // Before the setpoint, so a reader that takes both in one pass flies it at
+                    // the mission's speed (a position setpoint carries none).
+                    if c.speed_mps.is_finite() {
+                        let _ = self.outputs.setpoint_speed.publish(ros::Float64Msg { data: c.speed_mps });
+                    }
                 }
                 if let Some(m) = msg {
                     let _ = self.outputs.setpoint.publish(m);

@@ -844,6 +844,7 @@ pub const ROS2_TOPIC_ROLES: &[&str] = &[
     "camera/tiles",
     "cmd_vel",
     "setpoint",
+    "setpoint_speed",
     "pose_estimate",
     "path",
     "goals",
