@@ -1,10 +1,21 @@
 """The ROS 2 interface definitions the Cyclone DDS interop scripts use, written out
 independently of spomp's (DDS type names as rmw implementations register them)."""
 
+import os
 from dataclasses import dataclass
 
 from cyclonedds.idl import IdlStruct
 from cyclonedds.idl.types import array, float64, int32, sequence, uint8, uint32
+
+# Loopback only, for every script that imports these types: Cyclone bound to 127.0.0.1 without
+# multicast (read when a script creates its first participant, so setting it here is in time).
+os.environ["CYCLONEDDS_URI"] = (
+    "<CycloneDDS><Domain id='any'><General><Interfaces>"
+    "<NetworkInterface address='127.0.0.1'/></Interfaces><AllowMulticast>false</AllowMulticast>"
+    "</General><Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>30"
+    "</MaxAutoParticipantIndex><Peers><Peer address='127.0.0.1'/></Peers></Discovery></Domain>"
+    "</CycloneDDS>"
+)
 
 
 @dataclass
