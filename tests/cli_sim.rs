@@ -205,7 +205,8 @@ fn a_ugv_wedged_in_a_dead_end_pocket_gets_itself_out_and_visits_the_goal() {
     assert_eq!(ugv1["tree_status"], "success", "{ugv1}");
     // It was wedged: the first drive reported no progress, and the recovery took over.
     let problems = run["problems"].as_array().unwrap();
-    let said = |what: &str| problems.iter().any(|p| p["robot"] == "ugv1" && p["message"].as_str().unwrap().contains(what));
+    let said =
+        |what: &str| problems.iter().any(|p| p["robot"] == "ugv1" && p["message"].as_str().unwrap().contains(what));
     assert!(said("no progress"), "the UGV was never wedged: {problems:?}");
     // Out of the pocket and round by the south road (the tip is 25 m from the goal as the crow
     // flies; the road is about 90 m).
