@@ -174,7 +174,8 @@ pub fn plan(a: &PlanArgs) -> Result<ExitCode> {
 
     let start = Instant::now();
     let mut planner = GlobalPlanner::new(params, world.classes().clone()).context("global planner parameters")?;
-    planner.update_map(world.map()).context("building the traversability graph")?;
+    // The robot plans on the world as seen from above (its aerial view, where that differs).
+    planner.update_map(world.aerial_map()).context("building the traversability graph")?;
     let build_ms = ms_since(start);
     let stats = planner.graph_stats();
 

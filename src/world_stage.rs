@@ -342,5 +342,5 @@ fn detectable_clusters(
         ..defaults
     };
     let mut detector = spomp_mapping::GoalDetector::new(params, world.classes()).ok()?;
-    detector.detect(world.map(), &[]).ok().map(|d| d.goals.len())
+    detector.detect(world.aerial_map(), &[]).ok().map(|d| d.goals.len())
 }

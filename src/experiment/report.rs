@@ -79,6 +79,15 @@ pub struct ClaimResult {
     pub weakest_step_se: Option<f64>,
 }
 
+/// The ratio of the first of two means to the second (`ratio_at_least`): `None` unless there
+/// are two and the second is positive.
+pub fn ratio_of(means: &[f64]) -> Option<f64> {
+    match means {
+        [a, b] if *b > 0.0 && a.is_finite() && b.is_finite() => Some(a / b),
+        _ => None,
+    }
+}
+
 /// Checks one claim against the merged rows.
 pub fn check_claim(claim: &Claim, rows: &[TrialRow]) -> ClaimResult {
     let k = claim.k.unwrap_or(1);
@@ -116,9 +125,10 @@ pub fn check_claim(claim: &Claim, rows: &[TrialRow]) -> ClaimResult {
         }
         Expect::AtLeast => bounded(true).iter().all(|v| *v >= bound),
         Expect::AtMost => bounded(false).iter().all(|v| *v <= bound),
+        Expect::RatioAtLeast => ratio_of(&means).is_some_and(|r| r >= bound),
     };
     let weakest_step_se = match claim.expect {
-        Expect::Similar | Expect::AtLeast | Expect::AtMost => None,
+        Expect::Similar | Expect::AtLeast | Expect::AtMost | Expect::RatioAtLeast => None,
         _ => stats
             .windows(2)
             .filter_map(|w| match (w[0], w[1]) {
@@ -553,6 +563,14 @@ fn markdown(meta: &ExperimentMeta, rows: &[TrialRow], table: &Table, claims: &[C
                     fmt_num(c.claim.value.unwrap_or(f64::NAN)),
                     if c.claim.each_trial { " (every trial)" } else { "" }
                 ),
+                Expect::RatioAtLeast => {
+                    let means: Option<Vec<f64>> = c.stats.iter().map(|s| s.map(|s| s.mean)).collect();
+                    format!(
+                        "first / second ≥ {} (measured {})",
+                        fmt_num(c.claim.value.unwrap_or(f64::NAN)),
+                        means.as_deref().and_then(ratio_of).map_or_else(|| "—".to_string(), |r| format!("{r:.2}"))
+                    )
+                }
             };
             let values: Vec<String> = c
                 .claim
@@ -1025,5 +1043,24 @@ mod tests {
         assert_eq!(bound(Expect::AtMost, 6.0, true, &["b"]).verdict, "fails", "b's seed 2 visited 7");
         assert_eq!(bound(Expect::AtMost, 6.0, true, &["zz"]).verdict, "no data");
         assert_eq!(bound(Expect::AtMost, 6.0, false, &["b"]).weakest_step_se, None);
+    }
+
+    #[test]
+    fn a_ratio_claim_holds_when_the_first_mean_is_that_multiple_of_the_second() {
+        // a: goals 2 and 4 (mean 3); b: 5 and 7 (mean 6); z: 0 (mean 0).
+        let rows = vec![row("a", 1, 2), row("a", 2, 4), row("b", 1, 5), row("b", 2, 7), row("z", 1, 0)];
+        let ratio = |value, over: &[&str]| {
+            let mut c = claim(Expect::RatioAtLeast, Metric::GoalsVisited, over);
+            c.value = Some(value);
+            check_claim(&c, &rows)
+        };
+        assert_eq!(ratio(2.0, &["b", "a"]).verdict, "holds", "6 / 3 = 2");
+        assert_eq!(ratio(2.01, &["b", "a"]).verdict, "fails");
+        assert_eq!(ratio(1.0, &["a", "b"]).verdict, "fails", "3 / 6 = 0.5");
+        assert_eq!(ratio(0.1, &["a", "z"]).verdict, "fails", "no ratio to a mean of 0");
+        assert_eq!(ratio(2.0, &["b", "zz"]).verdict, "no data");
+        assert_eq!(ratio(2.0, &["b", "a"]).weakest_step_se, None);
+        assert_eq!(ratio_of(&[6.0, 3.0]), Some(2.0));
+        assert_eq!(ratio_of(&[6.0]), None);
     }
 }

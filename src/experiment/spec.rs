@@ -217,7 +217,8 @@ pub struct CommsOverride {
 
 /// A claim over configurations: the means of `metric` over seeds, in the order of `over`, are
 /// expected to rise, fall or stay alike; or each configuration's mean (or, with `each_trial`,
-/// every trial's value) is expected at least or at most a bound (an acceptance threshold).
+/// every trial's value) is expected at least or at most a bound (an acceptance threshold); or
+/// the first of two configurations' means is expected at least a multiple of the second's.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Claim {
@@ -236,12 +237,14 @@ pub struct Claim {
     /// How the means relate along `over`.
     pub expect: Expect,
     /// Configuration names in the order the expectation reads them: at least two, one is
-    /// enough for `at_least` and `at_most`.
+    /// enough for `at_least` and `at_most`, exactly two for `ratio_at_least`.
     pub over: Vec<String>,
     /// With `similar`: largest relative difference from the first mean (default 0.1).
     #[serde(default)]
     pub tolerance: Option<f64>,
-    /// With `at_least` / `at_most` (required there): the bound, in the metric's unit.
+    /// With `at_least` / `at_most` (required there): the bound, in the metric's unit. With
+    /// `ratio_at_least` (required there): the least ratio of the first mean to the second, a
+    /// positive number.
     #[serde(default)]
     pub value: Option<f64>,
     /// With `at_least` / `at_most`: hold the bound on every trial's value instead of each
@@ -264,6 +267,10 @@ pub enum Expect {
     AtLeast,
     /// Every mean (with `each_trial`, every trial's value) is at most `value`.
     AtMost,
+    /// The first configuration's mean is at least `value` times the second's (exactly two
+    /// configurations; the second's mean positive): e.g. how many times longer the trip takes
+    /// without an ablated feature than with it.
+    RatioAtLeast,
 }
 
 /// A per-trial metric.
@@ -633,16 +640,27 @@ fn check_file(file: &ExperimentFile, p: &mut Problems<'_>) {
     for (i, claim) in file.claims.iter().enumerate() {
         let at = |k: &str| vec![key("claims"), PathSeg::Index(i), key(k)];
         let bound = matches!(claim.expect, Expect::AtLeast | Expect::AtMost);
-        if claim.over.len() < 2 && !bound {
+        let ratio = claim.expect == Expect::RatioAtLeast;
+        if ratio && claim.over.len() != 2 {
+            p.at(&at("over"), Stage::Schema, "`ratio_at_least` compares exactly two configurations (first / second)");
+        } else if claim.over.len() < 2 && !bound {
             p.at(&at("over"), Stage::Schema, "a claim compares at least two configurations");
         }
         if claim.over.is_empty() && bound {
             p.at(&at("over"), Stage::Schema, "a claim names at least one configuration");
         }
-        match (bound, claim.value) {
+        match (bound || ratio, claim.value) {
+            (true, None) if ratio => {
+                p.at(&at("value"), Stage::Schema, "`ratio_at_least` needs the least ratio `value`")
+            }
             (true, None) => p.at(&at("value"), Stage::Schema, "`at_least` and `at_most` need the bound `value`"),
             (true, Some(v)) if !v.is_finite() => p.at(&at("value"), Stage::Schema, "expected a finite number"),
-            (false, Some(_)) => p.at(&at("value"), Stage::Schema, "`value` goes with `expect: at_least` or `at_most`"),
+            (true, Some(v)) if ratio && v <= 0.0 => {
+                p.at(&at("value"), Stage::Schema, "expected a positive ratio");
+            }
+            (false, Some(_)) => {
+                p.at(&at("value"), Stage::Schema, "`value` goes with `expect: at_least`, `at_most` or `ratio_at_least`")
+            }
             _ => {}
         }
         if claim.each_trial && !bound {
@@ -671,7 +689,10 @@ fn check_file(file: &ExperimentFile, p: &mut Problems<'_>) {
             (Expect::Similar, Some(t)) if !(t.is_finite() && t >= 0.0) => {
                 p.at(&at("tolerance"), Stage::Schema, "expected a non-negative relative tolerance (0.1 = 10 %)");
             }
-            (Expect::Increasing | Expect::Decreasing | Expect::AtLeast | Expect::AtMost, Some(_)) => {
+            (
+                Expect::Increasing | Expect::Decreasing | Expect::AtLeast | Expect::AtMost | Expect::RatioAtLeast,
+                Some(_),
+            ) => {
                 p.at(&at("tolerance"), Stage::Schema, "`tolerance` goes with `expect: similar`");
             }
             _ => {}

@@ -57,6 +57,22 @@ pub struct LayerFiles {
     /// Optional RGB PNG of the world's appearance; without it the class colours are used.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub color: Option<String>,
+    /// Optional: the world as seen from above, where it differs from the ground (what the
+    /// UAV's tiles and a prior map show); without it the ground layers are seen.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aerial: Option<AerialLayers>,
+}
+
+/// The world as seen from above where it is not what is on the ground: a barrier under tree
+/// canopy or a fence too thin for an aerial map, drawn as the road it stands on. The robots'
+/// aerial map then misleads there, and only driving tells.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AerialLayers {
+    /// RGB PNG of class colours, the size of the class layer. Where its class differs from the
+    /// ground's, the aerial view has that class, its table colour and the height the class
+    /// derives to (as for a world without an elevation layer); elsewhere the ground's layers.
+    pub class: String,
 }
 
 /// The contents of `world.yaml`.
@@ -355,6 +371,43 @@ fn check_size(layer: &'static str, path: &Path, spec: &GridSpec, w: u32, h: u32)
     Ok(())
 }
 
+/// The aerial view of a world whose `layers.aerial` names a class raster: the ground's layers
+/// (`ground`), with the aerial class, its table colour and its derived height wherever the
+/// aerial class differs from the ground's.
+fn aerial_view(
+    dir: &Path,
+    layers: &AerialLayers,
+    ground: &AerialMap,
+    classes: &ClassTable,
+    color_lut: &[([u8; 3], u8)],
+    heights: &DerivedElevationParams,
+) -> Result<AerialMap, SimError> {
+    let (path, img) = open_layer(dir, &layers.class, "aerial.class")?;
+    let img = img.to_rgb8();
+    let spec = ground.spec;
+    check_size("aerial.class", &path, &spec, img.width(), img.height())?;
+    let (w, h) = (spec.width as usize, spec.height as usize);
+    let mut height_of = [0.0f32; 256];
+    for c in &classes.classes {
+        height_of[c.index as usize] = heights.height_of(&c.name);
+    }
+    let mut aerial = ground.clone();
+    for (x, y, px) in img.enumerate_pixels() {
+        let rgb = px.0;
+        let Ok(k) = color_lut.binary_search_by(|(c, _)| c.cmp(&rgb)) else {
+            return Err(SimError::UnknownColor { path, x, y, color: rgb });
+        };
+        let class = color_lut[k].1;
+        let i = (h - 1 - y as usize) * w + x as usize;
+        if class != ground.class[i] {
+            aerial.class[i] = class;
+            aerial.rgb[i] = rgb;
+            aerial.elevation[i] = height_of[class as usize];
+        }
+    }
+    Ok(aerial)
+}
+
 impl World {
     /// Loads a world directory (`world.yaml` and its layers); elevations absent from the files
     /// are derived from the classes with the default heights.
@@ -441,12 +494,21 @@ impl World {
             }
         }
         map.version = 1;
-        World::new(map, classes, desc.meta)
+        let aerial = match &desc.layers.aerial {
+            Some(layers) => Some(aerial_view(dir, layers, &map, &classes, &color_lut, heights)?),
+            None => None,
+        };
+        let mut world = World::new(map, classes, desc.meta)?;
+        if let Some(aerial) = aerial {
+            world.set_aerial_view(aerial)?;
+        }
+        Ok(world)
     }
 
     /// Writes the world into `dir` (created if needed): `world.yaml` with the class table
-    /// inline, `class.png`, a 16-bit `elevation.png` (1 mm per count when the relief fits) and
-    /// `color.png`.
+    /// inline, `class.png`, a 16-bit `elevation.png` (1 mm per count when the relief fits),
+    /// `color.png` and, for a world with an aerial view of its own, its classes as
+    /// `aerial-class.png` (loaded back, the view's colours and heights are derived from them).
     pub fn save(&self, dir: impl AsRef<Path>) -> Result<(), SimError> {
         let dir = dir.as_ref();
         std::fs::create_dir_all(dir).map_err(io_err(dir))?;
@@ -490,6 +552,19 @@ impl World {
         let mut bytes = Vec::new();
         let encoded = elev_img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png);
         save_png("elevation.png", encoded, bytes)?;
+        let aerial = if self.has_aerial_view() {
+            let mut aerial_img = RgbImage::new(w, h);
+            for (i, &class) in self.aerial_map().class.iter().enumerate() {
+                let cell = spec.cell_of_index(i);
+                aerial_img.put_pixel(cell.col, h - 1 - cell.row, Rgb(class_colors[class as usize]));
+            }
+            let mut bytes = Vec::new();
+            let encoded = aerial_img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png);
+            save_png("aerial-class.png", encoded, bytes)?;
+            Some(AerialLayers { class: "aerial-class.png".into() })
+        } else {
+            None
+        };
 
         let desc = WorldFile {
             resolution_m: spec.resolution_m,
@@ -501,6 +576,7 @@ impl World {
                 class: "class.png".into(),
                 elevation: Some(ElevationLayer { file: "elevation.png".into(), scale_m, offset_m }),
                 color: Some("color.png".into()),
+                aerial,
             },
             meta: self.meta.clone(),
         };

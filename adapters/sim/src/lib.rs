@@ -29,8 +29,8 @@ mod world;
 pub use city::{CityParams, generate_city};
 pub use error::SimError;
 pub use files::{
-    ClassTableSource, DerivedElevationParams, ElevationLayer, LayerFiles, MAX_DEPTH_PNG_BYTES, MAX_WORLD_CELLS,
-    RESOLUTION_RANGE_M, WORLD_FILE, WorldFile, decode_depth_png, read_depth_png, render_png,
+    AerialLayers, ClassTableSource, DerivedElevationParams, ElevationLayer, LayerFiles, MAX_DEPTH_PNG_BYTES,
+    MAX_WORLD_CELLS, RESOLUTION_RANGE_M, WORLD_FILE, WorldFile, decode_depth_png, read_depth_png, render_png,
 };
 pub use panorama::{PanoramaRenderer, PanoramaSensor, SensorParams};
 pub use radio::{Blackout, Faults, KillFault, Link, LinkTier, Radio, RadioNode, RadioParams, Region};

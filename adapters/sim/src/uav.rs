@@ -243,7 +243,9 @@ impl OrthoCamera {
                 self.revealed_count += 1;
                 any = true;
                 let ti = (row - r0) as usize * tw as usize + (col - c0) as usize;
-                let mut label = world.map().class[wi];
+                // The camera sees the world from above (its aerial view, where that differs).
+                let seen = world.aerial_map();
+                let mut label = seen.class[wi];
                 if self.noise_probability > 0.0
                     && !self.labels.is_empty()
                     && self.rng.random_bool(self.noise_probability)
@@ -251,8 +253,8 @@ impl OrthoCamera {
                     label = self.labels[self.rng.random_range(0..self.labels.len())];
                 }
                 tile.class[ti] = label;
-                tile.rgb[ti] = world.map().rgb[wi];
-                tile.elevation[ti] = world.map().elevation[wi];
+                tile.rgb[ti] = seen.rgb[wi];
+                tile.elevation[ti] = seen.elevation[wi];
             }
         }
         any.then_some(tile)

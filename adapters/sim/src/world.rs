@@ -29,14 +29,19 @@ pub struct WorldMeta {
 
 /// The simulated world.
 ///
-/// The layers live in an [`AerialMap`] whose every cell is known: the UAV reveals tiles of
-/// exactly these layers. Elevations are finite (metres above the world's datum).
+/// The layers live in an [`AerialMap`] whose every cell is known: the ground truth bodies and
+/// sensors meet. The UAV reveals tiles of the world as seen from above, which are these layers
+/// unless the world has an aerial view of its own ([`World::set_aerial_view`]: a barrier under
+/// canopy, a fence too thin for an aerial map). Elevations are finite (metres above the
+/// world's datum).
 #[derive(Clone, Debug, PartialEq)]
 pub struct World {
-    /// Class, colour and elevation layers (private: the highest elevation is cached). Shared:
-    /// robots that start with the whole map (`sim.prior_map`) hold these very layers until
-    /// they change their copy.
+    /// Class, colour and elevation layers (private: the highest elevation is cached).
     map: Arc<AerialMap>,
+    /// The world seen from above where it differs from the ground: what a prior map holds and
+    /// the UAV's tiles show. `None`: the ground layers themselves. Shared: robots that start
+    /// with the whole map (`sim.prior_map`) hold these very layers until they change their copy.
+    aerial: Option<Arc<AerialMap>>,
     /// The class table the class layer refers to.
     classes: ClassTable,
     /// Ground truth and start poses.
@@ -78,7 +83,7 @@ impl World {
             ));
         }
         let max_elevation_m = map.elevation.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        Ok(World { map: Arc::new(map), classes, meta, max_elevation_m })
+        Ok(World { map: Arc::new(map), aerial: None, classes, meta, max_elevation_m })
     }
 
     /// A world of one class at one elevation (tests, toy scenes).
@@ -94,15 +99,42 @@ impl World {
         World::new(map, classes, WorldMeta::default())
     }
 
-    /// The class, colour and elevation layers.
+    /// The class, colour and elevation layers: the ground truth.
     #[inline]
     pub fn map(&self) -> &AerialMap {
         &self.map
     }
 
-    /// The layers, shared (a prior map for the robots costs no copy).
+    /// The world as seen from above: what the UAV's tiles and a prior map show. The ground
+    /// layers unless the world has an aerial view of its own.
+    #[inline]
+    pub fn aerial_map(&self) -> &AerialMap {
+        self.aerial.as_deref().unwrap_or(&self.map)
+    }
+
+    /// Whether the world has an aerial view that differs from its ground layers.
+    pub fn has_aerial_view(&self) -> bool {
+        self.aerial.is_some()
+    }
+
+    /// The world as seen from above, shared (a prior map for the robots costs no copy).
     pub fn shared_map(&self) -> Arc<AerialMap> {
-        Arc::clone(&self.map)
+        Arc::clone(self.aerial.as_ref().unwrap_or(&self.map))
+    }
+
+    /// Gives the world an aerial view of its own: what is seen from above where it differs
+    /// from the ground (a barrier under canopy, a fence too thin for an aerial map), so that
+    /// the robots' aerial map misleads where the world's does. An error, and no change, unless
+    /// `aerial` has the world's grid, every class in the table and finite elevations.
+    pub fn set_aerial_view(&mut self, aerial: AerialMap) -> Result<(), SimError> {
+        if aerial.spec != self.map.spec {
+            return Err(SimError::invalid("aerial view", "its grid differs from the world's"));
+        }
+        // The same checks as the ground layers'.
+        let checked = World::new(aerial, self.classes.clone(), WorldMeta::default())?;
+        let aerial = checked.map;
+        self.aerial = (*aerial != *self.map).then_some(aerial);
+        Ok(())
     }
 
     /// The class table of the class layer.
@@ -145,8 +177,9 @@ impl World {
         }
     }
 
-    /// Sets a cell's layers (generators and tests); ignores cells off the grid, classes not in
-    /// the table and non-finite elevations.
+    /// Sets a cell's ground layers (generators and tests); ignores cells off the grid, classes
+    /// not in the table and non-finite elevations. An aerial view of the world's own, if it has
+    /// one, stays as it is.
     pub fn set_cell(&mut self, cell: Cell, class: ClassId, rgb: [u8; 3], elevation_m: f32) {
         let inside = cell.col < self.map.spec.width && cell.row < self.map.spec.height;
         if inside && elevation_m.is_finite() && self.classes.get(class).is_some() {

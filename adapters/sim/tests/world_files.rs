@@ -199,6 +199,53 @@ fn missing_layers_and_bad_yaml_are_reported() {
 }
 
 #[test]
+fn an_aerial_view_shows_what_is_seen_from_above_and_survives_a_round_trip() {
+    // The ground: a vegetation barrier (1 m) at image (2, 1) = cell (2, 1) across the road; seen
+    // from above it is road. The building at cell (1, 2) is seen as it is.
+    let dir = scratch("aerial");
+    write_tiny(&dir, &format!("{TINY}  aerial: {{class: aerial.png}}\n"));
+    let t = ClassTable::default_table();
+    let vegetation = t.by_name("vegetation").unwrap();
+    let road = t.by_name("road").unwrap();
+    let mut ground = image::open(dir.join("class.png")).unwrap().to_rgb8();
+    let aerial = ground.clone();
+    ground.put_pixel(2, 1, Rgb(vegetation.color));
+    ground.save(dir.join("class.png")).unwrap();
+    aerial.save(dir.join("aerial.png")).unwrap();
+    let w = World::load(&dir).unwrap();
+    let barrier = Point2::new(10.0 + 2.5 * 0.5, 20.0 + 1.5 * 0.5);
+    let i = w.spec().index(w.spec().cell_at(barrier).unwrap());
+    assert!(w.has_aerial_view());
+    assert_eq!((w.class_at(barrier), w.elevation_at(barrier)), (Some(vegetation.index), Some(1.0)));
+    let seen = w.aerial_map();
+    assert_eq!((seen.class[i], seen.rgb[i], seen.elevation[i]), (road.index, road.color, 0.0));
+    // A prior map is the view from above; every other cell is the ground's.
+    assert_eq!(*w.shared_map(), *seen);
+    let differ = (0..w.spec().len()).filter(|&k| seen.class[k] != w.map().class[k]).count();
+    assert_eq!(differ, 1);
+    // Saved and loaded back: the same world, aerial view and all.
+    let saved = scratch("aerial-saved");
+    w.save(&saved).unwrap();
+    let back = World::load(&saved).unwrap();
+    assert_eq!(back.aerial_map(), w.aerial_map());
+    assert_eq!(back.map(), w.map());
+    // The same raster as the ground is no aerial view of its own.
+    ground.save(dir.join("aerial.png")).unwrap();
+    assert!(!World::load(&dir).unwrap().has_aerial_view());
+    // Errors name the layer: a wrong size, an unknown colour, a missing file.
+    RgbImage::new(5, 3).save(dir.join("aerial.png")).unwrap();
+    assert!(matches!(World::load(&dir), Err(SimError::WrongSize { layer: "aerial.class", .. })));
+    let mut odd = ground.clone();
+    odd.put_pixel(0, 0, Rgb([1, 2, 3]));
+    odd.save(dir.join("aerial.png")).unwrap();
+    assert!(matches!(World::load(&dir), Err(SimError::UnknownColor { x: 0, y: 0, .. })));
+    std::fs::remove_file(dir.join("aerial.png")).unwrap();
+    assert!(matches!(World::load(&dir), Err(SimError::MissingLayer { layer: "aerial.class", .. })));
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&saved);
+}
+
+#[test]
 fn class_table_from_a_file_is_checked() {
     let dir = scratch("table");
     write_tiny(&dir, "resolution_m: 0.5\nclass_table: classes.yaml\nlayers: {class: class.png}\n");

@@ -10,6 +10,9 @@ from the classes (vegetation 1 m, buildings 12 m, gravel and road flat):
   which a flat gravel wedge opens from the west road: 12 m wide at x = 10 m, closing to its tip
   against the building's wall at x = 40 m. The straight way to the goal runs into the wedge; the
   way that can be driven is the longer one by the south road.
+The regression test starts the UGV wedged near the tip, at (36, 23.1) facing east (world.yaml,
+wedge-mission.yaml): 1.6 m of gravel across, every side within its terrain analysis's 0.75 m
+inflation, so only a recovery gets it out.
 Standard library only; the output is byte-for-byte reproducible.
 """
 
