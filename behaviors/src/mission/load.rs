@@ -143,7 +143,8 @@ pub fn load_mission_str<E: 'static>(
             out.sources.push(text.to_string());
             root
         }
-        Err((source, diagnostic)) => {
+        Err(failure) => {
+            let ParseFailure { source, diagnostic } = *failure;
             out.sources.push(source);
             out.diagnostics.push(diagnostic);
             return out;
@@ -190,10 +191,17 @@ fn finish(mut out: LoadedMission, mission: Option<MissionFile>, mut diags: Vec<D
     out
 }
 
+/// Why the parse stage stopped.
+#[derive(Debug)]
+pub struct ParseFailure {
+    /// The source to keep for the mission (empty when it was too big to keep).
+    pub source: String,
+    /// The problem.
+    pub diagnostic: Diagnostic,
+}
+
 /// Stage parse: the mission's text within the size limit, parsed into a span-carrying tree.
-/// On error, the source to keep for the mission (empty when it was too big to keep) and the
-/// diagnostic.
-pub fn parse_stage(text: &str, path: &Path) -> Result<Node, (String, Diagnostic)> {
+pub fn parse_stage(text: &str, path: &Path) -> Result<Node, Box<ParseFailure>> {
     if text.len() as u64 > limits::MAX_SOURCE_BYTES {
         let message = format!(
             "the mission is {} bytes, more than the {} a mission may have",
@@ -201,9 +209,13 @@ pub fn parse_stage(text: &str, path: &Path) -> Result<Node, (String, Diagnostic)
             limits::MAX_SOURCE_BYTES
         );
         let at = Loc { line: 1, column: 1, offset: None, len: 0 };
-        return Err((String::new(), Diagnostic::new(path, at, "", Stage::Parse, message)));
+        let diagnostic = Diagnostic::new(path, at, "", Stage::Parse, message);
+        return Err(Box::new(ParseFailure { source: String::new(), diagnostic }));
     }
-    parse(text).map_err(|e| (text.to_string(), Diagnostic::new(path, e.loc, "", Stage::Parse, e.message)))
+    parse(text).map_err(|e| {
+        let diagnostic = Diagnostic::new(path, e.loc, "", Stage::Parse, e.message);
+        Box::new(ParseFailure { source: text.to_string(), diagnostic })
+    })
 }
 
 /// The mission's top-level sections, in the order the docs list them.
