@@ -11,10 +11,19 @@ Layers, bottom to top: core < skills < behaviors (engine + mission language) < r
 - an adapter depends on core, skills, behaviours and the robot, never on another adapter;
 - only the root `spomp` package wires adapters together;
 - tools (benchmark support) depend on no spomp crate and are used as dev-dependencies only.
-Every spomp crate must live in a known layer directory. Exit 1 on any violation.
+Dev-dependencies (tests, benchmarks, examples) obey the same rules: a skill's tests cannot
+reach up to the robot, nor an adapter's tests into another adapter; tools are the one extra a
+dev-dependency may name.
+Every spomp crate must live in a known layer directory.
+
+Inside `spomp-behaviors`, the engine (every module but `mission/`) knows nothing of the mission
+language: no engine source file names `crate::mission` / `spomp_behaviors::mission` (the
+language builds engine trees, never the other way round). Comments are not checked.
+Exit 1 on any violation.
 """
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -55,6 +64,33 @@ ALLOWED = {
 }
 
 
+# A path into the mission language from inside the crate or from outside it.
+LANGUAGE_PATH = re.compile(r"\b(crate|super|spomp_behaviors)\s*::\s*(\{[^}]*\bmission\b|mission\b)")
+
+
+def engine_language_problems(root: str) -> list:
+    """Engine modules of `spomp-behaviors` that reach into its mission language."""
+    src = os.path.join(root, "behaviors", "src")
+    language = os.path.join(src, "mission")
+    problems = []
+    for folder, _dirs, files in os.walk(src):
+        if folder == language or folder.startswith(language + os.sep):
+            continue
+        for f in sorted(files):
+            if not f.endswith(".rs"):
+                continue
+            path = os.path.join(folder, f)
+            with open(path, encoding="utf-8") as fh:
+                for n, line in enumerate(fh, 1):
+                    code = line.split("//", 1)[0]
+                    if LANGUAGE_PATH.search(code):
+                        rel = os.path.relpath(path, root)
+                        problems.append(
+                            f"{rel}:{n}: the engine must not use the mission language ({code.strip()})"
+                        )
+    return problems
+
+
 def main() -> int:
     meta = json.loads(
         subprocess.check_output(["cargo", "metadata", "--no-deps", "--format-version", "1"])
@@ -79,15 +115,18 @@ def main() -> int:
                 if not is_dev and layer != "tool":
                     problems.append(f"{name} ({layer}) may use the tool {dep['name']} as a dev-dependency only")
                 continue
-            if is_dev:
-                continue
             if dep_layer not in ALLOWED[layer]:
-                problems.append(f"{name} ({layer}) must not depend on {dep['name']} ({dep_layer})")
+                what = "have a dev-dependency on" if is_dev else "depend on"
+                problems.append(f"{name} ({layer}) must not {what} {dep['name']} ({dep_layer})")
+    problems.extend(engine_language_problems(root))
     for p in problems:
         print("layering:", p)
     if problems:
         return 1
-    print(f"layering: {len(ours)} crates, all dependencies respect the layers")
+    print(
+        f"layering: {len(ours)} crates, all dependencies (dev-dependencies too) respect the layers; "
+        "the engine of spomp-behaviors uses no mission language"
+    )
     return 0
 
 

@@ -18,6 +18,7 @@
 pub mod blackboard;
 pub mod control;
 pub mod decorators;
+pub mod duration;
 pub mod executor;
 pub mod job;
 pub mod library;
@@ -32,5 +33,7 @@ pub use blackboard::{BbValue, Binding, Blackboard, PortType};
 pub use executor::TreeExecutor;
 pub use library::engine_registry;
 pub use node::{Behavior, NodeInfo, Slot, TickContext, TreeObserver};
-pub use registry::{Category, LeafType, NodeCatalog, NodeRegistry, NodeTypeSpec, PortSpec};
+pub use registry::{
+    Category, LeafType, NodeCatalog, NodeError, NodeRegistry, NodeTypeSpec, PortSpec, RegistrationError,
+};
 pub use status::Status;

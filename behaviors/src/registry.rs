@@ -1,6 +1,7 @@
 //! Node types: their ports declared once, registration by name, and the manifest that the docs
 //! and the JSON schema are generated from.
 
+use std::any::{Any, TypeId};
 use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -107,7 +108,12 @@ pub enum Category {
     Subtree,
 }
 
-/// The ports of a node instance, bound and ready for its factory.
+/// The ports of a node instance, bound and ready for its factory: every port its type
+/// declares, bound to the mission's value, the declared default, or [`Binding::Unset`] (an
+/// optional port left open). Reading a port the type does not declare is an error
+/// ([`NodeError::UndeclaredPort`]), which [`NodeRegistry::try_register`] finds when the type is
+/// registered: a misspelled port name in a factory fails when the registry is built, never
+/// silently reads as unset.
 #[derive(Debug, Clone, Default)]
 pub struct PortBindings {
     bindings: BTreeMap<Text, Binding>,
@@ -115,6 +121,21 @@ pub struct PortBindings {
 }
 
 impl PortBindings {
+    /// The declared ports of `spec`, each bound as the mission language binds a port a mission
+    /// leaves out: to its declared default, or unset. What the registry probes a factory with,
+    /// and a start for code that builds a node by hand (tests, tools).
+    pub fn declared(spec: &NodeTypeSpec) -> Self {
+        let mut p = PortBindings::default();
+        for port in &spec.ports {
+            let binding = match &port.default {
+                Some(d) => BbValue::from_json(port.ty, d).map_or(Binding::Unset, Binding::Literal),
+                None => Binding::Unset,
+            };
+            p.insert(port.name.clone(), binding);
+        }
+        p
+    }
+
     /// Where the map frame's origin lies on the Earth, when the tree is built for a
     /// georeferenced operating area (`BuildOptions::map_origin`); `None` otherwise.
     pub fn map_origin(&self) -> Option<spomp_core::GeoPoint> {
@@ -126,29 +147,61 @@ impl PortBindings {
         self.map_origin = origin;
     }
 
-    /// Adds a binding.
+    /// Binds a port (the loader binds every declared port; a test may bind some by hand).
     pub fn insert(&mut self, name: impl Into<Text>, b: Binding) {
         self.bindings.insert(name.into(), b);
     }
 
-    /// The binding of a port (Unset if the mission left an optional port open).
-    pub fn get(&self, name: &str) -> Binding {
-        self.bindings.get(name).cloned().unwrap_or(Binding::Unset)
+    /// The binding of a declared port ([`Binding::Unset`] when the mission left an optional port
+    /// open); an undeclared name is an error.
+    pub fn get(&self, name: &str) -> Result<Binding, NodeError> {
+        self.bindings.get(name).cloned().ok_or_else(|| NodeError::UndeclaredPort(Text::Owned(name.to_string())))
     }
 
-    /// A literal value of a port known at build time (no blackboard), e.g. parameter blocks.
-    pub fn literal(&self, name: &str) -> Option<&BbValue> {
+    /// A literal value of a declared port known at build time (no blackboard), e.g. parameter
+    /// blocks; `None` when it is bound to an entry or unset. An undeclared name is an error.
+    pub fn literal(&self, name: &str) -> Result<Option<&BbValue>, NodeError> {
         match self.bindings.get(name) {
-            Some(Binding::Literal(v)) => Some(v),
-            _ => None,
+            Some(Binding::Literal(v)) => Ok(Some(v)),
+            Some(_) => Ok(None),
+            None => Err(NodeError::UndeclaredPort(Text::Owned(name.to_string()))),
         }
+    }
+}
+
+/// Why a node type's factory refused to build a node.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NodeError {
+    /// The factory read a port its type does not declare: a bug in the node type's code,
+    /// found when the type is registered ([`RegistrationError::UndeclaredPort`]).
+    #[error("reads port `{0}`, which its node type does not declare")]
+    UndeclaredPort(Text),
+    /// A port's value cannot be used (a bad literal, a file that does not parse).
+    #[error("{message}")]
+    InvalidPort {
+        /// The port.
+        port: Text,
+        /// What is wrong, naming the port.
+        message: String,
+    },
+    /// The node cannot be built for another reason, in the factory's words.
+    #[error("{0}")]
+    Invalid(String),
+}
+
+impl NodeError {
+    /// A port's value cannot be used; `message` names the port (it is shown as it is).
+    pub fn port(port: impl Into<Text>, message: impl Into<String>) -> Self {
+        NodeError::InvalidPort { port: port.into(), message: message.into() }
     }
 }
 
 /// Builds a leaf's behaviour from its bound ports; errors name what is wrong with the
 /// parameters. A closure, so a node type can carry configuration or handles to the
-/// services it calls.
-pub type LeafFactory<E> = Arc<dyn Fn(&PortBindings) -> Result<Box<dyn Behavior<E>>, String> + Send + Sync>;
+/// services it calls. The registry calls it once when the type is registered, with the
+/// declared defaults ([`PortBindings::declared`]), to find reads of undeclared ports: a factory
+/// builds, it does not act (no I/O but reading files its ports name, no threads).
+pub type LeafFactory<E> = Arc<dyn Fn(&PortBindings) -> Result<Box<dyn Behavior<E>>, NodeError> + Send + Sync>;
 
 /// A registered node type: what the mission language and the docs know of it. Leaves also
 /// have a factory, kept beside the spec in the [`NodeRegistry`].
@@ -187,7 +240,7 @@ impl NodeTypeSpec {
         factory: F,
     ) -> LeafType<E>
     where
-        F: Fn(&PortBindings) -> Result<Box<dyn Behavior<E>>, String> + Send + Sync + 'static,
+        F: Fn(&PortBindings) -> Result<Box<dyn Behavior<E>>, NodeError> + Send + Sync + 'static,
     {
         LeafType { spec: Self::structural(name, category, description, ports), factory: Arc::new(factory) }
     }
@@ -274,7 +327,7 @@ impl<E> From<LeafType<E>> for Registration<E> {
 #[derive(Clone, Default)]
 pub struct NodeCatalog {
     types: BTreeMap<Text, NodeTypeSpec>,
-    robot_checks: Option<Arc<dyn RobotChecks>>,
+    extensions: Extensions,
 }
 
 impl std::fmt::Debug for NodeCatalog {
@@ -283,26 +336,11 @@ impl std::fmt::Debug for NodeCatalog {
     }
 }
 
-/// A problem the robot layer found in a mission, at a field path of the mission file
-/// (`["team", "2", "navigation", "terrain", "inflation_m"]`).
-#[derive(Clone, Debug, PartialEq)]
-pub struct RobotProblem {
-    /// Field path in the mission file (mapping keys and list indices).
-    pub path: Vec<String>,
-    /// What is wrong, in the skill's words.
-    pub message: String,
-}
-
-/// What the mission language leaves to the layer that turns a mission into robots
-/// (`spomp-robot`): the robots' `navigation:` settings, whose types, defaults and rules are
-/// the skills', and the checks of every parameter the skills validate. Registered beside the
-/// node types, so the language stays below the robot layer.
-pub trait RobotChecks: Send + Sync {
-    /// The JSON Schema of a `navigation:` section (with its own `$defs`).
-    fn navigation_schema(&self) -> serde_json::Value;
-    /// Checks every robot of a typed mission as the robot layer will set it up.
-    fn check(&self, mission: &crate::mission::MissionFile) -> Vec<RobotProblem>;
-}
+/// What layers above registered beside the node types for the code that reads missions (the
+/// robot layer's checks of robot settings, for the mission language), one value per type.
+/// The engine carries them without knowing what they are, so it depends on no such layer.
+#[derive(Clone, Default)]
+struct Extensions(BTreeMap<TypeId, Arc<dyn Any + Send + Sync>>);
 
 /// All node types known to a build, by name, with the factories that build leaves for trees
 /// acting on `E` (the robot runtime; `()` for engine-only trees). Derefs to its
@@ -337,10 +375,66 @@ impl<E> std::ops::Deref for NodeRegistry<E> {
     }
 }
 
-/// A second registration under a name already taken.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("node type `{0}` is registered twice")]
-pub struct DuplicateNodeType(pub Text);
+/// Why a node type cannot be registered: a programming error of the code that declares it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RegistrationError {
+    /// A second registration under a name already taken.
+    #[error("node type `{0}` is registered twice")]
+    Duplicate(Text),
+    /// The factory reads a port the type does not declare (a misspelled name in its code).
+    #[error("node type `{node}`: its factory reads port `{port}`, which it does not declare")]
+    UndeclaredPort {
+        /// The node type.
+        node: Text,
+        /// The port read.
+        port: Text,
+    },
+    /// A declared default is not a value of the port's type.
+    #[error("node type `{node}`: the default of port `{port}` is not a {ty}: {message}")]
+    BadDefault {
+        /// The node type.
+        node: Text,
+        /// The port.
+        port: Text,
+        /// Its declared type.
+        ty: PortType,
+        /// What is wrong.
+        message: String,
+    },
+    /// Two ports of one type share a name.
+    #[error("node type `{node}` declares port `{port}` twice")]
+    DuplicatePort {
+        /// The node type.
+        node: Text,
+        /// The port.
+        port: Text,
+    },
+}
+
+/// Checks a type's declarations and probes its factory for reads of undeclared ports.
+fn check_declarations<E>(spec: &NodeTypeSpec, factory: Option<&LeafFactory<E>>) -> Result<(), RegistrationError> {
+    for (i, port) in spec.ports.iter().enumerate() {
+        if spec.ports[..i].iter().any(|p| p.name == port.name) {
+            return Err(RegistrationError::DuplicatePort { node: spec.name.clone(), port: port.name.clone() });
+        }
+        if let Some(d) = &port.default
+            && let Err(message) = BbValue::from_json(port.ty, d)
+        {
+            return Err(RegistrationError::BadDefault {
+                node: spec.name.clone(),
+                port: port.name.clone(),
+                ty: port.ty,
+                message,
+            });
+        }
+    }
+    if let Some(factory) = factory
+        && let Err(NodeError::UndeclaredPort(port)) = factory(&PortBindings::declared(spec))
+    {
+        return Err(RegistrationError::UndeclaredPort { node: spec.name.clone(), port });
+    }
+    Ok(())
+}
 
 impl<E> NodeRegistry<E> {
     /// An empty registry.
@@ -348,16 +442,19 @@ impl<E> NodeRegistry<E> {
         Self::default()
     }
 
-    /// Registers a node type. A name registered twice is a programming error of the build that
-    /// registers it, reported rather than silently replacing the first.
-    pub fn try_register(&mut self, r: impl Into<Registration<E>>) -> Result<(), DuplicateNodeType> {
+    /// Registers a node type. A name registered twice, a port declared twice, a default that is
+    /// no value of its port's type, or a factory that reads a port the type does not declare
+    /// (the factory is called once, with [`PortBindings::declared`]) is a programming error of
+    /// the code that declares the type, reported rather than left to a mission to find.
+    pub fn try_register(&mut self, r: impl Into<Registration<E>>) -> Result<(), RegistrationError> {
         let (spec, factory) = match r.into() {
             Registration::Structural(spec) => (spec, None),
             Registration::Leaf(LeafType { spec, factory }) => (spec, Some(factory)),
         };
         if self.catalog.types.contains_key(&spec.name) {
-            return Err(DuplicateNodeType(spec.name));
+            return Err(RegistrationError::Duplicate(spec.name));
         }
+        check_declarations(&spec, factory.as_ref())?;
         if let Some(f) = factory {
             self.factories.insert(spec.name.clone(), f);
         }
@@ -368,8 +465,9 @@ impl<E> NodeRegistry<E> {
     /// Registers a node type of the built-in libraries.
     ///
     /// # Panics
-    /// When the name is taken: the built-in libraries register distinct names, which a test
-    /// checks; a lab's own types go through [`NodeRegistry::try_register`].
+    /// On a [`RegistrationError`]: the built-in libraries register distinct names and read only
+    /// the ports they declare, which their tests check by building the registry; a lab's own
+    /// types go through [`NodeRegistry::try_register`].
     #[allow(clippy::panic)]
     pub fn register(&mut self, r: impl Into<Registration<E>>) {
         if let Err(e) = self.try_register(r) {
@@ -387,9 +485,10 @@ impl<E> NodeRegistry<E> {
         &self.catalog
     }
 
-    /// Sets the robot layer's checks of robot settings (see [`RobotChecks`]).
-    pub fn set_robot_checks(&mut self, checks: Arc<dyn RobotChecks>) {
-        self.catalog.robot_checks = Some(checks);
+    /// Keeps `value` beside the node types, replacing one of the same type: how a layer above
+    /// hands the code that reads missions what it needs (see `mission::RobotChecks`).
+    pub fn set_extension<T: Any + Send + Sync>(&mut self, value: T) {
+        self.catalog.extensions.0.insert(TypeId::of::<T>(), Arc::new(value));
     }
 }
 
@@ -409,9 +508,9 @@ impl NodeCatalog {
         self.types.keys().map(|name| &**name).collect()
     }
 
-    /// The robot layer's checks, when a robot layer is registered.
-    pub fn robot_checks(&self) -> Option<&dyn RobotChecks> {
-        self.robot_checks.as_deref()
+    /// The value of type `T` kept by [`NodeRegistry::set_extension`], if any.
+    pub fn extension<T: Any + Send + Sync>(&self) -> Option<&T> {
+        self.extensions.0.get(&TypeId::of::<T>()).and_then(|v| v.downcast_ref::<T>())
     }
 
     /// The manifest: every node type with its ports, as JSON.

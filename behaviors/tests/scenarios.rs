@@ -19,7 +19,7 @@ use std::sync::{Arc, Mutex};
 
 use spomp_behaviors::mission::load_tree_str;
 use spomp_behaviors::node::{Behavior, TickContext};
-use spomp_behaviors::registry::{Category, NodeRegistry, NodeTypeSpec, PortSpec};
+use spomp_behaviors::registry::{Category, NodeError, NodeRegistry, NodeTypeSpec, PortSpec};
 use spomp_behaviors::{BbValue, PortType, Status, engine_registry};
 use spomp_core::Time;
 
@@ -50,6 +50,9 @@ const SCENARIOS: &[Scenario] = &[
     Scenario { name: "sequence_with_memory inside a fallback keeps its place through the fallback's reset",
         tree: "fallback: [{sequence_with_memory: [{a: {steps: S}}, {b: {steps: FS}}]}, {c: {steps: S}}]",
         steps: &["S: a=S b=F c=S", "S: b=S"] },
+    Scenario { name: "sequence_with_memory passes children that succeed at once in one tick (BT.CPP yields after each)",
+        tree: "sequence_with_memory: [{a: {steps: S}}, {b: {steps: S}}, {c: {steps: S}}]",
+        steps: &["S: a=S b=S c=S"] },
     Scenario { name: "fallback stops at the first success",
         tree: "fallback: [{a: {steps: F}}, {b: {steps: RS}}, {c: {steps: S}}]",
         steps: &["R: a=F b=R", "S: b=S"] },
@@ -139,6 +142,9 @@ const SCENARIOS: &[Scenario] = &[
     Scenario { name: "parallel leaves skipped children out of its thresholds",
         tree: "parallel: [{run_once: {then_skip: true, child: {a: {steps: S}}}}, {b: {steps: RSS}}]",
         steps: &["R: a=S b=R", "S: b=S", "S: b=S"] },
+    Scenario { name: "parallel with a positive success threshold and a skipped child succeeds (BT.CPP stays running)",
+        tree: "parallel: {success_threshold: 2, children: [{run_once: {then_skip: true, child: {a: {steps: S}}}}, {b: {steps: S}}]}",
+        steps: &["S: a=S b=S", "S: b=S"] },
     Scenario { name: "decorators pass skipped up",
         tree: "sequence: [{inverter: {child: {run_once: {then_skip: true, child: {a: {steps: F}}}}}}, {b: {steps: S}}]",
         steps: &["S: a=F b=S", "S: b=S"] },
@@ -168,8 +174,10 @@ fn registry(log: &Arc<Mutex<Vec<String>>>) -> NodeRegistry<()> {
             "A scripted leaf.",
             vec![PortSpec::input("steps", PortType::String, "R, S, F or K per tick; the last repeats.")],
             move |ports| {
-                let Some(BbValue::Str(steps)) = ports.literal("steps") else { return Err("steps: a literal".into()) };
-                let steps = steps.chars().map(status_of).collect::<Result<Vec<_>, _>>()?;
+                let Some(BbValue::Str(steps)) = ports.literal("steps")? else {
+                    return Err(NodeError::port("steps", "steps: a literal"));
+                };
+                let steps = steps.chars().map(status_of).collect::<Result<Vec<_>, _>>().map_err(NodeError::Invalid)?;
                 Ok(Box::new(Scripted { id, steps, at: 0, log: Arc::clone(&log) }))
             },
         ))

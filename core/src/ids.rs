@@ -37,6 +37,12 @@ impl From<&str> for RobotId {
     }
 }
 
+/// Goals closer than this to each other are one goal, metres (the paper's 10 m): the default
+/// of the team state's deconfliction (claims, preemption) and of goal detection's
+/// deduplication, which a mission sets once for both (`goals.deconfliction_radius_m`). A
+/// convention both skills share, so it lives with the goal's identity.
+pub const DEFAULT_DECONFLICTION_RADIUS_M: f64 = 10.0;
+
 /// A goal's id, unique across the team: the robot that first identified it and a counter.
 #[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, JsonSchema)]
 pub struct GoalId {

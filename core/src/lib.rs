@@ -21,7 +21,7 @@ pub use classes::{ClassId, ClassInfo, ClassTable, ClassTableError, UNKNOWN_CLASS
 pub use geo::GeoPoint;
 pub use geometry::{Point2, Pose2, normalize_angle};
 pub use grid::{Cell, Grid, GridSpec};
-pub use ids::{GoalId, RobotId, RobotKind};
+pub use ids::{DEFAULT_DECONFLICTION_RADIUS_M, GoalId, RobotId, RobotKind};
 pub use motion::{FlightCommand, Odometry, OdometryCovariance, PoseEstimate, Twist2};
 pub use panorama::{DepthPanorama, PanoramaFrame, PanoramaGeometry, SemanticPanorama};
 pub use scan::ReachabilityScan;

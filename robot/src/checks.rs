@@ -4,7 +4,7 @@
 
 use serde_json::Value;
 use spomp_behaviors::mission::MissionFile;
-use spomp_behaviors::registry::{RobotChecks, RobotProblem};
+use spomp_behaviors::mission::{RobotChecks, RobotProblem};
 use spomp_core::RobotKind;
 use spomp_mapping::{GoalDetectionParams, MappingError};
 use spomp_teamstate::TeamStateError;

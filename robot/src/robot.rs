@@ -124,7 +124,11 @@ impl Robot {
         }
         let build = BuildOptions { base_dir: Some(loaded.base_dir()), map_origin: setup.map_origin };
         let tree = build_executor(role, registry, &robot_id, start, build)?;
-        let tick_hz = if setup.tick_hz.is_finite() && setup.tick_hz > 0.0 { setup.tick_hz } else { 10.0 };
+        let tick_hz = if setup.tick_hz.is_finite() && setup.tick_hz > 0.0 {
+            setup.tick_hz
+        } else {
+            spomp_behaviors::mission::schema::DEFAULT_TICK_HZ
+        };
         Ok(Robot {
             runtime,
             tree,

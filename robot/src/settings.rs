@@ -284,8 +284,10 @@ fn kind(v: &Value) -> &'static str {
     }
 }
 
-/// Merges `over` into `base`: mappings field by field, anything else replaced.
-pub(crate) fn merge(base: &mut Value, over: &Value) {
+/// Merges `over` into `base`: mappings field by field, anything else replaced. The one JSON
+/// patcher of the workspace: a role's `navigation:` under a robot's, a node's parameter block
+/// over the robot's parameters, an experiment configuration over its base mission.
+pub fn merge(base: &mut Value, over: &Value) {
     match (base, over) {
         (Value::Object(b), Value::Object(o)) => {
             for (k, v) in o {

@@ -5,7 +5,9 @@
 use std::sync::Arc;
 
 use spomp_behaviors::mission::MissionFile;
-use spomp_behaviors::mission::schema::LocalizationMode;
+use spomp_behaviors::mission::schema::{
+    DEFAULT_PRIOR_SIGMA_DEG, DEFAULT_PRIOR_SIGMA_M, DEFAULT_TICK_HZ, DEFAULT_TIME_LIMIT_PER_M_S, LocalizationMode,
+};
 use spomp_core::{AerialMap, ClassTable, GeoPoint, GridSpec, Pose2, RobotId, RobotKind};
 use spomp_localization::LocalizationParams;
 use spomp_mapping::{CompressionParams, GoalDetectionParams, PngLevel};
@@ -157,8 +159,8 @@ impl RobotSetup {
                         class_weights: classes.class_weights.clone(),
                         ..LocalizationParams::default()
                     }),
-                    prior_sigma_m: l.map(|l| l.prior_sigma_m).unwrap_or(2.0),
-                    prior_sigma_rad: l.map(|l| l.prior_sigma_deg).unwrap_or(5.0).to_radians(),
+                    prior_sigma_m: l.map_or(DEFAULT_PRIOR_SIGMA_M, |l| l.prior_sigma_m),
+                    prior_sigma_rad: l.map_or(DEFAULT_PRIOR_SIGMA_DEG, |l| l.prior_sigma_deg).to_radians(),
                     schedule: UpdateSchedule::default(),
                 },
                 PoseInput::OwnEstimate,
@@ -191,7 +193,7 @@ impl RobotSetup {
             detection,
             localization,
             nav,
-            goal_time_per_m_s: goals.map(|g| g.time_limit_per_m_s).unwrap_or(2.0),
+            goal_time_per_m_s: goals.map_or(DEFAULT_TIME_LIMIT_PER_M_S, |g| g.time_limit_per_m_s),
             seed: robot_seed(run_seed, index),
             map_publish_period_s: MAP_PUBLISH_PERIOD_S,
             // The whole map is re-encoded on every publish: favour speed over the last bytes.
@@ -203,7 +205,7 @@ impl RobotSetup {
             config,
             pose_input,
             role: spec.role.clone(),
-            tick_hz: role.map_or(10.0, |r| r.tick_hz),
+            tick_hz: role.map_or(DEFAULT_TICK_HZ, |r| r.tick_hz),
             warnings,
             map_origin: area.map_origin.or_else(|| {
                 let o = spec.ros2.as_ref()?.gps_origin.as_ref()?;

@@ -334,7 +334,7 @@ fn the_shipped_plan_is_flown_in_metres_from_its_planned_home() {
 
 fn follow_node(ports: &[(&'static str, BbValue)]) -> Result<Box<dyn spomp_behaviors::Behavior<RobotRuntime>>, String> {
     let registry = builtin_registry();
-    let mut p = PortBindings::default();
+    let mut p = PortBindings::declared(registry.get("follow_waypoints").unwrap());
     for (name, v) in ports {
         p.insert(*name, Binding::Literal(v.clone()));
     }
@@ -343,7 +343,7 @@ fn follow_node(ports: &[(&'static str, BbValue)]) -> Result<Box<dyn spomp_behavi
             p.insert(name, Binding::Literal(BbValue::Float(v)));
         }
     }
-    (registry.factory("follow_waypoints").unwrap())(&p)
+    (registry.factory("follow_waypoints").unwrap())(&p).map_err(|e| e.to_string())
 }
 
 fn plan_port(path: &Path) -> (&'static str, BbValue) {

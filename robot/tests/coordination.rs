@@ -156,7 +156,8 @@ fn failure_marks_unreachable_for_that_robot_only_until_cleared() {
 
     // Nothing else left for ugv1 would make it retry: clear_unreachable through the node.
     let registry = builtin_registry();
-    let mut node = (registry.factory("clear_unreachable").unwrap())(&Default::default()).unwrap();
+    let ports = spomp_behaviors::registry::PortBindings::declared(registry.get("clear_unreachable").unwrap());
+    let mut node = (registry.factory("clear_unreachable").unwrap())(&ports).unwrap();
     let mut bb = spomp_behaviors::Blackboard::new();
     let mut ctx = spomp_behaviors::TickContext {
         now: Time::from_millis(60),
@@ -213,7 +214,7 @@ mod detection {
         let registry = builtin_registry();
         let mut bb = Blackboard::new();
         let key = bb.declare("new", spomp_behaviors::PortType::Int);
-        let mut ports = spomp_behaviors::registry::PortBindings::default();
+        let mut ports = spomp_behaviors::registry::PortBindings::declared(registry.get("detect_goals").unwrap());
         ports.insert("new_goals", spomp_behaviors::Binding::Entry(key));
         let mut node = (registry.factory("detect_goals").unwrap())(&ports).unwrap();
         let mut ctx = TickContext { now: t, tick: 1, blackboard: &mut bb, env: rt, observer: None };

@@ -718,26 +718,9 @@ fn check_claim_robots(file: &ExperimentFile, resolved: &[ResolvedConfiguration],
     }
 }
 
-/// Merges `patch` into `base` key by key (objects recursively; anything else replaces).
-pub fn merge_json(base: &mut serde_json::Value, patch: &serde_json::Value) {
-    match (base, patch) {
-        (serde_json::Value::Object(b), serde_json::Value::Object(p)) => {
-            for (k, v) in p {
-                match b.get_mut(k) {
-                    Some(slot) => merge_json(slot, v),
-                    None => {
-                        b.insert(k.clone(), v.clone());
-                    }
-                }
-            }
-        }
-        (b, p) => *b = p.clone(),
-    }
-}
-
 fn merged(base: &Option<serde_json::Value>, patch: &serde_json::Value) -> Option<serde_json::Value> {
     let mut v = base.clone().unwrap_or_else(|| serde_json::Value::Object(Default::default()));
-    merge_json(&mut v, patch);
+    spomp_robot::settings::merge(&mut v, patch);
     Some(v)
 }
 
@@ -1093,7 +1076,7 @@ mod tests {
     fn merge_is_key_by_key() {
         let mut base =
             serde_json::json!({ "profile": "simulation", "global_planner": { "learning": "on", "sharing": "all" } });
-        merge_json(&mut base, &serde_json::json!({ "global_planner": { "sharing": "none" } }));
+        spomp_robot::settings::merge(&mut base, &serde_json::json!({ "global_planner": { "sharing": "none" } }));
         assert_eq!(
             base,
             serde_json::json!({ "profile": "simulation", "global_planner": { "learning": "on", "sharing": "none" } })

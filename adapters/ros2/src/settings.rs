@@ -50,7 +50,8 @@ pub struct RunSettings {
     pub gps_origin: Option<(f64, f64)>,
     /// Team-state messages to each peer at most this often, seconds.
     pub team_period_s: f64,
-    /// Byte budget of one team-state message.
+    /// What one round of team-state messages may carry to each peer, bytes: the mission's
+    /// `comms.bandwidth_bytes_per_s` × `team_period_s`.
     pub team_budget_bytes: usize,
     /// Follow a simulator farm's lockstep (`spomp run --lockstep`) instead of `/clock`.
     pub lockstep: Option<LockstepSettings>,
@@ -63,6 +64,16 @@ pub struct LockstepSettings {
     pub seed: u64,
     /// The farm is given up for gone when it sends nothing for this long, wall seconds.
     pub timeout_s: f64,
+}
+
+/// Team-state messages go to each peer at most this often, seconds.
+const TEAM_PERIOD_S: f64 = 1.0;
+
+/// What a link may carry in one round of `period_s`: the mission's `comms.bandwidth_bytes_per_s`
+/// means bytes per second per link, in the simulator's radio and here alike.
+fn link_budget_bytes(bandwidth_bytes_per_s: f64, period_s: f64) -> usize {
+    // The loader refuses a rate that is not positive; the bound keeps the cast exact.
+    (bandwidth_bytes_per_s * period_s).floor().clamp(0.0, u32::MAX as f64) as usize
 }
 
 impl RunSettings {
@@ -104,8 +115,8 @@ impl RunSettings {
             sensor_height_m: ros.sensor_height_m,
             use_sim_time: ros.use_sim_time,
             gps_origin: ros.gps_origin.map(|o| (o.latitude_deg, o.longitude_deg)),
-            team_period_s: 1.0,
-            team_budget_bytes: (mission.comms.bandwidth_bytes_per_s.clamp(1_000.0, 1e9)) as usize,
+            team_period_s: TEAM_PERIOD_S,
+            team_budget_bytes: link_budget_bytes(mission.comms.bandwidth_bytes_per_s, TEAM_PERIOD_S),
             lockstep: None,
         })
     }

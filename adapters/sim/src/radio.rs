@@ -24,12 +24,15 @@ pub struct RadioParams {
 }
 
 impl Default for RadioParams {
+    /// A mission's `comms:` defaults (their one home is the mission's `CommsSpec`); the small
+    /// tier's rate is the radio's own.
     fn default() -> Self {
+        let comms = spomp_behaviors::mission::schema::CommsSpec::default();
         RadioParams {
-            small_range_m: 50.0,
-            full_range_m: 30.0,
+            small_range_m: comms.position_range_m,
+            full_range_m: comms.data_range_m,
             small_bytes_per_s: 4_000.0,
-            full_bytes_per_s: 1_000_000.0,
+            full_bytes_per_s: comms.bandwidth_bytes_per_s,
         }
     }
 }

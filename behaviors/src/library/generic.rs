@@ -23,7 +23,7 @@ pub fn register_generic<E>(r: &mut NodeRegistry<E>) {
         Action,
         "Runs for `duration_s` of robot time, then succeeds.",
         vec![PortSpec::input("duration_s", Float, "How long, seconds.")],
-        |p| Ok(Box::new(Wait { duration: p.get("duration_s"), until: Time::ZERO })),
+        |p| Ok(Box::new(Wait { duration: p.get("duration_s")?, until: Time::ZERO })),
     ));
     r.register(NodeTypeSpec::leaf(
         "set_flag",
@@ -33,14 +33,14 @@ pub fn register_generic<E>(r: &mut NodeRegistry<E>) {
             PortSpec::output("flag", Bool, "Entry to write."),
             PortSpec::input("value", Bool, "Value to write.").with_default(json!(true)),
         ],
-        |p| Ok(Box::new(SetFlag { flag: p.get("flag"), value: p.get("value") })),
+        |p| Ok(Box::new(SetFlag { flag: p.get("flag")?, value: p.get("value")? })),
     ));
     r.register(NodeTypeSpec::leaf(
         "check_flag",
         Condition,
         "Succeeds if the boolean `flag` is true; fails if false or never written.",
         vec![PortSpec::input("flag", Bool, "Entry to read.")],
-        |p| Ok(Box::new(CheckFlag { flag: p.get("flag") })),
+        |p| Ok(Box::new(CheckFlag { flag: p.get("flag")? })),
     ));
     r.register(NodeTypeSpec::leaf(
         "check_string",
@@ -50,28 +50,28 @@ pub fn register_generic<E>(r: &mut NodeRegistry<E>) {
             PortSpec::input("value", Str, "Entry to read."),
             PortSpec::input("equals", Str, "The string it must equal."),
         ],
-        |p| Ok(Box::new(CheckString { value: p.get("value"), equals: p.get("equals") })),
+        |p| Ok(Box::new(CheckString { value: p.get("value")?, equals: p.get("equals")? })),
     ));
     r.register(NodeTypeSpec::leaf(
         "raise_event",
         Action,
         "Raises the named event (state-machine transitions `on: event` see it this tick and the next), then succeeds.",
         vec![PortSpec::input("event", Str, "Event name.")],
-        |p| Ok(Box::new(RaiseEvent { event: p.get("event") })),
+        |p| Ok(Box::new(RaiseEvent { event: p.get("event")? })),
     ));
     r.register(NodeTypeSpec::leaf(
         "wait_for_event",
         Action,
         "Runs until the named event is raised, then consumes it and succeeds.",
         vec![PortSpec::input("event", Str, "Event name.")],
-        |p| Ok(Box::new(WaitForEvent { event: p.get("event") })),
+        |p| Ok(Box::new(WaitForEvent { event: p.get("event")? })),
     ));
     r.register(NodeTypeSpec::leaf(
         "mission_time_at_least",
         Condition,
         "Succeeds once the robot's mission clock has reached `time_s` (e.g. to head home before the time limit).",
         vec![PortSpec::input("time_s", Float, "Mission time, seconds since start.")],
-        |p| Ok(Box::new(TimeAtLeast { time: p.get("time_s") })),
+        |p| Ok(Box::new(TimeAtLeast { time: p.get("time_s")? })),
     ));
 }
 
@@ -92,7 +92,7 @@ impl<E> Behavior<E> for Wait {
     fn tick(&mut self, prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
         if prev != Status::Running {
             let secs = self.duration.get::<f64>(ctx.blackboard).unwrap_or(f64::NAN);
-            let duration = match crate::mission::limits::duration_from_secs(secs) {
+            let duration = match crate::duration::duration_from_secs(secs) {
                 Ok(d) => d,
                 Err(e) => {
                     ctx.blackboard.report(format!("wait: duration_s: {e}"));
@@ -112,7 +112,12 @@ struct SetFlag {
 
 impl<E> Behavior<E> for SetFlag {
     fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, E>) -> Status {
-        let v = self.value.get::<bool>(ctx.blackboard).unwrap_or(true);
+        // `value` is always bound (its declared default when the mission leaves it out); an
+        // entry never written is the mission's mistake, reported rather than read as `true`.
+        let Some(v) = self.value.get::<bool>(ctx.blackboard) else {
+            ctx.blackboard.report("set_flag: no value on its `value` port".to_string());
+            return Status::Failure;
+        };
         if self.flag.set(ctx.blackboard, BbValue::Bool(v)) { Status::Success } else { Status::Failure }
     }
 }

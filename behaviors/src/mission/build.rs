@@ -12,7 +12,7 @@ use crate::decorators::{
 };
 use crate::executor::TreeExecutor;
 use crate::node::{Behavior, NodeInfo, Slot};
-use crate::registry::{NodeRegistry, PortBindings};
+use crate::registry::{NodeError, NodeRegistry, PortBindings};
 use crate::state_machine::{State, StateMachine, Transition};
 
 use spomp_core::{Point2, Pose2, RobotId};
@@ -24,12 +24,13 @@ use super::load::CompiledRole;
 #[derive(Debug, thiserror::Error)]
 pub enum BuildError {
     /// A node's factory refused its parameters.
-    #[error("{path}: {message}")]
+    #[error("{path}: {error}")]
     Node {
         /// Node path.
         path: String,
         /// What the factory said.
-        message: String,
+        #[source]
+        error: NodeError,
     },
 }
 
@@ -86,10 +87,11 @@ fn build<E: 'static>(
                 ControlType::Fallback => Box::new(Ordered::fallback(kids)),
                 ControlType::ReactiveSequence => Box::new(Reactive::sequence(kids)),
                 ControlType::ReactiveFallback => Box::new(Reactive::fallback(kids)),
-                ControlType::Parallel => Box::new(
-                    Parallel::new(kids, *success_threshold, *failure_threshold)
-                        .map_err(|e| BuildError::Node { path: ir.path.clone(), message: e.to_string() })?,
-                ),
+                ControlType::Parallel => {
+                    Box::new(Parallel::new(kids, *success_threshold, *failure_threshold).map_err(|e| {
+                        BuildError::Node { path: ir.path.clone(), error: NodeError::Invalid(e.to_string()) }
+                    })?)
+                }
                 ControlType::IfThenElse => Box::new(IfThenElse::new(kids)),
                 ControlType::WhileDoElse => Box::new(WhileDoElse::new(kids)),
             }
@@ -137,7 +139,7 @@ fn build<E: 'static>(
         IrKind::Leaf { ports } => {
             let spec = registry.get(&ir.type_name).ok_or_else(|| BuildError::Node {
                 path: ir.path.clone(),
-                message: format!("unknown node type `{}`", ir.type_name),
+                error: NodeError::Invalid(format!("unknown node type `{}`", ir.type_name)),
             })?;
             let mut bindings = PortBindings::default();
             bindings.set_map_origin(opts.map_origin);
@@ -151,9 +153,9 @@ fn build<E: 'static>(
             }
             let factory = registry.factory(&spec.name).ok_or_else(|| BuildError::Node {
                 path: ir.path.clone(),
-                message: "node type has no factory".into(),
+                error: NodeError::Invalid("node type has no factory".into()),
             })?;
-            factory(&bindings).map_err(|message| BuildError::Node { path: ir.path.clone(), message })?
+            factory(&bindings).map_err(|error| BuildError::Node { path: ir.path.clone(), error })?
         }
     };
     Ok(Slot::new(info, behavior))

@@ -14,17 +14,14 @@
 
 use std::io::Read;
 use std::path::{Component, Path, PathBuf};
-use std::time::Duration;
 
 use crate::blackboard::BbValue;
 
 use super::compile::{Ir, IrBinding, IrKind};
 use super::diagnostic::{Diagnostic, Stage};
 
-/// The longest duration a mission may write, seconds (about 31.7 years: missions write
-/// `wait: { duration_s: 1e9 }` for "until halted"). Far longer than any time limit, and small
-/// enough that every time computed from it stays exact in integer nanoseconds.
-pub const MAX_DURATION_S: f64 = 1e9;
+// The duration rule is the engine's (a node checks a duration bound to an entry the same way).
+pub use crate::duration::{MAX_DURATION_S, duration_from_secs, number};
 
 /// The longest mission time limit, seconds (7 days).
 pub const MAX_TIME_LIMIT_S: f64 = 604_800.0;
@@ -45,16 +42,6 @@ pub const MAX_ROBOTS: usize = 1000;
 /// The largest mission, include or plan file, bytes (4 MiB).
 pub const MAX_SOURCE_BYTES: u64 = 4 * 1024 * 1024;
 
-/// A duration from seconds, checked: finite, non-negative and at most [`MAX_DURATION_S`].
-/// The error says what was expected.
-pub fn duration_from_secs(secs: f64) -> Result<Duration, String> {
-    if secs.is_finite() && (0.0..=MAX_DURATION_S).contains(&secs) {
-        Ok(Duration::from_secs_f64(secs))
-    } else {
-        Err(format!("expected a duration between 0 and 1e9 s (1e9 stands for \"for ever\"), found {}", number(secs)))
-    }
-}
-
 /// Checks a time limit: positive, finite and at most [`MAX_TIME_LIMIT_S`].
 pub fn check_time_limit(secs: f64) -> Result<(), String> {
     if secs.is_finite() && secs > 0.0 && secs <= MAX_TIME_LIMIT_S {
@@ -65,11 +52,6 @@ pub fn check_time_limit(secs: f64) -> Result<(), String> {
             number(secs)
         ))
     }
-}
-
-/// A number as a user would write it: `1e308` rather than 309 digits.
-pub fn number(v: f64) -> String {
-    if v.is_finite() && v != 0.0 && !(1e-3..1e7).contains(&v.abs()) { format!("{v:e}") } else { format!("{v}") }
 }
 
 /// Checks an identifier (a mission name or a robot id): 1 to [`MAX_IDENTIFIER_LEN`] characters
@@ -291,6 +273,7 @@ pub fn check_tree_literals(ir: &Ir, files: &[PathBuf], roots: &[PathBuf], diags:
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+    use std::time::Duration;
 
     #[test]
     fn durations_have_a_maximum() {

@@ -121,6 +121,11 @@ pub fn load_mission_with<E: 'static>(path: &Path, nodes: &NodeRegistry<E>, optio
 /// Loads and validates a mission held in a string. `path` names it in diagnostics and places
 /// it: its includes, plan files and world are looked up from `path`'s folder (and
 /// `options.allowed_dirs`) as for a mission read from `path`, which need not exist.
+///
+/// The stages, each a function of its own reporting its problems as diagnostics of its
+/// [`Stage`]: [`parse_stage`], [`schema_stage`], [`include_stage`], [`wiring_stage`] (with the
+/// limits on literals), [`team_stage`], then, when all of them passed, [`build_stage`]. A later
+/// stage runs on whatever the earlier ones could make sense of.
 pub fn load_mission_str<E: 'static>(
     text: &str,
     path: &Path,
@@ -132,36 +137,106 @@ pub fn load_mission_str<E: 'static>(
     let roots: Vec<PathBuf> = std::iter::once(path.parent().map(Path::to_path_buf).unwrap_or_default())
         .chain(options.allowed_dirs.iter().cloned())
         .collect();
-    let file: FileId = 0;
     out.files.push(path.to_path_buf());
+    let root = match parse_stage(text, path) {
+        Ok(root) => {
+            out.sources.push(text.to_string());
+            root
+        }
+        Err(failure) => {
+            let ParseFailure { source, diagnostic } = *failure;
+            out.sources.push(source);
+            out.diagnostics.push(diagnostic);
+            return out;
+        }
+    };
+    let mut diags = Vec::new();
+    let Some(mission) = schema_stage(&root, path, &roots, &mut diags) else {
+        if root.as_map().is_none() {
+            // Not even a mapping: nothing later stages could read.
+            out.diagnostics = diags;
+            return out;
+        }
+        return finish_without_mission(out, &root, path, registry, &roots, diags);
+    };
+    let subtrees = include_stage(&root, path, &roots, &mut out, &mut diags);
+    wiring_stage(&root, path, registry, &subtrees, &roots, &mut out, &mut diags);
+    team_stage(&mission, &root, path, registry, &out.roles, &mut diags);
+    if diags.is_empty() {
+        build_stage(nodes, path, &out, &mut diags);
+    }
+    finish(out, Some(mission), diags)
+}
+
+/// The stages that do not need a typed mission, for a mission whose schema stage failed: its
+/// trees are still compiled and checked, so every broken part is reported in one pass.
+fn finish_without_mission(
+    mut out: LoadedMission,
+    root: &Node,
+    path: &Path,
+    registry: &NodeCatalog,
+    roots: &[PathBuf],
+    mut diags: Vec<Diagnostic>,
+) -> LoadedMission {
+    let subtrees = include_stage(root, path, roots, &mut out, &mut diags);
+    wiring_stage(root, path, registry, &subtrees, roots, &mut out, &mut diags);
+    finish(out, None, diags)
+}
+
+fn finish(mut out: LoadedMission, mission: Option<MissionFile>, mut diags: Vec<Diagnostic>) -> LoadedMission {
+    diags.sort_by_key(|d| (d.file.clone(), d.line, d.column));
+    diags.dedup();
+    out.diagnostics = diags;
+    out.mission = mission;
+    out
+}
+
+/// Why the parse stage stopped.
+#[derive(Debug)]
+pub struct ParseFailure {
+    /// The source to keep for the mission (empty when it was too big to keep).
+    pub source: String,
+    /// The problem.
+    pub diagnostic: Diagnostic,
+}
+
+/// Stage parse: the mission's text within the size limit, parsed into a span-carrying tree.
+pub fn parse_stage(text: &str, path: &Path) -> Result<Node, Box<ParseFailure>> {
     if text.len() as u64 > limits::MAX_SOURCE_BYTES {
-        out.sources.push(String::new());
         let message = format!(
             "the mission is {} bytes, more than the {} a mission may have",
             text.len(),
             limits::MAX_SOURCE_BYTES
         );
-        out.diagnostics.push(Diagnostic::new(
-            path,
-            Loc { line: 1, column: 1, offset: None, len: 0 },
-            "",
-            Stage::Parse,
-            message,
-        ));
-        return out;
+        let at = Loc { line: 1, column: 1, offset: None, len: 0 };
+        let diagnostic = Diagnostic::new(path, at, "", Stage::Parse, message);
+        return Err(Box::new(ParseFailure { source: String::new(), diagnostic }));
     }
-    let text = text.to_string();
-    out.sources.push(text.clone());
-    let root = match parse(&text) {
-        Ok(n) => n,
-        Err(e) => {
-            out.diagnostics.push(Diagnostic::new(path, e.loc, "", Stage::Parse, e.message));
-            return out;
-        }
-    };
-    let mut diags = Vec::new();
+    parse(text).map_err(|e| {
+        let diagnostic = Diagnostic::new(path, e.loc, "", Stage::Parse, e.message);
+        Box::new(ParseFailure { source: text.to_string(), diagnostic })
+    })
+}
 
-    // --- schema: each section on its own, so every broken section is reported ---
+/// The mission's top-level sections, in the order the docs list them.
+const SECTIONS: &[&str] = &[
+    "mission",
+    "description",
+    "include",
+    "team",
+    "goals",
+    "roles",
+    "subtrees",
+    "complete_when",
+    "time_limit_s",
+    "comms",
+    "sim",
+    "classes",
+];
+
+/// Stage schema: each section on its own, so every broken section is reported; then the whole
+/// typed mission and the ranges of its values. `None` when any section is broken.
+pub fn schema_stage(root: &Node, path: &Path, roots: &[PathBuf], diags: &mut Vec<Diagnostic>) -> Option<MissionFile> {
     let Some(entries) = root.as_map() else {
         diags.push(Diagnostic::new(
             path,
@@ -170,85 +245,25 @@ pub fn load_mission_str<E: 'static>(
             Stage::Schema,
             format!("a mission is a mapping with `mission`, `team`, `roles`, …; found {}", root.value.kind()),
         ));
-        out.diagnostics = diags;
-        return out;
+        return None;
     };
     let mut section_ok = true;
     for (k, v) in entries {
-        let result = match k.name.as_str() {
-            "team" => match v.as_seq() {
-                Some(items) => {
-                    let mut ok = true;
-                    for (i, item) in items.iter().enumerate() {
-                        if let Err(e) = item.deserialize::<RobotSpec>() {
-                            diags.push(de_diag(path, &format!("team[{i}]"), &e, item.loc));
-                            ok = false;
-                        }
-                    }
-                    if ok { Ok(()) } else { Err(None) }
-                }
-                None => Err(Some(DeError {
-                    message: format!("expected a list of robots, found {}", v.value.kind()),
-                    loc: Some(v.loc),
-                    path: vec![],
-                })),
-            },
-            "roles" => match v.as_map() {
-                Some(roles) => {
-                    let mut ok = true;
-                    for (rk, rv) in roles {
-                        if let Err(e) = rv.deserialize::<super::schema::RoleSpec>() {
-                            diags.push(de_diag(path, &format!("roles.{}", rk.name), &e, rv.loc));
-                            ok = false;
-                        }
-                    }
-                    if ok { Ok(()) } else { Err(None) }
-                }
-                None => Err(Some(DeError {
-                    message: format!("expected a mapping of role names to roles, found {}", v.value.kind()),
-                    loc: Some(v.loc),
-                    path: vec![],
-                })),
-            },
-            "mission" | "description" => v.deserialize::<Option<String>>().map(|_| ()).map_err(Some),
-            "include" => v.deserialize::<Vec<String>>().map(|_| ()).map_err(Some),
-            "goals" => v.deserialize::<Option<super::schema::GoalsSpec>>().map(|_| ()).map_err(Some),
-            "subtrees" => v.deserialize::<BTreeMap<String, super::schema::TreeNode>>().map(|_| ()).map_err(Some),
-            "complete_when" => v.deserialize::<super::schema::CompleteWhen>().map(|_| ()).map_err(Some),
-            "time_limit_s" => v.deserialize::<f64>().map(|_| ()).map_err(Some),
-            "comms" => v.deserialize::<super::schema::CommsSpec>().map(|_| ()).map_err(Some),
-            "sim" => v.deserialize::<Option<super::schema::SimSpec>>().map(|_| ()).map_err(Some),
-            "classes" => v.deserialize::<BTreeMap<String, String>>().map(|_| ()).map_err(Some),
-            other => {
-                const KNOWN: &[&str] = &[
-                    "mission",
-                    "description",
-                    "include",
-                    "team",
-                    "goals",
-                    "roles",
-                    "subtrees",
-                    "complete_when",
-                    "time_limit_s",
-                    "comms",
-                    "sim",
-                    "classes",
-                ];
-                let hint = super::compile::closest(other, KNOWN)
-                    .map(|c| format!(" (did you mean `{c}`?)"))
-                    .unwrap_or_default();
-                diags.push(Diagnostic::new(
-                    path,
-                    k.loc,
-                    other,
-                    Stage::Schema,
-                    format!("unknown key `{other}`{hint}; expected one of: {}", KNOWN.join(", ")),
-                ));
-                section_ok = false;
-                continue;
-            }
-        };
-        match result {
+        if !SECTIONS.contains(&k.name.as_str()) {
+            let other = k.name.as_str();
+            let hint =
+                super::compile::closest(other, SECTIONS).map(|c| format!(" (did you mean `{c}`?)")).unwrap_or_default();
+            diags.push(Diagnostic::new(
+                path,
+                k.loc,
+                other,
+                Stage::Schema,
+                format!("unknown key `{other}`{hint}; expected one of: {}", SECTIONS.join(", ")),
+            ));
+            section_ok = false;
+            continue;
+        }
+        match check_section(&k.name, v, path, diags) {
             Ok(()) => {}
             Err(Some(e)) => {
                 diags.push(de_diag(path, &k.name, &e, v.loc));
@@ -257,30 +272,98 @@ pub fn load_mission_str<E: 'static>(
             Err(None) => section_ok = false,
         }
     }
-    let mission = if section_ok {
-        match root.deserialize::<MissionFile>() {
-            Ok(m) => Some(m),
-            Err(e) => {
-                diags.push(de_diag(path, "", &e, root.loc));
-                None
-            }
-        }
-    } else {
-        None
-    };
-    if let Some(m) = &mission {
-        check_ranges(m, &root, path, &roots, &mut diags);
+    if !section_ok {
+        return None;
     }
+    match root.deserialize::<MissionFile>() {
+        Ok(m) => {
+            check_ranges(&m, root, path, roots, diags);
+            Some(m)
+        }
+        Err(e) => {
+            diags.push(de_diag(path, "", &e, root.loc));
+            None
+        }
+    }
+}
 
-    // --- includes and subtrees ---
+/// One known section against its type. `Err(None)`: the problems are in `diags` already (a
+/// list or mapping whose items were checked one by one).
+fn check_section(name: &str, v: &Node, path: &Path, diags: &mut Vec<Diagnostic>) -> Result<(), Option<DeError>> {
+    let not_a = |what: &str| {
+        Err(Some(DeError {
+            message: format!("expected {what}, found {}", v.value.kind()),
+            loc: Some(v.loc),
+            path: vec![],
+        }))
+    };
+    match name {
+        "team" => {
+            let Some(items) = v.as_seq() else { return not_a("a list of robots") };
+            let mut ok = true;
+            for (i, item) in items.iter().enumerate() {
+                if let Err(e) = item.deserialize::<RobotSpec>() {
+                    diags.push(de_diag(path, &format!("team[{i}]"), &e, item.loc));
+                    ok = false;
+                }
+            }
+            if ok { Ok(()) } else { Err(None) }
+        }
+        "roles" => {
+            let Some(roles) = v.as_map() else { return not_a("a mapping of role names to roles") };
+            let mut ok = true;
+            for (rk, rv) in roles {
+                if let Err(e) = rv.deserialize::<super::schema::RoleSpec>() {
+                    diags.push(de_diag(path, &format!("roles.{}", rk.name), &e, rv.loc));
+                    ok = false;
+                }
+            }
+            if ok { Ok(()) } else { Err(None) }
+        }
+        "mission" | "description" => v.deserialize::<Option<String>>().map(|_| ()).map_err(Some),
+        "include" => v.deserialize::<Vec<String>>().map(|_| ()).map_err(Some),
+        "goals" => v.deserialize::<Option<super::schema::GoalsSpec>>().map(|_| ()).map_err(Some),
+        "subtrees" => v.deserialize::<BTreeMap<String, super::schema::TreeNode>>().map(|_| ()).map_err(Some),
+        "complete_when" => v.deserialize::<super::schema::CompleteWhen>().map(|_| ()).map_err(Some),
+        "time_limit_s" => v.deserialize::<f64>().map(|_| ()).map_err(Some),
+        "comms" => v.deserialize::<super::schema::CommsSpec>().map(|_| ()).map_err(Some),
+        "sim" => v.deserialize::<Option<super::schema::SimSpec>>().map(|_| ()).map_err(Some),
+        "classes" => v.deserialize::<BTreeMap<String, String>>().map(|_| ()).map_err(Some),
+        _ => Ok(()),
+    }
+}
+
+/// Stage parse, for the included files, and the subtrees of every file: the subtrees a tree
+/// may refer to, by name.
+pub fn include_stage(
+    root: &Node,
+    path: &Path,
+    roots: &[PathBuf],
+    out: &mut LoadedMission,
+    diags: &mut Vec<Diagnostic>,
+) -> BTreeMap<String, SubtreeDef> {
+    let file: FileId = 0;
     let mut subtrees: BTreeMap<String, SubtreeDef> = BTreeMap::new();
-    collect_subtrees(&root, file, &mut subtrees, &out.files, &mut diags);
+    collect_subtrees(root, file, &mut subtrees, &out.files, diags);
     let mut stack = vec![canonical(path)];
     if let Some(inc) = root.get("include") {
-        load_includes(inc, path, &roots, &mut out, &mut stack, &mut subtrees, &mut diags);
+        load_includes(inc, path, roots, out, &mut stack, &mut subtrees, diags);
     }
+    subtrees
+}
 
-    // --- wiring: compile every role ---
+/// Stage wiring: every role's tree compiled (node types, ports, references, state machines)
+/// and its blackboard typed by the ports it feeds; then the subtrees no role uses, and the
+/// limits on the literal durations and files of the trees.
+pub fn wiring_stage(
+    root: &Node,
+    path: &Path,
+    registry: &NodeCatalog,
+    subtrees: &BTreeMap<String, SubtreeDef>,
+    roots: &[PathBuf],
+    out: &mut LoadedMission,
+    diags: &mut Vec<Diagnostic>,
+) {
     let files = out.files.clone();
     let mut used_subtrees_ok = true;
     if let Some(roles) = root.get("roles").and_then(Node::as_map) {
@@ -288,118 +371,135 @@ pub fn load_mission_str<E: 'static>(
             let Some(tree) = rv.get("tree") else {
                 continue; // reported by the schema stage
             };
-            let mut compiler = Compiler::new(registry, &subtrees, &files);
-            let ir = compiler.compile(tree, file, &rk.name);
+            let mut compiler = Compiler::new(registry, subtrees, &files);
+            let ir = compiler.compile(tree, 0, &rk.name);
             let mut d = compiler.into_diagnostics();
             used_subtrees_ok &= d.is_empty();
             let Some(ir) = ir else {
                 diags.append(&mut d);
                 continue;
             };
-            let mut initial: BTreeMap<String, (Option<PortType>, Loc, FileId)> = BTreeMap::new();
-            for (name, ty) in PROVIDED_ENTRIES {
-                initial.insert((*name).to_string(), (Some(*ty), Loc::default(), file));
-            }
-            let bb_node = rv.get("blackboard");
-            for (bk, _) in bb_node.and_then(Node::as_map).unwrap_or(&[]) {
-                initial.insert(bk.name.clone(), (None, bk.loc, file));
-            }
-            let entry_types = check_wiring(&ir, &initial, &files, &mut d);
-            // Type the role's initial values by the ports they feed.
-            let mut values = Vec::new();
-            for (bk, bv) in bb_node.and_then(Node::as_map).unwrap_or(&[]) {
-                let bpath = format!("roles.{}.blackboard.{}", rk.name, bk.name);
-                match entry_types.get(&bk.name) {
-                    None => d.push(Diagnostic::new(
-                        path,
-                        bk.loc,
-                        bpath,
-                        Stage::Wiring,
-                        format!("blackboard entry `{}` is never used by the tree", bk.name),
-                    )),
-                    Some(ty) => match BbValue::from_json(*ty, &bv.to_json()) {
-                        Ok(v) => values.push((bk.name.clone(), v)),
-                        Err(e) => d.push(Diagnostic::new(
-                            path,
-                            bv.loc,
-                            bpath,
-                            Stage::Wiring,
-                            format!("entry `{}` feeds {ty} ports: {e}", bk.name),
-                        )),
-                    },
-                }
-            }
-            let mut persist = Vec::new();
-            if let Some(list) = rv.get("persist").and_then(Node::as_seq) {
-                for (k, item) in list.iter().enumerate() {
-                    let Some(name) = item.as_str() else { continue };
-                    if values.iter().any(|(n, _)| n == name) {
-                        persist.push(name.to_string());
-                    } else {
-                        d.push(Diagnostic::new(
-                            path,
-                            item.loc,
-                            format!("roles.{}.persist[{k}]", rk.name),
-                            Stage::Wiring,
-                            format!("`{name}` is kept across reboots, so it needs an initial value in the role's `blackboard`"),
-                        ));
-                    }
-                }
-            }
+            let role = compile_role(&rk.name, rv, ir, path, &files, &mut d);
             diags.append(&mut d);
-            let tick_hz = rv.get("tick_hz").and_then(Node::as_f64).unwrap_or(10.0);
-            out.roles
-                .insert(rk.name.clone(), CompiledRole { tree: ir, entry_types, initial: values, persist, tick_hz });
+            out.roles.insert(rk.name.clone(), role);
         }
     }
     // Subtrees no role uses still get checked on their own (when the roles compiled cleanly,
     // so a broken subtree is not reported twice).
     if used_subtrees_ok {
-        for (name, def) in &subtrees {
-            let mut compiler = Compiler::new(registry, &subtrees, &files);
+        for (name, def) in subtrees {
+            let mut compiler = Compiler::new(registry, subtrees, &files);
             let _ = compiler.compile(&def.node, def.file, name);
             diags.append(&mut compiler.into_diagnostics());
         }
     }
-
-    // --- limits on literal durations and files in the trees ---
+    // Limits on literal durations and files in the trees.
     for role in out.roles.values() {
-        limits::check_tree_literals(&role.tree, &out.files, &roots, &mut diags);
+        limits::check_tree_literals(&role.tree, &out.files, roots, diags);
     }
+}
 
-    // --- team ---
-    if let Some(m) = &mission {
-        check_team(m, &root, path, registry, &out.roles, &mut diags);
-        // Robot settings and skill parameters, checked by the robot layer with the skills' rules.
-        if let Some(checks) = registry.robot_checks() {
-            for p in checks.check(m) {
-                let segs: Vec<&str> = p.path.iter().map(String::as_str).collect();
-                diags.push(Diagnostic::new(path, loc_at(&root, &segs), p.path.join("."), Stage::Schema, p.message));
+/// A role whose tree compiled: its entries typed by the ports they feed, its initial values
+/// and the entries it keeps across reboots checked against them.
+fn compile_role(
+    name: &str,
+    rv: &Node,
+    ir: Ir,
+    path: &Path,
+    files: &[PathBuf],
+    d: &mut Vec<Diagnostic>,
+) -> CompiledRole {
+    let file: FileId = 0;
+    let mut initial: BTreeMap<String, (Option<PortType>, Loc, FileId)> = BTreeMap::new();
+    for (entry, ty) in PROVIDED_ENTRIES {
+        initial.insert((*entry).to_string(), (Some(*ty), Loc::default(), file));
+    }
+    let bb_node = rv.get("blackboard");
+    for (bk, _) in bb_node.and_then(Node::as_map).unwrap_or(&[]) {
+        initial.insert(bk.name.clone(), (None, bk.loc, file));
+    }
+    let entry_types = check_wiring(&ir, &initial, files, d);
+    // Type the role's initial values by the ports they feed.
+    let mut values = Vec::new();
+    for (bk, bv) in bb_node.and_then(Node::as_map).unwrap_or(&[]) {
+        let bpath = format!("roles.{name}.blackboard.{}", bk.name);
+        match entry_types.get(&bk.name) {
+            None => d.push(Diagnostic::new(
+                path,
+                bk.loc,
+                bpath,
+                Stage::Wiring,
+                format!("blackboard entry `{}` is never used by the tree", bk.name),
+            )),
+            Some(ty) => match BbValue::from_json(*ty, &bv.to_json()) {
+                Ok(v) => values.push((bk.name.clone(), v)),
+                Err(e) => d.push(Diagnostic::new(
+                    path,
+                    bv.loc,
+                    bpath,
+                    Stage::Wiring,
+                    format!("entry `{}` feeds {ty} ports: {e}", bk.name),
+                )),
+            },
+        }
+    }
+    let mut persist = Vec::new();
+    if let Some(list) = rv.get("persist").and_then(Node::as_seq) {
+        for (k, item) in list.iter().enumerate() {
+            let Some(entry) = item.as_str() else { continue };
+            if values.iter().any(|(n, _)| n == entry) {
+                persist.push(entry.to_string());
+            } else {
+                d.push(Diagnostic::new(
+                    path,
+                    item.loc,
+                    format!("roles.{name}.persist[{k}]"),
+                    Stage::Wiring,
+                    format!(
+                        "`{entry}` is kept across reboots, so it needs an initial value in the role's `blackboard`"
+                    ),
+                ));
             }
         }
     }
+    let tick_hz = rv.get("tick_hz").and_then(Node::as_f64).unwrap_or(super::schema::DEFAULT_TICK_HZ);
+    CompiledRole { tree: ir, entry_types, initial: values, persist, tick_hz }
+}
 
-    // --- build: node factories check what only they can (e.g. a plan file that must parse) ---
-    if diags.is_empty() {
-        let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
-        for role in out.roles.values() {
-            let opts = super::BuildOptions { base_dir: Some(base.clone()), ..super::BuildOptions::default() };
-            let mut bb = crate::blackboard::Blackboard::new();
-            if let Err(super::BuildError::Node { path: node_path, message }) =
-                super::build_tree(&role.tree, nodes, &mut bb, opts)
-            {
-                let node = find_ir(&role.tree, &node_path).unwrap_or(&role.tree);
-                let file = out.files.get(node.file).cloned().unwrap_or_else(|| path.to_path_buf());
-                diags.push(Diagnostic::new(&file, node.loc, node_path, Stage::Wiring, message));
-            }
+/// Stage team: robots against their roles (kinds, skills, priorities, ids), then the robot
+/// layer's checks of robot settings and skill parameters, with the skills' rules.
+pub fn team_stage(
+    mission: &MissionFile,
+    root: &Node,
+    path: &Path,
+    registry: &NodeCatalog,
+    roles: &BTreeMap<String, CompiledRole>,
+    diags: &mut Vec<Diagnostic>,
+) {
+    check_team(mission, root, path, registry, roles, diags);
+    if let Some(checks) = registry.robot_checks() {
+        for p in checks.check(mission) {
+            let segs: Vec<&str> = p.path.iter().map(String::as_str).collect();
+            diags.push(Diagnostic::new(path, loc_at(root, &segs), p.path.join("."), Stage::Schema, p.message));
         }
     }
+}
 
-    diags.sort_by_key(|d| (d.file.clone(), d.line, d.column));
-    diags.dedup();
-    out.diagnostics = diags;
-    out.mission = mission;
-    out
+/// Stage build, for a mission every other stage passed: each role's tree built with the
+/// node factories, which check what only they can (e.g. a plan file that must parse).
+pub fn build_stage<E: 'static>(nodes: &NodeRegistry<E>, path: &Path, out: &LoadedMission, diags: &mut Vec<Diagnostic>) {
+    let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    for role in out.roles.values() {
+        let opts = super::BuildOptions { base_dir: Some(base.clone()), ..super::BuildOptions::default() };
+        let mut bb = crate::blackboard::Blackboard::new();
+        if let Err(super::BuildError::Node { path: node_path, error }) =
+            super::build_tree(&role.tree, nodes, &mut bb, opts)
+        {
+            let node = find_ir(&role.tree, &node_path).unwrap_or(&role.tree);
+            let file = out.files.get(node.file).cloned().unwrap_or_else(|| path.to_path_buf());
+            diags.push(Diagnostic::new(&file, node.loc, node_path, Stage::Wiring, error.to_string()));
+        }
+    }
 }
 
 /// The node of a compiled tree with this path.

@@ -2,6 +2,7 @@
 //! validation whose every error names the file, line, column and node.
 
 pub mod build;
+pub mod checks;
 pub mod compile;
 pub mod diagnostic;
 pub mod json_schema;
@@ -13,6 +14,7 @@ pub mod tree;
 pub mod yaml;
 
 pub use build::{BuildError, BuildOptions, build_executor, build_tree};
+pub use checks::{RobotChecks, RobotProblem};
 pub use diagnostic::{Diagnostic, Rendered, Severity, Stage};
 pub use load::{
     CompiledRole, LoadOptions, LoadedMission, PROVIDED_ENTRIES, check_endpoint, load_mission, load_mission_str,

@@ -145,12 +145,20 @@ pub struct LocalizationSpec {
     pub class_weights: Option<BTreeMap<String, f64>>,
 }
 
+/// A UGV's prior position uncertainty at the start when the mission leaves
+/// `localization.prior_sigma_m` out, metres (1σ): the one home of this default.
+pub const DEFAULT_PRIOR_SIGMA_M: f64 = 2.0;
+
+/// A UGV's prior heading uncertainty at the start when the mission leaves
+/// `localization.prior_sigma_deg` out, degrees (1σ): the one home of this default.
+pub const DEFAULT_PRIOR_SIGMA_DEG: f64 = 5.0;
+
 fn default_prior_position() -> f64 {
-    2.0
+    DEFAULT_PRIOR_SIGMA_M
 }
 
 fn default_prior_yaw() -> f64 {
-    5.0
+    DEFAULT_PRIOR_SIGMA_DEG
 }
 
 /// Localization modes.
@@ -357,8 +365,13 @@ pub struct GoalsSpec {
     pub claim_lease_s: Option<f64>,
 }
 
+/// The per-goal time limit per metre of planned path when the mission leaves
+/// `goals.time_limit_per_m_s` out (or has no `goals:`), seconds per metre: the one home of this
+/// default.
+pub const DEFAULT_TIME_LIMIT_PER_M_S: f64 = 2.0;
+
 fn default_time_per_m() -> f64 {
-    2.0
+    DEFAULT_TIME_LIMIT_PER_M_S
 }
 
 /// Goal detection settings.
@@ -423,8 +436,12 @@ pub struct RoleSpec {
     pub tree: TreeNode,
 }
 
+/// A role's tree ticks this often when the mission leaves `tick_hz` out, per second: the one
+/// home of this default (the loader, the robot and the adapters take the role's value).
+pub const DEFAULT_TICK_HZ: f64 = 10.0;
+
 fn default_tick() -> f64 {
-    10.0
+    DEFAULT_TICK_HZ
 }
 
 /// Mission completion.
@@ -450,7 +467,11 @@ pub struct CommsSpec {
     /// Within this range robots exchange everything, metres.
     #[serde(default = "default_data_range")]
     pub data_range_m: f64,
-    /// Bytes per second per link.
+    /// Bytes per second per link, each way: what a link between two robots may carry. The
+    /// simulator's radio gives a link `bandwidth × step` bytes per step; a robot process over
+    /// ROS 2 gives each peer `bandwidth × period` bytes per round of team messages (one round
+    /// a second). Unused bytes carry over while the link stays up, so an item larger than one
+    /// round's budget (a map version) goes through after enough rounds.
     #[serde(default = "default_bandwidth")]
     pub bandwidth_bytes_per_s: f64,
     /// Disable direct UGV-to-UGV links (data only via the UAV and basestation).

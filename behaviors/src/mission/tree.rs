@@ -48,7 +48,9 @@ pub fn load_tree_str<E: 'static>(
     }
     let mut bb = Blackboard::new();
     let tree = build_tree(&ir, registry, &mut bb, BuildOptions::default()).map_err(|e| match e {
-        BuildError::Node { path, message } => vec![Diagnostic::new(&file, ir.loc, path, Stage::Wiring, message)],
+        BuildError::Node { path, error } => {
+            vec![Diagnostic::new(&file, ir.loc, path, Stage::Wiring, error.to_string())]
+        }
     })?;
     for (name, value) in blackboard {
         bb.set_by_name(name, value.clone());
@@ -150,7 +152,7 @@ mod tests {
     use crate::library::engine_registry;
     use crate::mission::{LoadOptions, load_mission_str};
     use crate::node::{Behavior, TickContext};
-    use crate::registry::{DuplicateNodeType, NodeTypeSpec, PortSpec};
+    use crate::registry::{NodeError, NodeTypeSpec, PortSpec, RegistrationError};
     use crate::status::Status;
 
     /// A node type whose factory captures a counter shared with the test (a lab's service
@@ -170,9 +172,9 @@ mod tests {
             Category::Action,
             "Adds `step` to the shared counter.",
             vec![PortSpec::input("step", PortType::Int, "How much.")],
-            move |p| match p.literal("step") {
+            move |p| match p.literal("step")? {
                 Some(BbValue::Int(n)) if *n >= 0 => Ok(Box::new(Count(Arc::clone(&counter), *n as u32))),
-                _ => Err("step must be a literal count".into()),
+                _ => Err(NodeError::port("step", "step must be a literal count")),
             },
         ))
         .unwrap();
@@ -254,9 +256,70 @@ mod tests {
     #[test]
     fn registering_a_taken_name_is_an_error() {
         let mut r = engine_registry::<()>();
-        let again = NodeTypeSpec::leaf("wait", Category::Action, "Another wait.", vec![], |_| Err("unused".into()));
-        assert_eq!(r.try_register(again).err(), Some(DuplicateNodeType("wait".into())));
+        let again = NodeTypeSpec::leaf("wait", Category::Action, "Another wait.", vec![], |_| {
+            Err(NodeError::Invalid("unused".into()))
+        });
+        assert_eq!(r.try_register(again).err(), Some(RegistrationError::Duplicate("wait".into())));
         assert!(r.get("wait").is_some_and(|s| s.description.starts_with("Runs for")));
+    }
+
+    /// A node type whose code reads a port it did not declare (a misspelling): the registry
+    /// refuses it when it is built, naming the type and the port, instead of the node reading
+    /// an unset port for ever.
+    #[test]
+    fn a_factory_reading_an_undeclared_port_fails_at_registry_build() {
+        struct Idle;
+        impl Behavior for Idle {
+            fn tick(&mut self, _prev: Status, _ctx: &mut TickContext<'_>) -> Status {
+                Status::Success
+            }
+        }
+        let mut r = engine_registry::<()>();
+        let misspelled = NodeTypeSpec::leaf(
+            "hover",
+            Category::Action,
+            "Hovers.",
+            vec![PortSpec::input("altitude_m", PortType::Float, "Height.").with_default(serde_json::json!(10.0))],
+            |p| {
+                let _height = p.get("altitude")?; // the declared port is `altitude_m`
+                Ok(Box::new(Idle))
+            },
+        );
+        let e = r.try_register(misspelled).unwrap_err();
+        assert_eq!(e, RegistrationError::UndeclaredPort { node: "hover".into(), port: "altitude".into() });
+        assert_eq!(e.to_string(), "node type `hover`: its factory reads port `altitude`, which it does not declare");
+        assert!(r.get("hover").is_none(), "a refused type is not registered");
+        // Literals are checked the same way.
+        let by_literal = NodeTypeSpec::leaf("hover2", Category::Action, "Hovers.", vec![], |p| {
+            p.literal("speed")?;
+            Ok(Box::new(Idle))
+        });
+        assert!(matches!(r.try_register(by_literal), Err(RegistrationError::UndeclaredPort { .. })));
+        // The correct spelling registers.
+        let right = NodeTypeSpec::leaf(
+            "hover",
+            Category::Action,
+            "Hovers.",
+            vec![PortSpec::input("altitude_m", PortType::Float, "Height.").with_default(serde_json::json!(10.0))],
+            |p| {
+                let _height = p.get("altitude_m")?;
+                Ok(Box::new(Idle))
+            },
+        );
+        assert_eq!(r.try_register(right), Ok(()));
+    }
+
+    #[test]
+    fn a_default_that_is_no_value_of_its_port_type_is_refused() {
+        let mut r = engine_registry::<()>();
+        let bad = NodeTypeSpec::leaf(
+            "bad_default",
+            Category::Action,
+            "A default of the wrong type.",
+            vec![PortSpec::input("tolerance_m", PortType::Float, "Radius.").with_default(serde_json::json!("two"))],
+            |_| Err(NodeError::Invalid("unused".into())),
+        );
+        assert!(matches!(r.try_register(bad), Err(RegistrationError::BadDefault { .. })));
     }
 
     /// A lab that reads its node types from configuration: names, descriptions and ports are

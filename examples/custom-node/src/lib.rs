@@ -11,7 +11,7 @@ use serde_json::json;
 use spomp_behaviors::Status;
 use spomp_behaviors::blackboard::{BbValue, Binding, PortType};
 use spomp_behaviors::node::{Behavior, TickContext};
-use spomp_behaviors::registry::{Category, DuplicateNodeType, NodeRegistry, NodeTypeSpec, PortSpec};
+use spomp_behaviors::registry::{Category, NodeRegistry, NodeTypeSpec, PortSpec, RegistrationError};
 use spomp_robot::RobotRuntime;
 
 /// The lab's settings its node types are built with.
@@ -28,11 +28,12 @@ impl Default for LabSettings {
     }
 }
 
-/// Adds the lab's node types to `registry`; a name already taken is an error.
+/// Adds the lab's node types to `registry`; a name already taken (or a port the factory reads
+/// but does not declare) is an error.
 pub fn register(
     registry: &mut NodeRegistry<RobotRuntime>,
     settings: Arc<LabSettings>,
-) -> Result<(), DuplicateNodeType> {
+) -> Result<(), RegistrationError> {
     registry.try_register(
         NodeTypeSpec::leaf(
             "teammates_heard",
@@ -45,9 +46,9 @@ pub fn register(
             ],
             move |ports| {
                 Ok(Box::new(TeammatesHeard {
-                    at_least: ports.get("at_least"),
-                    within_s: ports.get("within_s"),
-                    count: ports.get("count"),
+                    at_least: ports.get("at_least")?,
+                    within_s: ports.get("within_s")?,
+                    count: ports.get("count")?,
                     settings: Arc::clone(&settings),
                 }))
             },
@@ -57,7 +58,7 @@ pub fn register(
 }
 
 /// The registry of the lab's binary: the built-in node types and the lab's.
-pub fn lab_registry(settings: LabSettings) -> Result<NodeRegistry<RobotRuntime>, DuplicateNodeType> {
+pub fn lab_registry(settings: LabSettings) -> Result<NodeRegistry<RobotRuntime>, RegistrationError> {
     let mut registry = spomp::registry();
     register(&mut registry, Arc::new(settings))?;
     Ok(registry)
@@ -72,7 +73,12 @@ struct TeammatesHeard {
 
 impl Behavior<RobotRuntime> for TeammatesHeard {
     fn tick(&mut self, _prev: Status, ctx: &mut TickContext<'_, RobotRuntime>) -> Status {
-        let at_least = self.at_least.get::<i64>(ctx.blackboard).unwrap_or(1);
+        // Always bound (the declared default when the mission leaves it out); an entry never
+        // written is a mistake of the mission, reported.
+        let Some(at_least) = self.at_least.get::<i64>(ctx.blackboard) else {
+            ctx.blackboard.report("teammates_heard: no value on its `at_least` port".to_string());
+            return Status::Failure;
+        };
         let within_s = self.within_s.get::<f64>(ctx.blackboard).unwrap_or(self.settings.freshness_s);
         let now = ctx.now;
         let team = ctx.env.team();

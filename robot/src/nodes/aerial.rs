@@ -20,7 +20,7 @@ use crate::runtime::RobotRuntime;
 use spomp_behaviors::Status;
 use spomp_behaviors::blackboard::{BbValue, Binding, PortType};
 use spomp_behaviors::node::Behavior;
-use spomp_behaviors::registry::{Category, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
+use spomp_behaviors::registry::{Category, NodeError, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
 
 /// Default clearance kept from no-fly polygons, metres.
 const DEFAULT_NO_FLY_MARGIN_M: f64 = 5.0;
@@ -351,57 +351,82 @@ struct FollowWaypoints {
     leg_points: usize,
 }
 
-fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, String> {
+fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, NodeError> {
+    // Every port read first, so the registry's probe sees each name whatever the checks below
+    // refuse.
+    let (no_fly_binding, no_fly_literal) = (p.get("no_fly")?, p.literal("no_fly")?);
+    let (waypoints, plan_file) = (p.get("waypoints")?, p.get("plan_file")?);
+    let (altitude, speed, radius) = (p.get("altitude_m")?, p.get("speed_mps")?, p.get("arrive_radius_m")?);
+    let (progress, resume_from) = (p.get("progress")?, p.get("resume_from")?);
     let mut polys = Vec::new();
     let mut fences = Vec::new();
     let mut margin = DEFAULT_NO_FLY_MARGIN_M;
-    match (p.get("no_fly"), p.literal("no_fly")) {
+    match (no_fly_binding, no_fly_literal) {
         (Binding::Unset, _) => {}
-        (_, Some(BbValue::Params(v))) => (polys, fences, margin) = NoFly::from_params(v)?,
-        _ => return Err("`no_fly` must be written in the mission as `{zones: [[{x, y}, …], …]}`".into()),
+        (_, Some(BbValue::Params(v))) => {
+            (polys, fences, margin) = NoFly::from_params(v).map_err(|e| NodeError::port("no_fly", e))?;
+        }
+        _ => {
+            return Err(NodeError::port(
+                "no_fly",
+                "`no_fly` must be written in the mission as `{zones: [[{x, y}, …], …]}`",
+            ));
+        }
     }
-    let waypoints = p.get("waypoints");
-    let source = match (waypoints, p.get("plan_file")) {
+    let source = match (waypoints, plan_file.clone()) {
         (Binding::Unset, Binding::Unset) => {
-            return Err(
-                "no waypoints: give either `waypoints` (a list of points) or `plan_file` (a QGroundControl .plan)"
-                    .into(),
-            );
+            return Err(NodeError::port(
+                "waypoints",
+                "no waypoints: give either `waypoints` (a list of points) or `plan_file` (a QGroundControl .plan)",
+            ));
         }
         (Binding::Unset, Binding::Literal(BbValue::Str(path))) => {
-            let plan = load_plan(Path::new(&*path), p.map_origin()).map_err(|e| e.to_string())?;
+            let plan = load_plan(Path::new(&*path), p.map_origin())
+                .map_err(|e| NodeError::port("plan_file", e.to_string()))?;
             if plan.waypoints.is_empty() {
-                return Err(format!("QGroundControl plan `{path}` has no waypoints to fly"));
+                return Err(NodeError::port(
+                    "plan_file",
+                    format!("QGroundControl plan `{path}` has no waypoints to fly"),
+                ));
             }
             polys.extend(plan.no_fly);
             fences.extend(plan.fly_inside);
             Source::Fixed(Arc::new(plan.waypoints.iter().map(|w| w.position).collect()))
         }
         (Binding::Unset, _) => {
-            return Err("`plan_file` must be a path written in the mission (not a blackboard entry), so the plan is checked when the mission is built".into());
+            return Err(NodeError::port(
+                "plan_file",
+                "`plan_file` must be a path written in the mission (not a blackboard entry), so the plan is checked when the mission is built",
+            ));
         }
         (Binding::Literal(BbValue::Points(w)), Binding::Unset) => Source::Fixed(w),
         (b, Binding::Unset) => Source::Port(b),
-        (_, _) => return Err("give either `waypoints` or `plan_file`, not both".into()),
+        (_, _) => return Err(NodeError::port("plan_file", "give either `waypoints` or `plan_file`, not both")),
     };
-    let no_fly = NoFly::new(polys, fences, margin)?;
+    let no_fly = NoFly::new(polys, fences, margin).map_err(|e| NodeError::port("no_fly", e))?;
     if let Source::Fixed(w) = &source {
         // Name the plan the waypoints and fences came from, so the operator knows which file.
-        let from = match p.get("plan_file") {
-            Binding::Literal(BbValue::Str(path)) => format!("QGroundControl plan `{path}`: "),
-            _ => String::new(),
+        let (port, from) = match &plan_file {
+            Binding::Literal(BbValue::Str(path)) => ("plan_file", format!("QGroundControl plan `{path}`: ")),
+            _ => ("waypoints", String::new()),
         };
         for (i, wp) in w.iter().enumerate() {
             if !(wp.x.is_finite() && wp.y.is_finite()) {
-                return Err(format!("{from}waypoint {i} is not finite"));
+                return Err(NodeError::port(port, format!("{from}waypoint {i} is not finite")));
             }
             if let Some(z) = no_fly.zone_containing(*wp) {
-                return Err(format!("{from}waypoint {i} at ({:.1}, {:.1}) lies inside no-fly zone {z}", wp.x, wp.y));
+                return Err(NodeError::port(
+                    port,
+                    format!("{from}waypoint {i} at ({:.1}, {:.1}) lies inside no-fly zone {z}", wp.x, wp.y),
+                ));
             }
             if no_fly.outside_fences(*wp) {
-                return Err(format!(
-                    "{from}waypoint {i} at ({:.1}, {:.1}) lies outside the inclusion geofence (fly only inside)",
-                    wp.x, wp.y
+                return Err(NodeError::port(
+                    port,
+                    format!(
+                        "{from}waypoint {i} at ({:.1}, {:.1}) lies outside the inclusion geofence (fly only inside)",
+                        wp.x, wp.y
+                    ),
                 ));
             }
         }
@@ -411,11 +436,11 @@ fn build_follow(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, Str
     literal_number(p, "arrive_radius_m", true)?;
     Ok(Box::new(FollowWaypoints {
         source,
-        altitude: p.get("altitude_m"),
-        speed: p.get("speed_mps"),
-        radius: p.get("arrive_radius_m"),
-        progress: p.get("progress"),
-        resume_from: p.get("resume_from"),
+        altitude,
+        speed,
+        radius,
+        progress,
+        resume_from,
         no_fly: Arc::new(no_fly),
         index: 0,
         route: VecDeque::new(),
@@ -566,20 +591,20 @@ struct SeekRobot {
     current: Option<RobotId>,
 }
 
-fn build_seek(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, String> {
+fn build_seek(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, NodeError> {
     literal_number(p, "stale_after_s", true)?;
     literal_number(p, "arrive_radius_m", true)?;
     literal_number(p, "speed_mps", true)?;
     literal_number(p, "altitude_m", false)?;
     literal_number(p, "alive_within_s", true)?;
     Ok(Box::new(SeekRobot {
-        stale: p.get("stale_after_s"),
-        radius: p.get("arrive_radius_m"),
-        speed: p.get("speed_mps"),
-        altitude: p.get("altitude_m"),
-        candidates: p.get("candidates"),
-        alive_within: p.get("alive_within_s"),
-        target: p.get("target"),
+        stale: p.get("stale_after_s")?,
+        radius: p.get("arrive_radius_m")?,
+        speed: p.get("speed_mps")?,
+        altitude: p.get("altitude_m")?,
+        candidates: p.get("candidates")?,
+        alive_within: p.get("alive_within_s")?,
+        target: p.get("target")?,
         last: None,
         current: None,
     }))
@@ -676,16 +701,16 @@ struct WaitForSync {
     saw_incomplete: bool,
 }
 
-fn build_wait(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, String> {
+fn build_wait(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, NodeError> {
     literal_number(p, "timeout_s", true)?;
     literal_number(p, "speed_mps", true)?;
     literal_number(p, "altitude_m", false)?;
     Ok(Box::new(WaitForSync {
-        robot: p.get("robot"),
-        timeout: p.get("timeout_s"),
-        track: p.get("track"),
-        speed: p.get("speed_mps"),
-        altitude: p.get("altitude_m"),
+        robot: p.get("robot")?,
+        timeout: p.get("timeout_s")?,
+        track: p.get("track")?,
+        speed: p.get("speed_mps")?,
+        altitude: p.get("altitude_m")?,
         started: Time::ZERO,
         saw_incomplete: false,
     }))
@@ -702,7 +727,11 @@ impl Behavior<RobotRuntime> for WaitForSync {
         let Some((altitude_m, speed_mps)) = flight_params(&self.altitude, &self.speed, ctx, WAIT) else {
             return Status::Failure;
         };
-        let track = self.track.get::<bool>(ctx.blackboard).unwrap_or(true);
+        // Always bound (the declared default when the mission leaves it out).
+        let Some(track) = self.track.get::<bool>(ctx.blackboard) else {
+            ctx.blackboard.report(format!("{WAIT}: no value on its `track` port"));
+            return Status::Failure;
+        };
         if prev != Status::Running {
             self.started = now;
             self.saw_incomplete = false;

@@ -27,7 +27,7 @@ pub fn register_coordination(r: &mut NodeRegistry<RobotRuntime>) {
             Action,
             "Brings this robot's copy of the aerial map up to date with the map versions received in the team state, then, if it changed, detects clusters of the mission's `goals.detect.class` in it (open, then close with `merge_distance_m`, components of at least `min_size_m`), places one goal per cluster at the point farthest from obstacles within `placement_region_m`, trying easier classes first, and adds the new ones (deduplicated within the deconfliction radius) to the team state. Succeeds after one pass, also when there is no map yet; writes the number of new goals.",
             vec![PortSpec::output("new_goals", PortType::Int, "Goals added by this pass.")],
-            |p| Ok(Box::new(DetectGoals { new_goals: p.get("new_goals") })),
+            |p| Ok(Box::new(DetectGoals { new_goals: p.get("new_goals")? })),
         )
         .for_kinds(&[RobotKind::Ugv, RobotKind::Basestation])
         .using_skills(&["mapping", "teamstate"]),
@@ -40,14 +40,14 @@ pub fn register_coordination(r: &mut NodeRegistry<RobotRuntime>) {
             PortSpec::output("goal", Goal, "The claimed goal."),
             PortSpec::output("goal_position", Point, "Where it is (map frame)."),
         ],
-        |p| Ok(Box::new(ClaimGoal { goal: p.get("goal"), position: p.get("goal_position") })),
+        |p| Ok(Box::new(ClaimGoal { goal: p.get("goal")?, position: p.get("goal_position")? })),
     )));
     r.register(ugv(NodeTypeSpec::leaf(
         "goal_still_mine",
         Condition,
         "Succeeds while this robot holds `goal`; fails as soon as it learns that a higher-priority robot claims it, or anyone visited it (goals within the deconfliction radius are the same goal). Guard `navigate_to` with it in a `reactive_sequence` for preemption.",
         vec![PortSpec::input("goal", Goal, "The goal held.")],
-        |p| Ok(Box::new(GoalStillMine { goal: p.get("goal") })),
+        |p| Ok(Box::new(GoalStillMine { goal: p.get("goal")? })),
     )));
     r.register(ugv(NodeTypeSpec::leaf(
         "has_claimable_goal",
@@ -61,7 +61,7 @@ pub fn register_coordination(r: &mut NodeRegistry<RobotRuntime>) {
         Action,
         "Marks `goal` visited by this robot in the team state (visited is final) and releases the claim.",
         vec![PortSpec::input("goal", Goal, "The goal reached.")],
-        |p| Ok(Box::new(MarkVisited { goal: p.get("goal") })),
+        |p| Ok(Box::new(MarkVisited { goal: p.get("goal")? })),
     )));
     r.register(ugv(NodeTypeSpec::leaf(
         "release_goal",
@@ -71,7 +71,7 @@ pub fn register_coordination(r: &mut NodeRegistry<RobotRuntime>) {
             PortSpec::input("goal", Goal, "The goal to release."),
             PortSpec::input("mark_unreachable", Bool, "Also mark it unreachable for this robot.").with_default(serde_json::json!(true)),
         ],
-        |p| Ok(Box::new(ReleaseGoal { goal: p.get("goal"), unreachable: p.get("mark_unreachable") })),
+        |p| Ok(Box::new(ReleaseGoal { goal: p.get("goal")?, unreachable: p.get("mark_unreachable")? })),
     )));
     r.register(ugv(NodeTypeSpec::leaf(
         "clear_unreachable",
@@ -194,7 +194,11 @@ struct ReleaseGoal {
 impl Behavior<RobotRuntime> for ReleaseGoal {
     fn tick(&mut self, _prev: Status, ctx: &mut Ctx<'_>) -> Status {
         let now = ctx.now;
-        let mark = self.unreachable.get::<bool>(ctx.blackboard).unwrap_or(true);
+        // Always bound (the declared default when the mission leaves it out).
+        let Some(mark) = self.unreachable.get::<bool>(ctx.blackboard) else {
+            ctx.blackboard.report("release_goal: no value on its `mark_unreachable` port".to_string());
+            return Status::Failure;
+        };
         let Some(goal) = goal_of(&self.goal, ctx, "release_goal") else { return Status::Failure };
         let rt = &mut *ctx.env;
         // Preempted or visited meanwhile: the goal is not unreachable, someone else has it.

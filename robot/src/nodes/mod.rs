@@ -18,7 +18,7 @@ pub use qgc_plan::plan_waypoints;
 pub use teammates::register_teammates;
 
 use spomp_behaviors::blackboard::{BbValue, Binding};
-use spomp_behaviors::registry::PortBindings;
+use spomp_behaviors::registry::{NodeError, PortBindings};
 use spomp_behaviors::{NodeRegistry, TickContext, engine_registry};
 
 use crate::checks::MissionRobotChecks;
@@ -29,15 +29,15 @@ pub(crate) type Ctx<'a> = TickContext<'a, RobotRuntime>;
 
 /// A literal number on a port, checked at build time (a bound entry is checked when ticked,
 /// by [`number`]).
-pub(crate) fn literal_number(p: &PortBindings, port: &str, positive: bool) -> Result<(), String> {
-    let v = match p.literal(port) {
+pub(crate) fn literal_number(p: &PortBindings, port: &'static str, positive: bool) -> Result<(), NodeError> {
+    let v = match p.literal(port)? {
         Some(BbValue::Float(f)) => *f,
         Some(BbValue::Int(i)) => *i as f64,
         _ => return Ok(()),
     };
     if !v.is_finite() || (positive && v <= 0.0) {
         let what = if positive { "a positive number" } else { "a finite number" };
-        return Err(format!("`{port}` must be {what}, found {v}"));
+        return Err(NodeError::port(port, format!("`{port}` must be {what}, found {v}")));
     }
     Ok(())
 }

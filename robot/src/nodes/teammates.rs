@@ -8,7 +8,7 @@ use spomp_core::{Point2, RobotId, RobotKind, Time};
 use spomp_behaviors::Status;
 use spomp_behaviors::blackboard::{Binding, PortType};
 use spomp_behaviors::node::Behavior;
-use spomp_behaviors::registry::{Category, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
+use spomp_behaviors::registry::{Category, NodeError, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
 
 use super::{Ctx, literal_number, number};
 use crate::runtime::RobotRuntime;
@@ -44,14 +44,14 @@ struct WaitForRobotAt {
     started: Time,
 }
 
-fn build_wait_at(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, String> {
+fn build_wait_at(p: &PortBindings) -> Result<Box<dyn Behavior<RobotRuntime>>, NodeError> {
     literal_number(p, "within_m", true)?;
     literal_number(p, "timeout_s", true)?;
     Ok(Box::new(WaitForRobotAt {
-        robot: p.get("robot"),
-        target: p.get("target"),
-        within: p.get("within_m"),
-        timeout: p.get("timeout_s"),
+        robot: p.get("robot")?,
+        target: p.get("target")?,
+        within: p.get("within_m")?,
+        timeout: p.get("timeout_s")?,
         started: Time::ZERO,
     }))
 }

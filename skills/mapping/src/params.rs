@@ -38,7 +38,7 @@ impl Default for GoalDetectionParams {
             placement_region_m: 7.0,
             open_radius_m: 0.5,
             min_clearance_m: 1.0,
-            deconfliction_radius_m: 10.0,
+            deconfliction_radius_m: spomp_core::DEFAULT_DECONFLICTION_RADIUS_M,
         }
     }
 }

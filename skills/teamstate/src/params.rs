@@ -37,7 +37,7 @@ pub struct TeamStateParams {
 impl Default for TeamStateParams {
     fn default() -> Self {
         TeamStateParams {
-            deconfliction_radius_m: 10.0,
+            deconfliction_radius_m: spomp_core::DEFAULT_DECONFLICTION_RADIUS_M,
             scan_min_spacing_m: 2.0,
             max_message_bytes: 16 * 1024 * 1024,
             max_scan_bins: 8192,

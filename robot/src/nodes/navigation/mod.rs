@@ -46,7 +46,7 @@ use crate::settings::WatchdogParams;
 use spomp_behaviors::Status;
 use spomp_behaviors::blackboard::{BbValue, Binding, PortType};
 use spomp_behaviors::node::Behavior;
-use spomp_behaviors::registry::{Category, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
+use spomp_behaviors::registry::{Category, NodeError, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
 
 mod driver;
 mod navigator;
@@ -74,6 +74,9 @@ pub const PINNED_RADIUS_M: f64 = 2.0;
 
 /// ... for this many stuck timeouts is stuck, and backs out along its own trail.
 pub const PINNED_TIMEOUTS: f64 = 2.0;
+/// `navigate_to`'s look-ahead when the mission leaves `lookahead_m` out, and `return_home`'s,
+/// metres: the port's declared default.
+pub const DEFAULT_LOOKAHEAD_M: f64 = 8.0;
 /// When stuck, the blocked edge is taken this far ahead of the robot along the path, metres.
 const BLOCKAGE_PROBE_M: f64 = 2.0;
 /// A robot this close to its look-ahead point may take one whose line is not clear of curbs.
@@ -103,7 +106,7 @@ pub fn register_navigation(r: &mut NodeRegistry<RobotRuntime>) {
                 PortSpec::optional("time_per_m_s", Float, "Time limit per metre of planned path, s/m; unset: the mission's `goals.time_limit_per_m_s`."),
                 PortSpec::optional("stuck_timeout_s", Float, "Fail as stuck after this long without 1 m of progress along the path, seconds; unset: the robot's `navigation.watchdog.stuck_timeout_s` (30 s unless the mission says otherwise)."),
                 PortSpec::optional("no_progress_timeout_s", Float, "Fail with `no_progress` when the robot has not come 1 m nearer the target (straight line, best so far) for this long, whatever the replans did, seconds; unset: the robot's `navigation.watchdog.no_progress_timeout_s` (120 s unless the mission says otherwise)."),
-                PortSpec::input("lookahead_m", Float, "Distance ahead along the global path of the waypoint given to the local planner, metres.").with_default(json!(8.0)),
+                PortSpec::input("lookahead_m", Float, "Distance ahead along the global path of the waypoint given to the local planner, metres.").with_default(json!(DEFAULT_LOOKAHEAD_M)),
                 PortSpec::optional("global_planner", Params, "Only `search: { replan_cost_rise_ratio }` (the robot's graph, learning and experience are shared by all nodes and set in its navigation parameters)."),
                 PortSpec::optional("local_planner", Params, "Overrides of `local_goal` and `dwa` (spomp-local-planner) over the robot's parameters, for this node; `terrain` is the robot's."),
                 PortSpec::output("failure_reason", Str, "Why it failed: no_path, stuck, no_progress or time_limit (no_navigation: the robot has no navigation stack)."),
@@ -163,22 +166,27 @@ fn robot_no_progress_timeout_s(rt: &RobotRuntime) -> f64 {
         .map_or_else(|| WatchdogParams::default().no_progress_timeout_s, |n| n.params.watchdog.no_progress_timeout_s)
 }
 
-fn number(binding: &Binding, ctx: &mut Ctx<'_>, node: &str, port: &str, default: f64) -> Option<f64> {
-    let v = match binding {
-        Binding::Unset => default,
-        b => match b.get::<f64>(ctx.blackboard) {
-            Some(v) => v,
-            None => {
-                ctx.blackboard.report(format!("{node}: `{port}` is not set"));
-                return None;
-            }
-        },
+/// A finite non-negative number from a port, or a report. A port with a declared default is
+/// always bound (the loader binds the default), so there is no default here.
+fn number(binding: &Binding, ctx: &mut Ctx<'_>, node: &str, port: &str) -> Option<f64> {
+    let Some(v) = binding.get::<f64>(ctx.blackboard) else {
+        ctx.blackboard.report(format!("{node}: `{port}` is not set"));
+        return None;
     };
     if v.is_finite() && v >= 0.0 {
         Some(v)
     } else {
         ctx.blackboard.report(format!("{node}: `{port}` must be a finite non-negative number, got {v}"));
         None
+    }
+}
+
+/// [`number`] for an optional port with no declared default, whose value when the mission
+/// leaves it out is the robot's (`unset`).
+fn number_or(binding: &Binding, ctx: &mut Ctx<'_>, node: &str, port: &str, unset: f64) -> Option<f64> {
+    match binding {
+        Binding::Unset => Some(unset),
+        b => number(b, ctx, node, port),
     }
 }
 
@@ -250,16 +258,16 @@ struct NavigateTo {
 }
 
 impl NavigateTo {
-    fn new(p: &PortBindings) -> Result<Self, String> {
+    fn new(p: &PortBindings) -> Result<Self, NodeError> {
         Ok(NavigateTo {
-            target: p.get("target"),
-            tolerance: p.get("tolerance_m"),
-            time_limit: p.get("time_limit_s"),
-            time_per_m: p.get("time_per_m_s"),
-            stuck_timeout: p.get("stuck_timeout_s"),
-            no_progress_timeout: p.get("no_progress_timeout_s"),
-            lookahead: p.get("lookahead_m"),
-            failure_reason: p.get("failure_reason"),
+            target: p.get("target")?,
+            tolerance: p.get("tolerance_m")?,
+            time_limit: p.get("time_limit_s")?,
+            time_per_m: p.get("time_per_m_s")?,
+            stuck_timeout: p.get("stuck_timeout_s")?,
+            no_progress_timeout: p.get("no_progress_timeout_s")?,
+            lookahead: p.get("lookahead_m")?,
+            failure_reason: p.get("failure_reason")?,
             nav: Navigator::new(Overrides::from_ports(p, true)?),
         })
     }
@@ -271,23 +279,29 @@ impl Behavior<RobotRuntime> for NavigateTo {
         let now = ctx.now;
         let Some(target) = target_of(&self.target, ctx, NODE) else { return Status::Failure };
         let (Some(tolerance_m), Some(stuck_timeout_s), Some(no_progress_timeout_s), Some(lookahead_m)) = (
-            number(&self.tolerance, ctx, NODE, "tolerance_m", 2.0),
-            number(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", robot_stuck_timeout_s(ctx.env)),
-            number(&self.no_progress_timeout, ctx, NODE, "no_progress_timeout_s", robot_no_progress_timeout_s(ctx.env)),
-            number(&self.lookahead, ctx, NODE, "lookahead_m", 8.0),
+            number(&self.tolerance, ctx, NODE, "tolerance_m"),
+            number_or(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", robot_stuck_timeout_s(ctx.env)),
+            number_or(
+                &self.no_progress_timeout,
+                ctx,
+                NODE,
+                "no_progress_timeout_s",
+                robot_no_progress_timeout_s(ctx.env),
+            ),
+            number(&self.lookahead, ctx, NODE, "lookahead_m"),
         ) else {
             return Status::Failure;
         };
         let fixed = match self.time_limit {
             Binding::Unset => None,
-            _ => match number(&self.time_limit, ctx, NODE, "time_limit_s", 0.0) {
+            _ => match number(&self.time_limit, ctx, NODE, "time_limit_s") {
                 Some(v) => Some(v),
                 None => return Status::Failure,
             },
         };
         let per_m = match self.time_per_m {
             Binding::Unset => None,
-            _ => match number(&self.time_per_m, ctx, NODE, "time_per_m_s", 0.0) {
+            _ => match number(&self.time_per_m, ctx, NODE, "time_per_m_s") {
                 Some(v) => Some(v),
                 None => return Status::Failure,
             },
@@ -319,12 +333,12 @@ struct ReturnHome {
 }
 
 impl ReturnHome {
-    fn new(p: &PortBindings) -> Result<Self, String> {
+    fn new(p: &PortBindings) -> Result<Self, NodeError> {
         Ok(ReturnHome {
-            min_distance: p.get("min_distance_m"),
-            tolerance: p.get("tolerance_m"),
-            stuck_timeout: p.get("stuck_timeout_s"),
-            failure_reason: p.get("failure_reason"),
+            min_distance: p.get("min_distance_m")?,
+            tolerance: p.get("tolerance_m")?,
+            stuck_timeout: p.get("stuck_timeout_s")?,
+            failure_reason: p.get("failure_reason")?,
             nav: Navigator::new(Overrides::default()),
         })
     }
@@ -335,9 +349,9 @@ impl Behavior<RobotRuntime> for ReturnHome {
         const NODE: &str = "return_home";
         let now = ctx.now;
         let (Some(min_distance_m), Some(tolerance_m), Some(stuck_timeout_s)) = (
-            number(&self.min_distance, ctx, NODE, "min_distance_m", 5.0),
-            number(&self.tolerance, ctx, NODE, "tolerance_m", 2.0),
-            number(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", robot_stuck_timeout_s(ctx.env)),
+            number(&self.min_distance, ctx, NODE, "min_distance_m"),
+            number(&self.tolerance, ctx, NODE, "tolerance_m"),
+            number_or(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", robot_stuck_timeout_s(ctx.env)),
         ) else {
             return Status::Failure;
         };
@@ -355,7 +369,7 @@ impl Behavior<RobotRuntime> for ReturnHome {
             limit: Limit::PerMetre(rt.goal_time_per_m_s()),
             stuck_timeout_s,
             no_progress_timeout_s: robot_no_progress_timeout_s(rt),
-            lookahead_m: 8.0,
+            lookahead_m: DEFAULT_LOOKAHEAD_M,
         };
         run_navigation(&mut self.nav, prev, rt, bb, now, &req, NODE, &self.failure_reason)
     }
@@ -397,16 +411,16 @@ struct NavigateLocal {
 }
 
 impl NavigateLocal {
-    fn new(p: &PortBindings) -> Result<Self, String> {
+    fn new(p: &PortBindings) -> Result<Self, NodeError> {
         // A literal frame is checked when the mission is loaded; a blackboard one when ticked.
-        if let Some(BbValue::Str(name)) = p.literal("frame") {
-            TargetFrame::parse(name)?;
+        if let Some(BbValue::Str(name)) = p.literal("frame")? {
+            TargetFrame::parse(name).map_err(|e| NodeError::port("frame", e))?;
         }
         Ok(NavigateLocal {
-            target: p.get("target"),
-            frame: p.get("frame"),
-            tolerance: p.get("tolerance_m"),
-            stuck_timeout: p.get("stuck_timeout_s"),
+            target: p.get("target")?,
+            frame: p.get("frame")?,
+            tolerance: p.get("tolerance_m")?,
+            stuck_timeout: p.get("stuck_timeout_s")?,
             driver: Driver::new(Overrides::from_ports(p, false)?),
             anchored: None,
         })
@@ -426,8 +440,8 @@ impl Behavior<RobotRuntime> for NavigateLocal {
         let Some(target) = target_of(&self.target, ctx, NODE) else { return Status::Failure };
         let Some(frame) = self.frame(ctx, NODE) else { return Status::Failure };
         let (Some(tolerance_m), Some(stuck_timeout_s)) = (
-            number(&self.tolerance, ctx, NODE, "tolerance_m", 1.0),
-            number(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", robot_stuck_timeout_s(ctx.env)),
+            number(&self.tolerance, ctx, NODE, "tolerance_m"),
+            number_or(&self.stuck_timeout, ctx, NODE, "stuck_timeout_s", robot_stuck_timeout_s(ctx.env)),
         ) else {
             return Status::Failure;
         };
@@ -584,7 +598,8 @@ mod tests {
     }
 
     fn ports(name: &'static str, v: Value) -> PortBindings {
-        let mut p = PortBindings::default();
+        let registry = crate::nodes::registry();
+        let mut p = PortBindings::declared(registry.get("navigate_to").unwrap());
         p.insert(name, Binding::Literal(BbValue::Params(Arc::new(v))));
         p
     }
@@ -596,11 +611,11 @@ mod tests {
         assert!(ok.local.is_some());
         let terrain =
             Overrides::from_ports(&ports("local_planner", json!({ "terrain": { "inflation_m": 1.0 } })), true);
-        assert!(terrain.unwrap_err().contains("terrain"));
+        assert!(terrain.unwrap_err().to_string().contains("terrain"));
         let unknown = Overrides::from_ports(&ports("local_planner", json!({ "dwa": { "warp": 9 } })), true);
         assert!(unknown.is_err());
         let graph = Overrides::from_ports(&ports("global_planner", json!({ "graph": {} })), true);
-        assert!(graph.unwrap_err().contains("global_planner.graph"));
+        assert!(graph.unwrap_err().to_string().contains("global_planner.graph"));
         let search = Overrides::from_ports(
             &ports("global_planner", json!({ "search": { "replan_cost_rise_ratio": 0.5 } })),
             true,

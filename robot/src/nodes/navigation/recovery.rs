@@ -17,7 +17,7 @@ use crate::runtime::RobotRuntime;
 use spomp_behaviors::Status;
 use spomp_behaviors::blackboard::{Binding, PortType};
 use spomp_behaviors::node::Behavior;
-use spomp_behaviors::registry::{Category, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
+use spomp_behaviors::registry::{Category, NodeError, NodeRegistry, NodeTypeSpec, PortBindings, PortSpec};
 
 /// Registers `back_up` and `spin`.
 pub fn register_recovery(r: &mut NodeRegistry<RobotRuntime>) {
@@ -35,7 +35,7 @@ pub fn register_recovery(r: &mut NodeRegistry<RobotRuntime>) {
                     .with_default(json!(0.3)),
                 PortSpec::input("timeout_s", Float, "Give up after this long, seconds.").with_default(json!(15.0)),
             ],
-            |p| Ok(Box::new(BackUp::new(p))),
+            |p| Ok(Box::new(BackUp::new(p)?)),
         )
         .for_kinds(&[Ugv])
         .using_skills(&["local_planner"]),
@@ -54,7 +54,7 @@ pub fn register_recovery(r: &mut NodeRegistry<RobotRuntime>) {
                     .with_default(json!(0.0)),
                 PortSpec::input("timeout_s", Float, "Give up after this long, seconds.").with_default(json!(20.0)),
             ],
-            |p| Ok(Box::new(Spin::new(p))),
+            |p| Ok(Box::new(Spin::new(p)?)),
         )
         .for_kinds(&[Ugv])
         .using_skills(&["local_planner"]),
@@ -91,14 +91,14 @@ struct BackUp {
 }
 
 impl BackUp {
-    fn new(p: &PortBindings) -> Self {
-        BackUp {
-            distance: p.get("distance_m"),
-            speed: p.get("speed_mps"),
-            timeout: p.get("timeout_s"),
+    fn new(p: &PortBindings) -> Result<Self, NodeError> {
+        Ok(BackUp {
+            distance: p.get("distance_m")?,
+            speed: p.get("speed_mps")?,
+            timeout: p.get("timeout_s")?,
             from: None,
             until: Time::ZERO,
-        }
+        })
     }
 }
 
@@ -163,16 +163,16 @@ struct Spin {
 }
 
 impl Spin {
-    fn new(p: &PortBindings) -> Self {
-        Spin {
-            angle: p.get("angle_deg"),
-            rate: p.get("turn_rate_radps"),
-            clearance: p.get("min_clearance_m"),
-            timeout: p.get("timeout_s"),
+    fn new(p: &PortBindings) -> Result<Self, NodeError> {
+        Ok(Spin {
+            angle: p.get("angle_deg")?,
+            rate: p.get("turn_rate_radps")?,
+            clearance: p.get("min_clearance_m")?,
+            timeout: p.get("timeout_s")?,
             turned: 0.0,
             last_yaw: None,
             until: Time::ZERO,
-        }
+        })
     }
 }
 

@@ -17,31 +17,33 @@ pub(super) struct Overrides {
 }
 
 impl Overrides {
-    pub(super) fn from_ports(p: &PortBindings, global: bool) -> Result<Self, String> {
+    pub(super) fn from_ports(p: &PortBindings, global: bool) -> Result<Self, NodeError> {
         let mut o = Overrides::default();
         if let Some(v) = params_literal(p, "local_planner")? {
-            let Some(obj) = v.as_object() else { return Err("`local_planner` must be a mapping".into()) };
+            let bad = |m: String| NodeError::port("local_planner", m);
+            let Some(obj) = v.as_object() else { return Err(bad("`local_planner` must be a mapping".into())) };
             if obj.contains_key("terrain") {
-                return Err("`local_planner.terrain` cannot be set per node: terrain analysis runs once per panorama for the whole robot; set it in the robot's navigation parameters".into());
+                return Err(bad("`local_planner.terrain` cannot be set per node: terrain analysis runs once per panorama for the whole robot; set it in the robot's navigation parameters".into()));
             }
             serde_json::from_value::<LocalPlannerParams>(v.clone())
-                .map_err(|e| format!("`local_planner`: {e}"))?
+                .map_err(|e| bad(format!("`local_planner`: {e}")))?
                 .validate()
-                .map_err(|e| format!("`local_planner`: {e}"))?;
+                .map_err(|e| bad(format!("`local_planner`: {e}")))?;
             o.local = Some(v);
         }
         if global && let Some(v) = params_literal(p, "global_planner")? {
-            let Some(obj) = v.as_object() else { return Err("`global_planner` must be a mapping".into()) };
+            let bad = |m: String| NodeError::port("global_planner", m);
+            let Some(obj) = v.as_object() else { return Err(bad("`global_planner` must be a mapping".into())) };
             if let Some(k) = obj.keys().find(|k| k.as_str() != "search") {
-                return Err(format!(
+                return Err(bad(format!(
                     "`global_planner.{k}` cannot be set per node: the robot has one traversability graph, fed by every scan and shared by every node; set it in the robot's navigation parameters (only `search` is per node)"
-                ));
+                )));
             }
             if let Some(s) = obj.get("search") {
                 let search: SearchParams =
-                    serde_json::from_value(s.clone()).map_err(|e| format!("`global_planner.search`: {e}"))?;
+                    serde_json::from_value(s.clone()).map_err(|e| bad(format!("`global_planner.search`: {e}")))?;
                 if !(search.replan_cost_rise_ratio.is_finite() && search.replan_cost_rise_ratio >= 0.0) {
-                    return Err("`global_planner.search.replan_cost_rise_ratio` must be finite and >= 0".into());
+                    return Err(bad("`global_planner.search.replan_cost_rise_ratio` must be finite and >= 0".into()));
                 }
                 o.search = Some(search);
             }
@@ -50,14 +52,19 @@ impl Overrides {
     }
 }
 
-pub(super) fn params_literal(p: &PortBindings, name: &str) -> Result<Option<Value>, String> {
-    match p.literal(name) {
-        None => match p.get(name) {
+pub(super) fn params_literal(p: &PortBindings, name: &'static str) -> Result<Option<Value>, NodeError> {
+    match p.literal(name)? {
+        None => match p.get(name)? {
             Binding::Unset => Ok(None),
-            _ => Err(format!("`{name}` must be written in the mission (a literal parameter block)")),
+            _ => Err(NodeError::port(
+                name,
+                format!("`{name}` must be written in the mission (a literal parameter block)"),
+            )),
         },
         Some(BbValue::Params(v)) => Ok(Some((**v).clone())),
-        Some(other) => Err(format!("`{name}` must be a mapping of parameters, not {:?}", other.port_type())),
+        Some(other) => {
+            Err(NodeError::port(name, format!("`{name}` must be a mapping of parameters, not {:?}", other.port_type())))
+        }
     }
 }
 
