@@ -17,7 +17,6 @@ use spomp_behaviors::mission::MissionFile;
 use spomp_core::{
     FlightCommand, GridSpec, MapTile, Odometry, OdometryCovariance, PanoramaFrame, PoseEstimate, RobotId, Time, Twist2,
 };
-use spomp_robot::seam::tier_bits;
 use spomp_ros2::lockstep::{Hello, LockstepError, Op, PROTOCOL, StepDone};
 use spomp_ros2::{DdsSettings, FarmLink};
 use spomp_sim::run::{DrivenStep, DrivenTeamMessage, ExternalDrivers, RealTimePacer, SkillLatency};
@@ -424,7 +423,7 @@ impl ExternalDrivers for FarmDrivers {
             return None;
         }
         let timeout = l.timeout;
-        match self.link.lockstep_team_out(robot.as_str(), to, tier_bits(tiers), budget_bytes as u64, timeout) {
+        match self.link.lockstep_team_out(robot.as_str(), to, tiers.bits(), budget_bytes as u64, timeout) {
             Ok(bytes) => bytes,
             Err(e) => {
                 self.drop_robot(robot.as_str(), self.now, &e);

@@ -42,6 +42,7 @@ mod log_cmd;
 mod memory_stage;
 mod output;
 mod plan_cmd;
+mod recording;
 mod replay_cmd;
 mod ros_args;
 mod run_cmd;

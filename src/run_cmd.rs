@@ -11,16 +11,13 @@ use anyhow::{Context, Result, bail};
 use spomp_behaviors::NodeRegistry;
 use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, read_text};
 use spomp_behaviors::mission::{LoadOptions, load_mission_str, load_mission_with};
-use spomp_behaviors::trace::TransitionRecord;
-use spomp_core::{
-    FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, Time, Twist2,
-};
+use spomp_core::RobotId;
 use spomp_mcap::{Recorder, RecorderOptions, RobotConventions, SafeFile};
-use spomp_robot::seam::SeamInput;
 use spomp_robot::{Robot, RobotRuntime, RobotSetup};
-use spomp_ros2::{RobotNode, RunObserver, RunSettings};
+use spomp_ros2::{RobotNode, RunSettings};
 
 use crate::live::{Discard, LiveTap};
+use crate::recording::{LogObserver, ObserverSettings};
 
 /// Options of `spomp run`.
 #[derive(Debug, Clone, clap::Args)]
@@ -173,6 +170,8 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     let mut robot =
         Robot::from_setup(&loaded, setup, registry).with_context(|| format!("setting up robot `{}`", args.robot))?;
     let simulated_session = robot.team().session();
+    // A recorded robot records from its first call on: the resume from a state file included.
+    robot.record_seam(args.record.is_some());
     let link = crate::team_link::set_up(&args.team_link, mission, &args.robot, &mut robot)?;
     if args.lockstep && link.link.is_none() {
         // Over the farm's radio the robot is one of the simulator's: its session is theirs (a
@@ -188,7 +187,6 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     for n in &link.notes {
         errln!("{n}");
     }
-    let resumed = link.resumed;
     crate::team_link::plug(&mut node, link.link, &args.team_link, &args.robot);
 
     let stop = Arc::new(AtomicBool::new(false));
@@ -256,7 +254,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
                 rec.set_tap(Box::new(tap));
             }
             let pending = run_info.filter(|_| args.lockstep);
-            drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref(), pending)?
+            drive(&mut node, &stop, args.until_s, Some(rec), true, pending)?
         }
         (None, Some(tap)) => {
             // Only the live view wants the messages: recorded into nothing, uncompressed.
@@ -264,9 +262,9 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
             let mut rec = Recorder::new(Discard::default(), options).context("starting the live view's recorder")?;
             rec.set_conventions(&args.robot, conventions);
             rec.set_tap(Box::new(tap));
-            drive(&mut node, &stop, args.until_s, Some(rec), resumed.as_deref(), None)?
+            drive(&mut node, &stop, args.until_s, Some(rec), false, None)?
         }
-        (None, None) => drive::<SafeFile>(&mut node, &stop, args.until_s, None, resumed.as_deref(), None)?,
+        (None, None) => drive::<SafeFile>(&mut node, &stop, args.until_s, None, false, None)?,
     };
     if let Some(e) = error {
         return Err(e.context("recording"));
@@ -306,110 +304,30 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     Ok(ExitCode::SUCCESS)
 }
 
-/// Runs the node until it stops, recording into `recorder` if given; the report, and the error
-/// that stopped the recording if one did.
+/// Runs the node until it stops, recording into `recorder` if given (its seam calls too when
+/// `replayable`); the report, and the error that stopped the recording if one did.
 fn drive<W: Write + Seek>(
     node: &mut RobotNode,
     stop: &AtomicBool,
     until_s: Option<f64>,
     recorder: Option<Recorder<W>>,
-    resumed: Option<&[u8]>,
+    replayable: bool,
     pending_info: Option<spomp_mcap::RunInfo>,
 ) -> Result<(spomp_ros2::RunReport, Option<anyhow::Error>)> {
-    let mut observer = RecordingObserver { recorder, error: None, pending_info };
-    if let Some(bytes) = resumed {
-        // Before every other call, as it happened: a replay resumes its robot the same way.
-        observer.on_seam(node.robot().id(), Time::ZERO, SeamInput::Resume(bytes));
-    }
+    let settings = ObserverSettings {
+        // Every panorama the robot took.
+        pano_every_ns: 1,
+        panos_dir: None,
+        bar: None,
+        trace: false,
+        replayable,
+        classes: None,
+    };
+    let mut observer = LogObserver::new(recorder, settings).with_pending_info(pending_info);
     let report = node.run(stop, until_s, &mut observer);
-    if let Some(rec) = observer.recorder.take() {
+    let (recorder, error) = observer.into_parts();
+    if let Some(rec) = recorder {
         rec.finish().context("finishing the log")?;
     }
-    Ok((report, observer.error))
-}
-
-/// Records a robot's inputs and outputs with the channels of `spomp sim`'s logs.
-struct RecordingObserver<W: Write + Seek> {
-    recorder: Option<Recorder<W>>,
-    error: Option<anyhow::Error>,
-    /// The run's setup, written once a lockstep farm said how the heavy skills run.
-    pending_info: Option<spomp_mcap::RunInfo>,
-}
-
-impl<W: Write + Seek> RecordingObserver<W> {
-    fn record(&mut self, f: impl FnOnce(&mut Recorder<W>) -> Result<(), spomp_mcap::RecordError>) {
-        if self.error.is_some() {
-            return;
-        }
-        if let Some(rec) = self.recorder.as_mut()
-            && let Err(e) = f(rec)
-        {
-            self.error = Some(e.into());
-        }
-    }
-}
-
-impl<W: Write + Seek> RunObserver for RecordingObserver<W> {
-    fn on_lockstep(&mut self, background_skills: bool) {
-        if let Some(info) = self.pending_info.take() {
-            let info = spomp_mcap::RunInfo { background_skills, ..info };
-            self.record(|r| r.run_info(&info));
-        }
-    }
-
-    fn on_odometry(&mut self, robot: &str, odom: &Odometry) {
-        self.record(|r| r.odometry(robot, odom));
-    }
-
-    fn on_panorama(&mut self, robot: &str, frame: &PanoramaFrame) {
-        self.record(|r| {
-            r.sensor_mount(robot, frame.stamp, frame.sensor_height_m)?;
-            r.panorama(robot, frame.stamp, &frame.depth, Some(&frame.semantic))
-        });
-    }
-
-    fn on_external_pose(&mut self, robot: &str, estimate: &PoseEstimate) {
-        self.record(|r| r.pose_in(robot, estimate.stamp, estimate.pose, 0.0));
-    }
-
-    fn on_tf(&mut self, topic: &str, time: Time, msg: &spomp_core::ros::TfMessage) {
-        self.record(|r| r.transform(topic, time, msg));
-    }
-
-    fn on_frame_mismatch(&mut self, robot: &str, message: &str) {
-        errln!("warning: robot {robot}: {message}");
-    }
-
-    fn on_command(&mut self, robot: &str, now: Time, cmd: Twist2) {
-        self.record(|r| r.command(robot, now, cmd));
-    }
-
-    fn on_flight(&mut self, robot: &str, now: Time, cmd: Option<&FlightCommand>) {
-        let topic = format!("/{robot}/setpoint");
-        self.record(|r| r.json(&topic, now, &cmd));
-    }
-
-    fn on_estimate(&mut self, robot: &str, estimate: &PoseEstimate) {
-        self.record(|r| r.estimate(robot, estimate));
-    }
-
-    fn on_transitions(&mut self, robot: &str, records: &[TransitionRecord]) {
-        self.record(|r| r.transitions(robot, records));
-    }
-
-    fn on_scan(&mut self, scan: &ReachabilityScan) {
-        self.record(|r| r.reachability(scan));
-    }
-
-    fn on_path(&mut self, robot: &str, now: Time, path: &[Point2]) {
-        self.record(|r| r.path(robot, now, path));
-    }
-
-    fn on_seam(&mut self, robot: &RobotId, now: Time, call: SeamInput<'_>) {
-        self.record(|r| r.seam(robot.as_str(), now, call));
-    }
-
-    fn on_problem(&mut self, robot: &str, now: Time, message: &str) {
-        self.record(|r| r.problem(robot, now, message));
-    }
+    Ok((report, error))
 }

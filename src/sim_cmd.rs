@@ -15,16 +15,13 @@ use rayon::prelude::*;
 use serde::Serialize;
 use spomp_behaviors::NodeRegistry;
 use spomp_behaviors::mission::{LoadOptions, LoadedMission, load_mission_with};
-use spomp_behaviors::trace::TransitionRecord;
-use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
-use spomp_core::ros::GoalMarkerInput;
-use spomp_core::{
-    AerialMap, Odometry, PanoramaFrame, PanoramaGeometry, Point2, ReachabilityScan, RobotId, RobotKind, Time,
-};
+use spomp_core::RobotId;
 use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
 use spomp_robot::RobotRuntime;
-use spomp_sim::run::{RobotSnapshot, RunResult, RunSummary, SeamInput, SimEvent, SimObserver, SimOptions, Simulation};
+use spomp_sim::run::{RunResult, RunSummary, SimOptions, Simulation};
 use spomp_sim::{Blackout, Faults, KillFault};
+
+use crate::recording::{LogObserver, ObserverSettings};
 
 use crate::live::{Discard, LiveTap};
 use crate::sim_plots;
@@ -377,7 +374,7 @@ fn clean_previous_outputs(out_dir: &Path) -> Result<(), String> {
 
 /// `dir/name` for a file or folder name the run makes up (a trial, a robot's panorama): refused
 /// unless `name` is one plain path component, so no output lands outside `dir`.
-fn output_path(dir: &Path, name: &str) -> Result<PathBuf> {
+pub(crate) fn output_path(dir: &Path, name: &str) -> Result<PathBuf> {
     let mut parts = Path::new(name).components();
     match (parts.next(), parts.next()) {
         (Some(std::path::Component::Normal(_)), None) => Ok(dir.join(name)),
@@ -491,10 +488,10 @@ fn run_trial(
     let settings = ObserverSettings {
         pano_every_ns: (args.pano_every_s * 1e9) as i64,
         panos_dir,
-        bar: bar.clone(),
+        bar: Some(bar.clone()),
         trace: args.trace,
         replayable: args.replayable,
-        classes: sim.world().classes().clone(),
+        classes: Some(sim.world().classes().clone()),
     };
     let stop = &mut || interrupted.load(Ordering::Relaxed);
     let result = match (args.no_mcap, live) {
@@ -571,18 +568,6 @@ fn localization_error_csv(result: &RunResult) -> String {
     csv
 }
 
-/// How a run is observed (everything but the recorder).
-struct ObserverSettings {
-    pano_every_ns: i64,
-    panos_dir: Option<PathBuf>,
-    bar: ProgressBar,
-    trace: bool,
-    /// Record every seam call (`--replayable`).
-    replayable: bool,
-    /// The world's class table (the map's traversability).
-    classes: spomp_core::ClassTable,
-}
-
 /// Runs `sim` to its end (or until `stop`), recorded by `recorder` if any; returns the result
 /// and the recorder, to be finished.
 fn run_observed<W: Write + Seek>(
@@ -591,203 +576,10 @@ fn run_observed<W: Write + Seek>(
     settings: ObserverSettings,
     stop: &mut dyn FnMut() -> bool,
 ) -> Result<(RunResult, Option<Recorder<W>>)> {
-    let mut observer = RunObserver {
-        recorder,
-        error: None,
-        settings,
-        last_pano: Default::default(),
-        last_second: -1,
-        goals: Vec::new(),
-    };
+    let mut observer = LogObserver::new(recorder, settings);
     let result = sim.run_until(&mut observer, stop);
-    if let Some(e) = observer.error.take() {
-        return Err(e);
-    }
-    Ok((result, observer.recorder.take()))
-}
-
-/// A goal as the team-level events tell it, for the goal markers.
-struct GoalState {
-    id: String,
-    position: Point2,
-    claimed_by: Option<String>,
-    visited_by: Option<String>,
-}
-
-/// Records a run to MCAP (and through it the live view) and drives the progress bar.
-struct RunObserver<W: Write + Seek> {
-    recorder: Option<Recorder<W>>,
-    error: Option<anyhow::Error>,
-    settings: ObserverSettings,
-    last_pano: std::collections::HashMap<RobotId, i64>,
-    last_second: i64,
-    /// The goals in the order they were identified.
-    goals: Vec<GoalState>,
-}
-
-impl<W: Write + Seek> RunObserver<W> {
-    fn record(&mut self, f: impl FnOnce(&mut Recorder<W>) -> Result<(), spomp_mcap::RecordError>) {
-        if self.error.is_some() {
-            return;
-        }
-        if let Some(rec) = self.recorder.as_mut()
-            && let Err(e) = f(rec)
-        {
-            self.error = Some(e.into());
-        }
-    }
-
-    /// Follows a goal event; true if the goals changed.
-    fn follow_goals(&mut self, event: &SimEvent) -> bool {
-        fn find(goals: &[GoalState], id: &str) -> Option<usize> {
-            goals.iter().position(|g| g.id == id)
-        }
-        match event {
-            SimEvent::GoalIdentified { goal, position, .. } => {
-                if find(&self.goals, goal).is_some() {
-                    return false;
-                }
-                self.goals.push(GoalState {
-                    id: goal.clone(),
-                    position: Point2::new(position[0], position[1]),
-                    claimed_by: None,
-                    visited_by: None,
-                });
-            }
-            SimEvent::GoalClaimed { goal, by } => {
-                let Some(k) = find(&self.goals, goal) else { return false };
-                self.goals[k].claimed_by = Some(by.clone());
-            }
-            SimEvent::GoalReleased { goal, by } => {
-                let Some(k) = find(&self.goals, goal) else { return false };
-                if self.goals[k].claimed_by.as_ref() != Some(by) {
-                    return false;
-                }
-                self.goals[k].claimed_by = None;
-            }
-            SimEvent::GoalVisited { goal, by } => {
-                let Some(k) = find(&self.goals, goal) else { return false };
-                self.goals[k].visited_by = Some(by.clone());
-            }
-            SimEvent::RobotKilled { .. } | SimEvent::RobotStuck { .. } | SimEvent::MissionEnded { .. } => return false,
-        }
-        true
-    }
-}
-
-impl<W: Write + Seek> SimObserver for RunObserver<W> {
-    fn on_state(&mut self, robot: &RobotId, now: Time, state: &RobotSnapshot) {
-        let second = now.nanos / 1_000_000_000;
-        if second != self.last_second {
-            self.last_second = second;
-            self.settings.bar.set_position(second.max(0) as u64);
-        }
-        self.record(|r| {
-            r.pose(robot.as_str(), now, state.truth, state.z_m)?;
-            r.tf(robot.as_str(), now, state.truth, state.z_m)?;
-            if let Some(est) = state.estimate {
-                r.estimate(robot.as_str(), &spomp_core::PoseEstimate { stamp: now, ..est })?;
-            }
-            if state.kind == RobotKind::Ugv {
-                r.command(robot.as_str(), now, state.command)?;
-            }
-            Ok(())
-        });
-    }
-
-    fn on_odometry(&mut self, robot: &RobotId, odom: &Odometry) {
-        self.record(|r| r.odometry(robot.as_str(), odom));
-    }
-
-    fn on_panorama(&mut self, robot: &RobotId, frame: &PanoramaFrame) {
-        if self.settings.pano_every_ns <= 0 {
-            return;
-        }
-        let last = self.last_pano.get(robot).copied();
-        if last.is_some_and(|t| frame.stamp.nanos - t < self.settings.pano_every_ns) {
-            return;
-        }
-        self.last_pano.insert(robot.clone(), frame.stamp.nanos);
-        self.record(|r| {
-            r.sensor_mount(robot.as_str(), frame.stamp, frame.sensor_height_m)?;
-            r.panorama(robot.as_str(), frame.stamp, &frame.depth, Some(&frame.semantic))
-        });
-        if let Some(dir) = &self.settings.panos_dir {
-            let saved = output_path(dir, &format!("{robot}-{:06}.png", frame.stamp.nanos / 1_000_000_000))
-                .and_then(|path| crate::world_cmd::save_depth_png(&frame.depth, DEFAULT_RANGE_SCALE_M, &path));
-            if let Err(e) = saved {
-                self.error.get_or_insert(e);
-            }
-        }
-    }
-
-    fn on_terrain(&mut self, robot: &RobotId, stamp: Time, geometry: PanoramaGeometry, obstacle: &[bool]) {
-        // Same rate as the panoramas: only for the frame just recorded.
-        if self.settings.pano_every_ns > 0 && self.last_pano.get(robot) == Some(&stamp.nanos) {
-            self.record(|r| r.obstacle_panorama(robot.as_str(), stamp, geometry, obstacle));
-        }
-    }
-
-    fn on_scan(&mut self, scan: &ReachabilityScan) {
-        self.record(|r| r.reachability(scan));
-    }
-
-    fn on_path(&mut self, robot: &RobotId, now: Time, path: &[Point2]) {
-        self.record(|r| r.path(robot.as_str(), now, path));
-    }
-
-    fn on_transitions(&mut self, robot: &RobotId, records: &[TransitionRecord]) {
-        if self.settings.trace {
-            for t in records {
-                self.settings.bar.suspend(|| {
-                    out!("{:>9.1}s {robot} {} {} -> {}", t.time.as_secs_f64(), t.path, t.from, t.to);
-                });
-            }
-        }
-        self.record(|r| r.transitions(robot.as_str(), records));
-    }
-
-    fn on_event(&mut self, now: Time, event: &SimEvent) {
-        self.record(|r| r.json("/team/events", now, event));
-        if self.follow_goals(event) {
-            let goals = std::mem::take(&mut self.goals);
-            self.record(|r| {
-                r.goals(
-                    now,
-                    goals.iter().map(|g| GoalMarkerInput {
-                        id: &g.id,
-                        position: g.position,
-                        claimed_by: g.claimed_by.as_deref(),
-                        visited_by: g.visited_by.as_deref(),
-                    }),
-                )
-            });
-            self.goals = goals;
-        }
-    }
-
-    fn on_map(&mut self, _robot: &RobotId, now: Time, map: &AerialMap) {
-        let classes = &self.settings.classes;
-        if self.error.is_some() {
-            return;
-        }
-        if let Some(rec) = self.recorder.as_mut()
-            && let Err(e) = rec.map(now, map, classes)
-        {
-            self.error = Some(e.into());
-        }
-    }
-
-    fn on_seam(&mut self, robot: &RobotId, now: Time, call: SeamInput<'_>) {
-        if !self.settings.replayable {
-            return;
-        }
-        self.record(|r| r.seam(robot.as_str(), now, call));
-    }
-
-    fn on_problem(&mut self, robot: &RobotId, now: Time, message: &str) {
-        self.record(|r| r.problem(robot.as_str(), now, message));
-    }
+    let recorder = observer.finish()?;
+    Ok((result, recorder))
 }
 
 fn combine(mission: &str, runs: Vec<RunSummary>, interrupted: bool) -> CombinedSummary {
@@ -996,6 +788,8 @@ struct OffMap {
     /// Robot, simulated seconds, where.
     left: Vec<(String, f64, spomp_core::Point2)>,
 }
+
+impl spomp_robot::RobotObserver for OffMap {}
 
 impl spomp_sim::run::SimObserver for OffMap {
     fn on_state(&mut self, robot: &spomp_core::RobotId, now: spomp_core::Time, state: &spomp_sim::run::RobotSnapshot) {

@@ -78,7 +78,6 @@ impl TeamChannel for ZenohChannel {
 /// and the mission say. Call before the node runs.
 pub fn set_up(args: &TeamLinkArgs, mission: &MissionFile, robot_id: &str, robot: &mut Robot) -> Result<SetUp> {
     let mut notes = Vec::new();
-    let mut resumed = None;
     let id = RobotId::new(robot_id);
     let keys = match &args.keys {
         Some(dir) => {
@@ -107,7 +106,7 @@ pub fn set_up(args: &TeamLinkArgs, mission: &MissionFile, robot_id: &str, robot:
     if let Some(path) = &args.state_file {
         match spomp_zenoh::read_state(path, robot_id) {
             Ok(None) => notes.push(format!("no state file at {} yet: starting fresh", path.display())),
-            Ok(Some(bytes)) => match robot.resume(&bytes) {
+            Ok(Some(bytes)) => match robot.resume(spomp_core::Time::ZERO, bytes) {
                 Ok(s) => {
                     notes.push(format!(
                         "resumed from {}: {} records, {} goals, {} own claims",
@@ -116,7 +115,6 @@ pub fn set_up(args: &TeamLinkArgs, mission: &MissionFile, robot_id: &str, robot:
                         s.goals,
                         s.own_claims
                     ));
-                    resumed = Some(bytes);
                 }
                 Err(e) => notes.push(format!("state file {} ignored: {e}", path.display())),
             },
@@ -128,7 +126,7 @@ pub fn set_up(args: &TeamLinkArgs, mission: &MissionFile, robot_id: &str, robot:
         }
     }
     if !args.wanted(mission, robot_id) {
-        return Ok(SetUp { link: None, notes, resumed });
+        return Ok(SetUp { link: None, notes });
     }
     let spec = mission.team.iter().find(|r| r.id == robot_id).and_then(|r| r.team_link.clone()).unwrap_or_default();
     let mut config = LinkConfig::new(&mission.mission, id.clone());
@@ -154,7 +152,7 @@ pub fn set_up(args: &TeamLinkArgs, mission: &MissionFile, robot_id: &str, robot:
         config.listen.join(", "),
         config.connect.join(", ")
     ));
-    Ok(SetUp { link: Some(link), notes, resumed })
+    Ok(SetUp { link: Some(link), notes })
 }
 
 /// What [`set_up`] did.
@@ -163,8 +161,6 @@ pub struct SetUp {
     pub link: Option<TeamLink>,
     /// What to tell the operator.
     pub notes: Vec<String>,
-    /// The state the robot resumed from (a seam call a replay repeats).
-    pub resumed: Option<Vec<u8>>,
 }
 
 /// Plugs the link and the state file into the node.

@@ -402,12 +402,15 @@ fn a_resumed_uav_continues_its_survey_where_it_was() {
         out
     };
     let mut rebooted = make("uav1");
-    rebooted.resume(&reframe(r#"{"next_waypoint":2}"#)).expect("resume");
+    rebooted.resume(Time::ZERO, reframe(r#"{"next_waypoint":2}"#)).expect("resume");
     assert!(rebooted.resume_state().windows(17).any(|w| w == br#"{"next_waypoint":"#), "entries kept");
     assert!(String::from_utf8_lossy(&rebooted.resume_state()).contains(r#""next_waypoint":2"#));
 
-    assert!(make("uav1").resume(&reframe(r#"{"speed":3}"#)).is_err(), "an entry the role does not keep");
-    assert!(make("uav1").resume(&reframe(r#"{"next_waypoint":"two"}"#)).is_err(), "a value of the wrong type");
-    assert!(make("ugv1").resume(&reframe("{}")).is_err(), "the UAV's team state given to ugv1");
-    assert!(make("uav1").resume(&state[..state.len() / 2]).is_err(), "cut short");
+    assert!(make("uav1").resume(Time::ZERO, reframe(r#"{"speed":3}"#)).is_err(), "an entry the role does not keep");
+    assert!(
+        make("uav1").resume(Time::ZERO, reframe(r#"{"next_waypoint":"two"}"#)).is_err(),
+        "a value of the wrong type"
+    );
+    assert!(make("ugv1").resume(Time::ZERO, reframe("{}")).is_err(), "the UAV's team state given to ugv1");
+    assert!(make("uav1").resume(Time::ZERO, state[..state.len() / 2].to_vec()).is_err(), "cut short");
 }

@@ -3,9 +3,10 @@
 //! - [`Robot`]: the seam. An adapter (the simulator, the ROS 2 node, log replay) owns one per
 //!   robot and drives it through a small push API: inputs ([`Robot::on_odometry`],
 //!   [`Robot::on_panorama`], [`Robot::on_external_pose`], [`Robot::on_camera_tiles`],
-//!   [`Robot::on_team_message`]), [`Robot::maintain`] and [`Robot::tick`], then outputs
-//!   ([`Robot::command`] or [`Robot::flight`], [`Robot::team_message_for`],
-//!   [`Robot::take_problems`]).
+//!   [`Robot::on_team_message`]), [`Robot::tick`], then outputs ([`Robot::command`] or
+//!   [`Robot::flight`], [`Robot::team_message_for`], [`Robot::take_problems`]).
+//! - [`seam`]: the same calls as data ([`SeamCall`], made by [`Robot::call`]), which the robot
+//!   records for one [`RobotObserver`] (logs, live views, replay checks).
 //! - [`RobotSetup`]: the one translation from a mission, a robot id and the [`OperatingArea`]
 //!   to a robot's configuration, with its [`NavigationSettings`] from the mission's
 //!   `navigation:` sections.
@@ -28,5 +29,6 @@ pub use checks::MissionRobotChecks;
 pub use nodes::registry;
 pub use robot::{ResumeError, Robot, RobotError};
 pub use runtime::{JoinFn, RobotRuntime};
+pub use seam::{RobotObserver, SeamCall, SeamReply, TickOutput};
 pub use settings::{NavigationProfile, NavigationSettings, SettingsError, WatchdogParams};
-pub use setup::{OperatingArea, PoseInput, RobotSetup, SetupError, robot_seed};
+pub use setup::{OperatingArea, PoseInput, RobotSetup, SetupError, SetupOptions, robot_seed};

@@ -5,7 +5,7 @@
 //! 1. pushes what arrived: odometry, panoramas, an external pose (GPS, a surveyed position,
 //!    simulator truth where the mission asks), camera tiles (the UAV), team-state messages with
 //!    the peer they came from;
-//! 2. calls [`Robot::maintain`] and [`Robot::tick`] at the robot's tick rate — and, when the
+//! 2. calls [`Robot::tick`] (upkeep, then the tree) at the robot's tick rate — and, when the
 //!    heavy skills run in the background ([`Robot::set_background_skills`]), hands the work
 //!    [`Robot::take_work`] gives to another thread and each result back with
 //!    [`Robot::finish_work`] between ticks;
@@ -13,6 +13,10 @@
 //!    (UAV target) — `None` is stop / hover, so a command never outlives the node that issued
 //!    it — the team-state message for each peer it can reach ([`Robot::team_message_for`]),
 //!    and the problems met ([`Robot::take_problems`]).
+//!
+//! Each of these calls is one [`SeamCall`] made through [`Robot::call`]; a robot told to
+//! record ([`Robot::record_seam`]) keeps them, with their answers, for its observers
+//! ([`Robot::deliver_recorded`]).
 
 use std::sync::Arc;
 
@@ -28,6 +32,7 @@ use spomp_behaviors::blackboard::BbValue;
 use spomp_teamstate::{ApplyReport, RestoreSummary, SyncError, TeamSecurity, TeamState, TeamStateError, TierSet};
 
 use crate::runtime::{FinishedWork, NavStack, RobotRuntime, RuntimeError, SkillWork};
+use crate::seam::{RobotObserver, SeamCall, SeamReply, TickOutput, UnknownWork};
 use crate::setup::{OperatingArea, PoseInput, RobotSetup, SetupError};
 
 /// Why a robot could not be built.
@@ -65,6 +70,17 @@ pub struct Robot {
     /// whether that wait was reported.
     waiting_since: Option<Time>,
     wait_reported: bool,
+    /// The calls made on the seam not yet delivered to observers, when recording.
+    seam_log: Option<Vec<(Time, SeamCall)>>,
+    /// Finished work handed over and not yet applied ([`Robot::deliver_work`]).
+    delivered: Vec<FinishedWork>,
+}
+
+/// Where a named seam method's call answered with another call's reply (never: each call
+/// gives its own); the fallback keeps production code free of panics.
+#[cold]
+fn mismatched_reply() {
+    debug_assert!(false, "a seam call answered with another call's reply");
 }
 
 /// A robot still without its first inputs this long after its first tick reports it once,
@@ -137,6 +153,8 @@ impl Robot {
             persist: role.persist.clone(),
             waiting_since: None,
             wait_reported: false,
+            seam_log: None,
+            delivered: Vec::new(),
         })
     }
 
@@ -162,36 +180,158 @@ impl Robot {
         self.tick_hz
     }
 
+    // --- the seam ------------------------------------------------------------------------------
+
+    /// Makes one call on the seam at `now` and returns it with its answers filled in, and what
+    /// else it gives its caller. Every named input, [`Self::tick`], [`Self::halt`],
+    /// [`Self::team_message_for`], [`Self::take_work`], [`Self::finish_work`] and
+    /// [`Self::resume`] is this call; a robot recording ([`Self::record_seam`]) keeps each call
+    /// made for its observers.
+    pub fn call(&mut self, now: Time, call: SeamCall) -> (SeamCall, SeamReply) {
+        self.call_observed(now, call, None)
+    }
+
+    /// [`Self::call`], a tick's node transitions going to `tree` as they happen.
+    pub fn call_observed(
+        &mut self,
+        now: Time,
+        call: SeamCall,
+        tree: Option<&mut dyn TreeObserver>,
+    ) -> (SeamCall, SeamReply) {
+        let (call, reply) = self.dispatch(now, call, tree);
+        if let Some(log) = self.seam_log.as_mut() {
+            log.push((now, call.clone()));
+        }
+        (call, reply)
+    }
+
+    fn dispatch(
+        &mut self,
+        now: Time,
+        mut call: SeamCall,
+        tree: Option<&mut dyn TreeObserver>,
+    ) -> (SeamCall, SeamReply) {
+        let reply = match &mut call {
+            SeamCall::Odometry(odom) => {
+                self.runtime.on_odometry(*odom);
+                SeamReply::Done
+            }
+            SeamCall::Panorama(frame) => {
+                self.runtime.on_panorama(Arc::clone(frame));
+                SeamReply::Done
+            }
+            SeamCall::ExternalPose(estimate) => {
+                self.runtime.on_external_pose(*estimate);
+                SeamReply::Done
+            }
+            SeamCall::CameraTiles(tiles) => {
+                self.runtime.on_camera_tiles(tiles, now);
+                SeamReply::Done
+            }
+            SeamCall::TeamIn { from, bytes } => {
+                let result = self.runtime.team_mut().apply_bytes(from, bytes);
+                if let Err(e) = &result {
+                    self.runtime.report(format!("sync from {from} rejected: {e}"));
+                }
+                SeamReply::TeamIn(result)
+            }
+            SeamCall::TeamOut { to, tiers, budget_bytes, sent } => {
+                *sent = self.runtime.team_mut().make_sync(to, *tiers, *budget_bytes).map(|m| m.encode());
+                SeamReply::Done
+            }
+            SeamCall::Tick(out) => {
+                self.runtime.maintain(now);
+                let status = self.tick_tree(now, tree);
+                *out = TickOutput { command: self.runtime.command(), flight: self.runtime.flight() };
+                SeamReply::Tick(status)
+            }
+            SeamCall::Halt => {
+                self.tree.halt(now, &mut self.runtime, tree);
+                SeamReply::Done
+            }
+            SeamCall::TakeWork(ids) => {
+                let work = self.runtime.take_work(now);
+                *ids = work.iter().map(SkillWork::id).collect();
+                SeamReply::TakeWork(work)
+            }
+            SeamCall::FinishWork(id) => match self.delivered.iter().position(|w| w.id() == *id) {
+                Some(k) => {
+                    let work = self.delivered.swap_remove(k);
+                    self.runtime.finish_work(work);
+                    SeamReply::FinishWork(Ok(()))
+                }
+                None => SeamReply::FinishWork(Err(UnknownWork(*id))),
+            },
+            SeamCall::Resume(bytes) => SeamReply::Resume(self.resume_from(bytes)),
+        };
+        (call, reply)
+    }
+
+    /// Whether the robot keeps every call made on its seam for its observers (a recorder that
+    /// logs them, a replay check): off by default, as it costs a copy of each call's data.
+    /// Turning it on again keeps what is recorded.
+    pub fn record_seam(&mut self, on: bool) {
+        match (on, self.seam_log.is_some()) {
+            (true, false) => self.seam_log = Some(Vec::new()),
+            (false, true) => self.seam_log = None,
+            _ => {}
+        }
+    }
+
+    /// Hands `observer` the calls made on the seam since the last delivery, in the order made
+    /// (none unless recording, [`Self::record_seam`]). Adapters that step several robots on
+    /// several threads deliver each robot's calls afterwards, in robot order: the log is the
+    /// same however the robots were stepped.
+    pub fn deliver_recorded(&mut self, observer: &mut dyn RobotObserver) {
+        let Some(log) = self.seam_log.as_mut() else { return };
+        if log.is_empty() {
+            return;
+        }
+        let calls = std::mem::take(log);
+        let id = self.runtime.id();
+        for (now, call) in &calls {
+            observer.on_seam(id, *now, call);
+        }
+        // Keeps the buffer's capacity for the next step.
+        let mut calls = calls;
+        calls.clear();
+        if let Some(log) = self.seam_log.as_mut() {
+            *log = calls;
+        }
+    }
+
     // --- inputs -----------------------------------------------------------------------------------
 
-    /// New odometry (robot frame).
-    pub fn on_odometry(&mut self, odom: Odometry) {
-        self.runtime.on_odometry(odom);
+    /// New odometry (robot frame) at `now`.
+    pub fn on_odometry(&mut self, now: Time, odom: Odometry) {
+        self.call(now, SeamCall::Odometry(odom));
     }
 
-    /// A new depth + semantic panorama.
-    pub fn on_panorama(&mut self, frame: Arc<PanoramaFrame>) {
-        self.runtime.on_panorama(frame);
+    /// A new depth + semantic panorama at `now`.
+    pub fn on_panorama(&mut self, now: Time, frame: Arc<PanoramaFrame>) {
+        self.call(now, SeamCall::Panorama(frame));
     }
 
-    /// A map-frame pose from outside (see [`Robot::pose_input`]).
-    pub fn on_external_pose(&mut self, estimate: PoseEstimate) {
-        self.runtime.on_external_pose(estimate);
+    /// A map-frame pose from outside at `now` (see [`Robot::pose_input`]).
+    pub fn on_external_pose(&mut self, now: Time, estimate: PoseEstimate) {
+        self.call(now, SeamCall::ExternalPose(estimate));
     }
 
-    /// Aerial-map tiles from the robot's own camera (the UAV).
-    pub fn on_camera_tiles(&mut self, tiles: &[MapTile], now: Time) {
-        self.runtime.on_camera_tiles(tiles, now);
+    /// Aerial-map tiles from the robot's own camera (the UAV) at `now`.
+    pub fn on_camera_tiles(&mut self, now: Time, tiles: Vec<MapTile>) {
+        self.call(now, SeamCall::CameraTiles(tiles));
     }
 
     /// A team-state sync message from peer `from`, as bytes off the link. A message that does
     /// not decode or check is rejected whole, reported, and changes nothing; the error says why.
-    pub fn on_team_message(&mut self, from: &RobotId, bytes: &[u8]) -> Result<ApplyReport, SyncError> {
-        let result = self.runtime.team_mut().apply_bytes(from, bytes);
-        if let Err(e) = &result {
-            self.runtime.report(format!("sync from {from} rejected: {e}"));
+    pub fn on_team_message(&mut self, now: Time, from: &RobotId, bytes: Vec<u8>) -> Result<ApplyReport, SyncError> {
+        match self.call(now, SeamCall::TeamIn { from: from.clone(), bytes }).1 {
+            SeamReply::TeamIn(result) => result,
+            _ => {
+                mismatched_reply();
+                Ok(ApplyReport::default())
+            }
         }
-        result
     }
 
     // --- the team link on robots ------------------------------------------------------------------
@@ -224,7 +364,17 @@ impl Robot {
     /// Takes a state made by [`Robot::resume_state`] before a reboot: its team state (checked
     /// as a peer's would be) and kept entries. Call it before the first tick, after
     /// [`Robot::secure_team`]. Refused whole if any part does not check.
-    pub fn resume(&mut self, bytes: &[u8]) -> Result<RestoreSummary, ResumeError> {
+    pub fn resume(&mut self, now: Time, bytes: Vec<u8>) -> Result<RestoreSummary, ResumeError> {
+        match self.call(now, SeamCall::Resume(bytes)).1 {
+            SeamReply::Resume(result) => result,
+            _ => {
+                mismatched_reply();
+                Err(ResumeError::Malformed("no answer".into()))
+            }
+        }
+    }
+
+    fn resume_from(&mut self, bytes: &[u8]) -> Result<RestoreSummary, ResumeError> {
         let (len, rest) = bytes.split_first_chunk::<4>().ok_or_else(|| ResumeError::Malformed("cut short".into()))?;
         let (entries, team) = rest
             .split_at_checked(u32::from_le_bytes(*len) as usize)
@@ -255,15 +405,11 @@ impl Robot {
 
     // --- stepping ---------------------------------------------------------------------------------
 
-    /// Background upkeep at `now` (team-state clock, global planner upkeep); once per tick.
-    pub fn maintain(&mut self, now: Time) {
-        self.runtime.maintain(now);
-    }
-
-    /// Ticks the tree once at `now`; transitions go to `observer`. A tree that has finished
+    /// Background upkeep at `now` (team-state clock, global planner upkeep), then one tick of the
+    /// tree; transitions go to `observer`. A tree that has finished
     /// (success or failure) stays finished: it is not ticked again and the robot commands
     /// nothing, so a mission's `all_trees_done` sees every robot done together. A role that
-    /// should run again says so with `repeat`. Upkeep ([`Self::maintain`]) goes on.
+    /// should run again says so with `repeat`. Upkeep goes on.
     ///
     /// The tree does not start before the robot's first inputs ([`Self::has_first_inputs`]): on
     /// a robot the processes and topics come up in any order, and a tree ticked first would see
@@ -271,6 +417,16 @@ impl Robot {
     /// the robot commands nothing, and a wait longer than [`FIRST_INPUTS_REPORT_S`] is reported
     /// once.
     pub fn tick(&mut self, now: Time, observer: Option<&mut dyn TreeObserver>) -> Status {
+        match self.call_observed(now, SeamCall::Tick(TickOutput::default()), observer).1 {
+            SeamReply::Tick(status) => status,
+            _ => {
+                mismatched_reply();
+                self.tree.status()
+            }
+        }
+    }
+
+    fn tick_tree(&mut self, now: Time, observer: Option<&mut dyn TreeObserver>) -> Status {
         self.runtime.begin_tick();
         let last = self.tree.status();
         if last.is_done() {
@@ -304,16 +460,17 @@ impl Robot {
         }
     }
 
-    /// Halts the tree (mission end, robot killed): running nodes stop and clean up.
-    pub fn halt(&mut self, now: Time, observer: Option<&mut dyn TreeObserver>) {
-        self.tree.halt(now, &mut self.runtime, observer);
+    /// Halts the tree (mission end, robot killed): running nodes stop and clean up. Unobserved:
+    /// a halt's transitions are not logged (a replay makes the same halt).
+    pub fn halt(&mut self, now: Time) {
+        self.call(now, SeamCall::Halt);
     }
 
     // --- heavy skills off the tick thread -----------------------------------------------------------
 
     /// Runs the heavy skills (panorama processing, the global planner's upkeep) as work the
     /// adapter takes with [`Self::take_work`] and runs elsewhere, instead of inside
-    /// [`Self::on_panorama`] and [`Self::maintain`]. Set before the first input.
+    /// [`Self::on_panorama`] and [`Self::tick`]. Set before the first input.
     pub fn set_background_skills(&mut self, on: bool) {
         self.runtime.set_background_skills(on);
     }
@@ -327,12 +484,27 @@ impl Robot {
     /// The work due now (background skills; none otherwise): run each, then give it back with
     /// [`Self::finish_work`]. See `spomp_robot::runtime::SkillWork`.
     pub fn take_work(&mut self, now: Time) -> Vec<SkillWork> {
-        self.runtime.take_work(now)
+        match self.call(now, SeamCall::TakeWork(Vec::new())).1 {
+            SeamReply::TakeWork(work) => work,
+            _ => {
+                mismatched_reply();
+                Vec::new()
+            }
+        }
     }
 
-    /// A finished work, back from wherever it ran.
-    pub fn finish_work(&mut self, work: FinishedWork) {
-        self.runtime.finish_work(work);
+    /// A finished work, back from wherever it ran, applied at `now`.
+    pub fn finish_work(&mut self, now: Time, work: FinishedWork) {
+        let id = work.id();
+        self.deliver_work(work);
+        self.call(now, SeamCall::FinishWork(id));
+    }
+
+    /// Hands over a finished work without applying it: the seam call
+    /// [`SeamCall::FinishWork`] with its number applies it (a replay delivers the work it ran
+    /// and makes the recorded call).
+    pub fn deliver_work(&mut self, work: FinishedWork) {
+        self.delivered.push(work);
     }
 
     // --- outputs ----------------------------------------------------------------------------------
@@ -349,8 +521,17 @@ impl Robot {
 
     /// The sync message for peer `to`, limited to `tiers` and `budget_bytes`, encoded for the
     /// link; `None` when there is nothing to send.
-    pub fn team_message_for(&mut self, to: &RobotId, tiers: TierSet, budget_bytes: usize) -> Option<Vec<u8>> {
-        self.runtime.team_mut().make_sync(to, tiers, budget_bytes).map(|m| m.encode())
+    pub fn team_message_for(
+        &mut self,
+        now: Time,
+        to: &RobotId,
+        tiers: TierSet,
+        budget_bytes: usize,
+    ) -> Option<Vec<u8>> {
+        match self.call(now, SeamCall::TeamOut { to: to.clone(), tiers, budget_bytes, sent: None }).0 {
+            SeamCall::TeamOut { sent, .. } => sent,
+            _ => None,
+        }
     }
 
     /// Problems met since the last call: the nodes' reports, then the runtime's.
@@ -387,7 +568,32 @@ impl Robot {
         self.runtime.nav().and_then(|n| n.latest_scan.as_ref())
     }
 
-    /// The runtime, read-only (tests and tools).
+    /// The latest terrain analysis's obstacle mask (UGVs), row-major in its panorama geometry.
+    pub fn terrain_obstacles(&self) -> Option<(spomp_core::PanoramaGeometry, &[bool])> {
+        self.runtime.nav().and_then(NavStack::terrain_obstacles)
+    }
+
+    /// The navigation settings in force (UGVs).
+    pub fn nav_params(&self) -> Option<&crate::runtime::NavParams> {
+        self.runtime.nav().map(|n| &n.params)
+    }
+
+    /// The robot's copy of the aerial map, if it keeps one.
+    pub fn aerial_map(&self) -> Option<&spomp_mapping::Orthomap> {
+        self.runtime.map()
+    }
+
+    /// The class table its skills use.
+    pub fn classes(&self) -> &spomp_core::ClassTable {
+        self.runtime.classes()
+    }
+
+    /// Panoramas replaced by a newer one before they were processed (background skills).
+    pub fn superseded_panoramas(&self) -> u64 {
+        self.runtime.superseded_panoramas()
+    }
+
+    /// The runtime, read-only (tests; adapters use the accessors above).
     pub fn runtime(&self) -> &RobotRuntime {
         &self.runtime
     }
@@ -395,11 +601,6 @@ impl Robot {
     /// The tree's executor (node paths, blackboard, status).
     pub fn tree(&self) -> &TreeExecutor<RobotRuntime> {
         &self.tree
-    }
-
-    /// The tree's executor, mutable (adapters inject blackboard entries and events).
-    pub fn tree_mut(&mut self) -> &mut TreeExecutor<RobotRuntime> {
-        &mut self.tree
     }
 }
 
@@ -430,6 +631,85 @@ mod tests {
         Robot::from_mission(&loaded, "ugv1", &area, 1, &crate::registry()).unwrap()
     }
 
+    /// Keeps every seam call it is handed.
+    #[derive(Default)]
+    struct SeamLog(Vec<(RobotId, Time, SeamCall)>);
+
+    impl RobotObserver for SeamLog {
+        fn wants_seam(&self) -> bool {
+            true
+        }
+        fn on_seam(&mut self, robot: &RobotId, now: Time, call: &SeamCall) {
+            self.0.push((robot.clone(), now, call.clone()));
+        }
+    }
+
+    /// Issue 35: the robot records itself. Every named method is a call on the seam, kept with
+    /// its answers in the order made, and a fresh robot made the same calls answers them alike
+    /// (what a replay checks) — no adapter has to report a call for it to be logged.
+    #[test]
+    fn a_recording_robot_keeps_every_call_with_its_answers_and_a_fresh_robot_answers_alike() {
+        let t = |s: f64| Time::from_secs_f64(s);
+        let drive = |r: &mut Robot| {
+            r.on_odometry(t(1.0), Odometry { stamp: t(1.0), ..Default::default() });
+            r.on_external_pose(
+                t(1.0),
+                PoseEstimate { stamp: t(1.0), pose: Pose2::new(5.0, 5.0, 0.0), confidence: 1.0, ..Default::default() },
+            );
+            let sent = r.team_message_for(t(1.0), &RobotId::new("ugv2"), TierSet::ALL, 1 << 20);
+            let rejected = r.on_team_message(t(1.05), &RobotId::new("ugv2"), vec![1, 2, 3]).is_err();
+            let status = r.tick(t(1.1), None);
+            let work = r.take_work(t(1.1));
+            r.halt(t(1.2));
+            (sent, rejected, status, work.len())
+        };
+        let mut r = robot_failing_at_once();
+        let mut quiet = robot_failing_at_once();
+        r.record_seam(true);
+        let (sent, rejected, status, work) = drive(&mut r);
+        assert_eq!((sent.clone(), rejected, status, work), drive(&mut quiet), "recording changes nothing");
+        assert!(sent.is_some() && rejected && status == Status::Failure && work == 0);
+        let mut log = SeamLog::default();
+        r.deliver_recorded(&mut log);
+        let names: Vec<&str> = log.0.iter().map(|(_, _, c)| c.name()).collect();
+        assert_eq!(names, ["odometry", "external_pose", "team_out", "team_in", "tick", "take_work", "halt"]);
+        assert!(log.0.iter().all(|(id, _, _)| id.as_str() == "ugv1"));
+        assert_eq!(log.0[2].1, t(1.0));
+        assert!(matches!(&log.0[2].2, SeamCall::TeamOut { sent: s, .. } if *s == sent), "the answer is kept");
+        assert!(matches!(log.0[4].2, SeamCall::Tick(TickOutput { command: None, flight: None })));
+        // Delivered once.
+        let mut again = SeamLog::default();
+        r.deliver_recorded(&mut again);
+        assert!(again.0.is_empty());
+        // A robot not told to record keeps nothing.
+        quiet.deliver_recorded(&mut again);
+        assert!(again.0.is_empty());
+        // Replayed on a fresh robot, every call answers as recorded.
+        let mut fresh = robot_failing_at_once();
+        for (_, now, call) in &log.0 {
+            let (answered, _) = fresh.call(*now, call.clone());
+            assert!(call.same_answers(&answered), "{} answered differently", call.name());
+        }
+        // A changed answer is told apart, with where it differs.
+        let SeamCall::TeamOut { to, tiers, budget_bytes, sent: Some(mut bytes) } = log.0[2].2.clone() else {
+            panic!("{:?}", log.0[2].2)
+        };
+        bytes[0] ^= 1;
+        let changed = SeamCall::TeamOut { to, tiers, budget_bytes, sent: Some(bytes) };
+        assert!(!log.0[2].2.same_answers(&changed));
+        assert!(changed.describe_answer(Some(&log.0[2].2)).contains("first difference at byte 0"));
+    }
+
+    /// A work result is applied only when handed over first; a finish naming another work is
+    /// refused, not applied.
+    #[test]
+    fn finishing_work_never_handed_over_is_refused() {
+        let mut r = robot_failing_at_once();
+        let (call, reply) = r.call(Time::from_secs_f64(1.0), SeamCall::FinishWork(7));
+        assert_eq!(call, SeamCall::FinishWork(7));
+        assert!(matches!(reply, SeamReply::FinishWork(Err(UnknownWork(7)))), "{reply:?}");
+    }
+
     /// Issue 32: on a robot the processes come up in any order; a tree ticked before the first
     /// odometry and pose failed at once and, finished, stayed failed for the whole mission.
     #[test]
@@ -446,14 +726,12 @@ mod tests {
         assert_eq!(waits.len(), 1, "{waits:?}");
         assert!(r.command().is_none_or(|c| c == Twist2::ZERO));
         // Odometry alone is not enough for a UGV: its pose too.
-        r.on_odometry(Odometry { stamp: t(12.0), ..Default::default() });
+        r.on_odometry(t(12.0), Odometry { stamp: t(12.0), ..Default::default() });
         assert!(!r.tick(t(12.0), None).is_done());
-        r.on_external_pose(PoseEstimate {
-            stamp: t(12.1),
-            pose: Pose2::new(5.0, 5.0, 0.0),
-            confidence: 1.0,
-            ..Default::default()
-        });
+        r.on_external_pose(
+            t(12.1),
+            PoseEstimate { stamp: t(12.1), pose: Pose2::new(5.0, 5.0, 0.0), confidence: 1.0, ..Default::default() },
+        );
         assert!(r.has_first_inputs());
         assert_eq!(r.tick(t(12.1), None), Status::Failure, "the tree runs once the inputs are in");
     }

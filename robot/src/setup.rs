@@ -112,6 +112,30 @@ pub fn robot_seed(run_seed: u64, robot_index: usize) -> u64 {
 /// How often the mapping robot publishes its map as a new version, seconds.
 pub const MAP_PUBLISH_PERIOD_S: f64 = 10.0;
 
+/// What the adapter adds to the mission for the translation ([`RobotSetup::from_mission_with`]):
+/// given to it, never patched into the configuration afterwards.
+#[derive(Clone, Debug)]
+pub struct SetupOptions {
+    /// How often the mapping robot publishes its map as a new version, seconds.
+    pub map_publish_period_s: f64,
+    /// PNG effort of the published map layers.
+    pub map_compression: CompressionParams,
+    /// The robot's own seed, when it is known already (a replay takes the recorded one);
+    /// `None`: [`robot_seed`] of the run's seed.
+    pub robot_seed: Option<u64>,
+}
+
+impl Default for SetupOptions {
+    fn default() -> Self {
+        SetupOptions {
+            map_publish_period_s: MAP_PUBLISH_PERIOD_S,
+            // The whole map is re-encoded on every publish: favour speed over the last bytes.
+            map_compression: CompressionParams { level: PngLevel::Fast },
+            robot_seed: None,
+        }
+    }
+}
+
 impl RobotSetup {
     /// The robot `id` of `mission` over `area`; `run_seed` seeds its random stream
     /// ([`robot_seed`]).
@@ -120,6 +144,17 @@ impl RobotSetup {
         id: &str,
         area: &OperatingArea,
         run_seed: u64,
+    ) -> Result<Self, SetupError> {
+        Self::from_mission_with(mission, id, area, run_seed, &SetupOptions::default())
+    }
+
+    /// [`Self::from_mission`] with the adapter's own inputs (map publishing, a known seed).
+    pub fn from_mission_with(
+        mission: &MissionFile,
+        id: &str,
+        area: &OperatingArea,
+        run_seed: u64,
+        options: &SetupOptions,
     ) -> Result<Self, SetupError> {
         let index = mission.team.iter().position(|r| r.id == id).ok_or_else(|| SetupError::UnknownRobot(id.into()))?;
         let spec = &mission.team[index];
@@ -194,10 +229,9 @@ impl RobotSetup {
             localization,
             nav,
             goal_time_per_m_s: goals.map_or(DEFAULT_TIME_LIMIT_PER_M_S, |g| g.time_limit_per_m_s),
-            seed: robot_seed(run_seed, index),
-            map_publish_period_s: MAP_PUBLISH_PERIOD_S,
-            // The whole map is re-encoded on every publish: favour speed over the last bytes.
-            map_compression: CompressionParams { level: PngLevel::Fast },
+            seed: options.robot_seed.unwrap_or_else(|| robot_seed(run_seed, index)),
+            map_publish_period_s: options.map_publish_period_s,
+            map_compression: options.map_compression.clone(),
             prior_map: area.prior_map.clone(),
         };
         Ok(RobotSetup {

@@ -11,7 +11,8 @@ use serde::{Deserialize, Serialize};
 use spomp_behaviors::mission::limits::{SourceError, read_regular};
 use spomp_behaviors::mission::output;
 use spomp_core::{RobotId, Time};
-use spomp_sim::run::{RunSummary, SeamInput, SimObserver};
+use spomp_robot::{RobotObserver, SeamCall};
+use spomp_sim::run::{RunSummary, SimObserver};
 use spomp_teamstate::{SyncMessage, TierSet};
 
 use super::spec::{Metric, TeamChannel};
@@ -236,13 +237,19 @@ impl ByteCounter {
     }
 }
 
-impl SimObserver for ByteCounter {
-    fn on_seam(&mut self, robot: &RobotId, _now: Time, call: SeamInput<'_>) {
-        if let SeamInput::TeamOut { tiers, sent: Some(bytes), .. } = call {
-            self.count(robot, tiers, bytes);
-        }
+impl RobotObserver for ByteCounter {
+    fn wants_seam(&self) -> bool {
+        true
     }
 
+    fn on_seam(&mut self, robot: &RobotId, _now: Time, call: &SeamCall) {
+        if let SeamCall::TeamOut { tiers, sent: Some(bytes), .. } = call {
+            self.count(robot, *tiers, bytes);
+        }
+    }
+}
+
+impl SimObserver for ByteCounter {
     fn record_period_s(&self) -> f64 {
         // Nothing here uses the robots' states: as rarely as the simulator allows.
         1.0

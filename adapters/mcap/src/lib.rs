@@ -35,6 +35,6 @@ pub use read::{LogCheck, LogMessage, McapLog, ReadError, check_log, decode_cdr, 
 pub use record::{MessageTap, MessageType, RecordError, Recorder, RecorderOptions, RobotConventions, encode_cdr};
 pub use safe::SafeFile;
 pub use seam::{
-    AREA_ATTACHMENT, AreaRecord, OpenLog, RUN_METADATA, ReplayLog, RunInfo, SeamCall, SeamCallMsg, TeamOut, TickOutput,
-    call_name, call_to_msg, open_replay_log, read_replay_log,
+    AREA_ATTACHMENT, AreaRecord, OpenLog, RUN_METADATA, ReplayLog, RunInfo, SeamCallMsg, TeamOut, call_from_msg,
+    call_to_msg, open_replay_log, read_replay_log,
 };

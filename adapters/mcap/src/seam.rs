@@ -21,12 +21,9 @@ use byteorder::LittleEndian;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use spomp_core::ros::RosMessage;
-use spomp_core::{
-    AerialMap, ClassTable, FlightCommand, GridSpec, MapTile, Odometry, PanoramaFrame, PoseEstimate, RobotId, Time,
-    Twist2,
-};
-
-use spomp_robot::seam::{SeamInput, tier_bits};
+use spomp_core::{AerialMap, ClassTable, GridSpec, RobotId, Time};
+use spomp_robot::SeamCall;
+use spomp_teamstate::TierSet;
 
 use crate::read::ReadError;
 use crate::record::{RecordError, Recorder};
@@ -43,7 +40,7 @@ const CDR_MEDIA_TYPE: &str = "application/x-spomp-cdr";
 pub struct SeamCallMsg {
     /// Time of the call, nanoseconds.
     pub stamp_ns: i64,
-    /// Which call ([`call_name`]: `odometry`, `panorama`, `team_in`, …).
+    /// Which call (`SeamCall::name`: `odometry`, `panorama`, `team_in`, …).
     pub call: String,
     /// The peer of a team message (`team_in`: the sender, `team_out`: the receiver), else empty.
     pub peer: String,
@@ -90,19 +87,10 @@ mod bytes {
     }
 }
 
-/// The outputs of one tick.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct TickOutput {
-    /// The velocity command after the tick (UGVs); `None`: stop.
-    pub command: Option<Twist2>,
-    /// The flight command after the tick (UAVs); `None`: hover.
-    pub flight: Option<FlightCommand>,
-}
-
-/// A sync request to a peer and what the robot answered.
+/// A `team_out` call's request and answer as the log stores it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TeamOut {
-    /// The tiers the link allowed, as bits (bit k = tier k).
+    /// The tiers the link allowed, as bits (`TierSet::bits`: bit k = tier k).
     pub tiers: u8,
     /// The byte budget.
     pub budget_bytes: u64,
@@ -110,105 +98,55 @@ pub struct TeamOut {
     pub sent: Option<Vec<u8>>,
 }
 
-/// One call on a robot's seam, owned (as read back).
-#[derive(Clone, Debug, PartialEq)]
-pub enum SeamCall {
-    /// `Robot::on_odometry`.
-    Odometry(Odometry),
-    /// `Robot::on_panorama`.
-    Panorama(Box<PanoramaFrame>),
-    /// `Robot::on_external_pose`.
-    ExternalPose(PoseEstimate),
-    /// `Robot::on_camera_tiles`.
-    CameraTiles(Vec<MapTile>),
-    /// `Robot::on_team_message`.
-    TeamIn {
-        /// The sender.
-        from: RobotId,
-        /// The bytes as received.
-        bytes: Vec<u8>,
-    },
-    /// `Robot::team_message_for`.
-    TeamOut {
-        /// The receiver.
-        to: RobotId,
-        /// Request and answer.
-        out: TeamOut,
-    },
-    /// `Robot::maintain` then `Robot::tick`, and the commands read back.
-    Tick(TickOutput),
-    /// `Robot::halt`.
-    Halt,
-    /// `Robot::take_work`, and the numbers of the work it gave.
-    TakeWork(Vec<u64>),
-    /// `Robot::finish_work` with work number `id`'s result.
-    FinishWork(u64),
-    /// `Robot::resume` with the state the robot rebooted with.
-    Resume(Vec<u8>),
-}
-
-/// The wire name of a call on a robot's seam.
-pub fn call_name(call: &SeamInput<'_>) -> &'static str {
-    match call {
-        SeamInput::Odometry(_) => "odometry",
-        SeamInput::Panorama(_) => "panorama",
-        SeamInput::ExternalPose(_) => "external_pose",
-        SeamInput::CameraTiles(_) => "camera_tiles",
-        SeamInput::TeamIn { .. } => "team_in",
-        SeamInput::TeamOut { .. } => "team_out",
-        SeamInput::Tick { .. } => "tick",
-        SeamInput::Halt => "halt",
-        SeamInput::TakeWork(_) => "take_work",
-        SeamInput::FinishWork(_) => "finish_work",
-        SeamInput::Resume(_) => "resume",
-    }
-}
-
-/// The wire message of a call on a robot's seam at `now`.
-pub fn call_to_msg(call: &SeamInput<'_>, now: Time) -> Result<SeamCallMsg, RecordError> {
-    let (peer, data) = match *call {
-        SeamInput::Odometry(o) => (String::new(), cdr(o)?),
-        SeamInput::Panorama(p) => (String::new(), cdr(p)?),
-        SeamInput::ExternalPose(e) => (String::new(), cdr(e)?),
-        SeamInput::CameraTiles(t) => (String::new(), cdr(&t)?),
-        SeamInput::TeamIn { from, bytes } => (from.to_string(), bytes.to_vec()),
-        SeamInput::TeamOut { to, tiers, budget_bytes, sent } => {
-            let out =
-                TeamOut { tiers: tier_bits(tiers), budget_bytes: budget_bytes as u64, sent: sent.map(<[u8]>::to_vec) };
+/// The wire message of a call on a robot's seam at `now` (the robot layer's
+/// [`SeamCall`], answers included).
+pub fn call_to_msg(call: &SeamCall, now: Time) -> Result<SeamCallMsg, RecordError> {
+    let (peer, data) = match call {
+        SeamCall::Odometry(o) => (String::new(), cdr(o)?),
+        SeamCall::Panorama(p) => (String::new(), cdr(&**p)?),
+        SeamCall::ExternalPose(e) => (String::new(), cdr(e)?),
+        SeamCall::CameraTiles(t) => (String::new(), cdr(t)?),
+        SeamCall::TeamIn { from, bytes } => (from.to_string(), bytes.clone()),
+        SeamCall::TeamOut { to, tiers, budget_bytes, sent } => {
+            let out = TeamOut { tiers: tiers.bits(), budget_bytes: *budget_bytes as u64, sent: sent.clone() };
             (to.to_string(), cdr(&out)?)
         }
-        SeamInput::Tick { command, flight } => (String::new(), cdr(&TickOutput { command, flight })?),
-        SeamInput::Halt => (String::new(), Vec::new()),
-        SeamInput::TakeWork(ids) => (String::new(), cdr(&ids)?),
-        SeamInput::FinishWork(id) => (String::new(), cdr(&id)?),
-        SeamInput::Resume(bytes) => (String::new(), bytes.to_vec()),
+        SeamCall::Tick(out) => (String::new(), cdr(out)?),
+        SeamCall::Halt => (String::new(), Vec::new()),
+        SeamCall::TakeWork(ids) => (String::new(), cdr(ids)?),
+        SeamCall::FinishWork(id) => (String::new(), cdr(id)?),
+        SeamCall::Resume(bytes) => (String::new(), bytes.clone()),
     };
-    Ok(SeamCallMsg { stamp_ns: now.nanos, call: call_name(call).to_string(), peer, data })
+    Ok(SeamCallMsg { stamp_ns: now.nanos, call: call.name().to_string(), peer, data })
 }
 
-impl SeamCall {
-    /// Decodes a wire message of `topic`.
-    pub fn from_msg(topic: &str, msg: &SeamCallMsg) -> Result<SeamCall, ReadError> {
-        let bad = |message: String| ReadError::Decode { topic: topic.to_string(), message };
-        let data = &msg.data[..];
-        let decode = |what: &str| bad(format!("`{}` call: {what} does not decode", msg.call));
-        Ok(match msg.call.as_str() {
-            "odometry" => SeamCall::Odometry(uncdr(data).ok_or_else(|| decode("odometry"))?),
-            "panorama" => SeamCall::Panorama(Box::new(uncdr(data).ok_or_else(|| decode("panorama"))?)),
-            "external_pose" => SeamCall::ExternalPose(uncdr(data).ok_or_else(|| decode("pose"))?),
-            "camera_tiles" => SeamCall::CameraTiles(uncdr(data).ok_or_else(|| decode("tiles"))?),
-            "team_in" => SeamCall::TeamIn { from: RobotId::new(&msg.peer), bytes: msg.data.clone() },
-            "team_out" => {
-                SeamCall::TeamOut { to: RobotId::new(&msg.peer), out: uncdr(data).ok_or_else(|| decode("request"))? }
+/// Decodes a wire message of `topic` into the call it records.
+pub fn call_from_msg(topic: &str, msg: &SeamCallMsg) -> Result<SeamCall, ReadError> {
+    let bad = |message: String| ReadError::Decode { topic: topic.to_string(), message };
+    let data = &msg.data[..];
+    let decode = |what: &str| bad(format!("`{}` call: {what} does not decode", msg.call));
+    Ok(match msg.call.as_str() {
+        "odometry" => SeamCall::Odometry(uncdr(data).ok_or_else(|| decode("odometry"))?),
+        "panorama" => SeamCall::Panorama(Arc::new(uncdr(data).ok_or_else(|| decode("panorama"))?)),
+        "external_pose" => SeamCall::ExternalPose(uncdr(data).ok_or_else(|| decode("pose"))?),
+        "camera_tiles" => SeamCall::CameraTiles(uncdr(data).ok_or_else(|| decode("tiles"))?),
+        "team_in" => SeamCall::TeamIn { from: RobotId::new(&msg.peer), bytes: msg.data.clone() },
+        "team_out" => {
+            let out: TeamOut = uncdr(data).ok_or_else(|| decode("request"))?;
+            SeamCall::TeamOut {
+                to: RobotId::new(&msg.peer),
+                tiers: TierSet::from_bits(out.tiers),
+                budget_bytes: usize::try_from(out.budget_bytes).unwrap_or(usize::MAX),
+                sent: out.sent,
             }
-            "tick" => SeamCall::Tick(uncdr(data).ok_or_else(|| decode("tick output"))?),
-            "halt" => SeamCall::Halt,
-            "take_work" => SeamCall::TakeWork(uncdr(data).ok_or_else(|| decode("work numbers"))?),
-            "finish_work" => SeamCall::FinishWork(uncdr(data).ok_or_else(|| decode("work number"))?),
-            "resume" => SeamCall::Resume(msg.data.clone()),
-            other => return Err(bad(format!("unknown seam call `{other}`"))),
-        })
-    }
+        }
+        "tick" => SeamCall::Tick(uncdr(data).ok_or_else(|| decode("tick output"))?),
+        "halt" => SeamCall::Halt,
+        "take_work" => SeamCall::TakeWork(uncdr(data).ok_or_else(|| decode("work numbers"))?),
+        "finish_work" => SeamCall::FinishWork(uncdr(data).ok_or_else(|| decode("work number"))?),
+        "resume" => SeamCall::Resume(msg.data.clone()),
+        other => return Err(bad(format!("unknown seam call `{other}`"))),
+    })
 }
 
 fn cdr<T: Serialize>(v: &T) -> Result<Vec<u8>, RecordError> {
@@ -349,9 +287,9 @@ impl<W: Write + Seek> Recorder<W> {
         self.end_chunk()
     }
 
-    /// One call on robot `robot`'s seam at `now` (`/R/seam`).
-    pub fn seam(&mut self, robot: &str, now: Time, call: SeamInput<'_>) -> Result<(), RecordError> {
-        let msg = call_to_msg(&call, now)?;
+    /// One call on robot `robot`'s seam at `now`, with its answers (`/R/seam`).
+    pub fn seam(&mut self, robot: &str, now: Time, call: &SeamCall) -> Result<(), RecordError> {
+        let msg = call_to_msg(call, now)?;
         self.log(&format!("/{robot}/seam"), now, &msg)
     }
 }
@@ -476,7 +414,10 @@ mod tests {
 
     use std::sync::Arc;
 
-    use spomp_core::{DepthPanorama, PanoramaGeometry, Point2, Pose2, SemanticPanorama};
+    use spomp_core::{
+        DepthPanorama, Odometry, PanoramaFrame, PanoramaGeometry, Point2, Pose2, SemanticPanorama, Twist2,
+    };
+    use spomp_robot::TickOutput;
     use spomp_teamstate::{Tier, TierSet};
 
     use super::*;
@@ -503,12 +444,12 @@ mod tests {
         }
     }
 
-    fn record(calls: &[(Time, SeamInput<'_>)]) -> Vec<u8> {
+    fn record(calls: &[(Time, SeamCall)]) -> Vec<u8> {
         let mut buf = std::io::Cursor::new(Vec::new());
         let mut rec = Recorder::new(&mut buf, RecorderOptions::default()).unwrap();
         rec.run_info(&info()).unwrap();
         for (t, c) in calls {
-            rec.seam("ugv1", *t, *c).unwrap();
+            rec.seam("ugv1", *t, c).unwrap();
         }
         rec.finish().unwrap();
         buf.into_inner()
@@ -532,16 +473,17 @@ mod tests {
         let peer = RobotId::new("uav1");
         let tick = TickOutput { command: Some(Twist2 { v: 1.5, omega: -1e-17 }), flight: None };
         let tiers = TierSet::only(Tier::Coordination).with(Tier::Maps);
+        let frame = Arc::new(frame);
         let calls = [
-            (Time::from_nanos(5), SeamInput::Odometry(&odom)),
-            (Time::from_nanos(6), SeamInput::Panorama(&frame)),
-            (Time::from_nanos(7), SeamInput::TeamIn { from: &peer, bytes: &[1, 2, 3] }),
-            (Time::from_nanos(7), SeamInput::TeamOut { to: &peer, tiers, budget_bytes: 9, sent: None }),
-            (Time::from_nanos(8), SeamInput::Tick { command: tick.command, flight: tick.flight }),
-            (Time::from_nanos(9), SeamInput::Halt),
-            (Time::from_nanos(9), SeamInput::TakeWork(&[7, 8])),
-            (Time::from_nanos(10), SeamInput::FinishWork(8)),
-            (Time::from_nanos(10), SeamInput::Resume(&[1, 2, 3])),
+            (Time::from_nanos(5), SeamCall::Odometry(odom)),
+            (Time::from_nanos(6), SeamCall::Panorama(Arc::clone(&frame))),
+            (Time::from_nanos(7), SeamCall::TeamIn { from: peer.clone(), bytes: vec![1, 2, 3] }),
+            (Time::from_nanos(7), SeamCall::TeamOut { to: peer.clone(), tiers, budget_bytes: 9, sent: None }),
+            (Time::from_nanos(8), SeamCall::Tick(tick)),
+            (Time::from_nanos(9), SeamCall::Halt),
+            (Time::from_nanos(9), SeamCall::TakeWork(vec![7, 8])),
+            (Time::from_nanos(10), SeamCall::FinishWork(8)),
+            (Time::from_nanos(10), SeamCall::Resume(vec![1, 2, 3])),
         ];
         let log = read_replay_log(&record(&calls)).unwrap();
         assert!(!log.truncated);
@@ -549,7 +491,7 @@ mod tests {
         let read: Vec<SeamCall> = log
             .messages
             .iter()
-            .map(|m| SeamCall::from_msg(&m.topic, &crate::decode_cdr(&m.topic, &m.data).unwrap()).unwrap())
+            .map(|m| call_from_msg(&m.topic, &crate::decode_cdr(&m.topic, &m.data).unwrap()).unwrap())
             .collect();
         assert_eq!(read.len(), calls.len());
         assert_eq!(read[0], SeamCall::Odometry(odom));
@@ -561,7 +503,8 @@ mod tests {
             ((-0.0f64).to_bits(), frame.semantic.class.to_vec())
         );
         assert_eq!(read[2], SeamCall::TeamIn { from: peer.clone(), bytes: vec![1, 2, 3] });
-        assert_eq!(read[3], SeamCall::TeamOut { to: peer, out: TeamOut { tiers: 0b101, budget_bytes: 9, sent: None } });
+        assert_eq!(read[3], SeamCall::TeamOut { to: peer, tiers, budget_bytes: 9, sent: None });
+        assert_eq!(tiers.bits(), 0b101, "bit k = tier k on the wire");
         assert_eq!(read[4], SeamCall::Tick(tick));
         assert_eq!(read[5], SeamCall::Halt);
         assert_eq!(read[6], SeamCall::TakeWork(vec![7, 8]));
@@ -572,15 +515,15 @@ mod tests {
     #[test]
     fn an_unclosed_log_reads_as_truncated_and_unknown_calls_are_errors() {
         let odom = Odometry::default();
-        let bytes = record(&[(Time::from_nanos(2_000_000_000), SeamInput::Odometry(&odom))]);
+        let bytes = record(&[(Time::from_nanos(2_000_000_000), SeamCall::Odometry(odom))]);
         // Without its footer and magic: not closed, the data whole.
         let log = read_replay_log(&bytes[..bytes.len() - 20]).unwrap();
         assert!(log.truncated);
         assert_eq!(log.end_ns, 2_000_000_000);
         assert!(log.info.is_some());
         let bad = SeamCallMsg { stamp_ns: 0, call: "teleport".into(), peer: String::new(), data: vec![] };
-        assert!(SeamCall::from_msg("/x/seam", &bad).is_err());
+        assert!(call_from_msg("/x/seam", &bad).is_err());
         let short = SeamCallMsg { stamp_ns: 0, call: "odometry".into(), peer: String::new(), data: vec![1, 2] };
-        assert!(SeamCall::from_msg("/x/seam", &short).is_err());
+        assert!(call_from_msg("/x/seam", &short).is_err());
     }
 }

@@ -77,7 +77,7 @@ pub enum Op {
     TeamOut {
         /// Addressee.
         to: RobotId,
-        /// Tiers the radio link allows, as bits (see `spomp_robot::seam::tier_bits`).
+        /// Tiers the radio link allows, as bits (see `spomp_teamstate::TierSet::bits`).
         tiers: u8,
         /// Bytes the link may carry.
         budget_bytes: u64,

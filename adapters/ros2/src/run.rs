@@ -18,15 +18,12 @@ use std::time::{Duration, Instant};
 use ros2_client::{Publisher, Subscription};
 use serde::Serialize;
 use spomp_behaviors::mission::schema::CmdVelType;
-use spomp_behaviors::trace::{Recorder, TransitionRecord};
+use spomp_behaviors::trace::Recorder;
 use spomp_core::ros;
-use spomp_core::{
-    FlightCommand, Odometry, PanoramaFrame, Point2, PoseEstimate, ReachabilityScan, RobotId, RobotKind, Time, Twist2,
-};
-use spomp_robot::Robot;
+use spomp_core::{FlightCommand, PanoramaFrame, Point2, PoseEstimate, RobotId, RobotKind, Time, Twist2};
 use spomp_robot::runtime::WorkKind;
-use spomp_robot::seam::SeamInput;
-use spomp_teamstate::TierSet;
+use spomp_robot::{Robot, RobotObserver};
+use spomp_teamstate::{Tier, TierSet};
 
 use crate::clock::{TimeBase, ros_nanos, wall_nanos};
 use crate::convert;
@@ -39,13 +36,12 @@ use crate::team::{StateSink, TeamChannel};
 use crate::topics::{CLOCK_TOPIC, ROSOUT_TOPIC};
 use crate::workers::{SkillWorkers, WorkOutcome};
 
-/// What a run produced, for the CLI's recorder (`--record`) and tests. Every method has an
-/// empty default.
-pub trait RunObserver {
-    /// Odometry as the robot received it.
-    fn on_odometry(&mut self, _robot: &str, _odom: &Odometry) {}
-    /// A panorama as the robot received it.
-    fn on_panorama(&mut self, _robot: &str, _frame: &PanoramaFrame) {}
+/// What a run produced, for the CLI's recorder (`--record`) and tests: what the robot saw and
+/// did (the robot layer's [`RobotObserver`]: its seam calls, which `spomp run --record` logs
+/// as `spomp sim --replayable` does, transitions, problems and refused inputs, scans, paths,
+/// odometry and panoramas) and what only this adapter knows (below). Every method has an empty
+/// default.
+pub trait RunObserver: RobotObserver {
     /// A pose input (GNSS, local position) as the robot received it.
     fn on_external_pose(&mut self, _robot: &str, _estimate: &PoseEstimate) {}
     /// The velocity command published (UGV).
@@ -54,22 +50,11 @@ pub trait RunObserver {
     fn on_flight(&mut self, _robot: &str, _now: Time, _cmd: Option<&FlightCommand>) {}
     /// The pose estimate.
     fn on_estimate(&mut self, _robot: &str, _estimate: &PoseEstimate) {}
-    /// Node transitions of one tick.
-    fn on_transitions(&mut self, _robot: &str, _records: &[TransitionRecord]) {}
-    /// A new reachability scan.
-    fn on_scan(&mut self, _scan: &ReachabilityScan) {}
-    /// A new planned path.
-    fn on_path(&mut self, _robot: &str, _now: Time, _path: &[Point2]) {}
-    /// A problem the robot met, or an input that was refused.
-    fn on_problem(&mut self, _robot: &str, _now: Time, _message: &str) {}
     /// A transform the robot published on `topic` (its tf topic), at robot time `time`.
     fn on_tf(&mut self, _topic: &str, _time: Time, _msg: &ros::TfMessage) {}
     /// An input named a frame other than the configured one (once per topic, field and frame
     /// found): the tf tree it implies would not connect. Also an `on_problem`.
     fn on_frame_mismatch(&mut self, _robot: &str, _message: &str) {}
-    /// Every call made on the robot's seam, in order, with what it answered: what a replay
-    /// feeds a fresh robot (`spomp run --record` logs them, as `spomp sim --replayable` does).
-    fn on_seam(&mut self, _robot: &RobotId, _now: Time, _call: SeamInput<'_>) {}
     /// A lockstep farm's hello was taken, before any call of its run: the heavy skills run in the
     /// background (`true`, under the farm's latency model) or inline.
     fn on_lockstep(&mut self, _background_skills: bool) {}
@@ -78,6 +63,7 @@ pub trait RunObserver {
 /// An observer that ignores everything.
 pub struct NoRunObserver;
 impl RunObserver for NoRunObserver {}
+impl RobotObserver for NoRunObserver {}
 
 /// Why the robot stopped itself.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
@@ -405,6 +391,7 @@ impl RobotNode {
         let started = Instant::now();
         let id = self.robot.id().clone();
         let mut transitions = Recorder::default();
+        self.robot.record_seam(observer.wants_seam());
         while !stop.load(Ordering::SeqCst) {
             let got = self.take_inputs(&mut state, observer);
             let Some(now) = state.now() else {
@@ -417,17 +404,17 @@ impl RobotNode {
             }
             if let Some(frame) = state.pending_frame(&self.settings) {
                 let frame = Arc::new(frame);
-                observer.on_panorama(id.as_str(), &frame);
-                observer.on_seam(self.robot.id(), now, SeamInput::Panorama(&frame));
-                self.robot.on_panorama(frame);
+                observer.on_panorama(&id, &frame);
+                self.robot.on_panorama(now, frame);
+                self.robot.deliver_recorded(observer);
                 state.frame_rx = state.panorama_rx;
             }
             self.exchange_work(&mut state, now, observer);
             let stop_reason = state.stop_reason(now, &self.settings);
             if stop_reason == StopReason::EStop && !state.halted {
-                observer.on_seam(self.robot.id(), now, SeamInput::Halt);
                 // Unobserved, like every halt a replay makes: the e-stop is logged on /rosout.
-                self.robot.halt(now, None);
+                self.robot.halt(now);
+                self.robot.deliver_recorded(observer);
                 state.halted = true;
             }
             if now >= state.next_tick {
@@ -438,27 +425,26 @@ impl RobotNode {
                 state.next_tick = Time::from_nanos(state.next_tick.nanos + state.period.nanos);
                 if stop_reason != StopReason::EStop {
                     state.halted = false;
-                    self.robot.maintain(now);
                     state.status = self.robot.tick(now, Some(&mut transitions));
                     state.report.ticks += 1;
                     // Transitions before the tick's seam record, as the simulator logs them: a
                     // replay compares them when it reaches the tick.
                     self.publish_transitions(&mut transitions, observer);
-                    let (command, flight) = (self.robot.command(), self.robot.flight());
-                    observer.on_seam(self.robot.id(), now, SeamInput::Tick { command, flight });
+                    self.robot.deliver_recorded(observer);
                 }
                 state.report.max_tick_ms = state.report.max_tick_ms.max(ms(tick_start.elapsed()));
                 self.publish_command(&mut state, now, stop_reason, observer);
                 self.publish_transitions(&mut transitions, observer);
                 for p in self.robot.take_problems() {
-                    observer.on_problem(id.as_str(), now, &p);
+                    observer.on_problem(&id, now, &p);
                     state.last_problem = Some(p);
                 }
                 self.publish_state(&mut state, now, observer);
             }
             if now >= state.next_team {
                 state.next_team = Time::from_nanos(now.nanos + Time::from_secs_f64(self.settings.team_period_s).nanos);
-                self.send_team(now, observer);
+                self.send_team(now);
+                self.robot.deliver_recorded(observer);
             }
             if let Some((_, period)) = self.state_sink.as_ref()
                 && now >= state.next_save
@@ -481,8 +467,8 @@ impl RobotNode {
     /// saved, and the run's report.
     fn shut_down(&mut self, mut state: LoopState, observer: &mut dyn RunObserver, started: Instant) -> RunReport {
         if let Some(now) = state.now() {
-            observer.on_seam(self.robot.id(), now, SeamInput::Halt);
-            self.robot.halt(now, None);
+            self.robot.halt(now);
+            self.robot.deliver_recorded(observer);
             self.publish_command(&mut state, now, StopReason::EStop, observer);
             state.report.robot_time_s = now.as_secs_f64();
         }
@@ -512,6 +498,7 @@ impl RobotNode {
         let timeout = Duration::from_secs_f64(self.settings.lockstep.as_ref().map_or(60.0, |l| l.timeout_s));
         let mut step = LockstepStep::new(self.robot.tick_hz());
         let mut last_call = Instant::now();
+        self.robot.record_seam(observer.wants_seam());
         while !stop.load(Ordering::SeqCst) {
             let call = match self.lockstep.as_ref().map(|(calls, _)| calls.take()) {
                 Some(Ok(Some((call, _)))) => call,
@@ -519,7 +506,7 @@ impl RobotNode {
                     if step.hello.is_some() && last_call.elapsed() > timeout {
                         let what =
                             format!("lockstep: the farm sent nothing for {:.0} s; stopping", timeout.as_secs_f64());
-                        observer.on_problem(self.robot.id().as_str(), state.now().unwrap_or(Time::ZERO), &what);
+                        observer.on_problem(self.robot.id(), state.now().unwrap_or(Time::ZERO), &what);
                         eprintln!("{}: {what}", self.robot.id());
                         break;
                     }
@@ -539,7 +526,7 @@ impl RobotNode {
             }
             if call.seq != step.next_seq {
                 let what = format!("lockstep: call {} arrived where {} was due; stopping", call.seq, step.next_seq);
-                observer.on_problem(self.robot.id().as_str(), state.now().unwrap_or(Time::ZERO), &what);
+                observer.on_problem(self.robot.id(), state.now().unwrap_or(Time::ZERO), &what);
                 eprintln!("{}: {what}", self.robot.id());
                 break;
             }
@@ -552,7 +539,9 @@ impl RobotNode {
             {
                 break;
             }
-            if let Some(reply) = self.lockstep_call(call.op, &mut state, &mut step, observer, started) {
+            let reply = self.lockstep_call(call.op, &mut state, &mut step, observer, started);
+            self.robot.deliver_recorded(observer);
+            if let Some(reply) = reply {
                 self.answer(call.seq, reply);
             }
         }
@@ -624,25 +613,22 @@ impl RobotNode {
                 state.report.received.odometry += 1;
                 state.odom_rx = Some((now, Instant::now()));
                 state.history.push(odom);
-                observer.on_odometry(id.as_str(), &odom);
-                observer.on_seam(&id, now, SeamInput::Odometry(&odom));
-                self.robot.on_odometry(odom);
+                observer.on_odometry(&id, &odom);
+                self.robot.on_odometry(now, odom);
             }
             Op::ExternalPose(est) => self.external_pose(state, est, observer),
             Op::Panorama(frame) => {
                 state.report.received.panoramas += 1;
                 state.panorama_stamp = Some(frame.stamp);
                 let frame = Arc::new(frame);
-                observer.on_panorama(id.as_str(), &frame);
-                observer.on_seam(&id, now, SeamInput::Panorama(&frame));
-                self.robot.on_panorama(frame);
+                observer.on_panorama(&id, &frame);
+                self.robot.on_panorama(now, frame);
                 step.estimate_after_panorama = self.robot.pose();
                 self.publish_perception(state, observer);
             }
             Op::CameraTiles(tiles) => {
                 state.report.received.camera_tiles += tiles.len() as u64;
-                observer.on_seam(&id, now, SeamInput::CameraTiles(&tiles));
-                self.robot.on_camera_tiles(&tiles, now);
+                self.robot.on_camera_tiles(now, tiles);
             }
             Op::ExchangeWork => self.exchange_work_at_modelled_time(state, step, now, observer),
             Op::TeamOut { to, tiers, budget_bytes } => {
@@ -650,28 +636,21 @@ impl RobotNode {
                     // The team state goes over the team link, not the farm's radio.
                     return Some(Reply::TeamOut(None));
                 }
-                let tiers = tiers_from_bits(tiers);
+                let tiers = TierSet::from_bits(tiers);
                 let budget_bytes = usize::try_from(budget_bytes).unwrap_or(usize::MAX);
-                let sent = self.robot.team_message_for(&to, tiers, budget_bytes);
-                let call = SeamInput::TeamOut { to: &to, tiers, budget_bytes, sent: sent.as_deref() };
-                observer.on_seam(&id, now, call);
-                return Some(Reply::TeamOut(sent));
+                return Some(Reply::TeamOut(self.robot.team_message_for(now, &to, tiers, budget_bytes)));
             }
             Op::TeamIn { from, bytes } => {
                 if self.team_channel.is_some() {
                     state.report.team_in_ignored += 1;
                 } else {
                     state.report.received.team += 1;
-                    observer.on_seam(&id, now, SeamInput::TeamIn { from: &from, bytes: &bytes });
-                    if let Err(e) = self.robot.on_team_message(&from, &bytes) {
+                    if let Err(e) = self.robot.on_team_message(now, &from, bytes) {
                         state.report.note_rejected(&from, self.peers.contains(&from), &e);
                     }
                 }
             }
-            Op::Halt => {
-                observer.on_seam(&id, now, SeamInput::Halt);
-                self.robot.halt(now, None);
-            }
+            Op::Halt => self.robot.halt(now),
             Op::Tick => return Some(Reply::Done(Box::new(self.lockstep_tick(state, step, now, observer, started)))),
         }
         None
@@ -697,8 +676,7 @@ impl RobotNode {
             let (_, work_id) = step.work_out.remove(k);
             let Some((work, took)) = self.wait_for_work(state, step, work_id, now, observer) else { continue };
             let kind = work.kind();
-            observer.on_seam(self.robot.id(), now, SeamInput::FinishWork(work_id));
-            self.robot.finish_work(work);
+            self.robot.finish_work(now, work);
             state.report.skill_jobs += 1;
             match kind {
                 WorkKind::Perception => {
@@ -708,13 +686,7 @@ impl RobotNode {
                 WorkKind::Planner => state.report.max_planner_ms = state.report.max_planner_ms.max(ms(took)),
             }
         }
-        let work = self.robot.take_work(now);
-        if work.is_empty() {
-            return;
-        }
-        let ids: Vec<u64> = work.iter().map(|w| w.id()).collect();
-        observer.on_seam(self.robot.id(), now, SeamInput::TakeWork(&ids));
-        for w in work {
+        for w in self.robot.take_work(now) {
             let latency_s = match w.kind() {
                 WorkKind::Perception => perception_s,
                 WorkKind::Planner => planner_s,
@@ -747,7 +719,7 @@ impl RobotNode {
                 }
                 Some(WorkOutcome::Panicked { kind, message }) => {
                     let what = format!("{} failed on its worker thread: {message}; the robot stops", kind.name());
-                    observer.on_problem(self.robot.id().as_str(), now, &what);
+                    observer.on_problem(self.robot.id(), now, &what);
                     self.log(now, 50, what.clone());
                     state.last_problem = Some(what);
                     state.skill_failed = true;
@@ -771,8 +743,7 @@ impl RobotNode {
         if let Some(channel) = self.team_channel.as_mut() {
             for (from, bytes) in channel.receive() {
                 state.report.received.team += 1;
-                observer.on_seam(&id, now, SeamInput::TeamIn { from: &from, bytes: &bytes });
-                if let Err(e) = self.robot.on_team_message(&from, &bytes) {
+                if let Err(e) = self.robot.on_team_message(now, &from, bytes) {
                     state.report.note_rejected(&from, self.peers.contains(&from), &e);
                 }
             }
@@ -780,7 +751,7 @@ impl RobotNode {
         while let Some(msg) = take(&self.inputs.estop, &mut state.report.malformed_inputs) {
             if msg.data != state.estop {
                 let what = if msg.data { "e-stop engaged: tree halted" } else { "e-stop released" };
-                observer.on_problem(id.as_str(), now, what);
+                observer.on_problem(&id, now, what);
                 self.log(now, if msg.data { 30 } else { 20 }, what.into());
             }
             state.estop = msg.data;
@@ -791,26 +762,24 @@ impl RobotNode {
         let mut ticked = false;
         if state.estop || state.skill_failed {
             if !state.halted {
-                observer.on_seam(&id, now, SeamInput::Halt);
-                self.robot.halt(now, None);
+                self.robot.halt(now);
                 state.halted = true;
             }
         } else if now >= step.next_tick {
             let tick_start = Instant::now();
             step.next_tick = Time::from_nanos(now.nanos + step.tick_period_ns - 1);
             state.halted = false;
-            self.robot.maintain(now);
             state.status = self.robot.tick(now, Some(&mut transitions));
             state.report.ticks += 1;
             ticked = true;
             transitioned = transitions.records.iter().map(|r| r.node_id).collect();
             self.publish_transitions(&mut transitions, observer);
-            let (command, flight) = (self.robot.command(), self.robot.flight());
-            observer.on_seam(&id, now, SeamInput::Tick { command, flight });
+            // After the transitions, as the simulator logs them.
+            self.robot.deliver_recorded(observer);
             state.report.max_tick_ms = state.report.max_tick_ms.max(ms(tick_start.elapsed()));
             problems = self.robot.take_problems();
             for p in &problems {
-                observer.on_problem(id.as_str(), now, p);
+                observer.on_problem(&id, now, p);
                 state.last_problem = Some(p.clone());
             }
         }
@@ -827,7 +796,7 @@ impl RobotNode {
         }
         if self.team_channel.is_some() && now >= state.next_team {
             state.next_team = Time::from_nanos(now.nanos + Time::from_secs_f64(self.settings.team_period_s).nanos);
-            self.send_team(now, observer);
+            self.send_team(now);
         }
         if let Some((_, period)) = self.state_sink.as_ref()
             && now >= state.next_save
@@ -861,8 +830,7 @@ impl RobotNode {
             match outcome {
                 WorkOutcome::Done { work, took } => {
                     let (id, kind) = (work.id(), work.kind());
-                    observer.on_seam(self.robot.id(), now, SeamInput::FinishWork(id));
-                    self.robot.finish_work(work);
+                    self.robot.finish_work(now, work);
                     state.report.skill_jobs += 1;
                     match kind {
                         WorkKind::Perception => {
@@ -875,20 +843,14 @@ impl RobotNode {
                 }
                 WorkOutcome::Panicked { kind, message } => {
                     let what = format!("{} failed on its worker thread: {message}; the robot stops", kind.name());
-                    observer.on_problem(self.robot.id().as_str(), now, &what);
+                    observer.on_problem(self.robot.id(), now, &what);
                     self.log(now, 50, what.clone());
                     state.last_problem = Some(what);
                     state.skill_failed = true;
                 }
             }
         }
-        let work = self.robot.take_work(now);
-        if work.is_empty() {
-            return;
-        }
-        let ids: Vec<u64> = work.iter().map(|w| w.id()).collect();
-        observer.on_seam(self.robot.id(), now, SeamInput::TakeWork(&ids));
-        for w in work {
+        for w in self.robot.take_work(now) {
             if w.kind() == WorkKind::Perception {
                 state.work_rx.insert(w.id(), state.frame_rx.take().unwrap_or_else(Instant::now));
             }
@@ -922,11 +884,10 @@ impl RobotNode {
                     state.report.received.odometry += 1;
                     state.odom_rx = Some((state.now().unwrap_or(odom.stamp), Instant::now()));
                     state.history.push(odom);
-                    observer.on_odometry(id.as_str(), &odom);
-                    observer.on_seam(self.robot.id(), state.now().unwrap_or(odom.stamp), SeamInput::Odometry(&odom));
-                    self.robot.on_odometry(odom);
+                    observer.on_odometry(&id, &odom);
+                    self.robot.on_odometry(state.now().unwrap_or(odom.stamp), odom);
                 }
-                Err(e) => state.refuse(id.as_str(), observer, &e.to_string()),
+                Err(e) => state.refuse(&id, observer, &e.to_string()),
             }
         }
         while let Some(msg) = take(&self.inputs.depth, &mut state.report.malformed_inputs) {
@@ -939,36 +900,32 @@ impl RobotNode {
                         state.set_pair(pair);
                     }
                 }
-                Err(e) => state.refuse(id.as_str(), observer, &e.to_string()),
+                Err(e) => state.refuse(&id, observer, &e.to_string()),
             }
         }
         while let Some(msg) = take(&self.inputs.semantic, &mut state.report.malformed_inputs) {
             got = true;
             let topic = self.settings.topics.get("panorama/semantic");
             self.check_frame(state, observer, topic, "header.frame_id", &msg.header.frame_id, FrameField::Sensor);
-            let classes = self.robot.runtime().classes().classes.len();
+            let classes = self.robot.classes().classes.len();
             match convert::semantic_from_ros(&msg, self.settings.v_fov_rad, classes) {
                 Ok(s) => {
                     if let Some(pair) = state.pairer.push_semantic(base.to_robot(msg.header.stamp), s) {
                         state.set_pair(pair);
                     }
                 }
-                Err(e) => state.refuse(id.as_str(), observer, &e.to_string()),
+                Err(e) => state.refuse(&id, observer, &e.to_string()),
             }
         }
         while let Some(msg) = take(&self.inputs.gps, &mut state.report.malformed_inputs) {
             got = true;
             let Some(origin) = self.settings.gps_origin else {
-                state.refuse(
-                    id.as_str(),
-                    observer,
-                    "gps: a NavSatFix arrived but the mission gives no ros2.gps_origin",
-                );
+                state.refuse(&id, observer, "gps: a NavSatFix arrived but the mission gives no ros2.gps_origin");
                 continue;
             };
             match convert::navsat_to_estimate(&msg, origin, &base) {
                 Ok(est) => self.external_pose(state, est, observer),
-                Err(e) => state.refuse(id.as_str(), observer, &e.to_string()),
+                Err(e) => state.refuse(&id, observer, &e.to_string()),
             }
         }
         while let Some(msg) = take(&self.inputs.pose_in, &mut state.report.malformed_inputs) {
@@ -977,33 +934,32 @@ impl RobotNode {
             self.check_frame(state, observer, topic, "header.frame_id", &msg.header.frame_id, FrameField::Map);
             match convert::pose_from_ros(&msg, &base) {
                 Ok(est) => self.external_pose(state, est, observer),
-                Err(e) => state.refuse(id.as_str(), observer, &e.to_string()),
+                Err(e) => state.refuse(&id, observer, &e.to_string()),
             }
         }
         let mut tiles = Vec::new();
         while let Some(msg) = take(&self.inputs.tiles, &mut state.report.malformed_inputs) {
             got = true;
-            let Some(grid) = self.robot.runtime().map().map(|m| m.map().spec) else {
-                state.refuse(id.as_str(), observer, "camera/tiles: a tile arrived but this robot keeps no aerial map");
+            let Some(grid) = self.robot.aerial_map().map(|m| m.map().spec) else {
+                state.refuse(&id, observer, "camera/tiles: a tile arrived but this robot keeps no aerial map");
                 continue;
             };
             match msg.to_tile(&grid) {
                 Ok(tile) => tiles.push(tile),
-                Err(e) => state.refuse(id.as_str(), observer, &format!("camera/tiles: {}", e.0)),
+                Err(e) => state.refuse(&id, observer, &format!("camera/tiles: {}", e.0)),
             }
         }
         if !tiles.is_empty() {
             state.report.received.camera_tiles += tiles.len() as u64;
             let now = state.now().unwrap_or(Time::ZERO);
-            observer.on_seam(self.robot.id(), now, SeamInput::CameraTiles(&tiles));
-            self.robot.on_camera_tiles(&tiles, now);
+            self.robot.on_camera_tiles(now, tiles);
         }
         while let Some(msg) = take(&self.inputs.estop, &mut state.report.malformed_inputs) {
             got = true;
             if msg.data != state.estop {
                 let now = state.now().unwrap_or(Time::ZERO);
                 let what = if msg.data { "e-stop engaged: tree halted" } else { "e-stop released" };
-                observer.on_problem(id.as_str(), now, what);
+                observer.on_problem(&id, now, what);
                 self.log(now, if msg.data { 30 } else { 20 }, what.into());
             }
             state.estop = msg.data;
@@ -1018,14 +974,13 @@ impl RobotNode {
                 continue;
             }
             let Some(from) = msg.layout.dim.first().map(|d| d.label.clone()).filter(|f| !f.is_empty()) else {
-                state.refuse(id.as_str(), observer, "team/in: a message without its sender (layout.dim[0].label)");
+                state.refuse(&id, observer, "team/in: a message without its sender (layout.dim[0].label)");
                 continue;
             };
             state.report.received.team += 1;
             let now = state.now().unwrap_or(Time::ZERO);
             let from = RobotId::new(&from);
-            observer.on_seam(self.robot.id(), now, SeamInput::TeamIn { from: &from, bytes: &msg.data });
-            if let Err(e) = self.robot.on_team_message(&from, &msg.data) {
+            if let Err(e) = self.robot.on_team_message(now, &from, msg.data) {
                 state.report.note_rejected(&from, self.peers.contains(&from), &e);
             }
         }
@@ -1034,12 +989,12 @@ impl RobotNode {
                 got = true;
                 state.report.received.team += 1;
                 let now = state.now().unwrap_or(Time::ZERO);
-                observer.on_seam(self.robot.id(), now, SeamInput::TeamIn { from: &from, bytes: &bytes });
-                if let Err(e) = self.robot.on_team_message(&from, &bytes) {
+                if let Err(e) = self.robot.on_team_message(now, &from, bytes) {
                     state.report.note_rejected(&from, self.peers.contains(&from), &e);
                 }
             }
         }
+        self.robot.deliver_recorded(observer);
         got
     }
 
@@ -1059,7 +1014,7 @@ impl RobotNode {
         let now = state.now().unwrap_or(Time::ZERO);
         state.report.frame_mismatches.insert(format!("{topic} {field}"), found.to_string());
         observer.on_frame_mismatch(id, &why);
-        observer.on_problem(id, now, &why);
+        observer.on_problem(self.robot.id(), now, &why);
         self.log(now, 30, why.clone());
         state.last_problem = Some(why);
     }
@@ -1068,8 +1023,7 @@ impl RobotNode {
         state.report.received.poses += 1;
         state.position_rx = state.now();
         observer.on_external_pose(self.robot.id().as_str(), &est);
-        observer.on_seam(self.robot.id(), state.now().unwrap_or(est.stamp), SeamInput::ExternalPose(&est));
-        self.robot.on_external_pose(est);
+        self.robot.on_external_pose(state.now().unwrap_or(est.stamp), est);
     }
 
     fn publish_command(
@@ -1142,7 +1096,7 @@ impl RobotNode {
             return;
         }
         let id = self.robot.id().clone();
-        observer.on_transitions(id.as_str(), &transitions.records);
+        observer.on_transitions(&id, &transitions.records);
         for r in &transitions.records {
             let msg = ros::Log {
                 stamp: r.time.into(),
@@ -1203,12 +1157,12 @@ impl RobotNode {
         if path.len() != state.last_path_len || path.first() != state.last_path_start.as_ref() {
             state.last_path_len = path.len();
             state.last_path_start = path.first().copied();
-            observer.on_path(id.as_str(), now, path);
+            observer.on_path(&id, now, path);
             let _ = self.outputs.path.publish(convert::path_to_ros(path, &self.settings.frames.map, now, &state.base));
         }
     }
 
-    fn send_team(&mut self, now: Time, observer: &mut dyn RunObserver) {
+    fn send_team(&mut self, now: Time) {
         let budget = self.settings.team_budget_bytes;
         if let Some(channel) = self.team_channel.as_mut() {
             // One message per tier, highest first, within the link's credit; only to peers the
@@ -1217,11 +1171,8 @@ impl RobotNode {
             carry_team_credit(&mut self.team_credit, self.peers.iter().filter(|p| reachable.contains(*p)), budget);
             for peer in self.peers.iter().filter(|p| reachable.contains(*p)) {
                 let Some(left) = self.team_credit.get_mut(peer) else { continue };
-                for tier in crate::team::TIERS {
-                    let tiers = TierSet::only(tier);
-                    let sent = self.robot.team_message_for(peer, tiers, *left);
-                    let call = SeamInput::TeamOut { to: peer, tiers, budget_bytes: *left, sent: sent.as_deref() };
-                    observer.on_seam(self.robot.id(), now, call);
+                for tier in Tier::ALL {
+                    let sent = self.robot.team_message_for(now, peer, TierSet::only(tier), *left);
                     if let Some(bytes) = sent {
                         *left = left.saturating_sub(bytes.len());
                         channel.send(peer, tier, bytes);
@@ -1236,9 +1187,7 @@ impl RobotNode {
         for peer in &self.peers {
             let Some(left) = self.team_credit.get_mut(peer) else { continue };
             let budget_bytes = *left;
-            let sent = self.robot.team_message_for(peer, TierSet::ALL, budget_bytes);
-            let call = SeamInput::TeamOut { to: peer, tiers: TierSet::ALL, budget_bytes, sent: sent.as_deref() };
-            observer.on_seam(self.robot.id(), now, call);
+            let sent = self.robot.team_message_for(now, peer, TierSet::ALL, budget_bytes);
             let Some(bytes) = sent else {
                 continue;
             };
@@ -1440,11 +1389,6 @@ impl LockstepStep {
     }
 }
 
-/// A tier set from its bits (bit k = tier k), as the lockstep calls carry it.
-fn tiers_from_bits(bits: u8) -> TierSet {
-    crate::team::TIERS.iter().filter(|t| bits & (1 << **t as u8) != 0).fold(TierSet::NONE, |set, t| set.with(*t))
-}
-
 /// Latency samples kept for the percentiles.
 const LATENCY_SAMPLES: usize = 4096;
 
@@ -1508,7 +1452,7 @@ impl LoopState {
         if self.use_sim_time { self.sim_now } else { Some(Time::from_nanos(wall_nanos() - self.base.epoch_nanos())) }
     }
 
-    fn refuse(&mut self, robot: &str, observer: &mut dyn RunObserver, why: &str) {
+    fn refuse(&mut self, robot: &RobotId, observer: &mut dyn RunObserver, why: &str) {
         self.report.malformed_inputs += 1;
         observer.on_problem(robot, self.now().unwrap_or(Time::ZERO), why);
         self.last_problem = Some(why.to_string());
@@ -1581,7 +1525,7 @@ impl LoopState {
         r.wall_s = wall.as_secs_f64();
         r.target_tick_hz = robot.tick_hz();
         r.tick_rate_hz = if r.wall_s > 0.0 { r.ticks as f64 / r.wall_s } else { 0.0 };
-        r.dropped_inputs += self.pairer.dropped() + robot.runtime().superseded_panoramas();
+        r.dropped_inputs += self.pairer.dropped() + robot.superseded_panoramas();
         r.tree_status = self.status.to_string();
         r.robot_time_s = self.now().map_or(0.0, |t| t.as_secs_f64());
         (r.odometry_to_command_p50_ms, r.odometry_to_command_p99_ms) = percentiles(&self.odom_latency);
@@ -1642,7 +1586,7 @@ mod tests {
             }
             carry_team_credit(&mut credit, [&b].into_iter(), budget);
             let left = credit.get_mut(&b).expect("credit for a reachable peer");
-            for tier in crate::team::TIERS {
+            for tier in Tier::ALL {
                 if let Some(msg) = sender.make_sync(&b, TierSet::only(tier), *left) {
                     let bytes = msg.encode();
                     *left = left.saturating_sub(bytes.len());

@@ -27,6 +27,3 @@ pub trait TeamChannel: Send {
 
 /// Where a robot's resume state goes (the CLI writes it to a file atomically).
 pub type StateSink = Box<dyn FnMut(Vec<u8>) + Send>;
-
-/// The tiers in the order a round sends them.
-pub const TIERS: [Tier; 3] = [Tier::Coordination, Tier::Scans, Tier::Maps];

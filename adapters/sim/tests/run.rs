@@ -11,6 +11,7 @@ use common::{load, simulation, write_mission};
 
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::{RobotId, Time};
+use spomp_robot::{RobotObserver, SeamCall};
 use spomp_sim::LinkTier;
 use spomp_sim::run::{NoObserver, Outcome, RobotSnapshot, SimObserver, SimOptions, Simulation};
 
@@ -104,6 +105,9 @@ impl SimObserver for Transcript {
             s.command
         ));
     }
+}
+
+impl RobotObserver for Transcript {
     fn on_transitions(&mut self, robot: &RobotId, records: &[TransitionRecord]) {
         for r in records {
             self.lines.push(format!("{robot} {r:?}"));
@@ -155,15 +159,24 @@ impl SimObserver for FullTranscript {
         let estimate = s.estimate.map(|e| e.pose);
         self.lines.push(format!("state {} {robot} {:?} {estimate:?} {:?}", now.nanos, s.truth, s.command));
     }
+    fn on_terrain(&mut self, robot: &RobotId, stamp: Time, _geometry: spomp_core::PanoramaGeometry, obstacle: &[bool]) {
+        self.lines.push(format!("terrain {robot} {stamp:?} {:x}", content_hash(&[&obstacle])));
+    }
+    fn on_event(&mut self, now: Time, event: &spomp_sim::run::SimEvent) {
+        self.lines.push(format!("event {} {event:?}", now.nanos));
+    }
+}
+
+impl RobotObserver for FullTranscript {
+    fn wants_seam(&self) -> bool {
+        true
+    }
     fn on_odometry(&mut self, robot: &RobotId, odom: &spomp_core::Odometry) {
         self.lines.push(format!("odometry {robot} {odom:?}"));
     }
     fn on_panorama(&mut self, robot: &RobotId, frame: &spomp_core::PanoramaFrame) {
         let content = content_hash(&[&frame.depth.range_m, &frame.semantic.class]);
         self.lines.push(format!("panorama {robot} {} {:?} {:?} {content:x}", frame.seq, frame.stamp, frame.odom_pose));
-    }
-    fn on_terrain(&mut self, robot: &RobotId, stamp: Time, _geometry: spomp_core::PanoramaGeometry, obstacle: &[bool]) {
-        self.lines.push(format!("terrain {robot} {stamp:?} {:x}", content_hash(&[&obstacle])));
     }
     fn on_scan(&mut self, scan: &spomp_core::ReachabilityScan) {
         self.lines.push(format!("scan {} {:?} {:x}", scan.robot, scan.stamp, content_hash(&[scan])));
@@ -176,19 +189,15 @@ impl SimObserver for FullTranscript {
             self.lines.push(format!("transition {robot} {r:?}"));
         }
     }
-    fn on_event(&mut self, now: Time, event: &spomp_sim::run::SimEvent) {
-        self.lines.push(format!("event {} {event:?}", now.nanos));
-    }
     fn on_problem(&mut self, robot: &RobotId, now: Time, message: &str) {
         self.lines.push(format!("problem {robot} {} {message}", now.nanos));
     }
-    fn on_seam(&mut self, robot: &RobotId, now: Time, call: spomp_sim::run::SeamInput<'_>) {
-        use spomp_sim::run::SeamInput;
+    fn on_seam(&mut self, robot: &RobotId, now: Time, call: &SeamCall) {
         let what = match call {
-            SeamInput::Panorama(frame) => format!("panorama {}", frame.seq),
-            SeamInput::CameraTiles(tiles) => format!("tiles {:x}", content_hash(&[&tiles])),
-            SeamInput::TeamIn { from, bytes } => format!("in {from} {:x}", content_hash(&[&bytes])),
-            SeamInput::TeamOut { to, budget_bytes, sent, .. } => {
+            SeamCall::Panorama(frame) => format!("panorama {}", frame.seq),
+            SeamCall::CameraTiles(tiles) => format!("tiles {:x}", content_hash(&[&tiles])),
+            SeamCall::TeamIn { from, bytes } => format!("in {from} {:x}", content_hash(&[&bytes])),
+            SeamCall::TeamOut { to, budget_bytes, sent, .. } => {
                 format!("out {to} {budget_bytes} {:x}", content_hash(&[&sent]))
             }
             other => format!("{other:?}"),

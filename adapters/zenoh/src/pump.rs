@@ -21,7 +21,7 @@ pub fn send_round(
     let mut total = 0;
     for peer in peers.iter().filter(|p| reachable.contains(*p)) {
         let mut left = budget_bytes;
-        for tier in [Tier::Coordination, Tier::Scans, Tier::Maps] {
+        for tier in Tier::ALL {
             let Some(bytes) = make(peer, TierSet::only(tier), left) else { continue };
             left = left.saturating_sub(bytes.len());
             total += bytes.len();

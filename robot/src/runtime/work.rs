@@ -76,6 +76,12 @@ enum Done {
     Planner(Box<PlannerDone>),
 }
 
+impl std::fmt::Debug for SkillWork {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SkillWork").field("id", &self.id).field("kind", &self.kind()).finish_non_exhaustive()
+    }
+}
+
 impl SkillWork {
     pub(super) fn perception(id: u64, job: PerceptionJob, rng: ChaCha8Rng) -> Self {
         SkillWork { id, job: Job::Perception(Box::new(job), Box::new(rng)) }

@@ -26,6 +26,11 @@ pub enum Tier {
     Maps = 2,
 }
 
+impl Tier {
+    /// Every tier, lowest first: the one place the tier list is spelled out.
+    pub const ALL: [Tier; 3] = [Tier::Coordination, Tier::Scans, Tier::Maps];
+}
+
 /// A set of tiers (what a link currently allows to flow).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct TierSet(u8);
@@ -55,6 +60,17 @@ impl TierSet {
     /// Whether `tier` is in the set.
     pub const fn contains(self, tier: Tier) -> bool {
         self.0 & (1 << tier as u8) != 0
+    }
+
+    /// The set as bits (bit k = tier k), the way logs and wire protocols carry it.
+    pub const fn bits(self) -> u8 {
+        self.0
+    }
+
+    /// The set of `bits` (bit k = tier k; bits of no tier are dropped): the inverse of
+    /// [`TierSet::bits`].
+    pub const fn from_bits(bits: u8) -> Self {
+        TierSet(bits & TierSet::ALL.0)
     }
 }
 
@@ -485,6 +501,19 @@ mod tests {
         assert!(coord.contains(Tier::Coordination) && !coord.contains(Tier::Scans));
         assert_eq!(TierSet::up_to(Tier::Maps), TierSet::ALL);
         assert_eq!(TierSet::only(Tier::Scans).with(Tier::Maps), TierSet(0b110));
+    }
+
+    #[test]
+    fn tier_bits_round_trip_and_name_each_tier_by_its_number() {
+        for bits in 0..=u8::MAX {
+            let set = TierSet::from_bits(bits);
+            for t in Tier::ALL {
+                assert_eq!(set.contains(t), bits & (1 << t as u8) != 0);
+            }
+            assert_eq!(TierSet::from_bits(set.bits()), set);
+            assert_eq!(set.bits(), bits & 0b111, "bits of no tier are dropped");
+        }
+        assert_eq!(Tier::ALL.iter().fold(TierSet::NONE, |s, t| s.with(*t)), TierSet::ALL);
     }
 
     #[test]

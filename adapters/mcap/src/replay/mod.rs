@@ -1,6 +1,6 @@
 //! Replay: a field failure debugged on a laptop.
 //!
-//! A log recorded with its seam calls (`/R/seam`, see [`crate::SeamCall`]) and the run's
+//! A log recorded with its seam calls (`/R/seam`, see [`spomp_robot::SeamCall`]) and the run's
 //! setup ([`crate::RunInfo`]) holds everything one robot consumed. [`replay`] builds a
 //! fresh robot from the mission, area and seed stored in the log, makes on it the recorded calls
 //! in the recorded order — odometry, panoramas, external poses, camera tiles, team-state bytes
@@ -14,19 +14,16 @@
 
 mod setup;
 
-use std::collections::{BTreeMap, VecDeque};
-use std::sync::Arc;
+use std::collections::VecDeque;
 use std::time::Instant;
 
-use crate::{LogMessage, ReadError, RunInfo, SeamCall, SeamCallMsg, TickOutput, decode_cdr, open_replay_log};
+use crate::{LogMessage, ReadError, RunInfo, SeamCallMsg, call_from_msg, decode_cdr, open_replay_log};
 use serde::Serialize;
 use spomp_behaviors::TreeObserver;
 use spomp_behaviors::trace::{Recorder, TransitionRecord};
-use spomp_core::{RobotId, Time};
+use spomp_core::Time;
 use spomp_mapping::CompressionParams;
-use spomp_robot::runtime::FinishedWork;
-use spomp_robot::{OperatingArea, Robot, RobotSetup};
-use spomp_teamstate::{Tier, TierSet};
+use spomp_robot::{OperatingArea, Robot, RobotSetup, SeamCall, SeamReply, SetupOptions};
 
 pub use setup::{area_record, mission_files, png_level_name, run_info};
 
@@ -167,7 +164,6 @@ pub fn replay(
     let mut state = State {
         id: id.to_string(),
         recorded: VecDeque::new(),
-        finished: BTreeMap::new(),
         report: ReplayReport {
             robot: id.to_string(),
             source: info.source.clone(),
@@ -234,15 +230,15 @@ fn build_robot(
         prior_map: info.area.prior_map.clone(),
         map_origin: info.area.map_origin,
     };
-    let mut setup = RobotSetup::from_mission(&mission, id, &area, info.run_seed).map_err(|e| match e {
+    let inputs = SetupOptions {
+        map_publish_period_s: info.map_publish_period_s,
+        map_compression: CompressionParams { level: setup::png_level(&info.map_compression)? },
+        robot_seed: info.robot_seeds.get(id).copied(),
+    };
+    let setup = RobotSetup::from_mission_with(&mission, id, &area, info.run_seed, &inputs).map_err(|e| match e {
         spomp_robot::SetupError::Settings(s) if !sets.is_empty() => ReplayError::Set(s.to_string()),
         other => ReplayError::Robot(other.to_string()),
     })?;
-    if let Some(seed) = info.robot_seeds.get(id) {
-        setup.config.seed = *seed;
-    }
-    setup.config.map_publish_period_s = info.map_publish_period_s;
-    setup.config.map_compression = CompressionParams { level: setup::png_level(&info.map_compression)? };
     let mut robot = Robot::from_setup(&loaded, setup, registry).map_err(|e| ReplayError::Robot(e.to_string()))?;
     robot.set_background_skills(info.background_skills);
     robot.set_team_session(info.team_session);
@@ -283,20 +279,10 @@ fn recorded_transition(m: &LogMessage) -> Result<Recorded, ReplayError> {
     Ok(Recorded { time_ns, name: log.name, msg: log.msg })
 }
 
-/// Bits of a log (bit k = tier k) as a tier set.
-pub fn tiers_from_bits(bits: u8) -> TierSet {
-    [Tier::Coordination, Tier::Scans, Tier::Maps]
-        .into_iter()
-        .filter(|t| bits & (1 << *t as u8) != 0)
-        .fold(TierSet::NONE, TierSet::with)
-}
-
 struct State {
     id: String,
     recorded: VecDeque<Recorded>,
     report: ReplayReport,
-    /// Work the robot gave (`take_work`), done at once, waiting for its recorded `finish_work`.
-    finished: BTreeMap<u64, FinishedWork>,
 }
 
 impl State {
@@ -317,7 +303,7 @@ impl State {
         if until_ns.is_some_and(|u| msg.stamp_ns > u) {
             return Ok(false);
         }
-        let call = SeamCall::from_msg(&m.topic, &msg)?;
+        let call = call_from_msg(&m.topic, &msg)?;
         let now = Time::from_nanos(msg.stamp_ns);
         self.report.calls += 1;
         self.report.replayed_to_s = now.as_secs_f64();
@@ -329,42 +315,28 @@ impl State {
         Ok(true)
     }
 
-    /// Makes one call; a divergence if what the robot produced differs from the log.
+    /// Makes one recorded call; a divergence if what the robot answered differs from the log.
     fn apply(
         &mut self,
         robot: &mut Robot,
         now: Time,
-        call: SeamCall,
+        recorded: SeamCall,
         trace: &mut dyn FnMut(&TransitionRecord),
     ) -> Option<Divergence> {
-        let id = self.id.clone();
-        let channel = |what: &str| format!("/{id}/seam:{what}");
-        match call {
-            SeamCall::Odometry(o) => robot.on_odometry(o),
-            SeamCall::Panorama(p) => robot.on_panorama(Arc::new(*p)),
-            SeamCall::ExternalPose(e) => robot.on_external_pose(e),
-            SeamCall::CameraTiles(t) => robot.on_camera_tiles(&t, now),
-            SeamCall::TeamIn { from, bytes } => {
-                let _ = robot.on_team_message(&from, &bytes);
-            }
-            SeamCall::TeamOut { to, out } => {
-                let budget = usize::try_from(out.budget_bytes).unwrap_or(usize::MAX);
-                let sent = robot.team_message_for(&to, tiers_from_bits(out.tiers), budget);
-                self.report.team_messages += 1;
-                if sent != out.sent {
-                    return Some(Divergence {
-                        time_s: now.as_secs_f64(),
-                        channel: channel("team_out"),
-                        recorded: describe_bytes(&to, out.sent.as_deref(), sent.as_deref()),
-                        replayed: describe_bytes(&to, sent.as_deref(), out.sent.as_deref()),
-                        node_path: String::new(),
-                    });
-                }
-            }
-            SeamCall::Tick(recorded) => {
-                robot.maintain(now);
-                let mut rec = Recorder::default();
-                robot.tick(now, Some(&mut rec as &mut dyn TreeObserver));
+        let channel = format!("/{}/seam:{}", self.id, recorded.name());
+        let mut rec = Recorder::default();
+        let tick = matches!(recorded, SeamCall::Tick(_));
+        let tree = if tick { Some(&mut rec as &mut dyn TreeObserver) } else { None };
+        let (replayed, reply) = robot.call_observed(now, recorded.clone(), tree);
+        let diverged = |recorded: String, replayed: String, node_path: String| Divergence {
+            time_s: now.as_secs_f64(),
+            channel: channel.clone(),
+            recorded,
+            replayed,
+            node_path,
+        };
+        match reply {
+            SeamReply::Tick(_) => {
                 // Problems go to the log's `/R/rosout`; drained here as the recorder does.
                 let _ = robot.take_problems();
                 self.report.ticks += 1;
@@ -374,63 +346,38 @@ impl State {
                 if let Some(d) = self.compare_transitions(&rec.records, now) {
                     return Some(d);
                 }
-                let replayed = TickOutput { command: robot.command(), flight: robot.flight() };
-                if format!("{replayed:?}") != format!("{recorded:?}") {
-                    return Some(Divergence {
-                        time_s: now.as_secs_f64(),
-                        channel: channel("tick"),
-                        recorded: describe_tick(&recorded),
-                        replayed: describe_tick(&replayed),
-                        node_path: running_leaves(robot),
-                    });
-                }
             }
-            SeamCall::Halt => robot.halt(now, None),
-            SeamCall::Resume(bytes) => {
-                // The recorded robot took it, or it would not have been logged: it must take
-                // here too (a secured robot's needs the keys, `--keys`).
-                if let Err(e) = robot.resume(&bytes) {
-                    return Some(Divergence {
-                        time_s: now.as_secs_f64(),
-                        channel: channel("resume"),
-                        recorded: "resumed from its saved state".into(),
-                        replayed: format!("refused the saved state: {e}"),
-                        node_path: String::new(),
-                    });
-                }
+            // The recorded robot took it, or it would not have been logged: it must take here
+            // too (a secured robot's needs the keys, `--keys`).
+            SeamReply::Resume(Err(e)) => {
+                return Some(diverged(
+                    "resumed from its saved state".into(),
+                    format!("refused the saved state: {e}"),
+                    String::new(),
+                ));
             }
-            SeamCall::TakeWork(recorded) => {
-                let work = robot.take_work(now);
-                let replayed: Vec<u64> = work.iter().map(|w| w.id()).collect();
-                if replayed != recorded {
-                    return Some(Divergence {
-                        time_s: now.as_secs_f64(),
-                        channel: channel("take_work"),
-                        recorded: format!("work {recorded:?}"),
-                        replayed: format!("work {replayed:?}"),
-                        node_path: String::new(),
-                    });
-                }
-                // Done now; applied when the log says the robot had it back.
+            // Done now; the robot applies each when the log says it had it back.
+            SeamReply::TakeWork(work) => {
                 for w in work {
-                    self.finished.insert(w.id(), w.run());
+                    robot.deliver_work(w.run());
                 }
             }
-            SeamCall::FinishWork(id) => match self.finished.remove(&id) {
-                Some(done) => {
-                    robot.finish_work(done);
-                    self.report.skill_jobs += 1;
-                }
-                None => {
-                    return Some(Divergence {
-                        time_s: now.as_secs_f64(),
-                        channel: channel("finish_work"),
-                        recorded: format!("work {id} finished"),
-                        replayed: "no such work taken".into(),
-                        node_path: String::new(),
-                    });
-                }
-            },
+            SeamReply::FinishWork(Ok(())) => self.report.skill_jobs += 1,
+            SeamReply::FinishWork(Err(e)) => {
+                return Some(diverged(recorded.describe_answer(None), e.to_string(), String::new()));
+            }
+            SeamReply::Done | SeamReply::TeamIn(_) | SeamReply::Resume(Ok(_)) => {}
+        }
+        if matches!(replayed, SeamCall::TeamOut { .. }) {
+            self.report.team_messages += 1;
+        }
+        if !recorded.same_answers(&replayed) {
+            let node_path = if tick { running_leaves(robot) } else { String::new() };
+            return Some(diverged(
+                recorded.describe_answer(Some(&replayed)),
+                replayed.describe_answer(Some(&recorded)),
+                node_path,
+            ));
         }
         None
     }
@@ -481,30 +428,6 @@ impl State {
     }
 }
 
-fn describe_tick(t: &TickOutput) -> String {
-    // `{:?}`: the shortest text that reads back as the same float.
-    match (t.command, t.flight) {
-        (Some(c), _) => format!("cmd_vel v={:?} m/s omega={:?} rad/s", c.v, c.omega),
-        (None, Some(f)) => {
-            format!("flight to ({:?}, {:?}) at {:?} m, {:?} m/s", f.target.x, f.target.y, f.altitude_m, f.speed_mps)
-        }
-        (None, None) => "stop".into(),
-    }
-}
-
-fn describe_bytes(to: &RobotId, this: Option<&[u8]>, other: Option<&[u8]>) -> String {
-    match this {
-        None => format!("nothing to {to}"),
-        Some(b) => {
-            let first_diff = other
-                .map(|o| b.iter().zip(o).position(|(x, y)| x != y).unwrap_or(b.len().min(o.len())))
-                .map(|k| format!(", first difference at byte {k}"))
-                .unwrap_or_default();
-            format!("{} bytes to {to}{first_diff}", b.len())
-        }
-    }
-}
-
 /// The paths of the leaves running after the last tick, `;`-separated.
 fn running_leaves(robot: &Robot) -> String {
     let mut running = Vec::new();
@@ -541,16 +464,6 @@ mod tests {
         assert!(apply_set(&mut none, "navigation..x", "3").is_err());
         let mut scalar = Some(serde_json::json!({ "profile": "simulation" }));
         assert!(apply_set(&mut scalar, "navigation.profile.x", "1").is_err());
-    }
-
-    #[test]
-    fn tier_bits_round_trip() {
-        for bits in 0..8u8 {
-            let set = tiers_from_bits(bits);
-            for (k, t) in [Tier::Coordination, Tier::Scans, Tier::Maps].into_iter().enumerate() {
-                assert_eq!(set.contains(t), bits & (1 << k) != 0);
-            }
-        }
     }
 
     #[test]
