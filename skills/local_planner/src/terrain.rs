@@ -347,6 +347,8 @@ pub struct TerrainAnalyzer {
     gradient_scratch: GradientScratch,
     distance_scratch: DistanceScratch,
     reach_scratch: ReachScratch,
+    /// One sanitised row for hole filling.
+    fill_scratch: Vec<f32>,
     output: TerrainOutput,
     /// The widest instruction set of this processor (AVX-512, AVX2 with FMA, or the build's
     /// baseline, SSE2 on x86-64), detected once: the stages run compiled for it.
@@ -382,6 +384,7 @@ impl TerrainAnalyzer {
             gradient_scratch: GradientScratch::default(),
             distance_scratch: DistanceScratch::default(),
             reach_scratch: ReachScratch::default(),
+            fill_scratch: Vec::with_capacity(geometry.cols),
             output,
             simd: pulp::Arch::new(),
         })
@@ -443,7 +446,16 @@ impl TerrainAnalyzer {
     #[inline(always)]
     fn run_fused<S: pulp::Simd>(&mut self, depth: &DepthPanorama, simd: S) {
         let wide_registers = !S::IS_SCALAR;
-        let TerrainAnalyzer { geometry, params: p, tables, gradient_scratch, distance_scratch, output: out, .. } = self;
+        let TerrainAnalyzer {
+            geometry,
+            params: p,
+            tables,
+            gradient_scratch,
+            distance_scratch,
+            fill_scratch,
+            output: out,
+            ..
+        } = self;
         let (rows, cols) = (geometry.rows, geometry.cols);
         let window = GradientWindow {
             window_m: p.gradient_window_m as f32,
@@ -462,6 +474,7 @@ impl TerrainAnalyzer {
                 &mut out.ranges_m[span.clone()],
                 cols,
                 p.hole_fill_max_m as f32,
+                fill_scratch,
                 wide_registers,
             );
             let rho = &out.ranges_m[span.clone()];
@@ -544,6 +557,7 @@ impl TerrainAnalyzer {
                 &mut out.ranges_m,
                 cols,
                 p.hole_fill_max_m as f32,
+                &mut self.fill_scratch,
                 wide_registers,
             ),
             TerrainStage::Project => stages::project(&out.ranges_m, &self.tables, &mut out.z_m, &mut out.r_m),
