@@ -158,7 +158,7 @@ fn world_show_pano_terrain_pipeline() {
     // A parameter file: a steeper threshold than the curb's slope sees no curb.
     let params = tmp.path().join("terrain.yaml");
     std::fs::write(&params, "slope_threshold: 100.0\n").unwrap();
-    let relaxed = run_json(&["terrain", s(&pano), "--json", "--params", s(&params)]);
+    let relaxed = run_json(&["terrain", s(&pano), "--json", "--repeat", "2", "--params", s(&params)]);
     let relaxed_obstacles =
         relaxed["reachability"].as_array().unwrap().iter().filter(|r| r["obstacle"].as_bool().unwrap()).count();
     assert!(relaxed_obstacles < obstacle_cols, "{relaxed_obstacles} vs {obstacle_cols}");
@@ -169,7 +169,7 @@ fn world_show_pano_terrain_pipeline() {
     assert!(String::from_utf8_lossy(&bad.stderr).contains("terrain.yaml"));
 
     // Human output: the stage table.
-    let human = spomp().args(["terrain", s(&pano)]).output().unwrap();
+    let human = spomp().args(["terrain", s(&pano), "--repeat", "2"]).output().unwrap();
     let text = String::from_utf8_lossy(&human.stdout);
     assert!(text.contains("distance_transform") && text.contains("traversable pixels"), "{text}");
     assert!(text.contains("total (fused)") && text.contains("staged total"), "{text}");

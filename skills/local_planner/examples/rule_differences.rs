@@ -144,7 +144,7 @@ fn main() -> std::result::Result<(), String> {
         // The stages run one by one here must be the analyzer's result.
         let mut analyzer = TerrainAnalyzer::new(depth.geometry, params.clone()).map_err(|e| e.to_string())?;
         let out = analyzer.analyze(depth).map_err(|e| e.to_string())?;
-        if out.reach_range_m() != &ours.reach_range_m[..] || out.obstacle() != &ours.obstacle[..] {
+        if out.reach_range_m() != ours.reach_range_m.as_slice() || out.obstacle() != ours.obstacle.as_slice() {
             return Err(format!("{name}: the stages differ from the analyzer"));
         }
         let count = |a: &[bool]| a.iter().filter(|&&x| x).count();
