@@ -35,12 +35,14 @@ pub struct TerrainParams {
     /// (default 0.3, simulation 0.25; finite, > 0).
     pub slope_threshold: f64,
     /// Obstacle runs along a row (with wrap in azimuth) shorter than this many pixels are
-    /// dropped as noise, pixels (default 3, as the authors; 0 or 1 keeps every run; at most
-    /// 4096).
+    /// dropped as noise, pixels (default 3, the floor of the authors' rule; 0 or 1 keeps every
+    /// run; at most 4096).
     pub min_obstacle_run_px: u32,
     /// Obstacle runs along a row whose arc length (Σρ)·2π/A is below this are dropped too,
-    /// metres (default 0: off, as the authors; simulation 0.3 with the pixel rule off, spomp's
-    /// former rule, measured: see [`TerrainParams::simulation`]; finite, ≥ 0).
+    /// metres (default 0: off — the authors drop runs under 0.3 m of arc at the run's last pixel
+    /// as well, not adopted for the robot, measured: the local planner README, rule 5;
+    /// simulation 0.3 with the pixel rule off, spomp's former rule, measured: see
+    /// [`TerrainParams::simulation`]; finite, ≥ 0).
     pub min_obstacle_run_m: f64,
     /// D_max: cap of the distance transform, metres (default 2.0; finite, > 0).
     pub max_obstacle_distance_m: f64,
