@@ -134,8 +134,8 @@ fn street_dropouts(seed: u64) -> (DepthPanorama, DropoutStats) {
             *stats_slot += 1.0 / n;
         }
     };
-    for i in 0..geometry.len() {
-        let Some(p) = hit[i] else { continue };
+    for (i, p) in hit.iter().enumerate() {
+        let Some(p) = *p else { continue };
         let (row, col) = (i / geometry.cols, i % geometry.cols);
         let rho = f64::from(pano.range_m[i]);
         let (se, ce) = geometry.elevation_of_row(row).sin_cos();
