@@ -112,7 +112,8 @@ enum Command {
         #[command(subcommand)]
         action: WorldCommand,
     },
-    /// Run terrain analysis on a depth panorama (16-bit PNG of range counts), timing each stage.
+    /// Run terrain analysis on a depth panorama (16-bit PNG of range counts), timing the robot's
+    /// fused analysis and each stage.
     Terrain {
         /// Depth panorama: 16-bit grayscale PNG, rows = elevation (row 0 looks up), 0 = no return.
         pano: PathBuf,
@@ -128,13 +129,14 @@ enum Command {
         /// Start from the paper's simulation values (slope 0.25, inflation 0.75 m).
         #[arg(long, conflicts_with = "params")]
         simulation: bool,
-        /// Runs; the stage timings are medians over them.
-        #[arg(long, default_value_t = 1)]
+        /// Timed runs, after one untimed warm-up; the timings are medians over them.
+        #[arg(long, default_value_t = 100)]
         repeat: usize,
         /// Folder for the stage images.
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Print {rows, cols, timings_ms, reachability, traversable_pixels} as JSON.
+        /// Print {rows, cols, total_ms, total_min_ms, staged_total_ms, timings_ms, reachability,
+        /// traversable_pixels} as JSON.
         #[arg(long)]
         json: bool,
     },

@@ -102,13 +102,32 @@ fn world_show_pano_terrain_pipeline() {
     let t = run_json(&["terrain", s(&pano), "--json", "--repeat", "2", "--out", s(&stages)]);
     let mut keys: Vec<&str> = t.as_object().unwrap().keys().map(String::as_str).collect();
     keys.sort_unstable();
-    assert_eq!(keys, ["cols", "reachability", "rows", "timings_ms", "traversable_pixels"]);
+    assert_eq!(
+        keys,
+        [
+            "cols",
+            "reachability",
+            "rows",
+            "staged_total_ms",
+            "timings_ms",
+            "total_min_ms",
+            "total_ms",
+            "traversable_pixels"
+        ]
+    );
     assert_eq!(t["rows"], 256);
     assert_eq!(t["cols"], 1024);
+    // The total is the fused analysis the robot runs; the stages are timed in a staged run.
+    let (total, total_min) = (t["total_ms"].as_f64().unwrap(), t["total_min_ms"].as_f64().unwrap());
+    assert!(total > 0.0 && total_min > 0.0 && total_min <= total, "{total} {total_min}");
     let timings = t["timings_ms"].as_object().unwrap();
+    let mut stage_sum = 0.0;
     for stage in ["fill_holes", "project", "gradients", "obstacles", "distance_transform", "reachability"] {
-        assert!(timings[stage].as_f64().unwrap() >= 0.0, "{stage}");
+        let ms = timings[stage].as_f64().unwrap();
+        assert!(ms >= 0.0, "{stage}");
+        stage_sum += ms;
     }
+    assert!(stage_sum > 0.0 && t["staged_total_ms"].as_f64().unwrap() > 0.0);
     let reach = t["reachability"].as_array().unwrap();
     assert_eq!(reach.len(), 1024);
     let obstacle_cols = reach.iter().filter(|r| r["obstacle"].as_bool().unwrap()).count();
@@ -139,7 +158,7 @@ fn world_show_pano_terrain_pipeline() {
     // A parameter file: a steeper threshold than the curb's slope sees no curb.
     let params = tmp.path().join("terrain.yaml");
     std::fs::write(&params, "slope_threshold: 100.0\n").unwrap();
-    let relaxed = run_json(&["terrain", s(&pano), "--json", "--params", s(&params)]);
+    let relaxed = run_json(&["terrain", s(&pano), "--json", "--repeat", "2", "--params", s(&params)]);
     let relaxed_obstacles =
         relaxed["reachability"].as_array().unwrap().iter().filter(|r| r["obstacle"].as_bool().unwrap()).count();
     assert!(relaxed_obstacles < obstacle_cols, "{relaxed_obstacles} vs {obstacle_cols}");
@@ -150,9 +169,10 @@ fn world_show_pano_terrain_pipeline() {
     assert!(String::from_utf8_lossy(&bad.stderr).contains("terrain.yaml"));
 
     // Human output: the stage table.
-    let human = spomp().args(["terrain", s(&pano)]).output().unwrap();
+    let human = spomp().args(["terrain", s(&pano), "--repeat", "2"]).output().unwrap();
     let text = String::from_utf8_lossy(&human.stdout);
     assert!(text.contains("distance_transform") && text.contains("traversable pixels"), "{text}");
+    assert!(text.contains("total (fused)") && text.contains("staged total"), "{text}");
 }
 
 #[test]

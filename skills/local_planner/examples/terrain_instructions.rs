@@ -9,8 +9,20 @@
 //! valgrind --tool=callgrind target/release/examples/terrain_instructions street 11
 //! ```
 //!
+//! Panoramas: `street` (the synthetic street, 2 % dropouts), `sim` (the simulator's parking lot),
+//! `street-dropouts` and `sim-dropouts` (the same with the dropouts of a real OS1-64 panorama,
+//! `benches/common/panoramas.rs`).
+//!
 //! `INSTRUCTION_SET=baseline|avx2|avx512` picks the code path (default: the widest available).
+//! `ONLY_STAGE=fill_holes|project|gradients|obstacles|distance_transform|reachability` runs that
+//! stage alone (`run_single_stage`, after one whole analysis) instead of the whole pipeline, for
+//! one stage's instruction count.
 //! With `STAGE_TIMES=1` it also prints each stage's smallest wall time over the repeats.
+//!
+//! `terrain_instructions write-png PANORAMA FILE.png` writes the panorama as a 16-bit PNG of range
+//! counts (1/512 m per count, `spomp terrain`'s default scale) and prints its share of pixels
+//! without a return, so that `spomp terrain FILE.png` analyses the very panorama the benchmark
+//! does.
 //!
 //! (Valgrind reports a processor without AVX-512, so the run measures the AVX2 code path.)
 
@@ -22,15 +34,41 @@ use spomp_local_planner::{InstructionSet, TerrainAnalyzer, TerrainParams, Terrai
 #[path = "../benches/common/panoramas.rs"]
 mod panoramas;
 
-use panoramas::{simulator_panorama, street_panorama};
+use panoramas::{
+    SIM_RANGE_SCALE_M, simulator_dropouts_panorama, simulator_panorama, street_dropout_stats, street_dropouts_panorama,
+    street_panorama,
+};
+
+fn panorama(name: Option<&str>) -> Result<spomp_core::DepthPanorama, String> {
+    match name {
+        Some("street") | None => Ok(street_panorama()),
+        Some("sim") => simulator_panorama(),
+        Some("street-dropouts") => Ok(street_dropouts_panorama()),
+        Some("sim-dropouts") => simulator_dropouts_panorama(),
+        Some(other) => Err(format!("panorama `{other}`: expected street, sim, street-dropouts or sim-dropouts")),
+    }
+}
 
 fn main() -> Result<(), String> {
-    let mut args = std::env::args().skip(1);
-    let pano = match args.next().as_deref() {
-        Some("street") | None => street_panorama(),
-        Some("sim") => simulator_panorama()?,
-        Some(other) => return Err(format!("panorama `{other}`: expected `street` or `sim`")),
-    };
+    let mut args = std::env::args().skip(1).peekable();
+    if args.peek().map(String::as_str) == Some("write-png") {
+        args.next();
+        let name = args.next();
+        let pano = panorama(name.as_deref())?;
+        let path = args.next().ok_or("write-png PANORAMA FILE.png: no file given")?;
+        let g = pano.geometry;
+        let image: image::ImageBuffer<image::Luma<u16>, Vec<u16>> =
+            image::ImageBuffer::from_raw(g.cols as u32, g.rows as u32, pano.to_counts(SIM_RANGE_SCALE_M))
+                .ok_or("panorama size")?;
+        image.save(&path).map_err(|e| format!("{path}: {e}"))?;
+        let missing = pano.range_m.iter().filter(|r| **r <= 0.0).count() as f64 / g.len() as f64;
+        println!("wrote {path}: {} × {}, {:.1} % without a return", g.rows, g.cols, 100.0 * missing);
+        if name.as_deref() == Some("street-dropouts") {
+            println!("{:?}", street_dropout_stats());
+        }
+        return Ok(());
+    }
+    let pano = panorama(args.next().as_deref())?;
     let repeats: usize = match args.next() {
         Some(arg) => arg.parse().map_err(|e| format!("REPEATS `{arg}`: {e}"))?,
         None => 1,
@@ -46,6 +84,18 @@ fn main() -> Result<(), String> {
         if !analyzer.select_instruction_set(set) {
             return Err(format!("this processor lacks {set:?}"));
         }
+    }
+    if let Some(name) = std::env::var_os("ONLY_STAGE") {
+        let stage = TerrainStage::ALL
+            .into_iter()
+            .find(|s| std::ffi::OsStr::new(s.name()) == name)
+            .ok_or_else(|| format!("ONLY_STAGE {name:?}: no such stage"))?;
+        analyzer.analyze(&pano).map_err(|e| e.to_string())?;
+        for _ in 0..repeats {
+            black_box(analyzer.run_single_stage(stage, black_box(&pano)).map_err(|e| e.to_string())?);
+        }
+        println!("{repeats} × {}", stage.name());
+        return Ok(());
     }
     let mut checksum = 0.0f64;
     for _ in 0..repeats {

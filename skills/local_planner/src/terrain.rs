@@ -35,12 +35,14 @@ pub struct TerrainParams {
     /// (default 0.3, simulation 0.25; finite, > 0).
     pub slope_threshold: f64,
     /// Obstacle runs along a row (with wrap in azimuth) shorter than this many pixels are
-    /// dropped as noise, pixels (default 3, as the authors; 0 or 1 keeps every run; at most
-    /// 4096).
+    /// dropped as noise, pixels (default 3, the floor of the authors' rule; 0 or 1 keeps every
+    /// run; at most 4096).
     pub min_obstacle_run_px: u32,
     /// Obstacle runs along a row whose arc length (Σρ)·2π/A is below this are dropped too,
-    /// metres (default 0: off, as the authors; simulation 0.3 with the pixel rule off, spomp's
-    /// former rule, measured: see [`TerrainParams::simulation`]; finite, ≥ 0).
+    /// metres (default 0: off — the authors drop runs under 0.3 m of arc at the run's last pixel
+    /// as well, not adopted for the robot, measured: the local planner README, rule 5;
+    /// simulation 0.3 with the pixel rule off, spomp's former rule, measured: see
+    /// [`TerrainParams::simulation`]; finite, ≥ 0).
     pub min_obstacle_run_m: f64,
     /// D_max: cap of the distance transform, metres (default 2.0; finite, > 0).
     pub max_obstacle_distance_m: f64,
@@ -347,6 +349,8 @@ pub struct TerrainAnalyzer {
     gradient_scratch: GradientScratch,
     distance_scratch: DistanceScratch,
     reach_scratch: ReachScratch,
+    /// One sanitised row for hole filling.
+    fill_scratch: Vec<f32>,
     output: TerrainOutput,
     /// The widest instruction set of this processor (AVX-512, AVX2 with FMA, or the build's
     /// baseline, SSE2 on x86-64), detected once: the stages run compiled for it.
@@ -382,6 +386,7 @@ impl TerrainAnalyzer {
             gradient_scratch: GradientScratch::default(),
             distance_scratch: DistanceScratch::default(),
             reach_scratch: ReachScratch::default(),
+            fill_scratch: Vec::with_capacity(geometry.cols),
             output,
             simd: pulp::Arch::new(),
         })
@@ -443,7 +448,16 @@ impl TerrainAnalyzer {
     #[inline(always)]
     fn run_fused<S: pulp::Simd>(&mut self, depth: &DepthPanorama, simd: S) {
         let wide_registers = !S::IS_SCALAR;
-        let TerrainAnalyzer { geometry, params: p, tables, gradient_scratch, distance_scratch, output: out, .. } = self;
+        let TerrainAnalyzer {
+            geometry,
+            params: p,
+            tables,
+            gradient_scratch,
+            distance_scratch,
+            fill_scratch,
+            output: out,
+            ..
+        } = self;
         let (rows, cols) = (geometry.rows, geometry.cols);
         let window = GradientWindow {
             window_m: p.gradient_window_m as f32,
@@ -462,6 +476,7 @@ impl TerrainAnalyzer {
                 &mut out.ranges_m[span.clone()],
                 cols,
                 p.hole_fill_max_m as f32,
+                fill_scratch,
                 wide_registers,
             );
             let rho = &out.ranges_m[span.clone()];
@@ -544,6 +559,7 @@ impl TerrainAnalyzer {
                 &mut out.ranges_m,
                 cols,
                 p.hole_fill_max_m as f32,
+                &mut self.fill_scratch,
                 wide_registers,
             ),
             TerrainStage::Project => stages::project(&out.ranges_m, &self.tables, &mut out.z_m, &mut out.r_m),

@@ -6,6 +6,9 @@
 #[path = "reference/stages.rs"]
 mod reference;
 
+#[path = "../benches/common/panoramas.rs"]
+mod panoramas;
+
 use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -151,6 +154,19 @@ fn street_with_simulation_params_and_heavy_dropouts_matches_reference() {
     check(&street_panorama(0.2, 11), TerrainParams::default());
 }
 
+/// The benchmark's panoramas with a real sensor's dropouts (a quarter and a third of the pixels
+/// without a return: sky, glass, dark surfaces, clusters): many holes and short obstacle runs
+/// per row, the work the hole and run searches do on real data.
+#[test]
+fn realistic_dropout_panoramas_match_reference() {
+    let street = panoramas::street_dropouts_panorama();
+    let missing = street.range_m.iter().filter(|r| **r <= 0.0).count() as f64 / street.range_m.len() as f64;
+    assert!((0.1..=0.3).contains(&missing), "{missing}");
+    check(&street, TerrainParams::default());
+    check(&street, TerrainParams::simulation());
+    check(&panoramas::simulator_dropouts_panorama().unwrap(), TerrainParams::default());
+}
+
 fn any_range() -> impl Strategy<Value = f32> {
     prop_oneof![
         6 => 0.3f32..12.0,
@@ -193,6 +209,36 @@ proptest! {
         for set in InstructionSet::ALL {
             if analyzer.select_instruction_set(set) {
                 assert_same(analyzer.analyze(&depth).unwrap(), &reference);
+            }
+        }
+    }
+
+    /// Rows of 60–200 columns (whole 64-column words of the hole and run masks and a partial
+    /// last one) with holes and obstacle runs of every length, for both run filters.
+    #[test]
+    fn wide_rows_with_holes_and_runs_match_reference(
+        rows in 2usize..7,
+        cols in 60usize..200,
+        simulation in any::<bool>(),
+        seed in proptest::collection::vec(any_range(), 1..61),
+        holes in proptest::collection::vec((0usize..1400, 1usize..40), 0..30),
+    ) {
+        let g = PanoramaGeometry { rows, cols, v_fov_rad: 1.5 };
+        let mut range_m: Vec<f32> = (0..g.len()).map(|i| seed[(i * 7 + i / cols) % seed.len()]).collect();
+        for (at, len) in holes {
+            let at = at % g.len();
+            let end = (at + len).min(g.len());
+            range_m[at..end].iter_mut().for_each(|r| *r = 0.0);
+        }
+        let depth = DepthPanorama { geometry: g, range_m };
+        let params = if simulation { TerrainParams::simulation() } else { TerrainParams::default() };
+        let params = TerrainParams { slope_threshold: 0.1, ..params };
+        let reference = run_reference(&depth, &params);
+        let mut analyzer = TerrainAnalyzer::new(g, params).unwrap();
+        for set in InstructionSet::ALL {
+            if analyzer.select_instruction_set(set) {
+                assert_same(analyzer.analyze(&depth).unwrap(), &reference);
+                assert_same(analyzer.analyze_observed(&depth, |_| {}).unwrap(), &reference);
             }
         }
     }
