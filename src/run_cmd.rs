@@ -159,8 +159,8 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
                 "run",
                 seed,
                 &area,
-                setup.config.map_publish_period_s,
-                setup.config.map_compression.level,
+                setup.config.map_publish_period_s(),
+                setup.config.map_compression().level,
             )
             // The node runs the heavy skills on worker threads (spomp_ros2::workers).
             .map(|info| spomp_mcap::RunInfo { background_skills: true, ..info })?,

@@ -7,6 +7,10 @@
 //!   [`Robot::flight`], [`Robot::team_message_for`], [`Robot::take_problems`]).
 //! - [`seam`]: the same calls as data ([`SeamCall`], made by [`Robot::call`]), which the robot
 //!   records for one [`RobotObserver`] (logs, live views, replay checks).
+//! - [`team_round`]: the team link's send round ([`Robot::team_round`] within a
+//!   [`LinkCredit`]) and the background work's modelled latency ([`ModelledWork`]), written once
+//!   for every adapter; the adapters only move bytes and work.
+//! - [`RobotView`]: what observers and tools may read of a robot, read-only.
 //! - [`RobotSetup`]: the one translation from a mission, a robot id and the [`OperatingArea`]
 //!   to a robot's configuration, with its [`NavigationSettings`] from the mission's
 //!   `navigation:` sections.
@@ -24,11 +28,13 @@ pub mod runtime;
 pub mod seam;
 pub mod settings;
 pub mod setup;
+pub mod team_round;
 
 pub use checks::MissionRobotChecks;
 pub use nodes::registry;
-pub use robot::{ResumeError, Robot, RobotError};
+pub use robot::{ResumeError, Robot, RobotError, RobotView, TeamTraffic};
 pub use runtime::{JoinFn, RobotRuntime};
 pub use seam::{RobotObserver, SeamCall, SeamReply, TickOutput};
 pub use settings::{NavigationProfile, NavigationSettings, SettingsError, WatchdogParams};
 pub use setup::{OperatingArea, PoseInput, RobotSetup, SetupError, SetupOptions, robot_seed};
+pub use team_round::{LinkCredit, ModelledWork, RoundShape, WorkLatency};

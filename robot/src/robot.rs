@@ -74,6 +74,48 @@ pub struct Robot {
     seam_log: Option<Vec<(Time, SeamCall)>>,
     /// Finished work handed over and not yet applied ([`Robot::deliver_work`]).
     delivered: Vec<FinishedWork>,
+    /// The team-state bytes it sent and received ([`Robot::team_traffic`]).
+    traffic: TeamTraffic,
+}
+
+/// The team-state traffic of a robot since it was built: what it sent (each answer of a
+/// [`SeamCall::TeamOut`]) and what it received, kept by the robot so that counting bytes needs
+/// no seam recording.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct TeamTraffic {
+    /// Messages sent.
+    pub sent_messages: u64,
+    /// Bytes sent in messages a link allowed every tier.
+    pub sent_bytes_all_tiers: u64,
+    /// Bytes sent in messages limited to fewer tiers (a coordination-only link, a channel per
+    /// tier).
+    pub sent_bytes_fewer_tiers: u64,
+    /// Bytes sent, by the tier they carried (coordination, scans, maps); a message's header
+    /// counts as coordination.
+    pub sent_bytes_by_tier: [u64; 3],
+    /// Messages received (taken or refused).
+    pub received_messages: u64,
+    /// Bytes received.
+    pub received_bytes: u64,
+}
+
+impl TeamTraffic {
+    /// Every byte sent.
+    pub fn sent_bytes(&self) -> u64 {
+        self.sent_bytes_all_tiers + self.sent_bytes_fewer_tiers
+    }
+
+    fn count_sent(&mut self, tiers: TierSet, message: &spomp_teamstate::SyncMessage, len: usize) {
+        self.sent_messages += 1;
+        if tiers == TierSet::ALL {
+            self.sent_bytes_all_tiers += len as u64;
+        } else {
+            self.sent_bytes_fewer_tiers += len as u64;
+        }
+        for (total, b) in self.sent_bytes_by_tier.iter_mut().zip(message.bytes_by_tier(len)) {
+            *total += b;
+        }
+    }
 }
 
 /// Where a named seam method's call answered with another call's reply (never: each call
@@ -155,6 +197,7 @@ impl Robot {
             wait_reported: false,
             seam_log: None,
             delivered: Vec::new(),
+            traffic: TeamTraffic::default(),
         })
     }
 
@@ -229,6 +272,8 @@ impl Robot {
                 SeamReply::Done
             }
             SeamCall::TeamIn { from, bytes } => {
+                self.traffic.received_messages += 1;
+                self.traffic.received_bytes += bytes.len() as u64;
                 let result = self.runtime.team_mut().apply_bytes(from, bytes);
                 if let Err(e) = &result {
                     self.runtime.report(format!("sync from {from} rejected: {e}"));
@@ -236,7 +281,11 @@ impl Robot {
                 SeamReply::TeamIn(result)
             }
             SeamCall::TeamOut { to, tiers, budget_bytes, sent } => {
-                *sent = self.runtime.team_mut().make_sync(to, *tiers, *budget_bytes).map(|m| m.encode());
+                *sent = self.runtime.team_mut().make_sync(to, *tiers, *budget_bytes).map(|m| {
+                    let bytes = m.encode();
+                    self.traffic.count_sent(*tiers, &m, bytes.len());
+                    bytes
+                });
                 SeamReply::Done
             }
             SeamCall::Tick(out) => {
@@ -565,7 +614,7 @@ impl Robot {
 
     /// The latest reachability scan (UGVs).
     pub fn latest_scan(&self) -> Option<&Arc<ReachabilityScan>> {
-        self.runtime.nav().and_then(|n| n.latest_scan.as_ref())
+        self.runtime.nav().and_then(NavStack::latest_scan)
     }
 
     /// The latest terrain analysis's obstacle mask (UGVs), row-major in its panorama geometry.
@@ -575,7 +624,7 @@ impl Robot {
 
     /// The navigation settings in force (UGVs).
     pub fn nav_params(&self) -> Option<&crate::runtime::NavParams> {
-        self.runtime.nav().map(|n| &n.params)
+        self.runtime.nav().map(NavStack::params)
     }
 
     /// The robot's copy of the aerial map, if it keeps one.
@@ -593,14 +642,116 @@ impl Robot {
         self.runtime.superseded_panoramas()
     }
 
-    /// The runtime, read-only (tests; adapters use the accessors above).
-    pub fn runtime(&self) -> &RobotRuntime {
-        &self.runtime
+    /// The team-state traffic since it was built.
+    pub fn team_traffic(&self) -> TeamTraffic {
+        self.traffic
     }
 
     /// The tree's executor (node paths, blackboard, status).
     pub fn tree(&self) -> &TreeExecutor<RobotRuntime> {
         &self.tree
+    }
+
+    /// What observers and tools may read of the robot.
+    pub fn view(&self) -> RobotView<'_> {
+        RobotView(self)
+    }
+}
+
+/// A robot, read-only: what observers, live views and tools may read of it (its estimates,
+/// team state, plans, the latest perception, its tree's status), never its runtime.
+#[derive(Clone, Copy)]
+pub struct RobotView<'a>(&'a Robot);
+
+impl<'a> RobotView<'a> {
+    /// The robot's id.
+    pub fn id(&self) -> &'a RobotId {
+        self.0.id()
+    }
+
+    /// Its kind.
+    pub fn kind(&self) -> RobotKind {
+        self.0.kind()
+    }
+
+    /// The latest map-frame pose estimate.
+    pub fn pose(&self) -> Option<PoseEstimate> {
+        self.0.pose()
+    }
+
+    /// The velocity command of the last tick (UGVs); `None`: stop.
+    pub fn command(&self) -> Option<Twist2> {
+        self.0.command()
+    }
+
+    /// The flight command of the last tick (UAVs); `None`: hover.
+    pub fn flight(&self) -> Option<FlightCommand> {
+        self.0.flight()
+    }
+
+    /// Its team state.
+    pub fn team(&self) -> &'a TeamState {
+        self.0.team()
+    }
+
+    /// Its team-state traffic since it was built.
+    pub fn team_traffic(&self) -> TeamTraffic {
+        self.0.team_traffic()
+    }
+
+    /// The path being followed, map frame.
+    pub fn planned_path(&self) -> Option<&'a [Point2]> {
+        self.0.planned_path()
+    }
+
+    /// The latest reachability scan (UGVs).
+    pub fn latest_scan(&self) -> Option<&'a Arc<ReachabilityScan>> {
+        self.0.latest_scan()
+    }
+
+    /// The latest terrain analysis's obstacle mask (UGVs), row-major in its panorama geometry.
+    pub fn terrain_obstacles(&self) -> Option<(spomp_core::PanoramaGeometry, &'a [bool])> {
+        self.0.terrain_obstacles()
+    }
+
+    /// The navigation stack (UGVs): its planner's graph, blocked edges, latest safe region.
+    pub fn nav(&self) -> Option<&'a NavStack> {
+        self.0.nav()
+    }
+
+    /// The navigation settings in force (UGVs).
+    pub fn nav_params(&self) -> Option<&'a crate::runtime::NavParams> {
+        self.0.nav_params()
+    }
+
+    /// The robot's copy of the aerial map, if it keeps one.
+    pub fn aerial_map(&self) -> Option<&'a spomp_mapping::Orthomap> {
+        self.0.aerial_map()
+    }
+
+    /// The class table its skills use.
+    pub fn classes(&self) -> &'a spomp_core::ClassTable {
+        self.0.classes()
+    }
+
+    /// Panoramas replaced by a newer one before they were processed (background skills).
+    pub fn superseded_panoramas(&self) -> u64 {
+        self.0.superseded_panoramas()
+    }
+
+    /// Its tree's status.
+    pub fn tree_status(&self) -> Status {
+        self.0.tree.status()
+    }
+
+    /// Its tree's executor, read-only (node paths, blackboard).
+    pub fn tree(&self) -> &'a TreeExecutor<RobotRuntime> {
+        self.0.tree()
+    }
+
+    /// Its localization (UGVs: the filter's state and counts).
+    pub fn localization(&self) -> &'a crate::runtime::Localization {
+        self.0.runtime.localization()
     }
 }
 
@@ -669,6 +820,14 @@ mod tests {
         let (sent, rejected, status, work) = drive(&mut r);
         assert_eq!((sent.clone(), rejected, status, work), drive(&mut quiet), "recording changes nothing");
         assert!(sent.is_some() && rejected && status == Status::Failure && work == 0);
+        // The robot counted its traffic itself, recording or not.
+        let len = sent.as_ref().map_or(0, |b| b.len() as u64);
+        for robot in [&r, &quiet] {
+            let t = robot.team_traffic();
+            assert_eq!((t.sent_messages, t.sent_bytes_all_tiers, t.sent_bytes_fewer_tiers), (1, len, 0));
+            assert_eq!(t.sent_bytes_by_tier.iter().sum::<u64>(), len);
+            assert_eq!((t.received_messages, t.received_bytes), (1, 3));
+        }
         let mut log = SeamLog::default();
         r.deliver_recorded(&mut log);
         let names: Vec<&str> = log.0.iter().map(|(_, _, c)| c.name()).collect();

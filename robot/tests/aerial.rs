@@ -20,6 +20,7 @@ use spomp_behaviors::registry::PortBindings;
 use spomp_behaviors::{BbValue, Binding, Status, TreeExecutor};
 use spomp_robot::RobotRuntime;
 use spomp_robot::registry as builtin_registry;
+use spomp_robot::runtime::DrivenRuntime;
 
 type RobotExecutor = TreeExecutor<RobotRuntime>;
 use spomp_core::{Point2, Pose2, PoseEstimate, RobotId, RobotKind, Time};
@@ -48,13 +49,13 @@ fn build_from(path: &Path, role: &str, id: &str, start: Pose2) -> RobotExecutor 
     build_executor(&loaded.roles[role], &registry, &RobotId::new(id), start, opts).unwrap()
 }
 
-fn runtime(id: &str, kind: RobotKind, priority: u32, start: Pose2) -> RobotRuntime {
-    RobotRuntime::new(RobotId::new(id), kind, priority, start, TeamStateParams::default()).unwrap()
+fn runtime(id: &str, kind: RobotKind, priority: u32, start: Pose2) -> DrivenRuntime {
+    RobotRuntime::new(RobotId::new(id), kind, priority, start, TeamStateParams::default()).unwrap().into()
 }
 
 /// A robot's position fix at `t` (GPS on the UAV, the UGV's localizer), published to its team
 /// state as adapters do.
-fn fix(rt: &mut RobotRuntime, p: Point2, t: Time) {
+fn fix(rt: &mut DrivenRuntime, p: Point2, t: Time) {
     rt.on_external_pose(PoseEstimate {
         stamp: t,
         pose: Pose2::new(p.x, p.y, 0.0),
@@ -65,7 +66,7 @@ fn fix(rt: &mut RobotRuntime, p: Point2, t: Time) {
 
 /// The simulated UAV: one executor tick at `t`, then fly toward `rt.flight` for `DT_S`.
 struct Uav {
-    rt: RobotRuntime,
+    rt: DrivenRuntime,
     ex: RobotExecutor,
     pos: Point2,
     /// Positions after every step.

@@ -12,6 +12,7 @@ use spomp_behaviors::{BbValue, Status, TreeExecutor};
 use spomp_core::{GoalId, Point2, Pose2, PoseEstimate, RobotId, RobotKind, Time};
 use spomp_robot::RobotRuntime;
 use spomp_robot::registry as builtin_registry;
+use spomp_robot::runtime::DrivenRuntime;
 use spomp_robot::runtime::RuntimeConfig;
 use spomp_teamstate::{TeamStateParams, TierSet};
 
@@ -42,7 +43,7 @@ time_limit_s: 100
 "#;
 
 struct Robot {
-    rt: RobotRuntime,
+    rt: DrivenRuntime,
     ex: TreeExecutor<RobotRuntime>,
 }
 
@@ -57,8 +58,10 @@ fn robots() -> (Robot, Robot) {
     let role = &loaded.roles["visitor"];
     let make = |id: &str, priority: u32, x: f64| {
         let start = Pose2::new(x, 0.0, 0.0);
-        let mut rt =
-            RobotRuntime::new(RobotId::new(id), RobotKind::Ugv, priority, start, TeamStateParams::default()).unwrap();
+        let mut rt: DrivenRuntime =
+            RobotRuntime::new(RobotId::new(id), RobotKind::Ugv, priority, start, TeamStateParams::default())
+                .unwrap()
+                .into();
         rt.on_external_pose(PoseEstimate { pose: start, confidence: 1.0, ..Default::default() });
         // Operator goals: A near both robots, B farther away.
         rt.team_mut().add_mission_goal(0, Point2::new(10.0, 0.0)).unwrap();
@@ -163,7 +166,7 @@ fn failure_marks_unreachable_for_that_robot_only_until_cleared() {
         now: Time::from_millis(60),
         tick: 1,
         blackboard: &mut bb,
-        env: &mut u1.rt,
+        env: u1.rt.runtime_mut(),
         observer: None,
     };
     assert_eq!(node.tick(Status::Idle, &mut ctx), Status::Success);
@@ -203,9 +206,9 @@ mod detection {
     }
 
     fn detecting_runtime(id: &str, spec: GridSpec) -> RobotRuntime {
-        let mut config = RuntimeConfig::basic(RobotId::new(id), RobotKind::Ugv, 1, Pose2::default());
-        config.detection = Some(GoalDetectionParams::default());
-        config.map_spec = Some(spec);
+        let config = RuntimeConfig::basic(RobotId::new(id), RobotKind::Ugv, 1, Pose2::default())
+            .with_detection(GoalDetectionParams::default())
+            .with_map_spec(spec);
         RobotRuntime::from_config(config).unwrap()
     }
 

@@ -12,6 +12,7 @@ use spomp_behaviors::{BbValue, Status, TreeExecutor};
 use spomp_core::{GoalId, Point2, Pose2, PoseEstimate, RobotId, RobotKind, Time};
 use spomp_robot::RobotRuntime;
 use spomp_robot::registry as builtin_registry;
+use spomp_robot::runtime::DrivenRuntime;
 use spomp_teamstate::TeamStateParams;
 
 /// The shipped subtrees, as the missions include them.
@@ -39,7 +40,7 @@ time_limit_s: 600
 "#;
 
 struct Robot {
-    rt: RobotRuntime,
+    rt: DrivenRuntime,
     ex: TreeExecutor<RobotRuntime>,
 }
 
@@ -54,7 +55,8 @@ fn robot_away_from_home(folder: &str) -> Robot {
     let loaded = load_mission(&path, &registry);
     assert!(loaded.diagnostics.is_empty(), "{:#?}", loaded.diagnostics);
     let home = Pose2::new(0.0, 0.0, 0.0);
-    let mut rt = RobotRuntime::new(RobotId::new("ugv1"), RobotKind::Ugv, 1, home, TeamStateParams::default()).unwrap();
+    let mut rt: DrivenRuntime =
+        RobotRuntime::new(RobotId::new("ugv1"), RobotKind::Ugv, 1, home, TeamStateParams::default()).unwrap().into();
     rt.on_external_pose(PoseEstimate { pose: Pose2::new(60.0, 0.0, 0.0), confidence: 1.0, ..Default::default() });
     let ex = build_executor(&loaded.roles["visitor"], &registry, rt.id(), home, BuildOptions::default()).unwrap();
     Robot { rt, ex }

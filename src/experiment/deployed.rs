@@ -398,11 +398,12 @@ pub fn run_deployed_trial(
     let radio_bytes = Arc::new(Mutex::new(ByteCounter::default()));
     sim.drive_externally(Box::new(CountingFarm { farm, bytes: radio_bytes.clone() }))
         .context("handing the robots to the farm")?;
-    let mut bytes = ByteCounter::default();
-    let result = sim.run_until(&mut bytes, &mut || interrupted.load(Ordering::Relaxed));
+    let result = sim.run_until(&mut rows::TrialObserver, &mut || interrupted.load(Ordering::Relaxed));
     if result.summary.outcome == Outcome::Interrupted {
         return Ok(None);
     }
+    // The simulator's own robots counted what they sent; the farm's, what its radio carried.
+    let mut bytes = ByteCounter::of_robots(&result.team_traffic);
     let mut problems: Vec<String> = notes.lock().map(|n| n.clone()).unwrap_or_default();
     let reports = processes.finish(&mut problems);
     match channel {

@@ -523,11 +523,11 @@ fn run_trial(
     let options = SimOptions { seed: trial.seed, parallel_robots, ..SimOptions::default() };
     let sim = Simulation::new(loaded, registry, Arc::new(world), options)
         .with_context(|| format!("setting up `{}`", mission.mission))?;
-    let mut bytes = ByteCounter::default();
-    let result = sim.run_until(&mut bytes, &mut || interrupted.load(Ordering::Relaxed));
+    let result = sim.run_until(&mut rows::TrialObserver, &mut || interrupted.load(Ordering::Relaxed));
     if result.summary.outcome == Outcome::Interrupted {
         return Ok(None);
     }
+    let bytes = ByteCounter::of_robots(&result.team_traffic);
     Ok(Some(rows::row_of(trial.index, &configuration.name, hash, &result.summary, &bytes)))
 }
 

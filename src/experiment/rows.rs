@@ -10,8 +10,8 @@ use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use spomp_behaviors::mission::limits::{SourceError, read_regular};
 use spomp_behaviors::mission::output;
-use spomp_core::{RobotId, Time};
-use spomp_robot::{RobotObserver, SeamCall};
+use spomp_core::RobotId;
+use spomp_robot::{RobotObserver, TeamTraffic};
 use spomp_sim::run::{RunSummary, SimObserver};
 use spomp_teamstate::{SyncMessage, TierSet};
 
@@ -237,21 +237,39 @@ impl ByteCounter {
     }
 }
 
-impl RobotObserver for ByteCounter {
-    fn wants_seam(&self) -> bool {
-        true
-    }
-
-    fn on_seam(&mut self, robot: &RobotId, _now: Time, call: &SeamCall) {
-        if let SeamCall::TeamOut { tiers, sent: Some(bytes), .. } = call {
-            self.count(robot, *tiers, bytes);
+impl ByteCounter {
+    /// The counts the robots kept of what they sent (`spomp_robot::TeamTraffic`): no seam
+    /// recording needed, so an experiment's robots do not copy every call they answer.
+    pub fn of_robots<'a>(traffic: impl IntoIterator<Item = &'a (RobotId, TeamTraffic)>) -> Self {
+        let mut bytes = ByteCounter::default();
+        for (robot, t) in traffic {
+            if t.sent_messages == 0 {
+                continue;
+            }
+            let robot = robot.to_string();
+            if t.sent_bytes_all_tiers > 0 {
+                *bytes.full.entry(robot.clone()).or_default() += t.sent_bytes_all_tiers;
+            }
+            if t.sent_bytes_fewer_tiers > 0 {
+                *bytes.small.entry(robot).or_default() += t.sent_bytes_fewer_tiers;
+            }
+            for (total, b) in bytes.by_tier.iter_mut().zip(t.sent_bytes_by_tier) {
+                *total += b;
+            }
         }
+        bytes
     }
 }
 
-impl SimObserver for ByteCounter {
+/// What an experiment's trial observes of its run: nothing but the result (the rows come from
+/// the summary and the robots' own traffic counts), with the robots' states as rarely as the
+/// simulator allows.
+pub struct TrialObserver;
+
+impl RobotObserver for TrialObserver {}
+
+impl SimObserver for TrialObserver {
     fn record_period_s(&self) -> f64 {
-        // Nothing here uses the robots' states: as rarely as the simulator allows.
         1.0
     }
 }

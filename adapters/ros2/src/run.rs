@@ -10,7 +10,7 @@
 //! its position) while odometry or panoramas are stale, while the e-stop is engaged, and once at
 //! shutdown.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -22,8 +22,8 @@ use spomp_behaviors::trace::Recorder;
 use spomp_core::ros;
 use spomp_core::{FlightCommand, PanoramaFrame, Point2, PoseEstimate, RobotId, RobotKind, Time, Twist2};
 use spomp_robot::runtime::WorkKind;
-use spomp_robot::{Robot, RobotObserver};
-use spomp_teamstate::{Tier, TierSet};
+use spomp_robot::{LinkCredit, ModelledWork, Robot, RobotObserver, RobotView, RoundShape, WorkLatency};
+use spomp_teamstate::TierSet;
 
 use crate::clock::{TimeBase, ros_nanos, wall_nanos};
 use crate::convert;
@@ -266,9 +266,9 @@ pub struct RobotNode {
     peers: Vec<RobotId>,
     /// The team link, when messages go between processes rather than over ROS 2 topics.
     team_channel: Option<Box<dyn TeamChannel>>,
-    /// Unused team-state budget per peer, bytes, carried from period to period while the peer
-    /// stays reachable (see [`carry_team_credit`]).
-    team_credit: BTreeMap<RobotId, usize>,
+    /// Unused team-state budget per peer, carried from period to period while the peer stays
+    /// reachable (the robot layer's rule, [`LinkCredit`]).
+    team_credit: LinkCredit,
     /// Where the resume state goes, and how often (seconds).
     state_sink: Option<(StateSink, f64)>,
     // Entities before the node: they are dropped first.
@@ -345,7 +345,7 @@ impl RobotNode {
             inputs,
             outputs,
             team_channel: None,
-            team_credit: BTreeMap::new(),
+            team_credit: LinkCredit::default(),
             state_sink: None,
             node,
         })
@@ -356,9 +356,9 @@ impl RobotNode {
         self.node.topics()
     }
 
-    /// The robot.
-    pub fn robot(&self) -> &Robot {
-        &self.robot
+    /// The robot, read-only.
+    pub fn robot(&self) -> RobotView<'_> {
+        self.robot.view()
     }
 
     /// Sends and receives team-state messages over `channel` instead of the ROS 2 topics.
@@ -667,13 +667,12 @@ impl RobotNode {
         observer: &mut dyn RunObserver,
     ) {
         let Some((perception_s, planner_s)) = step.hello.as_ref().and_then(|h| h.skill_latency_s) else { return };
-        let mut k = 0;
-        while k < step.work_out.len() {
-            if step.work_out[k].0 > now {
-                k += 1;
-                continue;
-            }
-            let (_, work_id) = step.work_out.remove(k);
+        let latency = WorkLatency { perception_s, planner_s };
+        let due = match step.work_out.as_mut() {
+            Some(w) => w.due(now),
+            None => Vec::new(),
+        };
+        for work_id in due {
             let Some((work, took)) = self.wait_for_work(state, step, work_id, now, observer) else { continue };
             let kind = work.kind();
             self.robot.finish_work(now, work);
@@ -686,15 +685,12 @@ impl RobotNode {
                 WorkKind::Planner => state.report.max_planner_ms = state.report.max_planner_ms.max(ms(took)),
             }
         }
-        for w in self.robot.take_work(now) {
-            let latency_s = match w.kind() {
-                WorkKind::Perception => perception_s,
-                WorkKind::Planner => planner_s,
-            };
-            let due = Time::from_nanos(now.nanos + Time::from_secs_f64(latency_s).nanos);
-            step.work_out.push((due, w.id()));
-            self.workers.submit(w);
-        }
+        let workers = &mut self.workers;
+        step.work_out.get_or_insert_with(|| ModelledWork::new(latency)).take(&mut self.robot, now, |w| {
+            let id = w.id();
+            workers.submit(w);
+            id
+        });
     }
 
     /// Work number `work_id` from the threads, waiting for it; `None` if a skill failed.
@@ -1163,18 +1159,17 @@ impl RobotNode {
     }
 
     fn send_team(&mut self, now: Time) {
-        let budget = self.settings.team_budget_bytes;
+        let budget = self.settings.team_budget_bytes as u64;
         if let Some(channel) = self.team_channel.as_mut() {
             // One message per tier, highest first, within the link's credit; only to peers the
             // link reaches now.
             let reachable = channel.reachable();
-            carry_team_credit(&mut self.team_credit, self.peers.iter().filter(|p| reachable.contains(*p)), budget);
+            self.team_credit.begin_round(self.peers.iter().filter(|p| reachable.contains(*p)).map(|p| (p, budget)));
             for peer in self.peers.iter().filter(|p| reachable.contains(*p)) {
-                let Some(left) = self.team_credit.get_mut(peer) else { continue };
-                for tier in Tier::ALL {
-                    let sent = self.robot.team_message_for(now, peer, TierSet::only(tier), *left);
-                    if let Some(bytes) = sent {
-                        *left = left.saturating_sub(bytes.len());
+                for (tiers, bytes) in
+                    self.robot.team_round(now, peer, TierSet::ALL, RoundShape::PerTier, &mut self.team_credit)
+                {
+                    if let Some(tier) = spomp_robot::team_round::single_tier(tiers) {
                         channel.send(peer, tier, bytes);
                     }
                 }
@@ -1183,27 +1178,24 @@ impl RobotNode {
         }
         // Over ROS 2 topics the farm's radio decides what arrives; this side cannot tell when a
         // link drops, so the credit is kept for every peer (within the cap).
-        carry_team_credit(&mut self.team_credit, self.peers.iter(), budget);
+        self.team_credit.begin_round(self.peers.iter().map(|p| (p, budget)));
         for peer in &self.peers {
-            let Some(left) = self.team_credit.get_mut(peer) else { continue };
-            let budget_bytes = *left;
-            let sent = self.robot.team_message_for(now, peer, TierSet::ALL, budget_bytes);
-            let Some(bytes) = sent else {
-                continue;
-            };
-            *left = left.saturating_sub(bytes.len());
-            let msg = ros::BytesMsg {
-                layout: ros::MultiArrayLayout {
-                    dim: vec![ros::MultiArrayDimension {
-                        label: peer.to_string(),
-                        size: bytes.len() as u32,
-                        stride: bytes.len() as u32,
-                    }],
-                    data_offset: 0,
-                },
-                data: bytes,
-            };
-            let _ = self.outputs.team_out.publish(msg);
+            for (_, bytes) in
+                self.robot.team_round(now, peer, TierSet::ALL, RoundShape::OneMessage, &mut self.team_credit)
+            {
+                let msg = ros::BytesMsg {
+                    layout: ros::MultiArrayLayout {
+                        dim: vec![ros::MultiArrayDimension {
+                            label: peer.to_string(),
+                            size: bytes.len() as u32,
+                            stride: bytes.len() as u32,
+                        }],
+                        data_offset: 0,
+                    },
+                    data: bytes,
+                };
+                let _ = self.outputs.team_out.publish(msg);
+            }
         }
     }
 
@@ -1367,8 +1359,8 @@ struct LockstepStep {
     /// Period of the tree's ticks, nanoseconds (rounded as the simulator rounds it).
     tick_period_ns: i64,
     next_tick: Time,
-    /// Work on the threads: (modelled time its result is due, work number), in the order taken.
-    work_out: Vec<(Time, u64)>,
+    /// Work on the threads by work number, under the farm's latency model (once it is known).
+    work_out: Option<ModelledWork<u64>>,
     /// Results the threads finished before they were due.
     finished: std::collections::HashMap<u64, (spomp_robot::runtime::FinishedWork, Duration)>,
     /// The estimate right after this step's panorama.
@@ -1382,7 +1374,7 @@ impl LockstepStep {
             next_seq: 1,
             tick_period_ns: ((1e9 / tick_hz).round() as i64).max(1),
             next_tick: Time::ZERO,
-            work_out: Vec::new(),
+            work_out: None,
             finished: std::collections::HashMap::new(),
             estimate_after_panorama: None,
         }
@@ -1545,24 +1537,6 @@ fn percentiles(samples: &VecDeque<f64>) -> (f64, f64) {
     (at(0.5), at(0.99))
 }
 
-/// Most team-state bytes a link may bank for later: a few full map versions (as the
-/// simulator's radio model).
-const MAX_TEAM_CREDIT_BYTES: usize = 32 * 1024 * 1024;
-
-/// Starts a send period: every peer in `up` gets `budget` bytes more credit, capped at
-/// [`MAX_TEAM_CREDIT_BYTES`]; peers not in `up` lose theirs. Unused budget carries over so a
-/// record larger than one period's budget (a map version) goes out after enough periods, as on
-/// a real link and as in the simulator's radio model; without it such a record is never sent
-/// and a sync that waits for it never completes.
-fn carry_team_credit<'a>(credit: &mut BTreeMap<RobotId, usize>, up: impl Iterator<Item = &'a RobotId>, budget: usize) {
-    let mut next = BTreeMap::new();
-    for peer in up {
-        let carried = credit.get(peer).copied().unwrap_or(0);
-        next.insert(peer.clone(), carried.saturating_add(budget).min(MAX_TEAM_CREDIT_BYTES.max(budget)));
-    }
-    *credit = next;
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1579,19 +1553,18 @@ mod tests {
         let blob: Vec<u8> =
             (0..budget * 5 / 2).map(|i| (i as u32).wrapping_mul(2_654_435_761).to_le_bytes()[3]).collect();
         sender.add_map_version(1, Time::from_secs_f64(1.0), blob).expect("map version");
-        let mut credit = BTreeMap::new();
+        let mut credit = LinkCredit::default();
         for period in 1..=20 {
             if !carry {
-                credit.clear();
+                credit = LinkCredit::default();
             }
-            carry_team_credit(&mut credit, [&b].into_iter(), budget);
-            let left = credit.get_mut(&b).expect("credit for a reachable peer");
-            for tier in Tier::ALL {
-                if let Some(msg) = sender.make_sync(&b, TierSet::only(tier), *left) {
-                    let bytes = msg.encode();
-                    *left = left.saturating_sub(bytes.len());
-                    receiver.apply_bytes(&a, &bytes).expect("a good message");
-                }
+            credit.begin_round([(&b, budget as u64)]);
+            let sent = spomp_robot::team_round::round(RoundShape::PerTier, TierSet::ALL, credit.left(&b), |t, left| {
+                sender.make_sync(&b, t, left).map(|m| m.encode())
+            });
+            for (_, bytes) in sent {
+                credit.spend(&b, bytes.len());
+                receiver.apply_bytes(&a, &bytes).expect("a good message");
             }
             if receiver.newest_map().is_some() {
                 return Some(period);
@@ -1607,23 +1580,6 @@ mod tests {
         // never completed and the UGVs never saw the map's later clusters.
         assert_eq!(periods_until_map_arrives(100_000, false), None);
         assert_eq!(periods_until_map_arrives(100_000, true), Some(3));
-    }
-
-    #[test]
-    fn team_credit_is_capped_and_lost_when_the_peer_is_out_of_reach() {
-        let (p, q) = (RobotId::new("ugv1"), RobotId::new("ugv2"));
-        let mut credit = BTreeMap::new();
-        for _ in 0..100 {
-            carry_team_credit(&mut credit, [&p, &q].into_iter(), 1_000_000);
-        }
-        assert_eq!(credit.get(&p), Some(&MAX_TEAM_CREDIT_BYTES));
-        carry_team_credit(&mut credit, [&q].into_iter(), 1_000_000);
-        assert_eq!(credit.get(&p), None);
-        carry_team_credit(&mut credit, [&p, &q].into_iter(), 1_000_000);
-        assert_eq!(credit.get(&p), Some(&1_000_000));
-        // A budget above the cap is never cut below one period's worth.
-        carry_team_credit(&mut credit, [&p].into_iter(), 64 * 1024 * 1024);
-        assert_eq!(credit.get(&p), Some(&(64 * 1024 * 1024)));
     }
 
     #[test]

@@ -124,7 +124,7 @@ fn own_scans_remove_a_blocked_edge_and_the_robot_takes_the_other_road() {
     assert!(other_road, "it replanned over the top street: {}", robot.summary());
     assert!(robot.removed_edges() >= 1, "its scans removed the blocked edge: {}", robot.summary());
     let nav = robot.rt.nav().unwrap();
-    assert!(nav.blocked_edges.is_empty(), "the scans found the block, not the stuck fallback: {}", robot.summary());
+    assert!(nav.blocked_edges().is_empty(), "the scans found the block, not the stuck fallback: {}", robot.summary());
     assert_eq!(robot.ugv.collisions(), 0, "{}", robot.summary());
 }
 
@@ -341,7 +341,7 @@ fn after_driving_up_ramps_the_model_rates_unseen_ramps_above_plain_curbs() {
         robot.advance(Twist2::ZERO);
     }
     assert_eq!(robot.ugv.collisions(), 0, "{}", robot.summary());
-    let stats = robot.rt.nav().unwrap().global.graph_stats();
+    let stats = robot.rt.nav().unwrap().global().graph_stats();
     assert!(stats.training_rounds >= 3, "{stats:?}");
     assert!(robot.ugv.base_elevation_m() < 0.05, "back on the road");
 
@@ -364,7 +364,7 @@ fn after_driving_up_ramps_the_model_rates_unseen_ramps_above_plain_curbs() {
         })
         .collect();
     assert!(ramp_cells.len() > 100 && curb_cells.len() > 500, "{} {}", ramp_cells.len(), curb_cells.len());
-    let planner = &mut robot.rt.nav_mut().unwrap().global;
+    let planner = robot.rt.nav_mut().unwrap().global_mut();
     let mut mean = |cells: &[usize]| {
         cells.iter().map(|&i| planner.traversability_at(point(i)).unwrap()).sum::<f64>() / cells.len() as f64
     };

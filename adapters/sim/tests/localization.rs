@@ -34,7 +34,7 @@ const WORLD: &str = "{ generate: { size_m: [200, 150], vehicle_clusters: 4, road
 
 /// Position error of a robot's own estimate against the simulator's truth.
 fn error_of(sim: &Simulation, id: &str) -> Option<f64> {
-    let estimate = sim.runtime(id)?.pose()?;
+    let estimate = sim.robot(id)?.pose()?;
     Some(estimate.pose.position().distance(sim.true_pose(id)?.position()))
 }
 
@@ -46,7 +46,7 @@ fn median(values: &[f64]) -> f64 {
 
 fn trace(sim: &Simulation, id: &str) {
     if std::env::var("LOC_TRACE").is_ok() && sim.now().nanos % 1_000_000_000 == 0 {
-        let rt = sim.runtime(id).unwrap();
+        let rt = sim.robot(id).unwrap();
         if let Localization::CrossView(cv) = &rt.localization() {
             let e = cv.filter().estimate();
             let spread = e.covariance[0].max(e.covariance[4]).sqrt();
@@ -58,7 +58,7 @@ fn trace(sim: &Simulation, id: &str) {
             sim.true_pose(id).map(|p| (p.x as i32, p.y as i32)),
             error_of(sim, id),
             rt.localization().updates(),
-            rt.map().map(|m| m.version())
+            rt.aerial_map().map(|m| m.version())
         );
     }
 }
@@ -111,7 +111,7 @@ sim: {{ world: {WORLD}, prior_map: true }}
         errors.push(error_of(&sim, "ugv1").unwrap());
         trace(&sim, "ugv1");
     }
-    let rt = sim.runtime("ugv1").unwrap();
+    let rt = sim.robot("ugv1").unwrap();
     let (med, max) = (median(&errors), errors.iter().copied().fold(0.0, f64::max));
     let series = sim.localization_error_series("ugv1").unwrap();
     eprintln!(
@@ -168,10 +168,10 @@ sim: {{ world: {WORLD} }}
     let mut after_map = Vec::new();
     while sim.outcome().is_none() && sim.now() < Time::from_secs_f64(150.0) {
         sim.step(&mut NoObserver);
-        let rt = sim.runtime("ugv1").unwrap();
+        let rt = sim.robot("ugv1").unwrap();
         let error = error_of(&sim, "ugv1").unwrap();
         trace(&sim, "ugv1");
-        match (rt.map().is_some(), map_at) {
+        match (rt.aerial_map().is_some(), map_at) {
             (false, _) => {
                 assert_eq!(rt.localization().updates(), 0, "no map, no measurement update");
                 before_map.push(error);
@@ -181,7 +181,7 @@ sim: {{ world: {WORLD} }}
         }
     }
     let map_at = map_at.expect("the UAV's map reached the UGV");
-    let rt = sim.runtime("ugv1").unwrap();
+    let rt = sim.robot("ugv1").unwrap();
     let drift = before_map.last().copied().unwrap();
     let settled: Vec<f64> = after_map.iter().filter(|(t, _)| t.secs_since(map_at) >= 30.0).map(|&(_, e)| e).collect();
     let settled_max = settled.iter().copied().fold(0.0, f64::max);

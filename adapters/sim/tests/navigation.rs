@@ -173,8 +173,8 @@ fn navigate_to_replans_when_its_scans_remove_a_blocked_edge() {
     assert_eq!(status, Status::Success, "{}", run.summary());
     assert!(over_the_top, "it replanned over the top street");
     let nav = run.rt.nav().unwrap();
-    assert!(nav.global.graph_stats().removed_edges >= 1, "{}", run.summary());
-    assert!(nav.blocked_edges.is_empty(), "the scans found it, not the stuck fallback: {}", run.summary());
+    assert!(nav.global().graph_stats().removed_edges >= 1, "{}", run.summary());
+    assert!(nav.blocked_edges().is_empty(), "the scans found it, not the stuck fallback: {}", run.summary());
     assert_eq!(run.ugv.collisions(), 0, "{}", run.summary());
 }
 
@@ -191,7 +191,7 @@ fn navigate_to_gets_around_a_roadblock_its_scans_cannot_judge() {
     assert!(first.iter().all(|p| p.y < 10.0), "the first plan takes the bottom street: {first:?}");
     assert_eq!(status, Status::Success, "{}", run.summary());
     assert!(over_the_top, "it replanned over the top street");
-    assert_eq!(run.rt.nav().unwrap().blocked_edges.len(), 1, "{}", run.summary());
+    assert_eq!(run.rt.nav().unwrap().blocked_edges().len(), 1, "{}", run.summary());
     assert_eq!(run.ugv.collisions(), 0, "{}", run.summary());
     assert!(run.ugv.distance_m() > 70.0, "it drove around: {}", run.summary());
 }

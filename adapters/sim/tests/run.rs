@@ -11,7 +11,7 @@ use common::{load, simulation, write_mission};
 
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::{RobotId, Time};
-use spomp_robot::{RobotObserver, SeamCall};
+use spomp_robot::RobotObserver;
 use spomp_sim::LinkTier;
 use spomp_sim::run::{NoObserver, Outcome, RobotSnapshot, SimObserver, SimOptions, Simulation};
 
@@ -54,11 +54,11 @@ fn radio_ranges_decide_what_flows() {
         let mut sim = simulation(&loaded, SimOptions { map_publish_period_s: 1.0, ..SimOptions::default() });
         run_for(&mut sim, 4.0);
         assert_eq!(sim.linked("base", "uav1"), tier, "at {distance} m");
-        let base = sim.runtime("base").unwrap();
+        let base = sim.robot("base").unwrap();
         let uav = RobotId::new("uav1");
         assert_eq!(base.team().robot_pose(&uav).is_some(), pose_flows, "pose at {distance} m");
         assert_eq!(base.team().latest_map(&uav).is_some(), map_flows, "map at {distance} m");
-        assert!(sim.runtime("uav1").unwrap().team().latest_map(&uav).is_some(), "the UAV published its map");
+        assert!(sim.robot("uav1").unwrap().team().latest_map(&uav).is_some(), "the UAV published its map");
     }
 }
 
@@ -81,7 +81,7 @@ sim:
     let loaded = load(&write_mission("kill", text));
     let mut sim = simulation(&loaded, SimOptions::default());
     run_for(&mut sim, 10.0);
-    let base = sim.runtime("base").unwrap();
+    let base = sim.robot("base").unwrap();
     let (_, alive_stamp) = base.team().robot_pose(&RobotId::new("uav1")).unwrap();
     let (_, dead_stamp) = base.team().robot_pose(&RobotId::new("uav2")).unwrap();
     assert!(alive_stamp.as_secs_f64() > 9.0, "the live UAV keeps sharing: {alive_stamp:?}");
@@ -168,9 +168,6 @@ impl SimObserver for FullTranscript {
 }
 
 impl RobotObserver for FullTranscript {
-    fn wants_seam(&self) -> bool {
-        true
-    }
     fn on_odometry(&mut self, robot: &RobotId, odom: &spomp_core::Odometry) {
         self.lines.push(format!("odometry {robot} {odom:?}"));
     }
@@ -191,18 +188,6 @@ impl RobotObserver for FullTranscript {
     }
     fn on_problem(&mut self, robot: &RobotId, now: Time, message: &str) {
         self.lines.push(format!("problem {robot} {} {message}", now.nanos));
-    }
-    fn on_seam(&mut self, robot: &RobotId, now: Time, call: &SeamCall) {
-        let what = match call {
-            SeamCall::Panorama(frame) => format!("panorama {}", frame.seq),
-            SeamCall::CameraTiles(tiles) => format!("tiles {:x}", content_hash(&[&tiles])),
-            SeamCall::TeamIn { from, bytes } => format!("in {from} {:x}", content_hash(&[&bytes])),
-            SeamCall::TeamOut { to, budget_bytes, sent, .. } => {
-                format!("out {to} {budget_bytes} {:x}", content_hash(&[&sent]))
-            }
-            other => format!("{other:?}"),
-        };
-        self.lines.push(format!("seam {robot} {} {what}", now.nanos));
     }
 }
 
@@ -231,6 +216,9 @@ fn robots_stepped_in_parallel_give_the_serial_run() {
         panic!("first difference at call {k}:\n serial:   {}\n parallel: {}", a.lines[k], b.lines[k]);
     }
     assert_eq!(ra.summary.deterministic_part(), rb.summary.deterministic_part());
+    // The team state flowed the same: every robot sent and took the same messages and bytes.
+    assert!(ra.team_traffic.iter().any(|(_, t)| t.sent_messages > 0 && t.received_bytes > 0), "{:?}", ra.team_traffic);
+    assert_eq!(ra.team_traffic, rb.team_traffic);
 }
 
 /// Regression (issue 19, the study's `relay-sharing-all` trials): a robot's tree that finished

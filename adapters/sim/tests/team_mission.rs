@@ -119,7 +119,7 @@ fn with_the_ugv_radio_off_the_uav_relays_and_the_mission_still_completes() {
                     direct_links.push(format!("{a}–{b} at {:.0} s", sim.now().as_secs_f64()));
                 }
             }
-            let team = &sim.runtime(a).unwrap().team();
+            let team = &sim.robot(a).unwrap().team();
             for g in team.goals() {
                 for c in g.claims.iter().filter(|c| c.robot.as_str() != *a) {
                     learned.entry(a).or_default().insert(c.robot.to_string());
@@ -149,7 +149,7 @@ fn a_dead_robots_claim_expires_and_another_ugv_visits_its_goal() {
     // its claim stays valid for a whole lease.
     let mut sim = simulation(&loaded, options());
     for ugv in UGVS {
-        assert_eq!(sim.runtime(ugv).unwrap().team().params().claim_lease_s, LEASE_S, "the mission's lease is wired");
+        assert_eq!(sim.robot(ugv).unwrap().team().params().claim_lease_s, LEASE_S, "the mission's lease is wired");
     }
     let mut first_stamp: BTreeMap<(String, GoalId), Time> = BTreeMap::new();
     let (victim, goal, renewed_at) = 'found: loop {
@@ -157,7 +157,7 @@ fn a_dead_robots_claim_expires_and_another_ugv_visits_its_goal() {
         assert!(sim.outcome().is_none(), "no UGV renewed a claim before the end");
         for ugv in UGVS {
             let me = RobotId::new(ugv);
-            let team = &sim.runtime(ugv).unwrap().team();
+            let team = &sim.robot(ugv).unwrap().team();
             for g in team.goals().iter().filter(|g| g.visited.is_none() && g.is_held_by(&me)) {
                 let Some(mine) = g.claims.iter().find(|c| c.robot == me) else { continue };
                 let first = *first_stamp.entry((ugv.to_string(), g.id.clone())).or_insert(mine.stamp);
@@ -177,7 +177,7 @@ fn a_dead_robots_claim_expires_and_another_ugv_visits_its_goal() {
         sim.step(&mut NoObserver);
     }
     let dead = RobotId::new(victim);
-    let view = sim.runtime(victim).unwrap().team().goal(&goal).cloned().expect("the victim knows its goal");
+    let view = sim.robot(victim).unwrap().team().goal(&goal).cloned().expect("the victim knows its goal");
     assert!(view.is_held_by(&dead), "{victim} holds {goal} just before the kill: {view:?}");
     let stamp = view.claims.iter().find(|c| c.robot == dead).unwrap().stamp.as_secs_f64();
     assert!((stamp - renewed_at).abs() < 1e-6, "same run up to the kill: claim stamped {stamp}, expected {renewed_at}");
@@ -191,7 +191,7 @@ fn a_dead_robots_claim_expires_and_another_ugv_visits_its_goal() {
     run_to_end(&mut sim, |sim| {
         let now = sim.now().as_secs_f64();
         for id in &others {
-            let Some(v) = sim.runtime(id).unwrap().team().goal(&goal) else { continue };
+            let Some(v) = sim.robot(id).unwrap().team().goal(&goal) else { continue };
             if v.claims.iter().any(|c| c.robot == dead) {
                 saw_dead_claim.insert(id.to_string());
                 if now > expires_s + 1.0 {

@@ -10,8 +10,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use spomp_core::{Point2, RobotId, Time};
+use spomp_robot::RoundShape;
+use spomp_robot::team_round::{round, single_tier};
 use spomp_teamstate::{GoalOrigin, TeamState, TeamStateParams, TierSet};
-use spomp_zenoh::pump::send_round;
 use spomp_zenoh::{KeyDir, LinkConfig, TeamLink};
 
 fn port() -> Result<u16, Box<dyn std::error::Error>> {
@@ -59,9 +60,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 for (from, bytes) in link.receive() {
                     state.apply_bytes(&from, &bytes)?;
                 }
-                send_round(link, std::slice::from_ref(&peer), 1 << 20, |p, tiers: TierSet, budget| {
-                    state.make_sync(p, tiers, budget).map(|m| m.encode())
-                });
+                if link.reachable().contains(&peer) {
+                    let sent = round(RoundShape::PerTier, TierSet::ALL, 1 << 20, |tiers, budget| {
+                        state.make_sync(&peer, tiers, budget).map(|m| m.encode())
+                    });
+                    for (tiers, bytes) in sent {
+                        if let Some(tier) = single_tier(tiers) {
+                            link.send(&peer, tier, bytes);
+                        }
+                    }
+                }
             }
             if robots[1].0.goal(&goal).is_some_and(|v| v.is_held_by(&ids[0])) {
                 latencies.push(t0.elapsed());

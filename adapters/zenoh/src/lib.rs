@@ -12,7 +12,6 @@
 
 pub mod keys;
 pub mod link;
-pub mod pump;
 pub mod state_file;
 
 pub use keys::{KeyDir, KeyDirError, RobotKeys};

@@ -8,8 +8,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use spomp_core::{Point2, Pose2, RobotId, Time};
+use spomp_robot::RoundShape;
+use spomp_robot::team_round::{round, single_tier};
 use spomp_teamstate::{GoalOrigin, TeamState, TeamStateParams, TierSet};
-use spomp_zenoh::pump::send_round;
 use spomp_zenoh::{Credentials, KeyDir, LinkConfig, TeamLink};
 
 fn free_port() -> u16 {
@@ -52,10 +53,18 @@ impl Member {
                 self.rejected += 1;
             }
         }
-        let state = &mut self.state;
-        send_round(link, peers, 64 * 1024, |peer, tiers: TierSet, budget| {
-            state.make_sync(peer, tiers, budget).map(|m| m.encode())
-        });
+        // The robot layer's round: a message per tier, coordination first, within the budget.
+        let reachable = link.reachable();
+        for peer in peers.iter().filter(|p| reachable.contains(*p)) {
+            let sent = round(RoundShape::PerTier, TierSet::ALL, 64 * 1024, |tiers, budget| {
+                self.state.make_sync(peer, tiers, budget).map(|m| m.encode())
+            });
+            for (tiers, bytes) in sent {
+                if let Some(tier) = single_tier(tiers) {
+                    link.send(peer, tier, bytes);
+                }
+            }
+        }
     }
 }
 

@@ -5,6 +5,7 @@
 //! the robot's tree. The runtime's state is private; inputs, outputs and what nodes may do go
 //! through methods that say what they do.
 
+mod driven;
 mod localization;
 mod navigation;
 mod work;
@@ -21,46 +22,50 @@ use spomp_core::{
 use spomp_mapping::{CompressedMap, CompressionParams, GoalDetectionParams, GoalDetector, MappingError, Orthomap};
 use spomp_teamstate::{GoalOrigin, IdentifyOutcome, TeamState, TeamStateError, TeamStateParams};
 
+pub use driven::DrivenRuntime;
 pub use localization::{Localization, LocalizationSetup, UpdateSchedule};
 pub use navigation::{NavParams, NavStack};
 pub use work::{FinishedWork, JoinFn, SkillWork, WorkKind};
 
 use work::{FinishedParts, PerceptionJob, PerceptionResult};
 
-/// How to set up one robot's runtime (from the mission and the adapter).
+/// How to set up one robot's runtime. Built by the one translation from a mission
+/// ([`crate::RobotSetup`]) or, for a runtime without a mission (tests, tools), by
+/// [`RuntimeConfig::basic`] and the `with_*` setters; read through accessors, never patched
+/// field by field after the translation.
 #[derive(Clone, Debug)]
 pub struct RuntimeConfig {
     /// The robot.
-    pub id: RobotId,
+    pub(crate) id: RobotId,
     /// Its kind.
-    pub kind: RobotKind,
+    pub(crate) kind: RobotKind,
     /// UGV priority (lower = higher); 0 for other kinds is fine.
-    pub priority: u32,
+    pub(crate) priority: u32,
     /// Start pose in the map frame (home, and the localization prior's mean).
-    pub start: Pose2,
+    pub(crate) start: Pose2,
     /// The semantic class table.
-    pub classes: ClassTable,
+    pub(crate) classes: ClassTable,
     /// Grid of the operating area (the aerial map the team builds).
-    pub map_spec: Option<GridSpec>,
+    pub(crate) map_spec: Option<GridSpec>,
     /// Team state parameters (deconfliction radius from the mission).
-    pub team: TeamStateParams,
+    pub(crate) team: TeamStateParams,
     /// Goal detection (from the mission's `goals.detect`); none for robots without it.
-    pub detection: Option<GoalDetectionParams>,
+    pub(crate) detection: Option<GoalDetectionParams>,
     /// Where the map-frame pose comes from.
-    pub localization: LocalizationSetup,
+    pub(crate) localization: LocalizationSetup,
     /// Navigation parameters (UGVs).
-    pub nav: Option<NavParams>,
+    pub(crate) nav: Option<NavParams>,
     /// Per-goal time limit per metre of planned path (mission `goals.time_limit_per_m_s`).
-    pub goal_time_per_m_s: f64,
+    pub(crate) goal_time_per_m_s: f64,
     /// Seed of this robot's random stream (skills take randomness from it).
-    pub seed: u64,
+    pub(crate) seed: u64,
     /// How often a mapping robot (the UAV) publishes its map as a new version, seconds.
-    pub map_publish_period_s: f64,
+    pub(crate) map_publish_period_s: f64,
     /// PNG effort of the published map layers.
-    pub map_compression: CompressionParams,
+    pub(crate) map_compression: CompressionParams,
     /// An aerial map the robot starts with (surveyed before the mission); `None`: only what the
     /// team maps. Shared, not copied: robots of a team hold one prior map until they change it.
-    pub prior_map: Option<Arc<AerialMap>>,
+    pub(crate) prior_map: Option<Arc<AerialMap>>,
 }
 
 impl RuntimeConfig {
@@ -85,6 +90,73 @@ impl RuntimeConfig {
             map_compression: CompressionParams::default(),
             prior_map: None,
         }
+    }
+
+    /// With the semantic class table `classes`.
+    pub fn with_classes(mut self, classes: ClassTable) -> Self {
+        self.classes = classes;
+        self
+    }
+
+    /// Detecting goals in the aerial map with `detection`.
+    pub fn with_detection(mut self, detection: GoalDetectionParams) -> Self {
+        self.detection = Some(detection);
+        self
+    }
+
+    /// Over the operating area's grid `spec`.
+    pub fn with_map_spec(mut self, spec: GridSpec) -> Self {
+        self.map_spec = Some(spec);
+        self
+    }
+
+    /// With team-state parameters `team`.
+    pub fn with_team(mut self, team: TeamStateParams) -> Self {
+        self.team = team;
+        self
+    }
+
+    /// With navigation (a UGV's) under `nav`.
+    pub fn with_nav(mut self, nav: NavParams) -> Self {
+        self.nav = Some(nav);
+        self
+    }
+
+    /// Its random stream seeded with `seed`.
+    pub fn with_seed(mut self, seed: u64) -> Self {
+        self.seed = seed;
+        self
+    }
+
+    /// Starting with the aerial map `map` (`None`: only what the team maps).
+    pub fn with_prior_map(mut self, map: Option<Arc<AerialMap>>) -> Self {
+        self.prior_map = map;
+        self
+    }
+
+    /// The robot.
+    pub fn id(&self) -> &RobotId {
+        &self.id
+    }
+
+    /// Its kind.
+    pub fn kind(&self) -> RobotKind {
+        self.kind
+    }
+
+    /// Its start pose in the map frame.
+    pub fn start(&self) -> Pose2 {
+        self.start
+    }
+
+    /// How often a mapping robot publishes its map as a new version, seconds.
+    pub fn map_publish_period_s(&self) -> f64 {
+        self.map_publish_period_s
+    }
+
+    /// PNG effort of the published map layers.
+    pub fn map_compression(&self) -> &CompressionParams {
+        &self.map_compression
     }
 }
 
@@ -281,7 +353,7 @@ impl RobotRuntime {
     // --- inputs (adapters, through `Robot`) -----------------------------------------------------
 
     /// Clears this tick's outputs; called before the tree is ticked.
-    pub fn begin_tick(&mut self) {
+    pub(crate) fn begin_tick(&mut self) {
         self.command = None;
         self.flight = None;
     }
@@ -289,7 +361,7 @@ impl RobotRuntime {
     /// A pose from outside the robot's own estimation: GPS on the UAV, the basestation's
     /// surveyed position, or (where the mission asks for it) simulator ground truth plus noise.
     /// Ignored while a cross-view localizer owns the pose.
-    pub fn on_external_pose(&mut self, estimate: PoseEstimate) {
+    pub(crate) fn on_external_pose(&mut self, estimate: PoseEstimate) {
         if matches!(self.localization, Localization::External) {
             self.pose = Some(estimate);
             self.publish_pose(estimate);
@@ -298,7 +370,7 @@ impl RobotRuntime {
 
     /// New odometry: the pose between panoramas is the last filtered pose composed with the
     /// odometry since (the paper's scheme).
-    pub fn on_odometry(&mut self, odom: Odometry) {
+    pub(crate) fn on_odometry(&mut self, odom: Odometry) {
         self.odometry = Some(odom);
         if let Some(estimate) = self.localization.pose_at(&odom, &mut self.rng) {
             self.pose = Some(estimate);
@@ -309,7 +381,7 @@ impl RobotRuntime {
     /// A new panorama: brings the map copy up to date, runs the localizer's measurement update,
     /// then terrain analysis (reachability scan shared on the team state and fed to the global
     /// planner). With background skills it is only kept, as the newest, for [`Self::take_work`].
-    pub fn on_panorama(&mut self, frame: Arc<PanoramaFrame>) {
+    pub(crate) fn on_panorama(&mut self, frame: Arc<PanoramaFrame>) {
         self.panorama = Some(frame.clone());
         if self.background_skills {
             if self.pending_panorama.replace(frame).is_some() {
@@ -381,7 +453,7 @@ impl RobotRuntime {
 
     /// Runs the heavy skills as work taken with [`Self::take_work`] instead of inline (an
     /// adapter with a worker thread: `spomp run`). Set before the first input.
-    pub fn set_background_skills(&mut self, on: bool) {
+    pub(crate) fn set_background_skills(&mut self, on: bool) {
         self.background_skills = on;
         // A robot that starts with a map plans from its first tick, as it does inline: the
         // graph of that map is built now, at setup, not in the background during the first
@@ -398,7 +470,7 @@ impl RobotRuntime {
     /// Lets a panorama's localization update and terrain analysis run side by side through
     /// `join` (for example `rayon::join`), inline or as work; `None` (the default): one after the
     /// other. The results are the same either way.
-    pub fn set_perception_join(&mut self, join: Option<JoinFn>) {
+    pub(crate) fn set_perception_join(&mut self, join: Option<JoinFn>) {
         self.perception_join = join;
     }
 
@@ -410,7 +482,7 @@ impl RobotRuntime {
     /// The work due now (background skills): the newest panorama's processing unless one is
     /// out, the global planner's upkeep when due unless it is out. Each is numbered; give each
     /// result back with [`Self::finish_work`].
-    pub fn take_work(&mut self, now: Time) -> Vec<SkillWork> {
+    pub(crate) fn take_work(&mut self, now: Time) -> Vec<SkillWork> {
         let mut out = Vec::new();
         if !self.background_skills {
             return out;
@@ -435,7 +507,7 @@ impl RobotRuntime {
     }
 
     /// A finished work back from wherever it ran.
-    pub fn finish_work(&mut self, work: FinishedWork) {
+    pub(crate) fn finish_work(&mut self, work: FinishedWork) {
         match work.into_parts() {
             FinishedParts::Perception(job, result) => {
                 self.perception_out = false;
@@ -460,7 +532,7 @@ impl RobotRuntime {
     /// is published to the team as a new version every `map_publish_period_s` while it changes
     /// (the whole map each time: the team state keeps only the newest version per publisher, so
     /// a robot that missed one still gets everything).
-    pub fn on_camera_tiles(&mut self, tiles: &[MapTile], now: Time) {
+    pub(crate) fn on_camera_tiles(&mut self, tiles: &[MapTile], now: Time) {
         let Some(map) = self.map.as_mut() else {
             if !tiles.is_empty() {
                 self.problems.push("camera tiles arrived, but this robot keeps no aerial map".into());
@@ -489,7 +561,7 @@ impl RobotRuntime {
     /// Background upkeep at simulated/real time `now`: the team state's clock (own claims
     /// renewed, other robots' expired claims dropped); the global planner takes in new map
     /// versions and team scans and retrains on its schedule. Call once per control period.
-    pub fn maintain(&mut self, now: Time) {
+    pub(crate) fn maintain(&mut self, now: Time) {
         self.team.advance_clock(now);
         let Some(nav) = self.nav.as_deref_mut() else { return };
         if self.background_skills {

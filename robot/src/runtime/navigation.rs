@@ -98,25 +98,25 @@ pub struct LocalView {
 /// Navigation state of one UGV.
 pub struct NavStack {
     /// Parameters.
-    pub params: NavParams,
+    params: NavParams,
     /// The latest safe region.
-    pub view: Option<LocalView>,
+    view: Option<LocalView>,
     /// The latest reachability scan (map frame).
-    pub latest_scan: Option<Arc<ReachabilityScan>>,
+    latest_scan: Option<Arc<ReachabilityScan>>,
     /// The depth image the latest analysis ran on.
     analyzed_depth: Option<Arc<DepthPanorama>>,
     /// The obstacle mask of the latest analysis (row-major in its geometry), kept for
     /// observers: the analyzer itself goes back to the process's idle ones.
     latest_obstacles: Option<(PanoramaGeometry, Vec<bool>)>,
     /// The global planner.
-    pub global: GlobalPlanner,
+    global: GlobalPlanner,
     /// The DWA controller.
-    pub dwa: Dwa,
+    dwa: Dwa,
     /// Which scans go to the team (the paper's communication modes).
-    pub sharer: ScanSharer,
+    sharer: ScanSharer,
     /// Graph edges (node pairs) this robot failed to get across while driving them: the
     /// driving nodes' experience of a blockage the scans could not judge (see [`NavStack::plan`]).
-    pub blocked_edges: Vec<(NodeId, NodeId)>,
+    blocked_edges: Vec<(NodeId, NodeId)>,
     /// Where the robot has been (map frame, every [`TRAIL_SPACING_M`], newest last): ground it
     /// drove, the way back when the graph has no path from where it stands.
     trail: VecDeque<Point2>,
@@ -207,6 +207,46 @@ impl PlannerJob {
 }
 
 impl NavStack {
+    /// The parameters in force.
+    pub fn params(&self) -> &NavParams {
+        &self.params
+    }
+
+    /// The latest safe region (from the latest panorama).
+    pub fn view(&self) -> Option<&LocalView> {
+        self.view.as_ref()
+    }
+
+    /// The latest reachability scan (map frame).
+    pub fn latest_scan(&self) -> Option<&Arc<ReachabilityScan>> {
+        self.latest_scan.as_ref()
+    }
+
+    /// The global planner.
+    pub fn global(&self) -> &GlobalPlanner {
+        &self.global
+    }
+
+    /// The global planner, for a tool or test that queries it (its queries keep caches).
+    pub fn global_mut(&mut self) -> &mut GlobalPlanner {
+        &mut self.global
+    }
+
+    /// The DWA controller.
+    pub fn dwa(&self) -> &Dwa {
+        &self.dwa
+    }
+
+    /// Which scans go to the team.
+    pub fn sharer(&self) -> &ScanSharer {
+        &self.sharer
+    }
+
+    /// Graph edges this robot failed to get across while driving them.
+    pub fn blocked_edges(&self) -> &[(NodeId, NodeId)] {
+        &self.blocked_edges
+    }
+
     /// A stack with no map and no experience.
     pub fn new(params: NavParams, classes: &ClassTable) -> Result<Self, RuntimeError> {
         let skill = |skill: &'static str| {

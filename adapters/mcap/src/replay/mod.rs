@@ -246,7 +246,10 @@ fn build_robot(
     Ok(robot)
 }
 
-/// Sets `navigation.a.b=value` in a robot's own navigation overrides.
+/// Sets `navigation.a.b=value` in a robot's own navigation overrides: the value as a patch
+/// `{a: {b: value}}` merged by the workspace's one JSON patcher (`spomp_robot::settings::merge`:
+/// a mapping merges field by field, anything else replaces). A key under a value that is not a
+/// section is refused, not replaced.
 fn apply_set(navigation: &mut Option<serde_json::Value>, path: &str, value: &str) -> Result<(), ReplayError> {
     let Some(rest) = path.strip_prefix("navigation.") else {
         return Err(ReplayError::Set(format!(
@@ -259,17 +262,22 @@ fn apply_set(navigation: &mut Option<serde_json::Value>, path: &str, value: &str
     }
     let parsed = serde_json::from_str::<serde_json::Value>(value.trim())
         .unwrap_or_else(|_| serde_json::Value::String(value.to_string()));
-    let mut at = navigation.get_or_insert_with(|| serde_json::Value::Object(Default::default()));
+    let base = navigation.get_or_insert_with(|| serde_json::Value::Object(Default::default()));
+    let mut at = &*base;
     for (k, key) in keys.iter().enumerate() {
         let serde_json::Value::Object(map) = at else {
             return Err(ReplayError::Set(format!("`{path}`: `{}` is not a section", keys[..k].join("."))));
         };
-        if k + 1 == keys.len() {
-            map.insert((*key).to_string(), parsed);
-            return Ok(());
+        match map.get(*key) {
+            Some(next) if k + 1 < keys.len() => at = next,
+            _ => break,
         }
-        at = map.entry((*key).to_string()).or_insert_with(|| serde_json::Value::Object(Default::default()));
     }
+    let patch = keys
+        .iter()
+        .rev()
+        .fold(parsed, |v, key| serde_json::Value::Object(serde_json::Map::from_iter([((*key).to_string(), v)])));
+    spomp_robot::settings::merge(base, &patch);
     Ok(())
 }
 
@@ -464,6 +472,10 @@ mod tests {
         assert!(apply_set(&mut none, "navigation..x", "3").is_err());
         let mut scalar = Some(serde_json::json!({ "profile": "simulation" }));
         assert!(apply_set(&mut scalar, "navigation.profile.x", "1").is_err());
+        // A section set whole merges as every other patch of the workspace does.
+        let mut nav = Some(serde_json::json!({ "terrain": { "slope_threshold": 0.3 } }));
+        apply_set(&mut nav, "navigation.terrain", r#"{ "inflation_m": 1.2 }"#).unwrap();
+        assert_eq!(nav.unwrap(), serde_json::json!({ "terrain": { "slope_threshold": 0.3, "inflation_m": 1.2 } }));
     }
 
     #[test]

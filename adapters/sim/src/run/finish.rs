@@ -118,7 +118,8 @@ impl Simulation {
             .filter(|r| r.kind == RobotKind::Ugv)
             .map(|r| (r.id.clone(), r.localization_error_series.clone()))
             .collect();
+        let team_traffic = self.robots.iter().map(|r| (r.id.clone(), r.robot.team_traffic())).collect();
         let trajectories = self.robots.into_iter().map(|r| (r.id, r.kind, r.trajectory)).collect();
-        RunResult { summary, world: self.world, trajectories, localization_errors }
+        RunResult { summary, world: self.world, trajectories, localization_errors, team_traffic }
     }
 }

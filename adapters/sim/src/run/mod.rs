@@ -51,8 +51,11 @@ use spomp_core::{
     RobotKind, Time, Twist2, normalize_angle,
 };
 use spomp_mapping::{CompressionParams, PngLevel};
-use spomp_robot::runtime::{FinishedWork, WorkKind};
-use spomp_robot::{PoseInput, Robot, RobotObserver, RobotRuntime, RobotSetup, SetupOptions};
+use spomp_robot::runtime::{FinishedWork, SkillWork, WorkKind};
+use spomp_robot::{
+    LinkCredit, ModelledWork, PoseInput, Robot, RobotObserver, RobotRuntime, RobotSetup, RobotView, RoundShape,
+    SetupOptions, TeamTraffic,
+};
 use spomp_teamstate::{GoalOrigin, Tier, TierSet};
 
 pub use external::{DrivenStep, DrivenTeamMessage, ExternalDrivers};
@@ -88,6 +91,9 @@ pub struct RunResult {
     /// Position error of each UGV's own estimate over time: (id, [(simulated time s, error m)]),
     /// sampled at panoramas, at most once a second (see [`Simulation::localization_error_series`]).
     pub localization_errors: Vec<(RobotId, Vec<(f64, f64)>)>,
+    /// Each robot's team-state traffic as its robot counted it (what the simulator ran of it:
+    /// a robot driven from outside counts in its own process).
+    pub team_traffic: Vec<(RobotId, TeamTraffic)>,
 }
 
 /// A mission running in the simulator.
@@ -113,10 +119,6 @@ pub struct Simulation {
     own_visits: BTreeMap<(GoalId, usize), Time>,
     /// Last time each pair of robots had a direct link (row-major, robot index pairs).
     last_link: Vec<Option<Time>>,
-    /// Bytes each directed link may still carry (row-major, sender × receiver).
-    link_credit: Vec<u64>,
-    /// When the radio last carried sync messages.
-    last_sync: Time,
     problems: BTreeMap<(String, String), ProblemCount>,
     outcome: Option<Outcome>,
     obstacles: Vec<Obstacle>,
@@ -186,8 +188,8 @@ impl Simulation {
             };
             let setup = RobotSetup::from_mission_with(&mission, &spec.id, &area, options.seed, &inputs)
                 .map_err(|e| robot_error(&e))?;
-            let start = setup.config.start;
-            let id = setup.config.id.clone();
+            let start = setup.config.start();
+            let id = setup.config.id().clone();
             let mut robot = Robot::from_setup(loaded, setup, registry).map_err(|e| robot_error(&e))?;
             robot.set_background_skills(options.skill_latency.is_some());
             robot.set_perception_join(options.parallel_robots.then_some(join_on_rayon as spomp_robot::JoinFn));
@@ -250,7 +252,8 @@ impl Simulation {
                 node_paths,
                 claim_time_s: BTreeMap::new(),
                 held: None,
-                work_out: Vec::new(),
+                work_out: options.skill_latency.map(|l| ModelledWork::new(l.into())),
+                link_credit: LinkCredit::default(),
                 localization_errors: Vec::new(),
                 localization_error_series: Vec::new(),
                 last_path_len: 0,
@@ -286,8 +289,6 @@ impl Simulation {
             aliases: BTreeMap::new(),
             own_visits: BTreeMap::new(),
             last_link: vec![None; n_robots * n_robots],
-            link_credit: vec![0; n_robots * n_robots],
-            last_sync: Time::from_nanos(-1),
             problems: BTreeMap::new(),
             outcome: None,
             obstacles: Vec::new(),
@@ -336,14 +337,9 @@ impl Simulation {
         self.outcome
     }
 
-    /// A robot (tests and tools).
-    pub fn robot(&self, id: &str) -> Option<&Robot> {
-        self.robots.iter().find(|r| r.id.as_str() == id).map(|r| &r.robot)
-    }
-
-    /// A robot's runtime (tests and tools).
-    pub fn runtime(&self, id: &str) -> Option<&RobotRuntime> {
-        self.robot(id).map(Robot::runtime)
+    /// A robot, read-only (tests, tools, live views).
+    pub fn robot(&self, id: &str) -> Option<RobotView<'_>> {
+        self.robots.iter().find(|r| r.id.as_str() == id).map(|r| r.robot.view())
     }
 
     /// A robot's ground-truth pose.
@@ -610,9 +606,12 @@ impl Simulation {
     }
 
     /// Background skills ([`SimOptions::skill_latency`]): work due back is handed to its robot,
-    /// then the work each robot has due now is taken and done, to come back after the latency.
+    /// then the work each robot has due now is taken and done, to come back after the latency
+    /// (the robot layer's `ModelledWork`, which a farm robot in lockstep runs too).
     fn exchange_work(&mut self, observer: &mut dyn SimObserver) {
-        let Some(latency) = self.options.skill_latency else { return };
+        if self.options.skill_latency.is_none() {
+            return;
+        }
         let now = self.now;
         for r in &mut self.robots {
             if !r.alive() {
@@ -624,13 +623,8 @@ impl Simulation {
                 }
                 continue;
             }
-            let mut k = 0;
-            while k < r.work_out.len() {
-                if r.work_out[k].0 > now {
-                    k += 1;
-                    continue;
-                }
-                let (_, work) = r.work_out.remove(k);
+            let Some(work_out) = r.work_out.as_mut() else { continue };
+            for work in work_out.due(now) {
                 let perception = work.kind() == WorkKind::Perception;
                 r.robot.finish_work(now, work);
                 r.robot.deliver_recorded(observer);
@@ -638,12 +632,8 @@ impl Simulation {
                     observe_scan(&r.id, &r.robot, last_scan_stamp, observer);
                 }
             }
-            let work = r.robot.take_work(now);
+            work_out.take(&mut r.robot, now, SkillWork::run);
             r.robot.deliver_recorded(observer);
-            for w in work {
-                let due = Time::from_nanos(now.nanos + Time::from_secs_f64(latency.of(w.kind())).nanos);
-                r.work_out.push((due, w.run()));
-            }
         }
     }
 

@@ -52,12 +52,11 @@ impl SkillLatency {
     /// Figures of the order `spomp run` measures on a 2-core machine (a panorama in tens of
     /// milliseconds, a graph rebuild in most of a second).
     pub const TYPICAL: SkillLatency = SkillLatency { perception_s: 0.05, planner_s: 0.8 };
+}
 
-    pub(super) fn of(&self, kind: WorkKind) -> f64 {
-        match kind {
-            WorkKind::Perception => self.perception_s,
-            WorkKind::Planner => self.planner_s,
-        }
+impl From<SkillLatency> for spomp_robot::WorkLatency {
+    fn from(l: SkillLatency) -> Self {
+        spomp_robot::WorkLatency { perception_s: l.perception_s, planner_s: l.planner_s }
     }
 }
 

@@ -1,11 +1,9 @@
 //! The radio's sync round: each link that is up carries one team-state message each way,
-//! within the tiers and bytes its range and bandwidth allow, unused bytes carried over while it
-//! stays up.
+//! within the tiers and bytes its range and bandwidth allow. The round itself (the credit
+//! carried while a link stays up, what fills the message) is the robot layer's
+//! (`spomp_robot::team_round`); here the radio decides which links are up and moves the bytes.
 
 use super::*;
-
-/// Most bytes a link can bank for later (a few full map versions).
-const MAX_LINK_CREDIT_BYTES: u64 = 32 * 1024 * 1024;
 
 impl Simulation {
     pub(super) fn sync_radio(&mut self, observer: &mut dyn SimObserver) {
@@ -17,32 +15,30 @@ impl Simulation {
             let robots = &self.robots;
             links.retain(|(i, j, _)| !(robots[*i].kind == RobotKind::Ugv && robots[*j].kind == RobotKind::Ugv));
         }
+        // This round's credit of every robot's links (robots without a link lose theirs).
+        let mut up: Vec<Vec<(RobotId, u64)>> = vec![Vec::new(); self.robots.len()];
+        for &(i, j, link) in &links {
+            up[i].push((self.robots[j].id.clone(), link.budget_bytes));
+            up[j].push((self.robots[i].id.clone(), link.budget_bytes));
+        }
+        for (r, up) in self.robots.iter_mut().zip(&up) {
+            r.link_credit.begin_round(up.iter().map(|(peer, budget)| (peer, *budget)));
+        }
         let n = self.robots.len();
-        // Unused bytes of a link carry over while it stays up, so an item larger than one
-        // period's budget (a map version) goes through after enough periods, as on a real
-        // link; the credit is lost when the link drops.
-        let mut credit = vec![0u64; n * n];
         for &(i, j, link) in &links {
             let tiers = match link.tier {
                 LinkTier::All => TierSet::ALL,
                 LinkTier::Small => TierSet::only(Tier::Coordination),
             };
             for (a, b) in [(i, j), (j, i)] {
-                let k = a * n + b;
-                let was_up = self.last_link.get(k).copied().flatten() == Some(self.last_sync);
-                let carried = if was_up { self.link_credit.get(k).copied().unwrap_or(0) } else { 0 };
-                if let Some(c) = credit.get_mut(k) {
-                    *c = carried.saturating_add(link.budget_bytes).min(MAX_LINK_CREDIT_BYTES);
-                }
-                if let Some(slot) = self.last_link.get_mut(k) {
+                if let Some(slot) = self.last_link.get_mut(a * n + b) {
                     *slot = Some(self.now);
                 }
             }
             for (a, b) in [(i, j), (j, i)] {
-                let k = a * n + b;
-                let budget = credit.get(k).copied().unwrap_or(0);
                 let from = self.robots[a].id.clone();
                 let to = self.robots[b].id.clone();
+                let budget = self.robots[a].link_credit.left(&to);
                 // Over the wire: encoded, decoded and checked by the receiver. A driven robot's
                 // messages were sent already; the link carries those it has room for (a small
                 // link, coordination only, cannot tell tiers apart in them: it carries none).
@@ -68,14 +64,14 @@ impl Simulation {
                     });
                     out
                 } else {
-                    let budget_bytes = usize::try_from(budget).unwrap_or(usize::MAX);
-                    let sent = self.robots[a].robot.team_message_for(self.now, &to, tiers, budget_bytes);
-                    self.robots[a].robot.deliver_recorded(observer);
-                    sent.into_iter().collect()
+                    let r = &mut self.robots[a];
+                    let sent = r.robot.team_round(self.now, &to, tiers, RoundShape::OneMessage, &mut r.link_credit);
+                    r.robot.deliver_recorded(observer);
+                    sent.into_iter().map(|(_, bytes)| bytes).collect()
                 };
                 for bytes in messages {
-                    if let Some(c) = credit.get_mut(k) {
-                        *c = c.saturating_sub(bytes.len() as u64);
+                    if self.robots[a].external {
+                        self.robots[a].link_credit.spend(&to, bytes.len());
                     }
                     match self.drivers.as_mut().filter(|_| self.robots[b].external) {
                         Some(d) => d.deliver_team_message(&to, &from, &bytes),
@@ -89,8 +85,6 @@ impl Simulation {
         }
         // What driven robots sent over links that are down is lost, as on a radio.
         self.driven_outbox.clear();
-        self.link_credit = credit;
-        self.last_sync = self.now;
         self.links = links;
     }
 }

@@ -66,7 +66,9 @@ pub(super) struct SimRobot {
     /// Driven from outside (see [`ExternalDrivers`]): its own `robot` is not ticked.
     pub(super) external: bool,
     /// Background work done and waiting for the step it is due back (skill latency).
-    pub(super) work_out: Vec<(Time, FinishedWork)>,
+    pub(super) work_out: Option<ModelledWork<FinishedWork>>,
+    /// What its links may still carry this radio round.
+    pub(super) link_credit: LinkCredit,
     /// The last map version this robot published that observers were shown.
     pub(super) map_shown: Option<u64>,
     /// The other UGVs' bodies this step, as obstacles for this one (a UGV's; reused).

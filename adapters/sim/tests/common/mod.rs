@@ -12,7 +12,7 @@ use spomp_behaviors::mission::{BuildOptions, LoadOptions, LoadedMission, build_e
 use spomp_behaviors::{Status, TreeExecutor};
 use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, RobotId, RobotKind, Time, Twist2};
 use spomp_robot::registry as builtin_registry;
-use spomp_robot::runtime::{NavParams, RuntimeConfig};
+use spomp_robot::runtime::{DrivenRuntime, NavParams, RuntimeConfig};
 use spomp_robot::{RobotRuntime, WatchdogParams};
 
 /// A UGV's tree over its runtime.
@@ -69,7 +69,7 @@ pub struct DriverSetup<'a> {
 
 /// A UGV runtime (pose from outside, simulation local-planner values) and its tree, from a
 /// one-role mission written to a temporary file and loaded like any mission.
-pub fn driver(world: &World, s: DriverSetup<'_>) -> (RobotRuntime, RobotExecutor) {
+pub fn driver(world: &World, s: DriverSetup<'_>) -> (DrivenRuntime, RobotExecutor) {
     let mission = format!(
         "mission: {name}\nteam:\n  - {{ id: {id}, kind: ugv, role: driver, priority: {priority}, start: {{ x_m: {x}, \
          y_m: {y}, yaw_deg: {yaw} }} }}\nroles:\n  driver:\n    tree:\n      {tree}\ncomplete_when: \
@@ -89,18 +89,18 @@ pub fn driver(world: &World, s: DriverSetup<'_>) -> (RobotRuntime, RobotExecutor
     let registry = builtin_registry();
     let loaded = load_mission_with(&path, &registry, &LoadOptions::default());
     assert!(loaded.diagnostics.is_empty(), "{mission}\n{:#?}", loaded.diagnostics);
-    let mut config = RuntimeConfig::basic(RobotId::new(s.id), RobotKind::Ugv, s.priority, s.start);
-    config.classes = world.classes().clone();
-    config.map_spec = Some(*world.spec());
-    config.team = s.team;
-    config.nav = Some(NavParams {
-        local: LocalPlannerParams::simulation(),
-        global: s.global,
-        watchdog: WatchdogParams::default(),
-    });
-    config.seed = 7;
-    config.prior_map = s.with_map.then(|| world.shared_map());
-    let rt = RobotRuntime::from_config(config).unwrap();
+    let config = RuntimeConfig::basic(RobotId::new(s.id), RobotKind::Ugv, s.priority, s.start)
+        .with_classes(world.classes().clone())
+        .with_map_spec(*world.spec())
+        .with_team(s.team)
+        .with_nav(NavParams {
+            local: LocalPlannerParams::simulation(),
+            global: s.global,
+            watchdog: WatchdogParams::default(),
+        })
+        .with_seed(7)
+        .with_prior_map(s.with_map.then(|| world.shared_map()));
+    let rt: DrivenRuntime = RobotRuntime::from_config(config).unwrap().into();
     let ex = build_executor(&loaded.roles["driver"], &registry, rt.id(), s.start, BuildOptions::default()).unwrap();
     (rt, ex)
 }
@@ -113,7 +113,7 @@ pub struct DrivingRobot {
     pub ugv: Ugv,
     pub odom: OdometryModel,
     pub sensor: PanoramaSensor,
-    pub rt: RobotRuntime,
+    pub rt: DrivenRuntime,
     pub ex: RobotExecutor,
     pub t: Time,
     /// Everything the tree reported, in order.
@@ -177,7 +177,7 @@ impl DrivingRobot {
 
     /// Edges the robot's own scans removed from its graph.
     pub fn removed_edges(&self) -> usize {
-        self.rt.nav().map_or(0, |n| n.global.graph_stats().removed_edges)
+        self.rt.nav().map_or(0, |n| n.global().graph_stats().removed_edges)
     }
 
     /// Where the robot is and what it went through, for assertion messages.
@@ -191,9 +191,9 @@ impl DrivingRobot {
             self.ugv.pose().y,
             self.ugv.distance_m(),
             self.ugv.collisions(),
-            nav.map(|n| n.global.graph_stats()),
+            nav.map(|n| n.global().graph_stats()),
             self.removed_edges(),
-            nav.map_or(0, |n| n.blocked_edges.len()),
+            nav.map_or(0, |n| n.blocked_edges().len()),
             self.ex.blackboard().get_by_name("why"),
             self.reports,
             self.rt.problems()

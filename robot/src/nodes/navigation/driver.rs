@@ -188,7 +188,7 @@ impl Driver {
             return;
         };
         let odometry = rt.odometry();
-        let Some((view, rng)) = rt.nav_and_rng().and_then(|(n, rng)| Some((n.view.as_ref()?, rng))) else {
+        let Some((view, rng)) = rt.nav_and_rng().and_then(|(n, rng)| Some((n.view()?, rng))) else {
             rt.command_velocity(Twist2::ZERO);
             return;
         };

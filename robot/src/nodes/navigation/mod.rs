@@ -157,13 +157,13 @@ pub fn register_navigation(r: &mut NodeRegistry<RobotRuntime>) {
 /// A positive finite number from a port (its declared default when unset), or a report.
 /// The robot's own stuck timeout (`navigation.watchdog`), for nodes that do not set one.
 fn robot_stuck_timeout_s(rt: &RobotRuntime) -> f64 {
-    rt.nav().map_or_else(|| WatchdogParams::default().stuck_timeout_s, |n| n.params.watchdog.stuck_timeout_s)
+    rt.nav().map_or_else(|| WatchdogParams::default().stuck_timeout_s, |n| n.params().watchdog.stuck_timeout_s)
 }
 
 /// The robot's own no-progress bound (`navigation.watchdog`), for nodes that do not set one.
 fn robot_no_progress_timeout_s(rt: &RobotRuntime) -> f64 {
     rt.nav()
-        .map_or_else(|| WatchdogParams::default().no_progress_timeout_s, |n| n.params.watchdog.no_progress_timeout_s)
+        .map_or_else(|| WatchdogParams::default().no_progress_timeout_s, |n| n.params().watchdog.no_progress_timeout_s)
 }
 
 /// A finite non-negative number from a port, or a report. A port with a declared default is

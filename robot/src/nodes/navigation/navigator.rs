@@ -158,7 +158,7 @@ impl Navigator {
 
     pub(super) fn node_position(rt: &RobotRuntime, node: Option<NodeId>) -> Option<Point2> {
         let node = node?;
-        rt.nav()?.global.nodes().find(|(id, _, _)| *id == node).map(|(_, p, _)| p)
+        rt.nav()?.global().nodes().find(|(id, _, _)| *id == node).map(|(_, p, _)| p)
     }
 
     /// Replans keeping the robot's commitment: from the node it is heading to (the current
@@ -200,7 +200,7 @@ impl Navigator {
         here: Point2,
         req: &Request,
     ) -> Result<(), String> {
-        let stamp = rt.nav().and_then(|n| n.view.as_ref()).map(|v| v.stamp);
+        let stamp = rt.nav().and_then(NavStack::view).map(|v| v.stamp);
         let new_view = stamp.is_some() && stamp != self.checked_view;
         self.checked_view = stamp;
         let Some(route) = &self.route else { return Ok(()) };
@@ -219,12 +219,12 @@ impl Navigator {
             (Some(_), Some(_)) if self.ahead.is_none() => return Ok(()),
             (Some(path), Some(nav)) => {
                 let changed = new_view
-                    && match nav.global.path_graph_cost(path) {
+                    && match nav.global().path_graph_cost(path) {
                         None => true,
                         Some(cost) => cost > path.graph_cost * (1.0 + ratio) + 1e-9,
                     };
                 let gone = match (self.behind, self.ahead) {
-                    (Some(a), Some(b)) => nav.global.edge_between(a, b).is_none(),
+                    (Some(a), Some(b)) => nav.global().edge_between(a, b).is_none(),
                     _ => false,
                 };
                 // The edge being driven can go while the path's graph cost does not change (its
@@ -292,7 +292,7 @@ impl Navigator {
         let Some(route) = self.route.as_mut() else {
             return Step::Failed(Reason::NoPath, "no route".into());
         };
-        let global = rt.nav().map(|n| &n.global);
+        let global = rt.nav().map(NavStack::global);
         // Whether the aerial map shows a step on the lines from `a` to `b` and to the points
         // `half_width_m` either side of `b` (a wedge: what lies right beside the robot, such
         // as a wall it drives along, does not count).

@@ -129,9 +129,9 @@ impl Behavior<RobotRuntime> for BackUp {
             return give_up(ctx, NODE, format!("backed up only {moved:.2} of {distance_m:.2} m in {timeout_s:.0} s"));
         }
         let cmd = ctx.env.nav().and_then(|nav| {
-            let view = nav.view.as_ref()?;
+            let view = nav.view()?;
             let robot = view.odom_pose.between(odom.pose);
-            nav.dwa.reverse_step(odom.twist, robot, distance_m - moved, speed_mps, &view.region)
+            nav.dwa().reverse_step(odom.twist, robot, distance_m - moved, speed_mps, &view.region)
         });
         match cmd {
             Some(cmd) => {
@@ -197,7 +197,7 @@ impl Behavior<RobotRuntime> for Spin {
             self.until = ctx.now + std::time::Duration::from_secs_f64(timeout_s);
             if min_clearance_m > 0.0 {
                 let clearance = ctx.env.nav().and_then(|nav| {
-                    let view = nav.view.as_ref()?;
+                    let view = nav.view()?;
                     view.region.clearance_at(view.odom_pose.between(odom.pose).position())
                 });
                 if clearance.is_none_or(|c| f64::from(c) < min_clearance_m) {
@@ -225,7 +225,7 @@ impl Behavior<RobotRuntime> for Spin {
                 format!("turned only {:.0} of {angle_deg:.0} degrees in {timeout_s:.0} s", self.turned.to_degrees()),
             );
         }
-        let cap = ctx.env.nav().map_or(rate, |n| n.dwa.params().max_turn_rate_radps);
+        let cap = ctx.env.nav().map_or(rate, |n| n.dwa().params().max_turn_rate_radps);
         ctx.env.command_velocity(Twist2 { v: 0.0, omega: rate.min(cap).copysign(goal) });
         Status::Running
     }

@@ -79,7 +79,7 @@ pub(super) struct Tuning {
 
 impl Tuning {
     pub(super) fn build(nav: &NavStack, overrides: &Overrides) -> Result<Self, String> {
-        let mut local = nav.params.local.clone();
+        let mut local = nav.params().local.clone();
         if let Some(over) = &overrides.local {
             let mut base = serde_json::to_value(&local).map_err(|e| e.to_string())?;
             merge(&mut base, over);
@@ -90,7 +90,7 @@ impl Tuning {
         let replan_ratio = overrides
             .search
             .as_ref()
-            .map_or(nav.params.global.search.replan_cost_rise_ratio, |s| s.replan_cost_rise_ratio)
+            .map_or(nav.params().global.search.replan_cost_rise_ratio, |s| s.replan_cost_rise_ratio)
             .max(0.0);
         Ok(Tuning { goal: local.local_goal, dwa, replan_ratio })
     }
