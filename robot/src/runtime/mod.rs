@@ -24,7 +24,7 @@ use spomp_teamstate::{GoalOrigin, IdentifyOutcome, TeamState, TeamStateError, Te
 
 pub use driven::DrivenRuntime;
 pub use localization::{Localization, LocalizationSetup, UpdateSchedule};
-pub use navigation::{NavParams, NavStack};
+pub use navigation::{LocalView, NavParams, NavStack};
 pub use work::{FinishedWork, JoinFn, SkillWork, WorkKind};
 
 use work::{FinishedParts, PerceptionJob, PerceptionResult};

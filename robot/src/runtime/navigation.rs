@@ -85,14 +85,36 @@ pub struct NavParams {
 #[derive(Clone, Debug)]
 pub struct LocalView {
     /// Safe region in the robot frame at the panorama.
-    pub region: SafeRegion,
+    pub(crate) region: SafeRegion,
     /// Map-frame pose estimate at the panorama.
-    pub pose: PoseEstimate,
+    pub(crate) pose: PoseEstimate,
     /// Odometry-frame pose at the panorama (compose with later odometry to express the region
     /// in the current robot frame).
-    pub odom_pose: Pose2,
+    pub(crate) odom_pose: Pose2,
     /// When the panorama was taken.
-    pub stamp: Time,
+    pub(crate) stamp: Time,
+}
+
+impl LocalView {
+    /// Safe region in the robot frame at the panorama.
+    pub fn region(&self) -> &SafeRegion {
+        &self.region
+    }
+
+    /// Map-frame pose estimate at the panorama.
+    pub fn pose(&self) -> PoseEstimate {
+        self.pose
+    }
+
+    /// Odometry-frame pose at the panorama.
+    pub fn odom_pose(&self) -> Pose2 {
+        self.odom_pose
+    }
+
+    /// When the panorama was taken.
+    pub fn stamp(&self) -> Time {
+        self.stamp
+    }
 }
 
 /// Navigation state of one UGV.
