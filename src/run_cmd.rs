@@ -119,7 +119,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     if !args.interfaces.is_empty() {
         settings.dds.interfaces = args.interfaces.clone();
     }
-    let node = format!("{}/{}", settings.topics.namespace().trim_end_matches('/'), spomp_core::ros::ROBOT_NODE_NAME);
+    let node = format!("{}/{}", settings.topics.namespace().trim_end_matches('/'), spomp_ros_msgs::ROBOT_NODE_NAME);
     let read = |p: &std::path::Path| std::fs::read_to_string(p).map_err(|e| e.to_string());
     let ros_args = match crate::ros_args::parse(&args.ros_args, &node, &read) {
         Ok(r) => r,
@@ -213,7 +213,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         tf_static: settings.topics.get("tf_static").to_string(),
         depth_encoding: settings.depth_encoding,
         depth_scale_m: settings.depth_scale_m,
-        logger: spomp_core::ros::rcl_logger_name(settings.topics.namespace(), spomp_core::ros::ROBOT_NODE_NAME),
+        logger: spomp_ros_msgs::rcl_logger_name(settings.topics.namespace(), spomp_ros_msgs::ROBOT_NODE_NAME),
     };
     if !args.json {
         errln!(

@@ -538,7 +538,7 @@ fn set_log_conventions<W: Write + Seek>(rec: &mut Recorder<W>, mission: &spomp_b
             tf_static: topics.get("tf_static").to_string(),
             depth_encoding: r.ros2.as_ref().map(|s| s.depth_encoding).unwrap_or_default(),
             depth_scale_m: r.ros2.as_ref().and_then(|s| s.depth_scale_m),
-            logger: spomp_core::ros::rcl_logger_name(topics.namespace(), spomp_core::ros::ROBOT_NODE_NAME),
+            logger: spomp_ros_msgs::rcl_logger_name(topics.namespace(), spomp_ros_msgs::ROBOT_NODE_NAME),
         };
         rec.set_conventions(&r.id, conventions);
     }
