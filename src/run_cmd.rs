@@ -146,9 +146,9 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         settings.lockstep = Some(spomp_ros2::settings::LockstepSettings { seed, timeout_s: args.lockstep_timeout_s });
     }
     // The operating area (map grid, class table, prior map) is the mission's world, as in `sim`.
-    let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
+    let world = spomp_world::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the operating area of `{}`", mission.mission))?;
-    let area = spomp_sim::run::operating_area(mission, &world);
+    let area = spomp_world::operating_area(mission, &world);
     let setup = RobotSetup::from_mission(mission, &args.robot, &area, seed)
         .with_context(|| format!("setting up robot `{}`", args.robot))?;
     // What a replay of the log needs to build this robot again.

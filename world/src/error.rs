@@ -1,10 +1,10 @@
-//! Errors of the simulator.
+//! Errors of the world model.
 
 use std::path::PathBuf;
 
-/// Why a world could not be built, loaded or saved, or a model could not be set up.
+/// Why a world could not be built, loaded or saved.
 #[derive(Debug, thiserror::Error)]
-pub enum SimError {
+pub enum WorldError {
     /// A file could not be read or written.
     #[error("{path}: {source}")]
     Io {
@@ -90,9 +90,9 @@ fn located(path: &std::path::Path, line: u32, column: u32) -> String {
     if line == 0 { path.display().to_string() } else { format!("{}:{line}:{column}", path.display()) }
 }
 
-impl SimError {
-    /// A shorthand for [`SimError::Invalid`].
+impl WorldError {
+    /// A shorthand for [`WorldError::Invalid`].
     pub(crate) fn invalid(what: &'static str, message: impl Into<String>) -> Self {
-        SimError::Invalid { what, message: message.into() }
+        WorldError::Invalid { what, message: message.into() }
     }
 }
