@@ -1,14 +1,20 @@
 #!/usr/bin/env python3
 """Checks the layering rules of docs/design.md §2 on the workspace's dependency graph.
 
-Layers, bottom to top: core < skills < behaviors (engine + mission language) < robot < adapters
-< the CLI (root package).
+Layers, bottom to top: core < messages < skills < behaviors (engine + mission language) < robot
+< world < adapters < the CLI (root package).
 - core depends on no spomp crate;
+- messages (`core/ros_msgs`: the ROS 2 message types as plain data) depend on core only;
 - a skill depends only on core and other skills (never behaviours, the robot or adapters);
-- behaviours (the engine and the mission language) depend on core only: they know no skill,
-  no robot and no adapter;
-- the robot (runtime, domain nodes, mission → robot) depends on core, skills and behaviours;
-- an adapter depends on core, skills, behaviours and the robot, never on another adapter;
+- behaviours (the engine and the mission language) depend on core and the messages only (a
+  robot's `ros2:` section names a depth encoding): they know no skill, no robot and no adapter;
+- the robot (runtime, domain nodes, mission → robot) depends on core, messages, skills and
+  behaviours;
+- the world model (`world/`: layers, world files, the city generator, a mission's world and
+  operating area) is data that may be read from files: it depends on core, skills, behaviours
+  and the robot, and adapters and the CLI use it (never the robot);
+- an adapter depends on core, messages, skills, behaviours, the robot and the world, never on
+  another adapter;
 - only the root `spomp` package wires adapters together;
 - tools (benchmark support) depend on no spomp crate and are used as dev-dependencies only.
 Dev-dependencies (tests, benchmarks, examples) obey the same rules: a skill's tests cannot
@@ -34,6 +40,10 @@ def layer_of(manifest_dir: str, root: str) -> str:
         return "cli"
     if rel == "core":
         return "core"
+    if rel == os.path.join("core", "ros_msgs"):
+        return "messages"
+    if rel == "world":
+        return "world"
     if rel == "behaviors":
         return "behaviors"
     if rel == "robot":
@@ -55,12 +65,14 @@ ALLOWED = {
     "tool": set(),
     "core": set(),
     "skill": {"core", "skill"},
-    "behaviors": {"core"},
-    "robot": {"core", "skill", "behaviors"},
-    "adapter": {"core", "skill", "behaviors", "robot"},
-    "cli": {"core", "skill", "behaviors", "robot", "adapter"},
-    "example": {"core", "skill", "behaviors", "robot", "adapter", "cli"},
-    "tests": {"core", "skill", "behaviors", "robot", "adapter", "cli"},
+    "messages": {"core"},
+    "behaviors": {"core", "messages"},
+    "robot": {"core", "messages", "skill", "behaviors"},
+    "world": {"core", "skill", "behaviors", "robot"},
+    "adapter": {"core", "messages", "skill", "behaviors", "robot", "world"},
+    "cli": {"core", "messages", "skill", "behaviors", "robot", "world", "adapter"},
+    "example": {"core", "messages", "skill", "behaviors", "robot", "world", "adapter", "cli"},
+    "tests": {"core", "messages", "skill", "behaviors", "robot", "world", "adapter", "cli"},
 }
 
 

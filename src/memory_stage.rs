@@ -15,7 +15,8 @@ use spomp_behaviors::mission::schema::{MissionFile, WorldSpec};
 use spomp_behaviors::mission::yaml::{self, Loc};
 use spomp_behaviors::mission::{Diagnostic, LoadedMission, Stage};
 use spomp_core::RobotKind;
-use spomp_sim::{SensorParams, World};
+use spomp_sim::SensorParams;
+use spomp_world::World;
 
 /// Cell size of generated worlds, metres (the aerial maps' 0.5 m).
 const GENERATED_CELL_M: f64 = 0.5;
@@ -187,7 +188,7 @@ pub fn sizes_of(mission: &MissionFile, base_dir: &Path) -> Result<Sizes, String>
         }
         Some(WorldSpec::Generate(g)) => cells_of_generated(g.size_m),
         None => {
-            let city = spomp_sim::CityParams::default();
+            let city = spomp_world::CityParams::default();
             cells_of_generated([city.width_m, city.height_m])
         }
     };

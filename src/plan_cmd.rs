@@ -4,7 +4,7 @@
 //! A path the graph finds is not always one a robot can drive: the graph ranks classes (it
 //! may cross vegetation, which is costly, not forbidden) and sees no curbs. So every path is
 //! also checked against what the simulated UGV can drive on the world's ground truth: the cells
-//! it can reach from the start ([`spomp_sim::reachable_cells`]: its step and drop limits, slope
+//! it can reach from the start ([`spomp_world::reachable_cells`]: its step and drop limits, slope
 //! and disc footprint, down a curb but not up it). The path is drivable when every point of it
 //! lies within [`DRIVE_CORRIDOR_M`] of a reachable cell (the local planner swerves that much
 //! around a global path, off a curb edge, say) and on no impassable class. The report gives the
@@ -23,7 +23,8 @@ use rand_chacha::ChaCha8Rng;
 use serde_json::json;
 use spomp_core::{GridSpec, Point2};
 use spomp_global_planner::{EdgeState, GlobalPath, GlobalPlanner, GlobalPlannerParams};
-use spomp_sim::{UgvLimits, UgvParams, World, render_png};
+use spomp_sim::UgvParams;
+use spomp_world::{UgvLimits, World, render_png};
 
 use crate::world_cmd::load_world;
 
@@ -51,7 +52,7 @@ pub fn drive(world: &World, limits: &UgvLimits, path: &[Point2]) -> Option<Block
         world.class_at(p).and_then(|c| classes.get(c)).map_or_else(|| "off the map".to_string(), |c| c.name.clone())
     };
     let first = *path.first()?;
-    let reach = spomp_sim::reachable_cells(world, limits, first);
+    let reach = spomp_world::reachable_cells(world, limits, first);
     if !reach.data.iter().any(|&r| r) {
         return Some(Blocked { at: first, class: name_at(first), why: "the UGV cannot stand at the start".into() });
     }

@@ -11,13 +11,13 @@ use anyhow::Result;
 use indicatif::ProgressBar;
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
-use spomp_core::ros::GoalMarkerInput;
 use spomp_core::{
     AerialMap, ClassTable, FlightCommand, Odometry, PanoramaFrame, PanoramaGeometry, Point2, PoseEstimate,
     ReachabilityScan, RobotId, RobotKind, Time, Twist2,
 };
 use spomp_mcap::{RecordError, Recorder, RunInfo};
 use spomp_robot::{RobotObserver, SeamCall};
+use spomp_ros_msgs::GoalMarkerInput;
 use spomp_sim::run::{RobotSnapshot, SimEvent, SimObserver};
 
 use crate::sim_cmd::output_path;
@@ -282,7 +282,7 @@ impl<W: Write + Seek> spomp_ros2::RunObserver for LogObserver<W> {
         self.record(|r| r.pose_in(robot, estimate.stamp, estimate.pose, 0.0));
     }
 
-    fn on_tf(&mut self, topic: &str, time: Time, msg: &spomp_core::ros::TfMessage) {
+    fn on_tf(&mut self, topic: &str, time: Time, msg: &spomp_ros_msgs::TfMessage) {
         self.record(|r| r.transform(topic, time, msg));
     }
 

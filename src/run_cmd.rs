@@ -119,7 +119,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     if !args.interfaces.is_empty() {
         settings.dds.interfaces = args.interfaces.clone();
     }
-    let node = format!("{}/{}", settings.topics.namespace().trim_end_matches('/'), spomp_core::ros::ROBOT_NODE_NAME);
+    let node = format!("{}/{}", settings.topics.namespace().trim_end_matches('/'), spomp_ros_msgs::ROBOT_NODE_NAME);
     let read = |p: &std::path::Path| std::fs::read_to_string(p).map_err(|e| e.to_string());
     let ros_args = match crate::ros_args::parse(&args.ros_args, &node, &read) {
         Ok(r) => r,
@@ -146,9 +146,9 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         settings.lockstep = Some(spomp_ros2::settings::LockstepSettings { seed, timeout_s: args.lockstep_timeout_s });
     }
     // The operating area (map grid, class table, prior map) is the mission's world, as in `sim`.
-    let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
+    let world = spomp_world::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the operating area of `{}`", mission.mission))?;
-    let area = spomp_sim::run::operating_area(mission, &world);
+    let area = spomp_world::operating_area(mission, &world);
     let setup = RobotSetup::from_mission(mission, &args.robot, &area, seed)
         .with_context(|| format!("setting up robot `{}`", args.robot))?;
     // What a replay of the log needs to build this robot again.
@@ -213,7 +213,7 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         tf_static: settings.topics.get("tf_static").to_string(),
         depth_encoding: settings.depth_encoding,
         depth_scale_m: settings.depth_scale_m,
-        logger: spomp_core::ros::rcl_logger_name(settings.topics.namespace(), spomp_core::ros::ROBOT_NODE_NAME),
+        logger: spomp_ros_msgs::rcl_logger_name(settings.topics.namespace(), spomp_ros_msgs::ROBOT_NODE_NAME),
     };
     if !args.json {
         errln!(

@@ -437,7 +437,7 @@ fn run_trial(
     };
     crate::output::create_dir(&trial_dir)?;
     crate::output::create_dir(&trial_dir.join("plots"))?;
-    let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
+    let world = spomp_world::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
     let options = SimOptions {
         seed,
@@ -448,7 +448,7 @@ fn run_trial(
         ..SimOptions::default()
     };
     let run_info = if args.replayable {
-        let area = spomp_sim::run::operating_area(mission, &world);
+        let area = spomp_world::operating_area(mission, &world);
         let level = options.map_compression.level;
         let info = spomp_mcap::replay::run_info(loaded, "sim", seed, &area, options.map_publish_period_s, level)?;
         Some(spomp_mcap::RunInfo { background_skills: options.skill_latency.is_some(), ..info })
@@ -538,7 +538,7 @@ fn set_log_conventions<W: Write + Seek>(rec: &mut Recorder<W>, mission: &spomp_b
             tf_static: topics.get("tf_static").to_string(),
             depth_encoding: r.ros2.as_ref().map(|s| s.depth_encoding).unwrap_or_default(),
             depth_scale_m: r.ros2.as_ref().and_then(|s| s.depth_scale_m),
-            logger: spomp_core::ros::rcl_logger_name(topics.namespace(), spomp_core::ros::ROBOT_NODE_NAME),
+            logger: spomp_ros_msgs::rcl_logger_name(topics.namespace(), spomp_ros_msgs::ROBOT_NODE_NAME),
         };
         rec.set_conventions(&r.id, conventions);
     }
@@ -716,7 +716,7 @@ pub fn dry_run(
 ) -> Result<(bool, serde_json::Value)> {
     let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
     let seed = mission.sim.as_ref().and_then(|s| s.seed).unwrap_or(1);
-    let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), seed)
+    let world = spomp_world::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
     let spec = *world.spec();
     let options = SimOptions { seed, time_limit_s: limits.time_limit_s, ..SimOptions::default() };

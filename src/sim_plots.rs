@@ -18,7 +18,7 @@ const TRACK_COLOURS: [[u8; 3]; 6] =
 pub fn map_plot(result: &RunResult, path: &Path) -> Result<()> {
     let world = &result.world;
     let spec = *world.spec();
-    let mut img = spomp_sim::render_png(world);
+    let mut img = spomp_world::render_png(world);
     // Dim the background so the overlays read well.
     for p in img.pixels_mut() {
         p.0 = p.0.map(|v| (v as f32 * 0.6) as u8);

@@ -35,7 +35,7 @@ pub struct TerrainArgs {
 /// Reads a 16-bit grayscale PNG of range counts into a depth panorama (the simulator's reader,
 /// which the `terrain_input` fuzz target exercises).
 pub fn read_depth_png(path: &Path, range_scale_m: f64, v_fov_rad: f64) -> Result<DepthPanorama> {
-    Ok(spomp_sim::read_depth_png(path, range_scale_m, v_fov_rad)?)
+    Ok(spomp_world::read_depth_png(path, range_scale_m, v_fov_rad)?)
 }
 
 fn load_params(a: &TerrainArgs) -> Result<TerrainParams> {

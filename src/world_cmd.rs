@@ -7,7 +7,8 @@ use anyhow::{Context, Result, bail};
 use image::{ImageBuffer, Luma};
 use serde_json::json;
 use spomp_core::{DepthPanorama, Pose2, SemanticPanorama};
-use spomp_sim::{CityParams, PanoramaRenderer, SensorParams, World, generate_city, render_png};
+use spomp_sim::{PanoramaRenderer, SensorParams};
+use spomp_world::{CityParams, World, generate_city, render_png};
 
 /// Options of `spomp world generate`.
 pub struct GenerateArgs {

@@ -34,7 +34,8 @@ use serde_json::json;
 use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, read_regular, read_text};
 use spomp_behaviors::mission::yaml;
 use spomp_core::{AerialMap, ClassId, ClassInfo, ClassTable, GridSpec, Point2, Pose2};
-use spomp_sim::{DerivedElevationParams, Ugv, UgvParams, World, WorldMeta};
+use spomp_sim::{Ugv, UgvParams};
+use spomp_world::{DerivedElevationParams, World, WorldMeta};
 
 /// The largest raster file read, bytes.
 pub const MAX_RASTER_BYTES: u64 = 64 << 20;
@@ -597,7 +598,7 @@ pub fn classify(
 /// unless `force`.
 pub fn check_scale(scale: Scale, width: u32, height: u32, force: bool) -> Result<f64> {
     let res = scale.metres_per_pixel();
-    let (lo, hi) = spomp_sim::RESOLUTION_RANGE_M;
+    let (lo, hi) = spomp_world::RESOLUTION_RANGE_M;
     if !(res.is_finite() && (lo..=hi).contains(&res)) {
         bail!("a pixel must be between {lo} and {hi} m; got {res} m per pixel");
     }
@@ -722,10 +723,10 @@ fn resample(
     }
     let cols = ((f64::from(width) * pixel_m / cell_m).round() as u64).max(1);
     let rows = ((f64::from(height) * pixel_m / cell_m).round() as u64).max(1);
-    if cols * rows > spomp_sim::MAX_WORLD_CELLS {
+    if cols * rows > spomp_world::MAX_WORLD_CELLS {
         bail!(
             "at --cell-m {cell_m} the world would be {cols} × {rows} cells; at most {} are allowed",
-            spomp_sim::MAX_WORLD_CELLS
+            spomp_world::MAX_WORLD_CELLS
         );
     }
     let (cols, rows) = (cols as u32, rows as u32);
@@ -919,7 +920,7 @@ pub fn import_world(a: &ImportArgs) -> Result<(World, ImportRecord)> {
         bail!("--ramp-spacing-m must be a non-negative distance in metres (0: no curb cuts), got {}", a.ramp_spacing_m);
     }
     let cell_m = a.cell_m.unwrap_or(res);
-    let (lo, hi) = spomp_sim::RESOLUTION_RANGE_M;
+    let (lo, hi) = spomp_world::RESOLUTION_RANGE_M;
     if !(cell_m.is_finite() && (lo..=hi).contains(&cell_m)) {
         bail!("--cell-m must be between {lo} and {hi} m, got {cell_m}");
     }
@@ -1476,7 +1477,8 @@ mod tests {
         let reach = |map: &AerialMap| {
             let world =
                 World::new(map.clone(), t.table.clone(), WorldMeta::default()).unwrap_or_else(|e| panic!("{e}"));
-            let cells = spomp_sim::reachable_cells(&world, &spomp_sim::UgvLimits::default(), Point2::new(30.0, 3.0));
+            let cells =
+                spomp_world::reachable_cells(&world, &spomp_world::UgvLimits::default(), Point2::new(30.0, 3.0));
             *cells.at(spec.cell_at(Point2::new(30.0, 15.0)).unwrap_or_else(|| panic!("off the map")))
         };
         assert!(!reach(&map), "without cuts the strip is a wall of curbs");

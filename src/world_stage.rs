@@ -27,7 +27,8 @@ use spomp_behaviors::mission::{Diagnostic, LoadOptions, LoadedMission, Stage};
 use spomp_core::classes::IMPASSABLE_RANK;
 use spomp_core::{Point2, Pose2, RobotKind};
 use spomp_robot::class_names::ClassNames;
-use spomp_sim::{Ugv, UgvParams, World};
+use spomp_sim::{Ugv, UgvParams};
+use spomp_world::World;
 
 /// One step of a path into the mission's YAML: a mapping key or a list index.
 enum Step<'a> {

@@ -12,9 +12,9 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use spomp_core::ros::{self, RosMessage};
 use spomp_live::viewer::Viewer;
 use spomp_mcap::{McapLog, decode_cdr};
+use spomp_ros_msgs::{self as ros, RosMessage};
 
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -39,7 +39,7 @@ fn a_simulator_log_has_the_dds_types_and_a_connected_tf_tree() {
     assert!(ranges.iter().all(|r| *r == f32::INFINITY || (r.is_finite() && *r > 0.0)), "no zeros or NaN");
 }
 
-fn depth_image(messages: &[spomp_mcap::LogMessage]) -> spomp_core::ros::Image {
+fn depth_image(messages: &[spomp_mcap::LogMessage]) -> spomp_ros_msgs::Image {
     let m = messages.iter().find(|m| m.topic == "/ugv1/panorama/depth").expect("a depth panorama");
     spomp_mcap::decode_cdr(&m.topic, &m.data).unwrap()
 }
@@ -63,7 +63,7 @@ fn a_simulator_log_names_the_frames_and_tf_topics_of_the_robots_settings() {
     let topics: std::collections::BTreeSet<&str> = messages.iter().map(|m| m.topic.as_str()).collect();
     assert!(topics.contains("/robot1/tf") && topics.contains("/robot1/tf_static"), "{topics:?}");
     let odom = messages.iter().find(|m| m.topic == "/ugv1/odom").expect("odometry");
-    let odom: spomp_core::ros::Odometry = spomp_mcap::decode_cdr(&odom.topic, &odom.data).unwrap();
+    let odom: spomp_ros_msgs::Odometry = spomp_mcap::decode_cdr(&odom.topic, &odom.data).unwrap();
     assert_eq!((odom.header.frame_id.as_str(), odom.child_frame_id.as_str()), ("odom", "base_link"));
     let cmd = messages.iter().find(|m| m.topic == "/ugv1/cmd_vel").expect("commands");
     assert_eq!(cmd.schema, "geometry_msgs/msg/Twist", "the robot's command type");

@@ -98,7 +98,7 @@ fn a_log_recorded_with_mono16_depth_still_replays() {
     let bytes = std::fs::read(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(log)).expect("the fixture");
     let messages = spomp_mcap::McapLog::from_bytes(bytes).messages().expect("the fixture reads");
     let depth = messages.iter().find(|m| m.topic == "/ugv1/panorama/depth").expect("a depth image");
-    let img: spomp_core::ros::Image = spomp_mcap::decode_cdr(&depth.topic, &depth.data).expect("an image");
+    let img: spomp_ros_msgs::Image = spomp_mcap::decode_cdr(&depth.topic, &depth.data).expect("an image");
     assert_eq!(img.encoding, "mono16", "the fixture holds the earlier depth encoding");
     let replay = spomp().args(["replay", log, "--robot", "ugv1"]).output().expect("replay runs");
     assert!(replay.status.success(), "{}", String::from_utf8_lossy(&replay.stderr));

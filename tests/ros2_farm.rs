@@ -17,7 +17,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use processes::{Reap, output, spomp, wait_with_timeout};
-use spomp_core::ros;
+use spomp_ros_msgs as ros;
 
 const MISSION: &str = "tests/missions/ros2/farm-one-ugv.yaml";
 const FAR_MISSION: &str = "tests/missions/ros2/farm-kill.yaml";

@@ -386,8 +386,8 @@ fn a_resumed_uav_continues_its_survey_where_it_was() {
     let loaded = load_mission_with(&path, &registry, &LoadOptions::default());
     assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
     let mission = loaded.mission.as_ref().expect("mission");
-    let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), 1).expect("world");
-    let area = spomp_sim::run::operating_area(mission, &world);
+    let world = spomp_world::world_for_mission(mission, &loaded.base_dir(), 1).expect("world");
+    let area = spomp_world::operating_area(mission, &world);
     let make = |id: &str| spomp_robot::Robot::from_mission(&loaded, id, &area, 1, &registry).expect("robot");
 
     let state = make("uav1").resume_state();

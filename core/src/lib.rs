@@ -12,7 +12,6 @@ pub mod grid;
 pub mod ids;
 pub mod motion;
 pub mod panorama;
-pub mod ros;
 pub mod scan;
 pub mod time;
 

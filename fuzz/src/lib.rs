@@ -250,9 +250,9 @@ pub fn world(data: &[u8]) {
     let dir = scratch("world");
     let mut u = Unstructured::new(data);
     let Ok(()) = world_files(&mut u, &dir) else { return };
-    if let Ok(w) = spomp_sim::World::load(&dir) {
+    if let Ok(w) = spomp_world::World::load(&dir) {
         // What `world show` does next.
-        let _ = spomp_sim::render_png(&w);
+        let _ = spomp_world::render_png(&w);
     }
 }
 
@@ -581,7 +581,7 @@ const MAX_TERRAIN_PIXELS: usize = 1 << 20;
 pub fn terrain_input(data: &[u8]) {
     use spomp_local_planner::{TerrainAnalyzer, TerrainParams};
     let v_fov = 90.0f64.to_radians();
-    let Ok(depth) = spomp_sim::decode_depth_png(data, spomp_core::panorama::DEFAULT_RANGE_SCALE_M, v_fov) else {
+    let Ok(depth) = spomp_world::decode_depth_png(data, spomp_core::panorama::DEFAULT_RANGE_SCALE_M, v_fov) else {
         return;
     };
     if depth.geometry.len() > MAX_TERRAIN_PIXELS {

@@ -375,7 +375,7 @@ pub fn run_deployed_trial(
             .with_context(|| format!("starting {id}'s process ({})", exe.display()))?;
         processes.0.push(RobotProcess { id: id.clone(), child, report, log });
     }
-    let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), trial.seed)
+    let world = spomp_world::world_for_mission(mission, &loaded.base_dir(), trial.seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
     // As the in-process trial runs (so that over the radio model the rows are equal).
     let options = SimOptions { seed: trial.seed, ..SimOptions::default() };

@@ -518,7 +518,7 @@ fn run_trial(
 ) -> Result<Option<TrialRow>> {
     let loaded = &configuration.loaded;
     let Some(mission) = loaded.mission.as_ref() else { bail!("the mission did not load") };
-    let world = spomp_sim::run::world_for_mission(mission, &loaded.base_dir(), trial.seed)
+    let world = spomp_world::world_for_mission(mission, &loaded.base_dir(), trial.seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
     let options = SimOptions { seed: trial.seed, parallel_robots, ..SimOptions::default() };
     let sim = Simulation::new(loaded, registry, Arc::new(world), options)

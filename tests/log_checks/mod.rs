@@ -4,8 +4,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-use spomp_core::ros;
 use spomp_mcap::{LogMessage, McapLog, decode_cdr};
+use spomp_ros_msgs as ros;
 
 /// The messages of the log at `path`.
 pub fn read(path: &Path) -> Vec<LogMessage> {

@@ -1,11 +1,11 @@
 //! MCAP recording and reading for spomp.
 //!
-//! Every message is a ROS 2 type from [`spomp_core::ros`], CDR-encoded (little endian, with the
+//! Every message is a ROS 2 type from [`spomp_ros_msgs`], CDR-encoded (little endian, with the
 //! 4-byte encapsulation header ROS 2 uses) on a channel whose schema is the type's `ros2msg`
 //! definition, so `ros2 bag`, Foxglove and the Python `mcap-ros2-support` decoder read the files
 //! as they are.
 //!
-//! Topics (per robot `R`), each with the type its ROS 2 topic has (`spomp_core::ros::ROBOT_TOPICS`):
+//! Topics (per robot `R`), each with the type its ROS 2 topic has (`spomp_ros_msgs::ROBOT_TOPICS`):
 //! `/R/pose` (PoseStamped, map frame: the simulator's truth), `/R/pose_in` (PoseStamped: a pose
 //! input as received), `/R/pose_estimate` (PoseWithCovarianceStamped), `/R/odom` (Odometry),
 //! `/R/cmd_vel` (TwistStamped, or Twist where the robot's `ros2.cmd_vel_type` says so),

@@ -20,9 +20,9 @@ use std::sync::Arc;
 use byteorder::LittleEndian;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
-use spomp_core::ros::RosMessage;
 use spomp_core::{AerialMap, ClassTable, GridSpec, RobotId, Time};
 use spomp_robot::SeamCall;
+use spomp_ros_msgs::RosMessage;
 use spomp_teamstate::TierSet;
 
 use crate::read::ReadError;

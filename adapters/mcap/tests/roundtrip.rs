@@ -9,9 +9,9 @@ use std::sync::Arc;
 use proptest::prelude::*;
 use spomp_behaviors::Status;
 use spomp_behaviors::trace::TransitionRecord;
-use spomp_core::ros::{Image, LaserScan, Log, PoseStamped};
 use spomp_core::{DepthPanorama, PanoramaGeometry, Pose2, ReachabilityScan, RobotId, SemanticPanorama, Time, Twist2};
 use spomp_mcap::{McapLog, Recorder, RecorderOptions, decode_cdr};
+use spomp_ros_msgs::{Image, LaserScan, Log, PoseStamped};
 
 fn sample_log() -> Vec<u8> {
     let mut buf = Cursor::new(Vec::new());
@@ -88,7 +88,7 @@ fn messages_round_trip_with_ros2_schemas() {
     assert!(l.msg.starts_with("idle -> running"));
     let path = msgs.iter().find(|m| m.topic == "/ugv1/active_path").unwrap();
     assert_eq!((path.schema.as_str(), path.log_time), ("std_msgs/msg/String", 300_000_000));
-    let p: spomp_core::ros::StringMsg = decode_cdr(&path.topic, &path.data).unwrap();
+    let p: spomp_ros_msgs::StringMsg = decode_cdr(&path.topic, &path.data).unwrap();
     assert_eq!(p.data, "visitor/sequence");
 }
 
@@ -265,7 +265,7 @@ fn problems_are_logged_under_the_robots_rcl_logger_name() {
     let mut rec = Recorder::new(&mut buf, RecorderOptions::default()).unwrap();
     rec.problem("ugv1", Time::from_millis(100), "planner: no path").unwrap();
     let mut husky = spomp_mcap::RobotConventions::defaults("ugv2");
-    husky.logger = spomp_core::ros::rcl_logger_name("/fleet/husky", spomp_core::ros::ROBOT_NODE_NAME);
+    husky.logger = spomp_ros_msgs::rcl_logger_name("/fleet/husky", spomp_ros_msgs::ROBOT_NODE_NAME);
     rec.set_conventions("ugv2", husky);
     rec.problem("ugv2", Time::from_millis(200), "e-stop").unwrap();
     rec.finish().unwrap();

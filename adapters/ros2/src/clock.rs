@@ -7,7 +7,7 @@
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use spomp_core::Time;
-use spomp_core::ros::RosTime;
+use spomp_ros_msgs::RosTime;
 
 /// The ROS time at which robot time is zero.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -1,4 +1,4 @@
-//! Between spomp's types and the ROS 2 messages of [`spomp_core::ros`] (the recorder's own).
+//! Between spomp's types and the ROS 2 messages of [`spomp_ros_msgs`] (the recorder's own).
 //!
 //! Frames follow REP-105, named by the robot's [`RobotFrames`] (`crate::frames`: `map`,
 //! `<prefix>odom`, `<prefix>base_link`, `<prefix>lidar` by default); units follow REP-103
@@ -6,12 +6,12 @@
 
 use std::sync::Arc;
 
-use spomp_core::ros;
-use spomp_core::ros::{DepthEncoding, RobotFrames};
 use spomp_core::{
     ClassId, DepthPanorama, FlightCommand, Odometry, PanoramaGeometry, Point2, Pose2, PoseEstimate, ReachabilityScan,
     SemanticPanorama, Time, Twist2, UNKNOWN_CLASS,
 };
+use spomp_ros_msgs as ros;
+use spomp_ros_msgs::{DepthEncoding, RobotFrames};
 
 use spomp_teamstate::GoalView;
 

@@ -1,5 +1,5 @@
 //! A ROS 2 node over RustDDS: participant set-up (domain, interfaces), typed publishers and
-//! subscriptions for the message types of [`spomp_core::ros`].
+//! subscriptions for the message types of [`spomp_ros_msgs`].
 
 use std::net::IpAddr;
 
@@ -7,7 +7,7 @@ use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::qos::{Durability, History, QosProfile};
 use ros2_client::{Context, MessageTypeName, Name, NodeName, NodeOptions, Publisher, Subscription};
 use serde::de::DeserializeOwned;
-use spomp_core::ros::RosMessage;
+use spomp_ros_msgs::RosMessage;
 
 /// Why the ROS 2 side could not be set up or used.
 #[derive(Debug, thiserror::Error)]
@@ -205,7 +205,7 @@ mod tests {
 
     #[test]
     fn message_types_split_into_package_and_type() {
-        let t = message_type::<spomp_core::ros::Odometry>();
+        let t = message_type::<spomp_ros_msgs::Odometry>();
         assert_eq!((t.package_name(), t.type_name()), ("nav_msgs", "Odometry"));
     }
 

@@ -7,11 +7,11 @@ use std::collections::{BTreeMap, VecDeque};
 
 use ros2_client::{Publisher, Subscription};
 use spomp_behaviors::mission::schema::{CmdVelType, Ros2Spec};
-use spomp_core::ros;
-use spomp_core::ros::{DepthEncoding, RobotFrames};
 use spomp_core::{
     FlightCommand, GridSpec, MapTile, Odometry, OdometryCovariance, PanoramaFrame, Point2, PoseEstimate, Time, Twist2,
 };
+use spomp_ros_msgs as ros;
+use spomp_ros_msgs::{DepthEncoding, RobotFrames};
 use spomp_teamstate::GoalView;
 
 use crate::clock::TimeBase;

@@ -11,7 +11,7 @@
 use std::collections::BTreeMap;
 
 use spomp_behaviors::mission::schema::Ros2Spec;
-use spomp_core::ros::RobotFrames;
+use spomp_ros_msgs::RobotFrames;
 
 use crate::topics::TopicNames;
 

@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 use ros2_client::qos::{History, QosProfile};
 use ros2_client::{Publisher, Subscription};
 use serde::{Deserialize, Serialize};
-use spomp_core::ros::RosMessage;
 use spomp_core::{FlightCommand, MapTile, Odometry, PanoramaFrame, PoseEstimate, RobotId, Time, Twist2};
+use spomp_ros_msgs::RosMessage;
 use spomp_teamstate::GoalView;
 
 use crate::dds::{DdsError, DdsNode};

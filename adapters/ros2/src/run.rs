@@ -19,10 +19,10 @@ use ros2_client::{Publisher, Subscription};
 use serde::Serialize;
 use spomp_behaviors::mission::schema::CmdVelType;
 use spomp_behaviors::trace::Recorder;
-use spomp_core::ros;
 use spomp_core::{FlightCommand, PanoramaFrame, Point2, PoseEstimate, RobotId, RobotKind, Time, Twist2};
 use spomp_robot::runtime::WorkKind;
 use spomp_robot::{LinkCredit, ModelledWork, Robot, RobotObserver, RobotView, RoundShape, WorkLatency};
+use spomp_ros_msgs as ros;
 use spomp_teamstate::TierSet;
 
 use crate::clock::{TimeBase, ros_nanos, wall_nanos};
@@ -1249,10 +1249,10 @@ impl RobotNode {
 }
 
 /// Checks every topic the node created against the one topic table
-/// ([`spomp_core::ros::ROBOT_TOPICS`], which the recorder names and types its channels from):
+/// ([`spomp_ros_msgs::ROBOT_TOPICS`], which the recorder names and types its channels from):
 /// one type per topic name on DDS and in logs. `cmd_vel` is of the type the settings choose.
 pub fn check_topic_types(settings: &RunSettings, created: &[(String, &'static str)]) -> Result<(), String> {
-    for t in spomp_core::ros::ROBOT_TOPICS {
+    for t in spomp_ros_msgs::ROBOT_TOPICS {
         let expected = match (t.role, settings.cmd_vel_type) {
             ("cmd_vel", CmdVelType::Twist) => <ros::Twist as ros::RosMessage>::TYPE_NAME,
             _ => t.type_name,

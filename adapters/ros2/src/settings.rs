@@ -1,7 +1,7 @@
 //! What `spomp run` needs to know beyond the robot itself: names, DDS, input formats, limits.
 
 use spomp_behaviors::mission::schema::{CmdVelType, MissionFile};
-use spomp_core::ros::{DepthEncoding, RobotFrames};
+use spomp_ros_msgs::{DepthEncoding, RobotFrames};
 
 use crate::dds::DdsSettings;
 use crate::topics::TopicNames;

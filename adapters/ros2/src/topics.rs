@@ -5,9 +5,9 @@ use std::collections::BTreeMap;
 use spomp_behaviors::mission::schema::Ros2Spec;
 
 /// Default topic of each role, relative to the robot's namespace (an absolute name stays as
-/// it is), with its type: [`spomp_core::ros::ROBOT_TOPICS`], the table the recorder shares. The
+/// it is), with its type: [`spomp_ros_msgs::ROBOT_TOPICS`], the table the recorder shares. The
 /// roles are the keys a mission's `ros2.topics` may rename.
-pub use spomp_core::ros::ROBOT_TOPICS;
+pub use spomp_ros_msgs::ROBOT_TOPICS;
 
 /// Node transitions and problems.
 pub const ROSOUT_TOPIC: &str = "/rosout";

@@ -6,7 +6,8 @@
 
 use std::time::{Duration, Instant};
 
-use spomp_core::{Time, ros};
+use spomp_core::Time;
+use spomp_ros_msgs as ros;
 use spomp_ros2::FarmLink;
 use spomp_ros2::dds::{DdsNode, DdsSettings, latched_qos};
 

@@ -3,7 +3,7 @@
 
 use std::time::{Duration, Instant};
 
-use spomp_core::ros;
+use spomp_ros_msgs as ros;
 use spomp_ros2::dds::{DdsNode, DdsSettings, sensor_qos, state_qos};
 
 fn loopback(domain_id: u16) -> DdsSettings {

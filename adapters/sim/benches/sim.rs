@@ -11,8 +11,10 @@ use std::hint::black_box;
 use criterion::Criterion;
 use criterion::measurement::Measurement;
 use spomp_core::{DepthPanorama, PanoramaGeometry, Pose2, SemanticPanorama, Twist2, UNKNOWN_CLASS};
-use spomp_sim::run::{NoObserver, SimOptions, Simulation, world_for_mission};
-use spomp_sim::{CityParams, PanoramaRenderer, Ugv, UgvParams, generate_city};
+use spomp_sim::run::{NoObserver, SimOptions, Simulation};
+use spomp_sim::{PanoramaRenderer, Ugv, UgvParams};
+use spomp_world::world_for_mission;
+use spomp_world::{CityParams, generate_city};
 use std::sync::Arc;
 
 fn panorama<M: Measurement + 'static>(c: &mut Criterion<M>) {

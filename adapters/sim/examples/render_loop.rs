@@ -6,7 +6,7 @@ use spomp_core::{DepthPanorama, PanoramaGeometry, Pose2, SemanticPanorama, UNKNO
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let n: usize = std::env::args().nth(1).map(|s| s.parse()).transpose()?.unwrap_or(200);
-    let world = spomp_sim::generate_city(&spomp_sim::CityParams::default(), 1)?;
+    let world = spomp_world::generate_city(&spomp_world::CityParams::default(), 1)?;
     let g = PanoramaGeometry::default_lidar();
     let renderer = spomp_sim::PanoramaRenderer::new(g, 0.4, 50.0)?;
     let mut depth = DepthPanorama::empty(g);

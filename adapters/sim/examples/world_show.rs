@@ -9,9 +9,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let out = args.next().unwrap_or_else(|| "world_out".into());
     let seed: u64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(1);
-    let world = spomp_sim::generate_city(&spomp_sim::CityParams::default(), seed)?;
+    let world = spomp_world::generate_city(&spomp_world::CityParams::default(), seed)?;
     world.save(&out)?;
-    spomp_sim::render_png(&world).save(std::path::Path::new(&out).join("render.png"))?;
+    spomp_world::render_png(&world).save(std::path::Path::new(&out).join("render.png"))?;
     let g = PanoramaGeometry::default_lidar();
     let renderer = spomp_sim::PanoramaRenderer::new(g, 0.4, 50.0)?;
     let mut depth = DepthPanorama::empty(g);

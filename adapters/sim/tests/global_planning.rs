@@ -20,8 +20,8 @@ use spomp_behaviors::Status;
 use spomp_core::{Cell, Point2, Pose2, Twist2, normalize_angle};
 use spomp_global_planner::{GlobalPlannerParams, SharingMode};
 use spomp_robot::RobotRuntime;
-use spomp_sim::World;
 use spomp_teamstate::{TeamStateParams, TierSet};
+use spomp_world::World;
 
 const ROAD: u8 = 0;
 
@@ -293,7 +293,7 @@ fn ramps(world: &World, ramp_colour: [u8; 3]) -> Vec<Ramp> {
 
 #[test]
 fn after_driving_up_ramps_the_model_rates_unseen_ramps_above_plain_curbs() {
-    let params = spomp_sim::CityParams {
+    let params = spomp_world::CityParams {
         width_m: 200.0,
         height_m: 150.0,
         vehicle_clusters: 2,
@@ -301,7 +301,7 @@ fn after_driving_up_ramps_the_model_rates_unseen_ramps_above_plain_curbs() {
         ramp_probability: 0.6,
         ..Default::default()
     };
-    let world = spomp_sim::generate_city(&params, 5).unwrap();
+    let world = spomp_world::generate_city(&params, 5).unwrap();
     let all = ramps(&world, params.ramp_color);
     assert!(all.len() >= 8, "{} ramps", all.len());
     // A corner with both ramps (one up along y, one up along x), the one nearest the city's

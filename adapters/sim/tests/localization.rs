@@ -25,9 +25,8 @@ use spomp_core::{Point2, Pose2, Time, Twist2};
 use spomp_localization::LocalizationParams;
 use spomp_robot::runtime::{Localization, LocalizationSetup, UpdateSchedule};
 use spomp_sim::run::{NoObserver, SimOptions, Simulation};
-use spomp_sim::{
-    CityParams, Faults, OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams, generate_city,
-};
+use spomp_sim::{Faults, OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams};
+use spomp_world::{CityParams, generate_city};
 
 /// The generated city every test runs in (the patrol mission's size, a fixed layout).
 const WORLD: &str = "{ generate: { size_m: [200, 150], vehicle_clusters: 4, roadblocks: 0, seed: 3 } }";

@@ -23,10 +23,9 @@ use common::{DriverSetup, DrivingRobot, fill, ring};
 use spomp_behaviors::{BbValue, Status};
 use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, Twist2};
 use spomp_global_planner::GlobalPlannerParams;
-use spomp_sim::{
-    CityParams, OdometryModel, OdometryNoiseParams, Ugv, UgvParams, World, generate_city, reachable_cells,
-};
+use spomp_sim::{OdometryModel, OdometryNoiseParams, Ugv, UgvParams};
 use spomp_teamstate::TeamStateParams;
+use spomp_world::{CityParams, World, generate_city, reachable_cells};
 
 const ROAD: u8 = 0;
 const BUILDING: u8 = 2;

@@ -2,9 +2,9 @@
 
 use spomp_core::{AerialMap, ClassTable, GridSpec, Point2, Pose2, RobotId, Time, UNKNOWN_CLASS};
 use spomp_sim::{
-    Blackout, Faults, KillFault, LinkTier, OrthoCamera, Radio, RadioNode, RadioParams, Region, Uav, UavParams, World,
-    generate_city,
+    Blackout, Faults, KillFault, LinkTier, OrthoCamera, Radio, RadioNode, RadioParams, Region, Uav, UavParams,
 };
+use spomp_world::{World, generate_city};
 
 fn node(x: f64, y: f64) -> RadioNode {
     RadioNode { position: Point2::new(x, y), alive: true }
@@ -118,7 +118,7 @@ fn uav_flies_waypoints_at_speed() {
 #[test]
 fn camera_reveals_each_cell_once_and_tiles_rebuild_the_world() {
     let world = generate_city(
-        &spomp_sim::CityParams {
+        &spomp_world::CityParams {
             width_m: 120.0,
             height_m: 120.0,
             vehicle_clusters: 2,

@@ -2,10 +2,8 @@
 
 use proptest::prelude::*;
 use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, Time, Twist2};
-use spomp_sim::{
-    CityParams, OdometryModel, OdometryNoiseParams, Ugv, UgvLimits, UgvParams, World, footprint_heights, generate_city,
-    ground_truth_traversability,
-};
+use spomp_sim::{OdometryModel, OdometryNoiseParams, Ugv, UgvParams};
+use spomp_world::{CityParams, UgvLimits, World, footprint_heights, generate_city, ground_truth_traversability};
 
 /// 40 m × 30 m: road below y = 10 m, a 0.15 m sidewalk above it, with a ramp across the
 /// sidewalk's first 3 m at x ∈ [20, 23) rising 0.025 m per cell, and a building at
@@ -217,7 +215,7 @@ fn noisy_pose_source_has_the_requested_spread() {
 
 #[test]
 fn robots_stop_short_of_each_other() {
-    use spomp_sim::Obstacle;
+    use spomp_world::Obstacle;
     let w = curb_world();
     let mut a = Ugv::new(&w, UgvParams::default(), Pose2::new(5.0, 5.0, 0.0)).unwrap();
     let b = Obstacle { center: Point2::new(10.0, 5.0), radius_m: 0.5, bottom_m: 0.0, top_m: 0.6, class: 4 };

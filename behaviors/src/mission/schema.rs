@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use spomp_core::RobotKind;
-pub use spomp_core::ros::DepthEncoding;
+pub use spomp_ros_msgs::DepthEncoding;
 
 /// A mission file.
 #[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]

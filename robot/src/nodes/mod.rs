@@ -14,7 +14,7 @@ use std::sync::Arc;
 pub use aerial::register_aerial;
 pub use coordination::register_coordination;
 pub use navigation::register_navigation;
-pub use qgc_plan::plan_waypoints;
+pub use qgc_plan::{PlanError, PlanProblem, plan_waypoints};
 pub use teammates::register_teammates;
 
 use spomp_behaviors::blackboard::{BbValue, Binding};

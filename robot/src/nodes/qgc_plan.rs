@@ -36,11 +36,10 @@
 //! union), never inside an exclusion zone. Rally points are ignored.
 
 use std::f64::consts::PI;
-use std::fmt;
 use std::path::{Path, PathBuf};
 
 use serde_json::Value;
-use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, read_text};
+use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, SourceError, read_text};
 use spomp_core::{GeoPoint, Point2};
 
 /// Farthest a waypoint or fence vertex may lie from the placement reference, metres.
@@ -69,30 +68,187 @@ pub(crate) struct QgcPlan {
     pub fly_inside: Polygons,
 }
 
-/// Why a plan file cannot be flown.
-#[derive(Clone, Debug, PartialEq)]
-pub(crate) struct PlanError {
+/// Why a plan file cannot be flown: the file and what is wrong in it.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("QGroundControl plan `{}`: {problem}", path.display())]
+pub struct PlanError {
     /// The file.
     pub path: PathBuf,
     /// What is wrong, and where in the file.
-    pub message: String,
+    pub problem: PlanProblem,
 }
 
-impl fmt::Display for PlanError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "QGroundControl plan `{}`: {}", self.path.display(), self.message)
+/// What is wrong in a `.plan` file. Problems inside the file are wrapped in
+/// [`PlanProblem::At`] with the JSON path they were found at (`mission.items[3]`).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum PlanProblem {
+    /// The file could not be read (missing, not a regular file, too large, not UTF-8).
+    #[error("cannot read the file: {0}")]
+    Unreadable(#[source] SourceError),
+    /// The text is not JSON.
+    #[error("not valid JSON: {0}")]
+    NotJson(String),
+    /// The top level is not a JSON object.
+    #[error("expected a JSON object with `fileType: \"Plan\"`, found {0}")]
+    NotAnObject(&'static str),
+    /// `fileType` names another kind of file.
+    #[error("`fileType` is `{0}`, expected `Plan`")]
+    WrongFileType(String),
+    /// No `fileType` at all.
+    #[error("missing `fileType: \"Plan\"`; is this a QGroundControl plan?")]
+    NotAPlan,
+    /// A required field is absent (its path in the file).
+    #[error("missing `{0}`")]
+    Missing(&'static str),
+    /// No `mission` section.
+    #[error("missing the `mission` section")]
+    NoMission,
+    /// `mission.plannedHomePosition` is not `[latitude, longitude, altitude]` (the value found).
+    #[error("`mission.plannedHomePosition` must be [latitude, longitude, altitude], found {0}")]
+    BadHome(String),
+    /// The georeferenced map origin is too close to a pole for the flat placement.
+    #[error("the map origin's latitude {0} is too close to a pole for a flat map")]
+    OriginNearPole(f64),
+    /// A latitude is too close to a pole for the flat placement.
+    #[error("latitude {0} is too close to a pole for a flat map")]
+    NearPole(f64),
+    /// A field that must be a list is not (its path in the file).
+    #[error("`{0}` must be a list")]
+    NotAList(&'static str),
+    /// `mission.items` is not a list.
+    #[error("`mission.items` must be a list of items")]
+    ItemsNotAList,
+    /// A latitude outside [-90, 90] degrees.
+    #[error("latitude {0} is not within [-90, 90] degrees")]
+    Latitude(f64),
+    /// A longitude outside [-180, 180] degrees.
+    #[error("longitude {0} is not within [-180, 180] degrees")]
+    Longitude(f64),
+    /// A point farther from the placement reference than plans may reach (50 km).
+    #[error(
+        "({latitude_deg}, {longitude_deg}) lies {:.0} km from {reference}; plans must stay within {:.0} km",
+        .distance_m / 1000.0,
+        MAX_EXTENT_M / 1000.0
+    )]
+    TooFar {
+        /// The point's latitude, degrees.
+        latitude_deg: f64,
+        /// The point's longitude, degrees.
+        longitude_deg: f64,
+        /// Its distance from the reference, metres.
+        distance_m: f64,
+        /// What the reference is (`the map origin`, `the plan's home`).
+        reference: &'static str,
+    },
+    /// A mission item without `type`.
+    #[error("missing the item `type` (SimpleItem or ComplexItem)")]
+    NoItemType,
+    /// A mission item of a type other than `SimpleItem` / `ComplexItem`.
+    #[error("unknown item type `{0}` (expected SimpleItem or ComplexItem)")]
+    UnknownItemType(String),
+    /// A complex item without the simple items QGroundControl generates for it.
+    #[error(
+        "complex item `{0}` is not supported (surveys and corridor scans are, through the items QGroundControl \
+         generated for them in `TransectStyleComplexItem.Items`); replace it with waypoints"
+    )]
+    UnsupportedComplexItem(String),
+    /// A survey or corridor scan whose generated items are empty.
+    #[error(
+        "complex item `{0}` has no generated items (`TransectStyleComplexItem.Items` is empty); open and save the \
+         plan in QGroundControl to generate them"
+    )]
+    NoGeneratedItems(String),
+    /// `TransectStyleComplexItem.Items` of the item at this path is not a list.
+    #[error("{0}.TransectStyleComplexItem.Items must be a list of items")]
+    GeneratedItemsNotAList(String),
+    /// A simple item without its MAVLink `command`.
+    #[error("missing the MAVLink `command` number")]
+    NoCommand,
+    /// A navigation command spomp does not fly (number and MAVLink name, when known).
+    #[error(
+        "navigation command {command} {name} is not supported (flown: {}, 20 NAV_RETURN_TO_LAUNCH; skipped: 22 \
+             NAV_TAKEOFF, 84 NAV_VTOL_TAKEOFF, and non-navigation commands ≥ 100)",
+        flown_list()
+    )]
+    UnsupportedCommand {
+        /// The MAVLink command number.
+        command: u64,
+        /// Its name, empty when not known.
+        name: &'static str,
+    },
+    /// `frame` is not a number (the value found).
+    #[error("`frame` must be a MAVLink frame number, found {0}")]
+    FrameNotNumber(String),
+    /// A frame other than a global latitude/longitude one.
+    #[error("frame {0} is not a global (latitude/longitude) frame; supported frames: {GLOBAL_FRAMES:?}")]
+    NotGlobalFrame(u64),
+    /// No `params` list.
+    #[error("missing the 7 `params` of the command")]
+    NoParams,
+    /// `params` of another length than 7.
+    #[error("a command has 7 `params`, found {0}")]
+    ParamCount(usize),
+    /// A parameter that must be a number is not.
+    #[error("params[{index}] ({what}) must be a number")]
+    ParamNotNumber {
+        /// Index in `params`.
+        index: usize,
+        /// What the parameter is.
+        what: &'static str,
+    },
+    /// A geofence without `inclusion`.
+    #[error("missing `inclusion` (true or false)")]
+    NoInclusion,
+    /// A polygon fence without `polygon`.
+    #[error("missing `polygon`")]
+    NoPolygon,
+    /// A polygon of fewer than 3 vertices (the count).
+    #[error("a polygon needs at least 3 vertices, found {0}")]
+    TooFewVertices(usize),
+    /// A fence vertex that is not `[latitude, longitude]`.
+    #[error("expected [latitude, longitude]")]
+    NotLatLon,
+    /// A fence vertex whose latitude is not a number.
+    #[error("latitude must be a number")]
+    LatitudeNotNumber,
+    /// A fence vertex whose longitude is not a number.
+    #[error("longitude must be a number")]
+    LongitudeNotNumber,
+    /// A circle fence without `circle`.
+    #[error("missing `circle`")]
+    NoCircle,
+    /// A circle fence whose radius is not a positive number.
+    #[error("expected a positive number of metres")]
+    BadRadius,
+    /// A problem at a path in the file (`mission.items[2]`, `geoFence.polygons[0]`).
+    #[error("{at}: {problem}")]
+    At {
+        /// Where in the file.
+        at: String,
+        /// What is wrong there.
+        problem: Box<PlanProblem>,
+    },
+}
+
+impl PlanProblem {
+    /// This problem, found at `at` in the file.
+    fn at(self, at: impl Into<String>) -> Self {
+        PlanProblem::At { at: at.into(), problem: Box::new(self) }
     }
 }
 
-impl std::error::Error for PlanError {}
+/// The flown navigation commands, for [`PlanProblem::UnsupportedCommand`]'s message.
+fn flown_list() -> String {
+    FLOWN.iter().map(|(c, n)| format!("{c} {n}")).collect::<Vec<_>>().join(", ")
+}
 
 /// Reads and interprets a `.plan` file, placed through `map_origin` when the operating area is
 /// georeferenced (else around the plan's home).
 pub(crate) fn load_plan(path: &Path, map_origin: Option<GeoPoint>) -> Result<QgcPlan, PlanError> {
-    let error = |message: String| PlanError { path: path.to_path_buf(), message };
+    let error = |problem: PlanProblem| PlanError { path: path.to_path_buf(), problem };
     // The loader checked the file, but it is read again here when the tree is built: the same
     // rules (a regular file, at most the mission language's size limit) hold at this read too.
-    let text = read_text(path, MAX_SOURCE_BYTES).map_err(|e| error(format!("cannot read the file: {e}")))?;
+    let text = read_text(path, MAX_SOURCE_BYTES).map_err(|e| error(PlanProblem::Unreadable(e)))?;
     parse_plan(&text, map_origin).map_err(error)
 }
 
@@ -100,39 +256,36 @@ pub(crate) fn load_plan(path: &Path, map_origin: Option<GeoPoint>) -> Result<Qgc
 /// `follow_waypoints` reads them over an area whose origin lies at `map_origin` (`None`: the
 /// plan's planned home is the origin): for checks made outside the node, such as `spomp
 /// validate`'s world stage. The error names the file and the problem.
-pub fn plan_waypoints(path: &Path, map_origin: Option<GeoPoint>) -> Result<Vec<Point2>, String> {
-    load_plan(path, map_origin).map(|p| p.waypoints.iter().map(|w| w.position).collect()).map_err(|e| e.to_string())
+pub fn plan_waypoints(path: &Path, map_origin: Option<GeoPoint>) -> Result<Vec<Point2>, PlanError> {
+    load_plan(path, map_origin).map(|p| p.waypoints.iter().map(|w| w.position).collect())
 }
 
 /// Interprets the text of a `.plan` file; errors say where in the file the problem is.
-pub(crate) fn parse_plan(text: &str, map_origin: Option<GeoPoint>) -> Result<QgcPlan, String> {
-    let root: Value = serde_json::from_str(text).map_err(|e| format!("not valid JSON: {e}"))?;
+pub(crate) fn parse_plan(text: &str, map_origin: Option<GeoPoint>) -> Result<QgcPlan, PlanProblem> {
+    let root: Value = serde_json::from_str(text).map_err(|e| PlanProblem::NotJson(e.to_string()))?;
     let Some(obj) = root.as_object() else {
-        return Err(format!("expected a JSON object with `fileType: \"Plan\"`, found {}", kind(&root)));
+        return Err(PlanProblem::NotAnObject(kind(&root)));
     };
     match obj.get("fileType").and_then(Value::as_str) {
         Some("Plan") => {}
-        Some(other) => return Err(format!("`fileType` is `{other}`, expected `Plan`")),
-        None => return Err("missing `fileType: \"Plan\"`; is this a QGroundControl plan?".into()),
+        Some(other) => return Err(PlanProblem::WrongFileType(other.to_string())),
+        None => return Err(PlanProblem::NotAPlan),
     }
-    let mission = obj.get("mission").ok_or("missing the `mission` section")?;
-    let home = mission.get("plannedHomePosition").ok_or("missing `mission.plannedHomePosition`")?;
+    let mission = obj.get("mission").ok_or(PlanProblem::NoMission)?;
+    let home = mission.get("plannedHomePosition").ok_or(PlanProblem::Missing("mission.plannedHomePosition"))?;
     let (home_lat, home_lon) = home_of(home)?;
     let origin = match map_origin {
         Some(o) => {
             if !(o.latitude_deg.is_finite() && o.latitude_deg.abs() <= 85.0) {
-                return Err(format!(
-                    "the map origin's latitude {} is too close to a pole for a flat map",
-                    o.latitude_deg
-                ));
+                return Err(PlanProblem::OriginNearPole(o.latitude_deg));
             }
             Origin { at: o, what: "the map origin" }
         }
         None => Origin { at: GeoPoint::new(home_lat, home_lon), what: "the plan's home" },
     };
-    let home = origin.to_local(home_lat, home_lon).map_err(|e| format!("`mission.plannedHomePosition`: {e}"))?;
+    let home = origin.to_local(home_lat, home_lon).map_err(|e| e.at(HOME_AT))?;
 
-    let items = mission.get("items").and_then(Value::as_array).ok_or("`mission.items` must be a list of items")?;
+    let items = mission.get("items").and_then(Value::as_array).ok_or(PlanProblem::ItemsNotAList)?;
     let mut plan = QgcPlan::default();
     let mut walk = Walk { origin: &origin, home, returned: false };
     for (i, item) in items.iter().enumerate() {
@@ -147,6 +300,9 @@ pub(crate) fn parse_plan(text: &str, map_origin: Option<GeoPoint>) -> Result<Qgc
     Ok(plan)
 }
 
+/// How the plan's home is named in errors.
+const HOME_AT: &str = "`mission.plannedHomePosition`";
+
 /// The local tangent plane points are placed on.
 struct Origin {
     at: GeoPoint,
@@ -156,39 +312,39 @@ struct Origin {
 
 impl Origin {
     /// Latitude/longitude in degrees to metres east/north of the origin.
-    fn to_local(&self, lat: f64, lon: f64) -> Result<Point2, String> {
+    fn to_local(&self, lat: f64, lon: f64) -> Result<Point2, PlanProblem> {
         check_lat_lon(lat, lon)?;
         let p = self.at.local_of(lat, lon);
         if p.norm() > MAX_EXTENT_M {
-            return Err(format!(
-                "({lat}, {lon}) lies {:.0} km from {}; plans must stay within {:.0} km",
-                p.norm() / 1000.0,
-                self.what,
-                MAX_EXTENT_M / 1000.0
-            ));
+            return Err(PlanProblem::TooFar {
+                latitude_deg: lat,
+                longitude_deg: lon,
+                distance_m: p.norm(),
+                reference: self.what,
+            });
         }
         Ok(p)
     }
 }
 
-fn check_lat_lon(lat: f64, lon: f64) -> Result<(), String> {
+fn check_lat_lon(lat: f64, lon: f64) -> Result<(), PlanProblem> {
     if !(lat.is_finite() && (-90.0..=90.0).contains(&lat)) {
-        return Err(format!("latitude {lat} is not within [-90, 90] degrees"));
+        return Err(PlanProblem::Latitude(lat));
     }
     if !(lon.is_finite() && (-180.0..=180.0).contains(&lon)) {
-        return Err(format!("longitude {lon} is not within [-180, 180] degrees"));
+        return Err(PlanProblem::Longitude(lon));
     }
     Ok(())
 }
 
-fn home_of(home: &Value) -> Result<(f64, f64), String> {
-    let bad = || format!("`mission.plannedHomePosition` must be [latitude, longitude, altitude], found {home}");
+fn home_of(home: &Value) -> Result<(f64, f64), PlanProblem> {
+    let bad = || PlanProblem::BadHome(home.to_string());
     let arr = home.as_array().ok_or_else(bad)?;
     let lat = arr.first().and_then(Value::as_f64).ok_or_else(bad)?;
     let lon = arr.get(1).and_then(Value::as_f64).ok_or_else(bad)?;
-    check_lat_lon(lat, lon).map_err(|e| format!("`mission.plannedHomePosition`: {e}"))?;
+    check_lat_lon(lat, lon).map_err(|e| e.at(HOME_AT))?;
     if lat.abs() > 85.0 {
-        return Err(format!("`mission.plannedHomePosition`: latitude {lat} is too close to a pole for a flat map"));
+        return Err(PlanProblem::NearPole(lat).at(HOME_AT));
     }
     Ok((lat, lon))
 }
@@ -226,11 +382,8 @@ struct Walk<'a> {
 }
 
 impl Walk<'_> {
-    fn item(&mut self, item: &Value, at: &str, out: &mut Vec<PlanWaypoint>) -> Result<(), String> {
-        let ty = item
-            .get("type")
-            .and_then(Value::as_str)
-            .ok_or_else(|| format!("{at}: missing the item `type` (SimpleItem or ComplexItem)"))?;
+    fn item(&mut self, item: &Value, at: &str, out: &mut Vec<PlanWaypoint>) -> Result<(), PlanProblem> {
+        let ty = item.get("type").and_then(Value::as_str).ok_or_else(|| PlanProblem::NoItemType.at(at))?;
         match ty {
             "SimpleItem" => {}
             "ComplexItem" => {
@@ -239,20 +392,11 @@ impl Walk<'_> {
                 // for them: the route the vehicle is sent.
                 let generated = item.get("TransectStyleComplexItem").and_then(|t| t.get("Items"));
                 let Some(inner) = generated else {
-                    return Err(format!(
-                        "{at}: complex item `{what}` is not supported (surveys and corridor scans are, through the \
-                         items QGroundControl generated for them in `TransectStyleComplexItem.Items`); replace it \
-                         with waypoints"
-                    ));
+                    return Err(PlanProblem::UnsupportedComplexItem(what.to_string()).at(at));
                 };
-                let inner = inner
-                    .as_array()
-                    .ok_or_else(|| format!("{at}.TransectStyleComplexItem.Items must be a list of items"))?;
+                let inner = inner.as_array().ok_or_else(|| PlanProblem::GeneratedItemsNotAList(at.to_string()))?;
                 if inner.is_empty() {
-                    return Err(format!(
-                        "{at}: complex item `{what}` has no generated items (`TransectStyleComplexItem.Items` is \
-                         empty); open and save the plan in QGroundControl to generate them"
-                    ));
+                    return Err(PlanProblem::NoGeneratedItems(what.to_string()).at(at));
                 }
                 for (k, sub) in inner.iter().enumerate() {
                     self.item(sub, &format!("{at}.TransectStyleComplexItem.Items[{k}]"), out)?;
@@ -262,9 +406,9 @@ impl Walk<'_> {
                 }
                 return Ok(());
             }
-            other => return Err(format!("{at}: unknown item type `{other}` (expected SimpleItem or ComplexItem)")),
+            other => return Err(PlanProblem::UnknownItemType(other.to_string()).at(at)),
         }
-        let wp = item_waypoint(item, self.origin, self.home, out.last()).map_err(|e| format!("{at}: {e}"))?;
+        let wp = item_waypoint(item, self.origin, self.home, out.last()).map_err(|e| e.at(at))?;
         if let Some((wp, returns)) = wp {
             out.push(wp);
             self.returned = returns;
@@ -279,8 +423,8 @@ fn item_waypoint(
     origin: &Origin,
     home: Point2,
     previous: Option<&PlanWaypoint>,
-) -> Result<Option<(PlanWaypoint, bool)>, String> {
-    let command = item.get("command").and_then(Value::as_u64).ok_or("missing the MAVLink `command` number")?;
+) -> Result<Option<(PlanWaypoint, bool)>, PlanProblem> {
+    let command = item.get("command").and_then(Value::as_u64).ok_or(PlanProblem::NoCommand)?;
     if command >= 100 {
         return Ok(None); // CONDITION_*, DO_*, camera: they do not move the vehicle
     }
@@ -293,34 +437,30 @@ fn item_waypoint(
     }
     if !FLOWN.iter().any(|(c, _)| *c == command) {
         let name = REFUSED.iter().find(|(c, _)| *c == command).map_or("", |(_, n)| *n);
-        let flown: Vec<String> = FLOWN.iter().map(|(c, n)| format!("{c} {n}")).collect();
-        return Err(format!(
-            "navigation command {command} {name} is not supported (flown: {}, 20 NAV_RETURN_TO_LAUNCH; skipped: 22 \
-             NAV_TAKEOFF, 84 NAV_VTOL_TAKEOFF, and non-navigation commands ≥ 100)",
-            flown.join(", ")
-        ));
+        return Err(PlanProblem::UnsupportedCommand { command, name });
     }
     let frame = match item.get("frame") {
         None => 3,
-        Some(f) => f.as_u64().ok_or_else(|| format!("`frame` must be a MAVLink frame number, found {f}"))?,
+        Some(f) => f.as_u64().ok_or_else(|| PlanProblem::FrameNotNumber(f.to_string()))?,
     };
     if !GLOBAL_FRAMES.contains(&frame) {
-        return Err(format!(
-            "frame {frame} is not a global (latitude/longitude) frame; supported frames: {GLOBAL_FRAMES:?}"
-        ));
+        return Err(PlanProblem::NotGlobalFrame(frame));
     }
-    let params = item.get("params").and_then(Value::as_array).ok_or("missing the 7 `params` of the command")?;
+    let params = item.get("params").and_then(Value::as_array).ok_or(PlanProblem::NoParams)?;
     if params.len() != 7 {
-        return Err(format!("a command has 7 `params`, found {}", params.len()));
+        return Err(PlanProblem::ParamCount(params.len()));
     }
-    let number = |i: usize, what: &str| {
-        params.get(i).and_then(Value::as_f64).ok_or_else(|| format!("params[{i}] ({what}) must be a number"))
+    let number = |index: usize, what: &'static str| {
+        params.get(index).and_then(Value::as_f64).ok_or(PlanProblem::ParamNotNumber { index, what })
     };
     let lat = number(4, "latitude")?;
     let lon = number(5, "longitude")?;
     let altitude_m = match params.get(6).and_then(Value::as_f64) {
         Some(a) if a.is_finite() => a,
-        _ => item.get("Altitude").and_then(Value::as_f64).ok_or("params[6] (altitude) must be a number")?,
+        _ => item
+            .get("Altitude")
+            .and_then(Value::as_f64)
+            .ok_or(PlanProblem::ParamNotNumber { index: 6, what: "altitude" })?,
     };
     Ok(Some((PlanWaypoint { position: origin.to_local(lat, lon)?, altitude_m }, false)))
 }
@@ -329,26 +469,26 @@ fn item_waypoint(
 const CIRCLE_SIDES: usize = 16;
 
 /// The exclusion zones and the inclusion fences of a `geoFence` section.
-fn fences(fence: &Value, origin: &Origin) -> Result<(Polygons, Polygons), String> {
+fn fences(fence: &Value, origin: &Origin) -> Result<(Polygons, Polygons), PlanProblem> {
     let (mut zones, mut inside) = (Vec::new(), Vec::new());
-    let inclusion = |v: &Value, at: &str| -> Result<bool, String> {
-        v.get("inclusion").and_then(Value::as_bool).ok_or_else(|| format!("{at}: missing `inclusion` (true or false)"))
+    let inclusion = |v: &Value, at: &str| -> Result<bool, PlanProblem> {
+        v.get("inclusion").and_then(Value::as_bool).ok_or_else(|| PlanProblem::NoInclusion.at(at))
     };
-    let latlon = |v: &Value, at: &str| -> Result<Point2, String> {
-        let arr =
-            v.as_array().filter(|a| a.len() >= 2).ok_or_else(|| format!("{at}: expected [latitude, longitude]"))?;
-        let lat = arr.first().and_then(Value::as_f64).ok_or_else(|| format!("{at}: latitude must be a number"))?;
-        let lon = arr.get(1).and_then(Value::as_f64).ok_or_else(|| format!("{at}: longitude must be a number"))?;
-        origin.to_local(lat, lon).map_err(|e| format!("{at}: {e}"))
+    let latlon = |v: &Value, at: &str| -> Result<Point2, PlanProblem> {
+        let arr = v.as_array().filter(|a| a.len() >= 2).ok_or_else(|| PlanProblem::NotLatLon.at(at))?;
+        let lat = arr.first().and_then(Value::as_f64).ok_or_else(|| PlanProblem::LatitudeNotNumber.at(at))?;
+        let lon = arr.get(1).and_then(Value::as_f64).ok_or_else(|| PlanProblem::LongitudeNotNumber.at(at))?;
+        origin.to_local(lat, lon).map_err(|e| e.at(at))
     };
     if let Some(polys) = fence.get("polygons") {
-        let polys = polys.as_array().ok_or("`geoFence.polygons` must be a list")?;
+        let polys = polys.as_array().ok_or(PlanProblem::NotAList("geoFence.polygons"))?;
         for (i, p) in polys.iter().enumerate() {
             let at = format!("geoFence.polygons[{i}]");
             let include = inclusion(p, &at)?;
-            let verts = p.get("polygon").and_then(Value::as_array).ok_or_else(|| format!("{at}: missing `polygon`"))?;
+            let verts =
+                p.get("polygon").and_then(Value::as_array).ok_or_else(|| PlanProblem::NoPolygon.at(at.as_str()))?;
             if verts.len() < 3 {
-                return Err(format!("{at}: a polygon needs at least 3 vertices, found {}", verts.len()));
+                return Err(PlanProblem::TooFewVertices(verts.len()).at(at));
             }
             let pts = verts
                 .iter()
@@ -359,17 +499,17 @@ fn fences(fence: &Value, origin: &Origin) -> Result<(Polygons, Polygons), String
         }
     }
     if let Some(circles) = fence.get("circles") {
-        let circles = circles.as_array().ok_or("`geoFence.circles` must be a list")?;
+        let circles = circles.as_array().ok_or(PlanProblem::NotAList("geoFence.circles"))?;
         for (i, c) in circles.iter().enumerate() {
             let at = format!("geoFence.circles[{i}]");
             let include = inclusion(c, &at)?;
-            let circle = c.get("circle").ok_or_else(|| format!("{at}: missing `circle`"))?;
+            let circle = c.get("circle").ok_or_else(|| PlanProblem::NoCircle.at(at.as_str()))?;
             let center = latlon(circle.get("center").unwrap_or(&Value::Null), &format!("{at}.circle.center"))?;
             let radius = circle
                 .get("radius")
                 .and_then(Value::as_f64)
                 .filter(|r| r.is_finite() && *r > 0.0)
-                .ok_or_else(|| format!("{at}.circle.radius: expected a positive number of metres"))?;
+                .ok_or_else(|| PlanProblem::BadRadius.at(format!("{at}.circle.radius")))?;
             // Exclusion: the polygon around the circle; inclusion: the polygon inside it. Either
             // way the polygon errs on the safe side.
             let r = if include { radius } else { radius / (PI / CIRCLE_SIDES as f64).cos() };
@@ -447,7 +587,7 @@ mod tests {
         assert!(p.fly_inside[1].iter().all(|v| (v.distance(centre) - 10.0).abs() < 1e-6));
 
         let missing = fence.replacen("\"inclusion\": false, ", "", 1);
-        let e = parse_plan(&plan(&wp(16, 39.9527, -75.1651), &missing), None).unwrap_err();
+        let e = parse_plan(&plan(&wp(16, 39.9527, -75.1651), &missing), None).unwrap_err().to_string();
         assert!(e.contains("geoFence.polygons[0]") && e.contains("missing `inclusion`"), "{e}");
     }
 
@@ -516,21 +656,34 @@ mod tests {
             &format!("[{}, {camera}, {}, {}]", item(16, 40.0, 20.0), item(16, 40.0, 80.0), item(16, 60.0, 80.0)),
             "[]",
         );
-        let e = parse_plan(&empty, Some(origin)).unwrap_err();
+        let e = parse_plan(&empty, Some(origin)).unwrap_err().to_string();
         assert!(e.contains("mission.items[2]") && e.contains("no generated items"), "{e}");
         // A point far from the map origin is refused, naming the reference.
-        let far = parse_plan(&plan(&wp(16, 41.0, -75.1651), "{}"), Some(origin)).unwrap_err();
+        let far = parse_plan(&plan(&wp(16, 41.0, -75.1651), "{}"), Some(origin)).unwrap_err().to_string();
         assert!(far.contains("km from the map origin"), "{far}");
+    }
+
+    /// Callers tell problems apart by variant, with the place in the file beside them.
+    #[test]
+    fn problems_are_typed_and_located() {
+        let e = parse_plan(&plan(&wp(21, 39.9527, -75.1651), "{}"), None).unwrap_err();
+        let PlanProblem::At { at, problem } = &e else { panic!("{e:?}") };
+        assert_eq!(at, "mission.items[0]");
+        assert_eq!(**problem, PlanProblem::UnsupportedCommand { command: 21, name: "NAV_LAND" });
+        assert_eq!(parse_plan("[]", None).unwrap_err(), PlanProblem::NotAnObject("a list"));
+        let e = load_plan(Path::new("/no/such/plan.plan"), None).unwrap_err();
+        assert_eq!(e.path, Path::new("/no/such/plan.plan"));
+        assert!(matches!(e.problem, PlanProblem::Unreadable(_)), "{e:?}");
     }
 
     #[test]
     fn unsupported_items_are_named() {
-        let e = parse_plan(&plan(&wp(21, 39.9527, -75.1651), "{}"), None).unwrap_err();
+        let e = parse_plan(&plan(&wp(21, 39.9527, -75.1651), "{}"), None).unwrap_err().to_string();
         assert!(e.contains("mission.items[0]") && e.contains("21 NAV_LAND"), "{e}");
         let survey = r#"{"type": "ComplexItem", "complexItemType": "survey"}"#;
-        let e = parse_plan(&plan(survey, "{}"), None).unwrap_err();
+        let e = parse_plan(&plan(survey, "{}"), None).unwrap_err().to_string();
         assert!(e.contains("complex item `survey`"), "{e}");
-        let far = parse_plan(&plan(&wp(16, 41.0, -75.1651), "{}"), None).unwrap_err();
+        let far = parse_plan(&plan(&wp(16, 41.0, -75.1651), "{}"), None).unwrap_err().to_string();
         assert!(far.contains("km from the plan's home"), "{far}");
     }
 }

@@ -282,7 +282,7 @@ fn apply_set(navigation: &mut Option<serde_json::Value>, path: &str, value: &str
 }
 
 fn recorded_transition(m: &LogMessage) -> Result<Recorded, ReplayError> {
-    let log: spomp_core::ros::Log = decode_cdr(&m.topic, &m.data)?;
+    let log: spomp_ros_msgs::Log = decode_cdr(&m.topic, &m.data)?;
     let time_ns = i64::from(log.stamp.sec) * 1_000_000_000 + i64::from(log.stamp.nanosec);
     Ok(Recorded { time_ns, name: log.name, msg: log.msg })
 }

@@ -62,7 +62,7 @@ pub use external::{DrivenStep, DrivenTeamMessage, ExternalDrivers};
 pub use observer::{NoObserver, RobotSnapshot, SimEvent, SimObserver};
 pub use options::{SimOptions, SkillLatency};
 pub use pace::RealTimePacer;
-pub use setup::{faults_for_mission, operating_area, radio_for_mission, world_for_mission};
+pub use setup::{faults_for_mission, radio_for_mission};
 pub use summary::{
     ClusterSummary, ErrorStats, GoalSummary, NavigationInForce, Outcome, ProblemCount, RobotSummary, RunSummary,
 };
@@ -170,7 +170,7 @@ impl Simulation {
         }
         let faults = faults_for_mission(&mission, &options.faults);
         let radio = Radio::new(radio_for_mission(&mission), &faults)?;
-        let area = operating_area(&mission, &world);
+        let area = spomp_world::operating_area(&mission, &world);
         // Through the mission's mapping: looked up by the built-in name alone, a renamed table's
         // bodies (`Car`) fell back to index 4, another class there (the yard's grass).
         let ugv_body_class = spomp_robot::class_names::ClassNames::new(&mission, world.classes())

@@ -1,39 +1,11 @@
-//! From a validated mission to the simulated team's surroundings: the world, the operating
-//! area the robots are set up over (the robots themselves come from `spomp-robot`), the radio
-//! and the faults.
-
-use std::path::Path;
+//! From a validated mission to the simulated team's surroundings: the radio and the faults
+//! (the world and the operating area come from `spomp-world`, the robots from `spomp-robot`).
 
 use spomp_behaviors::mission::MissionFile;
-use spomp_behaviors::mission::schema::{FaultSpec, WorldSpec};
+use spomp_behaviors::mission::schema::FaultSpec;
 use spomp_core::RobotId;
-use spomp_robot::OperatingArea;
 
-use crate::city::{CityParams, generate_city};
-use crate::error::SimError;
 use crate::radio::{Blackout, Faults, KillFault, RadioParams, Region};
-use crate::world::World;
-
-/// The world a mission names: generated (seeded by the mission's world seed, else the trial
-/// seed) or loaded from a folder relative to the mission file. A mission without `sim.world`
-/// gets the default generated city.
-pub fn world_for_mission(mission: &MissionFile, base_dir: &Path, trial_seed: u64) -> Result<World, SimError> {
-    let spec = mission.sim.as_ref().and_then(|s| s.world.clone());
-    match spec {
-        Some(WorldSpec::Dir(dir)) => World::load(base_dir.join(dir)),
-        Some(WorldSpec::Generate(g)) => {
-            let params = CityParams {
-                width_m: g.size_m[0],
-                height_m: g.size_m[1],
-                vehicle_clusters: g.vehicle_clusters as usize,
-                roadblocks: g.roadblocks as usize,
-                ..CityParams::default()
-            };
-            generate_city(&params, g.seed.unwrap_or(trial_seed))
-        }
-        None => generate_city(&CityParams::default(), trial_seed),
-    }
-}
 
 /// Faults of the mission's `sim.faults`, merged with `extra` (from the command line).
 pub fn faults_for_mission(mission: &MissionFile, extra: &Faults) -> Faults {
@@ -63,16 +35,5 @@ pub fn radio_for_mission(mission: &MissionFile) -> RadioParams {
         full_range_m: c.data_range_m,
         full_bytes_per_s: c.bandwidth_bytes_per_s,
         ..RadioParams::default()
-    }
-}
-
-/// The operating area robots are set up over in `world`: its class table and grid, and the
-/// whole aerial map when the mission says the robots start with it (`sim.prior_map`).
-pub fn operating_area(mission: &MissionFile, world: &World) -> OperatingArea {
-    OperatingArea {
-        classes: world.classes().clone(),
-        grid: *world.spec(),
-        prior_map: mission.sim.as_ref().is_some_and(|s| s.prior_map).then(|| world.shared_map()),
-        map_origin: world.meta.gps_origin,
     }
 }

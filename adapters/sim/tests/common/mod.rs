@@ -19,9 +19,11 @@ use spomp_robot::{RobotRuntime, WatchdogParams};
 pub type RobotExecutor = TreeExecutor<RobotRuntime>;
 use spomp_global_planner::GlobalPlannerParams;
 use spomp_local_planner::LocalPlannerParams;
-use spomp_sim::run::{SimOptions, Simulation, world_for_mission};
-use spomp_sim::{OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams, World};
+use spomp_sim::run::{SimOptions, Simulation};
+use spomp_sim::{OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams};
 use spomp_teamstate::TeamStateParams;
+use spomp_world::World;
+use spomp_world::world_for_mission;
 
 /// Writes a mission to a temporary file named after it (unique per test process).
 pub fn write_mission(name: &str, text: &str) -> PathBuf {

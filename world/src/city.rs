@@ -9,7 +9,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use spomp_core::{AerialMap, ClassId, ClassTable, GridSpec, Point2, Pose2};
 
-use crate::error::SimError;
+use crate::error::WorldError;
 use crate::terrain::UgvLimits;
 use crate::world::{World, WorldMeta};
 
@@ -155,11 +155,11 @@ struct Classes {
 }
 
 impl Classes {
-    fn from_table(t: &ClassTable) -> Result<Self, SimError> {
+    fn from_table(t: &ClassTable) -> Result<Self, WorldError> {
         let id = |name: &str| {
             t.by_name(name)
                 .map(|c| c.index)
-                .ok_or_else(|| SimError::invalid("class table", format!("the city needs class `{name}`")))
+                .ok_or_else(|| WorldError::invalid("class table", format!("the city needs class `{name}`")))
         };
         Ok(Classes {
             road: id("road")?,
@@ -253,8 +253,8 @@ fn mm(e: f64) -> f64 {
     (e * 1000.0).round() / 1000.0
 }
 
-fn check(p: &CityParams) -> Result<(), SimError> {
-    let bad = |m: String| Err(SimError::invalid("city parameters", m));
+fn check(p: &CityParams) -> Result<(), WorldError> {
+    let bad = |m: String| Err(WorldError::invalid("city parameters", m));
     let positive = [
         ("width_m", p.width_m),
         ("height_m", p.height_m),
@@ -322,7 +322,7 @@ fn road_lines(extent_m: f64, pitch_m: f64, road_w: f64) -> Vec<f64> {
 }
 
 /// Generates a city. Deterministic for a seed; the class table is the one shipped with spomp.
-pub fn generate_city(p: &CityParams, seed: u64) -> Result<World, SimError> {
+pub fn generate_city(p: &CityParams, seed: u64) -> Result<World, WorldError> {
     check(p)?;
     let table = ClassTable::default_table();
     let ids = Classes::from_table(&table)?;

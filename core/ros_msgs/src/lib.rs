@@ -8,8 +8,8 @@
 use serde::ser::SerializeTuple;
 use serde::{Deserialize, Serialize, Serializer};
 
-use crate::geometry::Pose2;
-use crate::time::Time;
+use spomp_core::geometry::Pose2;
+use spomp_core::time::Time;
 
 /// A ROS 2 message type: its full name and its definition as ROS 2 tools expect in a `ros2msg`
 /// schema (the type's own fields, then each dependency after a separator line).
@@ -709,7 +709,12 @@ impl GridMap {
     pub const TILE_LAYERS: [&'static str; 3] = ["class", "color", "elevation"];
 
     /// `tile` of the map over `spec`, in `frame` at `stamp`.
-    pub fn from_tile(tile: &crate::aerial::MapTile, spec: &crate::grid::GridSpec, frame: &str, stamp: RosTime) -> Self {
+    pub fn from_tile(
+        tile: &spomp_core::aerial::MapTile,
+        spec: &spomp_core::grid::GridSpec,
+        frame: &str,
+        stamp: RosTime,
+    ) -> Self {
         let (nx, ny) = (tile.width as usize, tile.height as usize);
         let res = spec.resolution_m;
         let centre_x = spec.origin.x + (f64::from(tile.col0) + nx as f64 / 2.0) * res;
@@ -721,7 +726,7 @@ impl GridMap {
                 // grid_map index (i, j): i runs down x, j down y; stored column-major.
                 let at = (ny - 1 - row) * nx + (nx - 1 - col);
                 let [r, g, b] = tile.rgb.get(k).copied().unwrap_or_default();
-                layers[0][at] = f32::from(tile.class.get(k).copied().unwrap_or(crate::classes::UNKNOWN_CLASS));
+                layers[0][at] = f32::from(tile.class.get(k).copied().unwrap_or(spomp_core::classes::UNKNOWN_CLASS));
                 layers[1][at] = f32::from_bits(u32::from(r) << 16 | u32::from(g) << 8 | u32::from(b));
                 layers[2][at] = tile.elevation.get(k).copied().unwrap_or(f32::NAN);
             }
@@ -739,7 +744,7 @@ impl GridMap {
                 resolution: res,
                 length_x: nx as f64 * res,
                 length_y: ny as f64 * res,
-                pose: Pose::from_pose2(crate::geometry::Pose2::new(centre_x, centre_y, 0.0), 0.0),
+                pose: Pose::from_pose2(spomp_core::geometry::Pose2::new(centre_x, centre_y, 0.0), 0.0),
             },
             layers: Self::TILE_LAYERS.iter().map(|l| (*l).to_string()).collect(),
             basic_layers: vec!["class".into()],
@@ -751,7 +756,7 @@ impl GridMap {
 
     /// The tile of the map over `spec` this grid map carries: it must be aligned with the
     /// map's cells, at its resolution, unrotated, inside it, with the three tile layers.
-    pub fn to_tile(&self, spec: &crate::grid::GridSpec) -> Result<crate::aerial::MapTile, GridMapError> {
+    pub fn to_tile(&self, spec: &spomp_core::grid::GridSpec) -> Result<spomp_core::aerial::MapTile, GridMapError> {
         let bad = |m: String| GridMapError(m);
         let res = spec.resolution_m;
         let info = &self.info;
@@ -798,7 +803,7 @@ impl GridMap {
         };
         let (class, color, elevation) = (layer("class")?, layer("color")?, layer("elevation")?);
         let n = nx * ny;
-        let mut tile = crate::aerial::MapTile {
+        let mut tile = spomp_core::aerial::MapTile {
             col0,
             row0,
             width: nx as u32,
@@ -811,8 +816,11 @@ impl GridMap {
             for col in 0..nx {
                 let at = (ny - 1 - row) * nx + (nx - 1 - col);
                 let c = class[at];
-                let class =
-                    if c.is_finite() && (0.0..=255.0).contains(&c) { c as u8 } else { crate::classes::UNKNOWN_CLASS };
+                let class = if c.is_finite() && (0.0..=255.0).contains(&c) {
+                    c as u8
+                } else {
+                    spomp_core::classes::UNKNOWN_CLASS
+                };
                 let bits = color[at].to_bits();
                 tile.class.push(class);
                 tile.rgb.push([(bits >> 16) as u8, (bits >> 8) as u8, bits as u8]);
@@ -829,7 +837,7 @@ impl Odometry {
     /// A robot's odometry: pose in `frames.odom`, twist in `frames.base_link`; `pose_sigma`
     /// (x, y, yaw) and `twist_sigma` (v, ω) are the 1σ uncertainties placed on the covariance
     /// diagonals (z, roll, pitch: a large variance — planar odometry does not measure them).
-    pub fn from_odometry(frames: &RobotFrames, odom: &crate::motion::Odometry, stamp: RosTime) -> Self {
+    pub fn from_odometry(frames: &RobotFrames, odom: &spomp_core::motion::Odometry, stamp: RosTime) -> Self {
         let mut msg = Odometry {
             header: Header { stamp, frame_id: frames.odom.clone() },
             child_frame_id: frames.base_link.clone(),
@@ -848,7 +856,7 @@ impl Odometry {
         for (k, s) in pose.iter().enumerate() {
             planar[k * 3 + k] = s * s;
         }
-        self.with_covariance(&crate::motion::OdometryCovariance {
+        self.with_covariance(&spomp_core::motion::OdometryCovariance {
             pose: planar,
             twist: [twist[0] * twist[0], twist[1] * twist[1]],
         })
@@ -859,7 +867,7 @@ impl Odometry {
     /// variances into linear x and angular z; the axes planar odometry does not measure (z,
     /// roll, pitch; lateral and vertical velocity, roll and pitch rates) get
     /// [`UNMEASURED_VARIANCE`].
-    pub fn with_covariance(mut self, cov: &crate::motion::OdometryCovariance) -> Self {
+    pub fn with_covariance(mut self, cov: &spomp_core::motion::OdometryCovariance) -> Self {
         const AXES: [usize; 3] = [0, 1, 5];
         let mut p = [0.0; 36];
         let mut t = [0.0; 36];
@@ -886,7 +894,7 @@ pub const UNMEASURED_VARIANCE: f64 = 1e6;
 
 impl Twist {
     /// A planar velocity command (`linear.x`, `angular.z`).
-    pub fn from_twist2(cmd: crate::motion::Twist2) -> Self {
+    pub fn from_twist2(cmd: spomp_core::motion::Twist2) -> Self {
         let mut msg = Twist::default();
         msg.linear.x = cmd.v;
         msg.angular.z = cmd.omega;
@@ -896,7 +904,7 @@ impl Twist {
 
 impl TwistStamped {
     /// A planar velocity command at `stamp` in the body frame `base_link`.
-    pub fn from_twist2(cmd: crate::motion::Twist2, base_link: &str, stamp: RosTime) -> Self {
+    pub fn from_twist2(cmd: spomp_core::motion::Twist2, base_link: &str, stamp: RosTime) -> Self {
         TwistStamped { header: Header { stamp, frame_id: base_link.into() }, twist: Twist::from_twist2(cmd) }
     }
 }
@@ -904,13 +912,13 @@ impl TwistStamped {
 impl LaserScan {
     /// A reachability scan in the body frame `base_link`: bin i at angle −i·2π/N, range = safe
     /// distance, intensity 1 where a known obstacle ends the bin. Per REP-117 `range_max` is
-    /// fixed ([`crate::scan::REACHABILITY_RANGE_MAX_M`], above any reach) and `range_min` is the
+    /// fixed ([`spomp_core::scan::REACHABILITY_RANGE_MAX_M`], above any reach) and `range_min` is the
     /// floor, 0, so every bin is a valid reading (laser_geometry and rviz keep
     /// `range_min ≤ r < range_max`); a range that would reach `range_max` is held just below it.
-    pub fn from_reachability(scan: &crate::scan::ReachabilityScan, base_link: &str, stamp: RosTime) -> Self {
+    pub fn from_reachability(scan: &spomp_core::scan::ReachabilityScan, base_link: &str, stamp: RosTime) -> Self {
         let n = scan.bins().max(1);
         let step = -(std::f64::consts::TAU / n as f64) as f32;
-        let max = crate::scan::REACHABILITY_RANGE_MAX_M;
+        let max = spomp_core::scan::REACHABILITY_RANGE_MAX_M;
         let below_max = max * (1.0 - f32::EPSILON);
         LaserScan {
             header: Header { stamp, frame_id: base_link.into() },
@@ -974,7 +982,7 @@ impl DepthEncoding {
         match self {
             DepthEncoding::Float32Metres => None,
             DepthEncoding::Uint16 => Some(0.001),
-            DepthEncoding::Mono16 => Some(crate::panorama::DEFAULT_RANGE_SCALE_M),
+            DepthEncoding::Mono16 => Some(spomp_core::panorama::DEFAULT_RANGE_SCALE_M),
         }
     }
 
@@ -994,7 +1002,7 @@ impl Image {
     /// `32FC1` and count 0 otherwise.
     pub fn from_depth(
         header: Header,
-        depth: &crate::panorama::DepthPanorama,
+        depth: &spomp_core::panorama::DepthPanorama,
         encoding: DepthEncoding,
         scale_m: Option<f64>,
         every: usize,
@@ -1013,7 +1021,7 @@ impl Image {
                         data.extend_from_slice(&v.to_le_bytes());
                     }
                     DepthEncoding::Uint16 | DepthEncoding::Mono16 => {
-                        data.extend_from_slice(&crate::panorama::range_to_count(m, scale).to_le_bytes());
+                        data.extend_from_slice(&spomp_core::panorama::range_to_count(m, scale).to_le_bytes());
                     }
                 }
             }
@@ -1032,7 +1040,7 @@ impl Image {
 
 impl Path {
     /// A planned path in `map`.
-    pub fn from_points(points: &[crate::geometry::Point2], stamp: RosTime) -> Self {
+    pub fn from_points(points: &[spomp_core::geometry::Point2], stamp: RosTime) -> Self {
         let header = Header { stamp, frame_id: "map".into() };
         let poses = points
             .iter()
@@ -1044,19 +1052,19 @@ impl Path {
 
 impl OccupancyGrid {
     /// The aerial map's traversability in `map`: each known cell's class rank scaled to 0–100
-    /// (rank 0 = 0, impassable = 100, [`crate::classes::IMPASSABLE_RANK`]), −1 where unmapped.
+    /// (rank 0 = 0, impassable = 100, [`spomp_core::classes::IMPASSABLE_RANK`]), −1 where unmapped.
     pub fn from_aerial_map(
-        map: &crate::aerial::AerialMap,
-        classes: &crate::classes::ClassTable,
+        map: &spomp_core::aerial::AerialMap,
+        classes: &spomp_core::classes::ClassTable,
         stamp: RosTime,
     ) -> Self {
         let ranks = classes.rank_lut();
-        let scale = 100 / i16::from(crate::classes::IMPASSABLE_RANK.max(1));
+        let scale = 100 / i16::from(spomp_core::classes::IMPASSABLE_RANK.max(1));
         let data = map
             .class
             .iter()
             .map(|&c| {
-                if c == crate::classes::UNKNOWN_CLASS {
+                if c == spomp_core::classes::UNKNOWN_CLASS {
                     -1
                 } else {
                     (i16::from(ranks[usize::from(c)]) * scale).min(100) as i8
@@ -1085,7 +1093,7 @@ pub struct GoalMarkerInput<'a> {
     /// The goal's id, as the label shows it.
     pub id: &'a dyn std::fmt::Display,
     /// Map-frame position.
-    pub position: crate::geometry::Point2,
+    pub position: spomp_core::geometry::Point2,
     /// Who claims it.
     pub claimed_by: Option<&'a str>,
     /// Who visited it.
@@ -1162,7 +1170,7 @@ impl TfMessage {
 impl PoseWithCovarianceStamped {
     /// A pose estimate in `map`: x, y, yaw variances placed in the 6 × 6 matrix; z, roll,
     /// pitch unknown ([`UNMEASURED_VARIANCE`]).
-    pub fn from_estimate(est: &crate::motion::PoseEstimate, map: &str, stamp: RosTime) -> Self {
+    pub fn from_estimate(est: &spomp_core::motion::PoseEstimate, map: &str, stamp: RosTime) -> Self {
         let mut cov = [0.0; 36];
         let axes = [0usize, 1, 5];
         for (i, &a) in axes.iter().enumerate() {
@@ -1437,7 +1445,7 @@ mod tests {
 
     #[test]
     fn planar_covariance_lands_on_x_y_yaw_with_its_correlations() {
-        let cov = crate::motion::OdometryCovariance {
+        let cov = spomp_core::motion::OdometryCovariance {
             pose: [0.04, 0.01, 0.002, 0.01, 0.09, -0.003, 0.002, -0.003, 0.0004],
             twist: [0.0001, 0.0009],
         };
@@ -1515,7 +1523,7 @@ mod tests {
 
     #[test]
     fn the_aerial_map_becomes_a_traversability_grid_with_unknown_cells_minus_one() {
-        use crate::{AerialMap, ClassTable, GridSpec, Point2, UNKNOWN_CLASS};
+        use spomp_core::{AerialMap, ClassTable, GridSpec, Point2, UNKNOWN_CLASS};
         let classes = ClassTable::default_table();
         let rank_of = |name: &str| classes.by_name(name).map(|c| (c.index, c.rank)).unwrap_or_default();
         let (road, road_rank) = rank_of("road");
@@ -1536,16 +1544,16 @@ mod tests {
     fn goal_markers_clear_the_old_set_then_show_each_goal_coloured_by_its_state() {
         let (a, b, c) = ("uav1-1".to_string(), "uav1-2".to_string(), "uav1-3".to_string());
         let goals = [
-            GoalMarkerInput { id: &a, position: crate::Point2::new(1.0, 2.0), claimed_by: None, visited_by: None },
+            GoalMarkerInput { id: &a, position: spomp_core::Point2::new(1.0, 2.0), claimed_by: None, visited_by: None },
             GoalMarkerInput {
                 id: &b,
-                position: crate::Point2::new(3.0, 4.0),
+                position: spomp_core::Point2::new(3.0, 4.0),
                 claimed_by: Some("ugv1"),
                 visited_by: None,
             },
             GoalMarkerInput {
                 id: &c,
-                position: crate::Point2::new(5.0, 6.0),
+                position: spomp_core::Point2::new(5.0, 6.0),
                 claimed_by: Some("ugv1"),
                 visited_by: Some("ugv2"),
             },
@@ -1579,9 +1587,9 @@ mod tests {
 
     #[test]
     fn a_map_tile_travels_as_a_grid_map_and_back_cell_for_cell() {
-        use crate::aerial::MapTile;
-        use crate::geometry::Point2;
-        use crate::grid::GridSpec;
+        use spomp_core::aerial::MapTile;
+        use spomp_core::geometry::Point2;
+        use spomp_core::grid::GridSpec;
         let spec = GridSpec::new(Point2::new(-10.0, 5.0), 0.5, 40, 30);
         let (w, h) = (3u32, 2u32);
         let n = (w * h) as usize;

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use image::{ImageBuffer, Luma, Rgb, RgbImage};
 use spomp_core::{ClassTable, GridSpec, Point2};
-use spomp_sim::{CityParams, SimError, UgvLimits, World, generate_city, render_png};
+use spomp_world::{CityParams, UgvLimits, World, WorldError, generate_city, render_png};
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("spomp-sim-{}-{name}", std::process::id()));
@@ -81,7 +81,7 @@ fn default_city_has_the_papers_features() {
 #[test]
 fn bad_city_parameters_are_errors() {
     let p = CityParams { block_pitch_m: 15.0, ..CityParams::default() };
-    assert!(matches!(generate_city(&p, 0), Err(SimError::Invalid { .. })));
+    assert!(matches!(generate_city(&p, 0), Err(WorldError::Invalid { .. })));
     let p = CityParams { width_m: f64::NAN, ..CityParams::default() };
     assert!(generate_city(&p, 0).is_err());
     let p = CityParams { width_m: 1e9, ..CityParams::default() };
@@ -142,7 +142,7 @@ fn unknown_colour_names_its_pixel() {
     img.put_pixel(3, 2, Rgb([1, 2, 3]));
     img.save(dir.join("class.png")).unwrap();
     let err = World::load(&dir).unwrap_err();
-    assert!(matches!(err, SimError::UnknownColor { x: 3, y: 2, color: [1, 2, 3], .. }), "{err}");
+    assert!(matches!(err, WorldError::UnknownColor { x: 3, y: 2, color: [1, 2, 3], .. }), "{err}");
     assert!(err.to_string().contains("pixel (x 3, y 2)"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -156,12 +156,15 @@ fn wrong_layer_size_is_reported() {
     elev.save(dir.join("elevation.png")).unwrap();
     let err = World::load(&dir).unwrap_err();
     assert!(
-        matches!(err, SimError::WrongSize { layer: "elevation", width: 4, height: 3, got_width: 5, got_height: 3, .. }),
+        matches!(
+            err,
+            WorldError::WrongSize { layer: "elevation", width: 4, height: 3, got_width: 5, got_height: 3, .. }
+        ),
         "{err}"
     );
     // Declared size against the class layer too.
     write_tiny(&dir, "resolution_m: 0.5\nwidth: 7\nheight: 3\nlayers: {class: class.png}\n");
-    assert!(matches!(World::load(&dir), Err(SimError::WrongSize { layer: "class", .. })));
+    assert!(matches!(World::load(&dir), Err(WorldError::WrongSize { layer: "class", .. })));
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -171,7 +174,7 @@ fn eight_bit_elevation_is_rejected() {
     write_tiny(&dir, &format!("{TINY}  elevation: {{file: elevation.png, scale_m: 0.01}}\n"));
     image::GrayImage::new(4, 3).save(dir.join("elevation.png")).unwrap();
     let err = World::load(&dir).unwrap_err();
-    assert!(matches!(err, SimError::BadImage { .. }) && err.to_string().contains("16-bit"), "{err}");
+    assert!(matches!(err, WorldError::BadImage { .. }) && err.to_string().contains("16-bit"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -179,22 +182,22 @@ fn eight_bit_elevation_is_rejected() {
 fn missing_layers_and_bad_yaml_are_reported() {
     let dir = scratch("missing");
     write_tiny(&dir, "resolution_m: 0.5\nlayers:\n  class: class.png\n  color: nope.png\n");
-    assert!(matches!(World::load(&dir), Err(SimError::MissingLayer { layer: "color", .. })));
+    assert!(matches!(World::load(&dir), Err(WorldError::MissingLayer { layer: "color", .. })));
     std::fs::remove_file(dir.join("class.png")).unwrap();
-    assert!(matches!(World::load(&dir), Err(SimError::MissingLayer { layer: "class", .. })));
+    assert!(matches!(World::load(&dir), Err(WorldError::MissingLayer { layer: "class", .. })));
     write_tiny(&dir, "resolution_m: 0.5\nlayers: {class: class.png}\nbogus: 1\n");
     let err = World::load(&dir).unwrap_err();
-    assert!(matches!(err, SimError::BadYaml { .. }) && err.to_string().contains("bogus"), "{err}");
+    assert!(matches!(err, WorldError::BadYaml { .. }) && err.to_string().contains("bogus"), "{err}");
     write_tiny(&dir, "resolution_m: -1\nlayers: {class: class.png}\n");
-    assert!(matches!(World::load(&dir), Err(SimError::BadYaml { .. })));
+    assert!(matches!(World::load(&dir), Err(WorldError::BadYaml { .. })));
     write_tiny(&dir, "layers: [\n");
-    assert!(matches!(World::load(&dir), Err(SimError::BadYaml { .. })));
+    assert!(matches!(World::load(&dir), Err(WorldError::BadYaml { .. })));
     std::fs::remove_file(dir.join("world.yaml")).unwrap();
-    assert!(matches!(World::load(&dir), Err(SimError::Io { .. })));
+    assert!(matches!(World::load(&dir), Err(WorldError::Io { .. })));
     // A corrupt PNG.
     write_tiny(&dir, TINY);
     std::fs::write(dir.join("class.png"), b"not a png").unwrap();
-    assert!(matches!(World::load(&dir), Err(SimError::BadImage { .. })));
+    assert!(matches!(World::load(&dir), Err(WorldError::BadImage { .. })));
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -234,13 +237,13 @@ fn an_aerial_view_shows_what_is_seen_from_above_and_survives_a_round_trip() {
     assert!(!World::load(&dir).unwrap().has_aerial_view());
     // Errors name the layer: a wrong size, an unknown colour, a missing file.
     RgbImage::new(5, 3).save(dir.join("aerial.png")).unwrap();
-    assert!(matches!(World::load(&dir), Err(SimError::WrongSize { layer: "aerial.class", .. })));
+    assert!(matches!(World::load(&dir), Err(WorldError::WrongSize { layer: "aerial.class", .. })));
     let mut odd = ground.clone();
     odd.put_pixel(0, 0, Rgb([1, 2, 3]));
     odd.save(dir.join("aerial.png")).unwrap();
-    assert!(matches!(World::load(&dir), Err(SimError::UnknownColor { x: 0, y: 0, .. })));
+    assert!(matches!(World::load(&dir), Err(WorldError::UnknownColor { x: 0, y: 0, .. })));
     std::fs::remove_file(dir.join("aerial.png")).unwrap();
-    assert!(matches!(World::load(&dir), Err(SimError::MissingLayer { layer: "aerial.class", .. })));
+    assert!(matches!(World::load(&dir), Err(WorldError::MissingLayer { layer: "aerial.class", .. })));
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&saved);
 }
@@ -252,7 +255,7 @@ fn class_table_from_a_file_is_checked() {
     std::fs::write(dir.join("classes.yaml"), spomp_core::classes::DEFAULT_CLASS_TABLE_YAML).unwrap();
     assert!(World::load(&dir).is_ok());
     std::fs::write(dir.join("classes.yaml"), "classes:\n  - {index: 0, name: a, rank: 9, color: [0,0,0]}\n").unwrap();
-    assert!(matches!(World::load(&dir), Err(SimError::ClassTable(_))));
+    assert!(matches!(World::load(&dir), Err(WorldError::ClassTable(_))));
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -294,7 +297,7 @@ mod never_panics {
 
 #[test]
 fn clusters_are_reachable_and_sidewalks_only_up_ramps() {
-    use spomp_sim::reachable_cells;
+    use spomp_world::reachable_cells;
     let limits = UgvLimits::default();
     let w = generate_city(&CityParams::default(), 3).unwrap();
     let start = w.meta.start_poses[0].position();
@@ -340,7 +343,8 @@ fn bad_world_files_are_refused_at_their_line_column_and_field() {
         let (line, column): (u32, u32) = (line.parse().expect("line"), column.parse().expect("column"));
         write_tiny(&dir, &text);
         let err = World::load(&dir).expect_err(&name);
-        let SimError::BadYaml { line: got_line, column: got_column, field: got_field, message: got, .. } = &err else {
+        let WorldError::BadYaml { line: got_line, column: got_column, field: got_field, message: got, .. } = &err
+        else {
             panic!("{name}: {err:?}");
         };
         assert_eq!((*got_line, *got_column, got_field.as_str()), (line, column, field), "{name}: {err}");

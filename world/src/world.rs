@@ -7,7 +7,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use spomp_core::{AerialMap, Cell, ClassId, ClassTable, GeoPoint, GridSpec, Point2, Pose2};
 
-use crate::error::SimError;
+use crate::error::WorldError;
 
 /// What the world's author knows that the robots must find out: scoring ground truth and where
 /// a team may start.
@@ -53,16 +53,16 @@ pub struct World {
 impl World {
     /// A world from its layers. Checks that the layers fit the grid, the resolution is positive,
     /// every class is in the table and every elevation is finite.
-    pub fn new(map: AerialMap, classes: ClassTable, meta: WorldMeta) -> Result<Self, SimError> {
+    pub fn new(map: AerialMap, classes: ClassTable, meta: WorldMeta) -> Result<Self, WorldError> {
         let n = map.spec.len();
         if !(map.spec.resolution_m.is_finite() && map.spec.resolution_m > 0.0) {
-            return Err(SimError::invalid("world", "resolution must be positive"));
+            return Err(WorldError::invalid("world", "resolution must be positive"));
         }
         if map.spec.is_empty() {
-            return Err(SimError::invalid("world", "the grid has no cells"));
+            return Err(WorldError::invalid("world", "the grid has no cells"));
         }
         if map.class.len() != n || map.rgb.len() != n || map.elevation.len() != n {
-            return Err(SimError::invalid("world", "layer lengths differ from the grid size"));
+            return Err(WorldError::invalid("world", "layer lengths differ from the grid size"));
         }
         let mut known = [false; 256];
         for c in &classes.classes {
@@ -70,14 +70,14 @@ impl World {
         }
         if let Some(i) = map.class.iter().position(|&c| !known[c as usize]) {
             let cell = map.spec.cell_of_index(i);
-            return Err(SimError::invalid(
+            return Err(WorldError::invalid(
                 "world",
                 format!("cell ({}, {}) has class {} which is not in the table", cell.col, cell.row, map.class[i]),
             ));
         }
         if let Some(i) = map.elevation.iter().position(|e| !e.is_finite()) {
             let cell = map.spec.cell_of_index(i);
-            return Err(SimError::invalid(
+            return Err(WorldError::invalid(
                 "world",
                 format!("cell ({}, {}) has a non-finite elevation", cell.col, cell.row),
             ));
@@ -87,7 +87,7 @@ impl World {
     }
 
     /// A world of one class at one elevation (tests, toy scenes).
-    pub fn flat(spec: GridSpec, classes: ClassTable, class: ClassId, elevation_m: f32) -> Result<Self, SimError> {
+    pub fn flat(spec: GridSpec, classes: ClassTable, class: ClassId, elevation_m: f32) -> Result<Self, WorldError> {
         let color = classes.get(class).map_or([0, 0, 0], |c| c.color);
         let map = AerialMap {
             class: vec![class; spec.len()],
@@ -126,9 +126,9 @@ impl World {
     /// from the ground (a barrier under canopy, a fence too thin for an aerial map), so that
     /// the robots' aerial map misleads where the world's does. An error, and no change, unless
     /// `aerial` has the world's grid, every class in the table and finite elevations.
-    pub fn set_aerial_view(&mut self, aerial: AerialMap) -> Result<(), SimError> {
+    pub fn set_aerial_view(&mut self, aerial: AerialMap) -> Result<(), WorldError> {
         if aerial.spec != self.map.spec {
-            return Err(SimError::invalid("aerial view", "its grid differs from the world's"));
+            return Err(WorldError::invalid("aerial view", "its grid differs from the world's"));
         }
         // The same checks as the ground layers'.
         let checked = World::new(aerial, self.classes.clone(), WorldMeta::default())?;

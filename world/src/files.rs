@@ -16,7 +16,7 @@ use spomp_behaviors::mission::limits::{
 use spomp_behaviors::mission::output;
 use spomp_behaviors::mission::yaml::{self, Node};
 
-use crate::error::SimError;
+use crate::error::WorldError;
 use crate::world::{World, WorldMeta};
 
 /// Name of the world description inside a world directory.
@@ -276,15 +276,15 @@ fn node_at<'a>(root: &'a Node, field: &str) -> &'a Node {
 }
 
 /// A located error of `world.yaml`: at the value of `field` (or the nearest node above it).
-fn field_error(path: &Path, root: &Node, field: &str, message: String) -> SimError {
+fn field_error(path: &Path, root: &Node, field: &str, message: String) -> WorldError {
     let loc = node_at(root, field).loc;
     let message = if message.starts_with(field) { message } else { format!("{field}: {message}") };
-    SimError::BadYaml { path: path.to_path_buf(), line: loc.line, column: loc.column, field: field.into(), message }
+    WorldError::BadYaml { path: path.to_path_buf(), line: loc.line, column: loc.column, field: field.into(), message }
 }
 
 /// Parses `world.yaml` into a description; every error carries its line, column and field.
-fn parse_description(path: &Path, text: &str) -> Result<(Node, WorldFile), SimError> {
-    let root = yaml::parse(text).map_err(|e| SimError::BadYaml {
+fn parse_description(path: &Path, text: &str) -> Result<(Node, WorldFile), WorldError> {
+    let root = yaml::parse(text).map_err(|e| WorldError::BadYaml {
         path: path.to_path_buf(),
         line: e.loc.line,
         column: e.loc.column,
@@ -295,20 +295,20 @@ fn parse_description(path: &Path, text: &str) -> Result<(Node, WorldFile), SimEr
         let field = e.path_string();
         let loc = e.loc.unwrap_or_else(|| node_at(&root, &field).loc);
         let message = if field.is_empty() { e.message } else { format!("{field}: {}", e.message) };
-        SimError::BadYaml { path: path.to_path_buf(), line: loc.line, column: loc.column, field, message }
+        WorldError::BadYaml { path: path.to_path_buf(), line: loc.line, column: loc.column, field, message }
     })?;
     check_description(&desc).map_err(|(field, message)| field_error(path, &root, &field, message))?;
     Ok((root, desc))
 }
 
-fn source_err(path: &Path) -> impl FnOnce(SourceError) -> SimError + '_ {
+fn source_err(path: &Path) -> impl FnOnce(SourceError) -> WorldError + '_ {
     move |e| match e {
         SourceError::Io { message, kind, .. } => {
-            SimError::Io { path: path.to_path_buf(), source: std::io::Error::new(kind, message) }
+            WorldError::Io { path: path.to_path_buf(), source: std::io::Error::new(kind, message) }
         }
         other => {
             let (line, column) = other.position().unwrap_or((0, 0));
-            SimError::BadYaml {
+            WorldError::BadYaml {
                 path: path.to_path_buf(),
                 line,
                 column,
@@ -319,36 +319,36 @@ fn source_err(path: &Path) -> impl FnOnce(SourceError) -> SimError + '_ {
     }
 }
 
-fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> SimError + '_ {
-    move |source| SimError::Io { path: path.to_path_buf(), source }
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> WorldError + '_ {
+    move |source| WorldError::Io { path: path.to_path_buf(), source }
 }
 
-fn image_err(path: &Path) -> impl FnOnce(image::ImageError) -> SimError + '_ {
+fn image_err(path: &Path) -> impl FnOnce(image::ImageError) -> WorldError + '_ {
     move |e| match e {
-        image::ImageError::IoError(source) => SimError::Io { path: path.to_path_buf(), source },
-        other => SimError::BadImage { path: path.to_path_buf(), message: other.to_string() },
+        image::ImageError::IoError(source) => WorldError::Io { path: path.to_path_buf(), source },
+        other => WorldError::BadImage { path: path.to_path_buf(), message: other.to_string() },
     }
 }
 
 /// Re-checks a table written inline in `world.yaml` through the core parser (which owns the
 /// rules); its errors point at the `class_table` key.
-fn checked_table(table: ClassTable, path: &Path, root: &Node) -> Result<ClassTable, SimError> {
+fn checked_table(table: ClassTable, path: &Path, root: &Node) -> Result<ClassTable, WorldError> {
     let text = serde_saphyr::to_string(&table)
         .map_err(|e| field_error(path, root, "class_table", format!("class_table: {e}")))?;
     ClassTable::from_yaml(&text).map_err(|e| field_error(path, root, "class_table", format!("class_table: {e}")))
 }
 
-fn open_layer(dir: &Path, file: &str, layer: &'static str) -> Result<(PathBuf, image::DynamicImage), SimError> {
+fn open_layer(dir: &Path, file: &str, layer: &'static str) -> Result<(PathBuf, image::DynamicImage), WorldError> {
     let path = resolve_inside(&[dir.to_path_buf()], dir, file).map_err(source_err(&dir.join(WORLD_FILE)))?;
     if !path.is_file() {
-        return Err(SimError::MissingLayer { layer, path });
+        return Err(WorldError::MissingLayer { layer, path });
     }
     // A regular file within the size limit (no FIFO, no device, no multi-gigabyte file), then
     // decoded from memory with the image library's default allocation limits.
     let bytes = read_regular(&path, MAX_LAYER_PNG_BYTES).map_err(source_err(&path))?;
     let img = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
-        .map_err(|source| SimError::Io { path: path.clone(), source })?
+        .map_err(|source| WorldError::Io { path: path.clone(), source })?
         .decode()
         .map_err(image_err(&path))?;
     Ok((path, img))
@@ -357,9 +357,9 @@ fn open_layer(dir: &Path, file: &str, layer: &'static str) -> Result<(PathBuf, i
 /// The largest world layer PNG read, bytes (a 10 000 × 10 000 colour layer compresses far below).
 pub const MAX_LAYER_PNG_BYTES: u64 = 256 << 20;
 
-fn check_size(layer: &'static str, path: &Path, spec: &GridSpec, w: u32, h: u32) -> Result<(), SimError> {
+fn check_size(layer: &'static str, path: &Path, spec: &GridSpec, w: u32, h: u32) -> Result<(), WorldError> {
     if w != spec.width || h != spec.height {
-        return Err(SimError::WrongSize {
+        return Err(WorldError::WrongSize {
             layer,
             path: path.to_path_buf(),
             width: spec.width,
@@ -381,7 +381,7 @@ fn aerial_view(
     classes: &ClassTable,
     color_lut: &[([u8; 3], u8)],
     heights: &DerivedElevationParams,
-) -> Result<AerialMap, SimError> {
+) -> Result<AerialMap, WorldError> {
     let (path, img) = open_layer(dir, &layers.class, "aerial.class")?;
     let img = img.to_rgb8();
     let spec = ground.spec;
@@ -395,7 +395,7 @@ fn aerial_view(
     for (x, y, px) in img.enumerate_pixels() {
         let rgb = px.0;
         let Ok(k) = color_lut.binary_search_by(|(c, _)| c.cmp(&rgb)) else {
-            return Err(SimError::UnknownColor { path, x, y, color: rgb });
+            return Err(WorldError::UnknownColor { path, x, y, color: rgb });
         };
         let class = color_lut[k].1;
         let i = (h - 1 - y as usize) * w + x as usize;
@@ -411,12 +411,12 @@ fn aerial_view(
 impl World {
     /// Loads a world directory (`world.yaml` and its layers); elevations absent from the files
     /// are derived from the classes with the default heights.
-    pub fn load(dir: impl AsRef<Path>) -> Result<World, SimError> {
+    pub fn load(dir: impl AsRef<Path>) -> Result<World, WorldError> {
         World::load_with(dir, &DerivedElevationParams::default())
     }
 
     /// Loads a world directory, deriving missing elevations with `heights`.
-    pub fn load_with(dir: impl AsRef<Path>, heights: &DerivedElevationParams) -> Result<World, SimError> {
+    pub fn load_with(dir: impl AsRef<Path>, heights: &DerivedElevationParams) -> Result<World, WorldError> {
         let dir = dir.as_ref();
         let yaml_path = dir.join(WORLD_FILE);
         let text = read_text(&yaml_path, MAX_SOURCE_BYTES).map_err(source_err(&yaml_path))?;
@@ -452,7 +452,7 @@ impl World {
         for (x, y, px) in class_img.enumerate_pixels() {
             let rgb = px.0;
             let Ok(k) = color_lut.binary_search_by(|(c, _)| c.cmp(&rgb)) else {
-                return Err(SimError::UnknownColor { path: class_path, x, y, color: rgb });
+                return Err(WorldError::UnknownColor { path: class_path, x, y, color: rgb });
             };
             let i = (h - 1 - y as usize) * w + x as usize;
             map.class[i] = color_lut[k].1;
@@ -463,7 +463,7 @@ impl World {
             Some(layer) => {
                 let (path, img) = open_layer(dir, &layer.file, "elevation")?;
                 let image::DynamicImage::ImageLuma16(img) = img else {
-                    return Err(SimError::BadImage {
+                    return Err(WorldError::BadImage {
                         path,
                         message: format!("elevation must be a 16-bit grayscale PNG, found {:?}", img.color()),
                     });
@@ -509,7 +509,7 @@ impl World {
     /// inline, `class.png`, a 16-bit `elevation.png` (1 mm per count when the relief fits),
     /// `color.png` and, for a world with an aerial view of its own, its classes as
     /// `aerial-class.png` (loaded back, the view's colours and heights are derived from them).
-    pub fn save(&self, dir: impl AsRef<Path>) -> Result<(), SimError> {
+    pub fn save(&self, dir: impl AsRef<Path>) -> Result<(), WorldError> {
         let dir = dir.as_ref();
         std::fs::create_dir_all(dir).map_err(io_err(dir))?;
         let spec = *self.spec();
@@ -581,7 +581,7 @@ impl World {
             meta: self.meta.clone(),
         };
         let yaml_path = dir.join(WORLD_FILE);
-        let text = serde_saphyr::to_string(&desc).map_err(|e| SimError::BadYaml {
+        let text = serde_saphyr::to_string(&desc).map_err(|e| WorldError::BadYaml {
             path: yaml_path.clone(),
             line: 0,
             column: 0,
@@ -598,20 +598,20 @@ pub const MAX_DEPTH_PNG_BYTES: u64 = 64 << 20;
 /// Reads a depth panorama saved as a 16-bit grayscale PNG of range counts (`spomp terrain`'s
 /// input, `--save-panos` output): a regular file of at most [`MAX_DEPTH_PNG_BYTES`], decoded by
 /// [`decode_depth_png`].
-pub fn read_depth_png(path: &Path, range_scale_m: f64, v_fov_rad: f64) -> Result<DepthPanorama, SimError> {
+pub fn read_depth_png(path: &Path, range_scale_m: f64, v_fov_rad: f64) -> Result<DepthPanorama, WorldError> {
     let bytes = read_regular(path, MAX_DEPTH_PNG_BYTES).map_err(source_err(path))?;
     decode_depth_png(&bytes, range_scale_m, v_fov_rad).map_err(|e| match e {
-        SimError::BadImage { message, .. } => SimError::BadImage { path: path.to_path_buf(), message },
+        WorldError::BadImage { message, .. } => WorldError::BadImage { path: path.to_path_buf(), message },
         other => other,
     })
 }
 
 /// Decodes the bytes of a 16-bit grayscale PNG of range counts into a depth panorama of
 /// `range_scale_m` metres per count and a vertical field of view of `v_fov_rad`. Errors (as
-/// [`SimError::BadImage`] with an empty path) when the bytes are no image, not 16-bit grayscale,
+/// [`WorldError::BadImage`] with an empty path) when the bytes are no image, not 16-bit grayscale,
 /// or larger than the decoder's memory limit.
-pub fn decode_depth_png(bytes: &[u8], range_scale_m: f64, v_fov_rad: f64) -> Result<DepthPanorama, SimError> {
-    let bad = |message: String| SimError::BadImage { path: PathBuf::new(), message };
+pub fn decode_depth_png(bytes: &[u8], range_scale_m: f64, v_fov_rad: f64) -> Result<DepthPanorama, WorldError> {
+    let bad = |message: String| WorldError::BadImage { path: PathBuf::new(), message };
     let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| bad(format!("cannot read: {e}")))?;
