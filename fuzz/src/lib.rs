@@ -595,7 +595,7 @@ pub fn terrain_input(data: &[u8]) {
 }
 
 /// The fuzz crate's folder (its `corpus/` and `regressions/`): this file is also compiled into the
-/// workspace's integration tests (`tests/fuzz_replay.rs`), whose manifest folder is the
+/// workspace's integration tests (`tests/it/fuzz_replay.rs`), whose manifest folder is the
 /// workspace root.
 #[cfg(test)]
 fn fuzz_dir() -> PathBuf {
