@@ -1,10 +1,12 @@
 //! The simulator as a ROS 2 robot farm, end to end on loopback: `spomp sim --ros2` simulates the
 //! robots' bodies and sensors, separate `spomp run` processes drive them over DDS.
 //!
-//! Most tests run the farm in lockstep (`--lockstep`): its time advances only when every robot
+//! The tests run the farm in lockstep (`--lockstep`): its time advances only when every robot
 //! has answered the step, so what they check does not depend on the machine's load, and a
-//! lockstep run is the very run `spomp sim` makes with the robots inside it. One test keeps the
-//! paced, real-time farm, with generous bounds.
+//! lockstep run is the very run `spomp sim` makes with the robots inside it. (The UAV test ran
+//! paced at 4× real time, so its outcome hung on the machine keeping up with the camera. The
+//! paced farm still runs in CI's Cyclone DDS step, `scripts/cyclonedds-farm.py`, which checks that
+//! it runs, not what it achieves.)
 //!
 //! DDS stays on this machine: `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` restricts both processes
 //! to 127.0.0.1, and each test uses a domain id of its own.
@@ -347,15 +349,16 @@ fn the_e_stop_halts_the_robot_until_released() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
-/// The paced farm, as live use and demos run it: real time × 4, generous bounds.
+/// A UAV's whole survey over ROS 2, in lockstep (it ran paced, and so depended on the machine's
+/// speed).
 #[test]
 fn a_uav_driven_over_ros2_maps_the_city_for_the_team() {
     let d = domain(300);
     let out = temp_dir("uav");
     std::fs::create_dir_all(&out).expect("temp dir");
     let log = out.join("uav1.mcap");
-    let sim = start_sim(UAV_MISSION, &d, &out.join("sim"), &["--drive", "uav1", "--rate", "4", "--no-mcap"]);
-    let run = start_robot(UAV_MISSION, "uav1", &d, &["--record", log.to_str().expect("utf-8 path")]);
+    let sim = start_sim(UAV_MISSION, &d, &out.join("sim"), &["--lockstep", "--drive", "uav1", "--no-mcap"]);
+    let run = start_lockstep_robot(UAV_MISSION, "uav1", &d, &["--record", log.to_str().expect("utf-8 path")]);
     let FarmEnd { summary, run_out, .. } = finish_farm(sim, run);
     // The only map the team has is the one the driven UAV built from the camera tiles the farm
     // published: the simulator's UGV found the vehicle cluster in it and visited it.

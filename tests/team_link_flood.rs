@@ -158,8 +158,15 @@ fn an_insider_flood_under_invented_names_is_refused_counted_and_kept_nowhere() {
         }
         std::thread::sleep(Duration::from_millis(200));
     }
-    // Give the robot's subscription time to reach the flooder's session.
-    std::thread::sleep(Duration::from_secs(1));
+    // A put before the robot's subscription has reached the flooder's session goes nowhere:
+    // wait until a publisher on the flood's key expressions has a match (this was a 1 s sleep).
+    let probe = session.declare_publisher(format!("spomp/{TEAM}/team/base/ugv1/coordination")).wait().unwrap();
+    let start = Instant::now();
+    while !probe.matching_status().wait().unwrap().matching() {
+        assert!(start.elapsed() < Duration::from_secs(60), "the robot's subscription never reached the flooder");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let _ = probe.undeclare().wait();
     let before = memory_kb(base.0.id());
 
     for k in 0..INVENTED {

@@ -594,18 +594,25 @@ pub fn terrain_input(data: &[u8]) {
     }
 }
 
+/// The fuzz crate's folder (its `corpus/` and `regressions/`): this file is also compiled into the
+/// workspace's integration tests (`tests/it/fuzz_replay.rs`), whose manifest folder is the
+/// workspace root.
+#[cfg(test)]
+fn fuzz_dir() -> PathBuf {
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
+    if manifest.join("fuzz_targets").is_dir() { manifest.to_path_buf() } else { manifest.join("fuzz") }
+}
+
 #[cfg(test)]
 mod seeds {
     //! `cargo test -- --ignored write_seeds` writes the hand-made seed inputs of the targets
     //! whose formats a fuzzer cannot easily guess (kept in `corpus/`).
 
-    use std::path::Path;
-
     use spomp_core::{Point2, Pose2, ReachabilityScan, RobotId, Time};
     use spomp_teamstate::{GoalOrigin, TeamState, TeamStateParams, TierSet};
 
     fn put(target: &str, name: &str, bytes: &[u8]) {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("corpus").join(target);
+        let dir = super::fuzz_dir().join("corpus").join(target);
         std::fs::create_dir_all(&dir).expect("corpus folder");
         std::fs::write(dir.join(name), bytes).expect("seed");
     }
@@ -653,10 +660,8 @@ mod replay {
     //! Every kept input — the minimised corpora and the inputs of fixed crashes — through its
     //! target, with a plain `cargo test`: a regression panics here.
 
-    use std::path::Path;
-
     fn replay(target: &str, run: fn(&[u8])) {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let root = super::fuzz_dir();
         let mut count = 0;
         for kind in ["corpus", "regressions"] {
             let Ok(entries) = std::fs::read_dir(root.join(kind).join(target)) else { continue };

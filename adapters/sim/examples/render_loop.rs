@@ -1,6 +1,6 @@
 //! Renders N panoramas from a street of the default city (for profiling with `perf stat`).
 //!
-//! `cargo run --release -p spomp-sim --example render_loop -- 500`
+//! `cargo run --profile profiling -p spomp-sim --example render_loop -- 500`
 
 use spomp_core::{DepthPanorama, PanoramaGeometry, Pose2, SemanticPanorama, UNKNOWN_CLASS};
 

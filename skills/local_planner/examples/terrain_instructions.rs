@@ -4,9 +4,9 @@
 //! divided by the difference of the counts is the cost of one analysis, without the setup:
 //!
 //! ```sh
-//! cargo build --release -p spomp-local-planner --example terrain_instructions
-//! valgrind --tool=callgrind target/release/examples/terrain_instructions street 1
-//! valgrind --tool=callgrind target/release/examples/terrain_instructions street 11
+//! cargo build --profile profiling -p spomp-local-planner --example terrain_instructions
+//! valgrind --tool=callgrind target/profiling/examples/terrain_instructions street 1
+//! valgrind --tool=callgrind target/profiling/examples/terrain_instructions street 11
 //! ```
 //!
 //! Panoramas: `street` (the synthetic street, 2 % dropouts), `sim` (the simulator's parking lot),
