@@ -21,3 +21,4 @@ mod cli_world_import;
 mod experiment_fixtures;
 mod fuzz_replay;
 mod mission_fixtures;
+mod team_traffic;

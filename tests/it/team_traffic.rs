@@ -12,8 +12,8 @@ use spomp_behaviors::mission::{LoadOptions, load_mission_with};
 use spomp_core::{RobotId, Time};
 use spomp_robot::{RobotObserver, SeamCall, TeamTraffic};
 use spomp_sim::run::{SimObserver, SimOptions, Simulation};
-use spomp_world::world_for_mission;
 use spomp_teamstate::{SyncMessage, TierSet};
+use spomp_world::world_for_mission;
 
 /// Counts the answers of the recorded `TeamOut` calls, as the experiment's counter did.
 #[derive(Default)]
