@@ -179,15 +179,11 @@ impl PanoramaRenderer {
         let mut col0 = 0;
         while col0 < cols {
             let width = COLUMN_BLOCK.min(cols - col0);
-            // Every pixel of a marched column is written (no clearing of the block first: that
-            // `memset` was 2 % of a team run's instructions): the march writes each row it
-            // passes, a return or none, and the rows above where it stopped are blanked here.
+            block_range.fill(0.0);
+            block_class.fill(UNKNOWN_CLASS);
             for k in 0..width {
                 let mut column = BlockColumn { range: &mut block_range, class: &mut block_class, k };
-                let unseen = self.march_column(world, &ray, col0 + k, &mut column);
-                for row in 0..unseen {
-                    column.set(row, 0.0, UNKNOWN_CLASS);
-                }
+                self.march_column(world, &ray, col0 + k, &mut column);
             }
             let image_rows = out.range_m.chunks_exact_mut(cols).zip(out_sem.class.chunks_exact_mut(cols));
             let block_rows = block_range.chunks_exact(COLUMN_BLOCK).zip(block_class.chunks_exact(COLUMN_BLOCK));
@@ -199,10 +195,9 @@ impl PanoramaRenderer {
         }
     }
 
-    /// Marches column `col`'s ray across the height field from `ray`'s start, writing its
-    /// column of the block scratch from the bottom row up to where it stops (rows beyond the
-    /// range get no return); returns that row: the rows above it are left for the caller.
-    fn march_column(&self, world: &World, ray: &RayStart, col: usize, column: &mut BlockColumn<'_>) -> usize {
+    /// Marches column `col`'s ray across the height field from `ray`'s start, filling its
+    /// column of the block scratch (cleared by the caller).
+    fn march_column(&self, world: &World, ray: &RayStart, col: usize, column: &mut BlockColumn<'_>) {
         let spec = world.spec();
         let res = ray.res;
         let (w, h) = (spec.width as i64, spec.height as i64);
@@ -212,10 +207,10 @@ impl PanoramaRenderer {
         let max_range = self.max_range_m;
         let (z_s, top_dz, far_top_tan) = (ray.z_s, ray.top_dz, ray.far_top_tan);
         let (sy, cy) = ray.yaw_sin_cos;
-        let Some(&(ca, sa)) = self.col_dir.get(col) else { return column.rows() };
+        let Some(&(ca, sa)) = self.col_dir.get(col) else { return };
         let rows = column.rows().min(self.tan_row.len());
         if rows == 0 {
-            return column.rows();
+            return;
         }
         // World direction of this column's ray.
         let dx = cy * ca - sy * sa;
@@ -256,8 +251,6 @@ impl PanoramaRenderer {
                     let r = t_in * self.sec_row[row];
                     if r <= max_range {
                         column.set(row, r, label);
-                    } else {
-                        column.set(row, 0.0, UNKNOWN_CLASS);
                     }
                 }
                 next_tan = if row > 0 { self.tan_row[row - 1] } else { f32::INFINITY };
@@ -271,8 +264,6 @@ impl PanoramaRenderer {
                     let r = dz * self.csc_row[row];
                     if r <= max_range {
                         column.set(row, r, label);
-                    } else {
-                        column.set(row, 0.0, UNKNOWN_CLASS);
                     }
                 }
                 next_tan = if row > 0 { self.tan_row[row - 1] } else { f32::INFINITY };
@@ -301,7 +292,6 @@ impl PanoramaRenderer {
             }
             t_in = t_out;
         }
-        row
     }
 }
 
