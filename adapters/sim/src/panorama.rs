@@ -625,6 +625,51 @@ mod tests {
     }
 
     #[test]
+    fn columns_beside_a_wall_are_those_of_open_ground() {
+        // The wall of the test above, seen by some columns of a block and not by the others:
+        // every pixel of a column that misses it (sky and ground beyond the range included) is
+        // what the same column shows on open ground, whatever its neighbours in the block hit.
+        let open = flat_world();
+        let mut world = flat_world();
+        let spec = *world.spec();
+        for row in 0..spec.height {
+            for col in 0..spec.width {
+                let c = spec.center(spomp_core::Cell::new(col, row));
+                if (10.0..12.0).contains(&c.x) && (-5.0..5.0).contains(&c.y) {
+                    world.set_cell(spomp_core::Cell::new(col, row), 2, [70, 70, 70], 20.0);
+                }
+            }
+        }
+        let g = PanoramaGeometry::default_lidar();
+        let r = PanoramaRenderer::new(g, 0.4, 20.0).unwrap();
+        let pose = Pose2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2 + 0.013);
+        let (mut depth, mut sem) = buffers(g);
+        r.render(&world, pose, &mut depth, &mut sem);
+        let (mut open_depth, mut open_sem) = buffers(g);
+        r.render(&open, pose, &mut open_depth, &mut open_sem);
+        let horizon = g.row_of_elevation(0.0).unwrap();
+        let (mut wall_cols, mut open_cols) = (0, 0);
+        for col in 0..g.cols {
+            let sees_wall = sem.class[horizon * g.cols + col] == 2;
+            wall_cols += usize::from(sees_wall);
+            if sees_wall
+                || (1..=2).any(|d| sem.class[horizon * g.cols + (col + d) % g.cols] == 2)
+                || (1..=2).any(|d| sem.class[horizon * g.cols + (col + g.cols - d) % g.cols] == 2)
+            {
+                continue;
+            }
+            open_cols += 1;
+            for row in 0..g.rows {
+                let i = row * g.cols + col;
+                assert_eq!(depth.range_m[i].to_bits(), open_depth.range_m[i].to_bits(), "row {row} col {col}");
+                assert_eq!(sem.class[i], open_sem.class[i], "row {row} col {col}");
+            }
+        }
+        assert!(wall_cols > 100 && wall_cols % 16 != 0, "{wall_cols} columns see the wall");
+        assert!(open_cols > 800, "{open_cols} columns compared");
+    }
+
+    #[test]
     fn curb_face_is_seen_as_a_step() {
         // Road at 0 m, a sidewalk 0.15 m high from x = 3 m: rays that would hit the road
         // beyond 3 m hit the curb face at horizontal distance 3 m instead.

@@ -5,6 +5,11 @@
 //! gathers one byte per observed cell. The bin width is chosen so that the farthest observed
 //! cell moves by at most half a cell across a bin; the pose's position is taken at the centre
 //! of its map cell. Both quantisations stay below the map's own resolution.
+//!
+//! A score is therefore a function of (heading bin, map cell) alone, and a tracking cloud puts
+//! many of its particles in the same few cells and bins: poses are sorted by bin and then by
+//! cell, and a pose on the cell of the one before it takes that pose's score (the same sums in
+//! the same order, so the same bits) instead of gathering again.
 
 use std::f64::consts::TAU;
 
@@ -32,12 +37,22 @@ const MAX_CELL_COORD: f64 = (1u64 << 40) as f64;
 /// Scratch space for scoring, reused across calls.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Scorer {
-    /// (heading bin, pose index), sorted.
-    keyed: Vec<(u32, u32)>,
+    /// (heading bin, map cell, pose index), sorted: poses on the same bin and cell score alike.
+    keyed: Vec<(u32, PoseCell, u32)>,
     /// Rotated integer offsets (cols, rows) of the observed cells for the current bin.
     offsets: Vec<(i32, i32)>,
     /// The same offsets as row-major index offsets.
     linear: Vec<i64>,
+}
+
+/// The map cell a pose stands in (row, column; clamped to [`MAX_CELL_COORD`]), or
+/// [`PoseCell::NOWHERE`] for a non-finite position. Ordered by row first, like the map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+struct PoseCell(i64, i64);
+
+impl PoseCell {
+    /// A pose whose position is not finite: every cell lands on unknown.
+    const NOWHERE: PoseCell = PoseCell(i64::MAX, i64::MAX);
 }
 
 /// Sums of one class run.
@@ -111,30 +126,40 @@ impl Scorer {
         // Farthest cell moves ≤ ½ cell across a bin: bin width 0.5 / reach radians.
         let bins = ((TAU * reach / 0.5).ceil() as usize).clamp(8, 1 << 20);
         let bin_width = TAU / bins as f64;
-        self.keyed.clear();
-        for (i, p) in poses.iter().enumerate() {
-            let bin = (p.yaw.rem_euclid(TAU) / bin_width).round() as usize % bins;
-            self.keyed.push((bin as u32, i as u32));
-        }
-        self.keyed.sort_unstable();
-
         let spec = &field.spec;
         let inv_res = 1.0 / spec.resolution_m;
         let (width, height) = (spec.width as i64, spec.height as i64);
+        self.keyed.clear();
+        for (i, p) in poses.iter().enumerate() {
+            let bin = (p.yaw.rem_euclid(TAU) / bin_width).round() as usize % bins;
+            let fc = ((p.x - spec.origin.x) * inv_res).floor();
+            let fr = ((p.y - spec.origin.y) * inv_res).floor();
+            let cell = if fc.is_finite() && fr.is_finite() {
+                PoseCell(
+                    fr.clamp(-MAX_CELL_COORD, MAX_CELL_COORD) as i64,
+                    fc.clamp(-MAX_CELL_COORD, MAX_CELL_COORD) as i64,
+                )
+            } else {
+                PoseCell::NOWHERE
+            };
+            self.keyed.push((bin as u32, cell, i as u32));
+        }
+        self.keyed.sort_unstable();
+
         let packed = PackedLevels::new(agree_level);
         let mut start = 0;
         while start < self.keyed.len() {
             let bin = self.keyed[start].0;
             let end = start + self.keyed[start..].iter().take_while(|k| k.0 == bin).count();
             let (s, c) = (bin as f64 * bin_width).sin_cos();
-            // One plain pass per output so that the rotation runs on whole vectors.
+            // One plain pass per output so that the rotation runs on whole vectors (written as
+            // they are computed: zeroing the buffer first was a `memset` per bin).
             self.offsets.clear();
-            self.offsets.resize(obs.cells.len(), (0, 0));
-            for (offset, cell) in self.offsets.iter_mut().zip(&obs.cells) {
+            self.offsets.extend(obs.cells.iter().map(|cell| {
                 let (x, y) = (cell.x as f64, cell.y as f64);
                 // The pose sits at its cell's centre (0.5, 0.5) within the cell.
-                *offset = (floor_small(0.5 + c * x - s * y), floor_small(0.5 + s * x + c * y));
-            }
+                (floor_small(0.5 + c * x - s * y), floor_small(0.5 + s * x + c * y))
+            }));
             let (mut min_c, mut max_c, mut min_r, mut max_r) = (i32::MAX, i32::MIN, i32::MAX, i32::MIN);
             for &(dc, dr) in &self.offsets {
                 min_c = min_c.min(dc);
@@ -144,15 +169,13 @@ impl Scorer {
             }
             self.linear.clear();
             self.linear.extend(self.offsets.iter().map(|&(dc, dr)| dr as i64 * width + dc as i64));
-            for &(_, index) in &self.keyed[start..end] {
-                let Some(pose) = poses.get(index as usize) else {
-                    continue;
-                };
-                let fc = ((pose.x - spec.origin.x) * inv_res).floor();
-                let fr = ((pose.y - spec.origin.y) * inv_res).floor();
-                let score = if fc.is_finite() && fr.is_finite() {
-                    let col = fc.clamp(-MAX_CELL_COORD, MAX_CELL_COORD) as i64;
-                    let row = fr.clamp(-MAX_CELL_COORD, MAX_CELL_COORD) as i64;
+            // The previous pose of this bin, its cell and score.
+            let mut previous: Option<(PoseCell, PoseScore)> = None;
+            for &(_, cell, index) in &self.keyed[start..end] {
+                let score = if let Some((_, score)) = previous.filter(|&(seen, _)| seen == cell) {
+                    score
+                } else if cell != PoseCell::NOWHERE {
+                    let PoseCell(row, col) = cell;
                     let inside = col + min_c as i64 >= 0
                         && col + (max_c as i64) < width
                         && row + min_r as i64 >= 0
@@ -165,6 +188,7 @@ impl Scorer {
                 } else {
                     unknown_everywhere(field, obs)
                 };
+                previous = Some((cell, score));
                 if let Some(slot) = out.get_mut(index as usize) {
                     *slot = score;
                 }
@@ -357,6 +381,35 @@ mod tests {
             assert_eq!(s.agree_weight, exact.agree_weight);
         }
         assert_eq!(out[2].known_weight, 0.0, "off the map: all unknown");
+    }
+
+    #[test]
+    fn poses_sharing_a_cell_and_bin_score_as_if_scored_alone() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let map = blocky_map(&mut rng);
+        let field = MatchField::build(&map, &ClassTable::default_table(), &LocalizationParams::default()).unwrap();
+        let obs = observation(&mut rng, &field);
+        // A tight cloud (many poses per cell and heading bin), a few off the map and non-finite.
+        let mut poses: Vec<Particle> = (0..300)
+            .map(|_| Particle {
+                x: 10.0 + rng.random_range(-0.6..0.6),
+                y: 15.0 + rng.random_range(-0.6..0.6),
+                yaw: 0.3 + rng.random_range(-0.01..0.01),
+            })
+            .collect();
+        poses.push(Particle { x: -4.9, y: 3.1, yaw: 0.3 });
+        poses.push(Particle { x: -4.9, y: 3.1, yaw: 0.3 });
+        poses.push(Particle { x: f64::NAN, y: 3.1, yaw: 0.3 });
+        let mut scorer = Scorer::default();
+        let mut together = Vec::new();
+        scorer.score_all(&field, &obs, &poses, 1, &mut together);
+        let mut alone = Vec::new();
+        for (p, s) in poses.iter().zip(&together) {
+            scorer.score_all(&field, &obs, std::slice::from_ref(p), 1, &mut alone);
+            assert_eq!(alone[0].weighted_cost.to_bits(), s.weighted_cost.to_bits(), "{p:?}");
+            assert_eq!(alone[0].known_weight.to_bits(), s.known_weight.to_bits(), "{p:?}");
+            assert_eq!(alone[0].agree_weight.to_bits(), s.agree_weight.to_bits(), "{p:?}");
+        }
     }
 
     #[test]
