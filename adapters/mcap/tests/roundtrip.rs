@@ -209,7 +209,7 @@ fn an_attachment_without_room_for_its_crc_is_corrupt_not_a_panic() {
 }
 
 /// Offset of the first top-level chunk record (opcode 6) after the magic.
-/// Regression (CI, `tests/cli_harden.rs` bit flips): a flipped bit in the length of the
+/// Regression (CI, `tests/it/cli_harden.rs` bit flips): a flipped bit in the length of the
 /// message index after a chunk made the record run past the data section, and `log check` took
 /// the closed log for one a crash cut short ("not closed", exit 0). A closed log whose records
 /// stop making sense is corrupt.
