@@ -175,16 +175,7 @@ impl<T> ModelledWork<T> {
     /// The work whose modelled time has come at `now`, in the order taken: hand each back
     /// with [`Robot::finish_work`] at `now`, in this order, before [`Self::take`].
     pub fn due(&mut self, now: Time) -> Vec<T> {
-        let mut due = Vec::new();
-        let mut k = 0;
-        while k < self.out.len() {
-            if self.out[k].0 > now {
-                k += 1;
-                continue;
-            }
-            due.push(self.out.remove(k).1);
-        }
-        due
+        self.out.extract_if(.., |(at, _)| *at <= now).map(|(_, work)| work).collect()
     }
 
     /// Takes the work `robot` has due at `now`; `start` sets each going (runs it, or hands it

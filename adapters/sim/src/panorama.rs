@@ -554,6 +554,21 @@ mod tests {
         World::flat(spec, ClassTable::default_table(), 0, 0.0).unwrap()
     }
 
+    /// The flat world with a 20 m tall building face 2 m thick at x = 10 m, y in [-5, 5).
+    fn walled_world() -> World {
+        let mut world = flat_world();
+        let spec = *world.spec();
+        for row in 0..spec.height {
+            for col in 0..spec.width {
+                let c = spec.center(spomp_core::Cell::new(col, row));
+                if (10.0..12.0).contains(&c.x) && (-5.0..5.0).contains(&c.y) {
+                    world.set_cell(spomp_core::Cell::new(col, row), 2, [70, 70, 70], 20.0);
+                }
+            }
+        }
+        world
+    }
+
     fn buffers(g: PanoramaGeometry) -> (DepthPanorama, SemanticPanorama) {
         (DepthPanorama::empty(g), SemanticPanorama { geometry: g, class: vec![] })
     }
@@ -586,17 +601,8 @@ mod tests {
 
     #[test]
     fn wall_appears_in_the_columns_facing_it_at_the_right_range() {
-        let mut world = flat_world();
         // A 20 m tall building face at x = 10 m spanning y in [-5, 5).
-        let spec = *world.spec();
-        for row in 0..spec.height {
-            for col in 0..spec.width {
-                let c = spec.center(spomp_core::Cell::new(col, row));
-                if (10.0..12.0).contains(&c.x) && (-5.0..5.0).contains(&c.y) {
-                    world.set_cell(spomp_core::Cell::new(col, row), 2, [70, 70, 70], 20.0);
-                }
-            }
-        }
+        let world = walled_world();
         let g = PanoramaGeometry::default_lidar();
         let r = PanoramaRenderer::new(g, 0.4, 50.0).unwrap();
         let (mut depth, mut sem) = buffers(g);
@@ -630,16 +636,7 @@ mod tests {
         // every pixel of a column that misses it (sky and ground beyond the range included) is
         // what the same column shows on open ground, whatever its neighbours in the block hit.
         let open = flat_world();
-        let mut world = flat_world();
-        let spec = *world.spec();
-        for row in 0..spec.height {
-            for col in 0..spec.width {
-                let c = spec.center(spomp_core::Cell::new(col, row));
-                if (10.0..12.0).contains(&c.x) && (-5.0..5.0).contains(&c.y) {
-                    world.set_cell(spomp_core::Cell::new(col, row), 2, [70, 70, 70], 20.0);
-                }
-            }
-        }
+        let world = walled_world();
         let g = PanoramaGeometry::default_lidar();
         let r = PanoramaRenderer::new(g, 0.4, 20.0).unwrap();
         let pose = Pose2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2 + 0.013);
