@@ -421,18 +421,7 @@ impl FarmLink {
     /// Delivers a team-state message to a driven robot.
     pub fn deliver_team(&self, to: &str, from: &str, bytes: &[u8]) {
         if let Some(r) = self.robot(to) {
-            let msg = ros::BytesMsg {
-                layout: ros::MultiArrayLayout {
-                    dim: vec![ros::MultiArrayDimension {
-                        label: from.to_string(),
-                        size: bytes.len() as u32,
-                        stride: bytes.len() as u32,
-                    }],
-                    data_offset: 0,
-                },
-                data: bytes.to_vec(),
-            };
-            let _ = r.team_in.publish(msg);
+            let _ = r.team_in.publish(ros::BytesMsg::labelled(from, bytes.to_vec()));
         }
     }
 

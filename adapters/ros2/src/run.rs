@@ -1183,18 +1183,7 @@ impl RobotNode {
             for (_, bytes) in
                 self.robot.team_round(now, peer, TierSet::ALL, RoundShape::OneMessage, &mut self.team_credit)
             {
-                let msg = ros::BytesMsg {
-                    layout: ros::MultiArrayLayout {
-                        dim: vec![ros::MultiArrayDimension {
-                            label: peer.to_string(),
-                            size: bytes.len() as u32,
-                            stride: bytes.len() as u32,
-                        }],
-                        data_offset: 0,
-                    },
-                    data: bytes,
-                };
-                let _ = self.outputs.team_out.publish(msg);
+                let _ = self.outputs.team_out.publish(ros::BytesMsg::labelled(peer.as_str(), bytes));
             }
         }
     }

@@ -649,10 +649,25 @@ pub struct MultiArrayLayout {
 /// `std_msgs/UInt8MultiArray`: opaque bytes (team-state sync messages between robots).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct BytesMsg {
-    /// Layout (unused: one flat dimension).
+    /// Layout: one flat dimension; between robots its label names the peer robot.
     pub layout: MultiArrayLayout,
     /// Bytes.
     pub data: Vec<u8>,
+}
+
+impl BytesMsg {
+    /// Team-state bytes `data` as one dimension labelled `peer` (the robot they go to on the
+    /// farm's outgoing topic, the robot they came from on a robot's incoming one).
+    pub fn labelled(peer: &str, data: Vec<u8>) -> Self {
+        let len = data.len() as u32;
+        Self {
+            layout: MultiArrayLayout {
+                dim: vec![MultiArrayDimension { label: peer.to_string(), size: len, stride: len }],
+                data_offset: 0,
+            },
+            data,
+        }
+    }
 }
 
 /// `std_msgs/Float32MultiArray`.
