@@ -2,17 +2,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly by design
 
-use std::path::Path;
-
-use assert_cmd::Command;
-
-fn spomp() -> Command {
-    Command::cargo_bin("spomp").unwrap()
-}
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
+use crate::{root, spomp};
 
 #[test]
 fn validate_exit_codes() {

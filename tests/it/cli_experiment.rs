@@ -8,16 +8,8 @@
 use std::io::Write;
 use std::path::Path;
 
-use assert_cmd::Command;
+use crate::{root, spomp};
 use spomp::experiment::rows::{TrialRow, read_rows};
-
-fn spomp() -> Command {
-    Command::cargo_bin("spomp").unwrap()
-}
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
 
 const SMOKE: &str = "experiments/smoke.yaml";
 

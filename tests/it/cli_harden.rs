@@ -8,18 +8,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command as StdCommand, Stdio};
 use std::time::{Duration, Instant};
 
-use assert_cmd::Command;
-
-fn spomp() -> Command {
-    Command::cargo_bin("spomp").unwrap()
-}
+use crate::{root, spomp};
 
 fn bin() -> PathBuf {
     assert_cmd::cargo::cargo_bin("spomp")
-}
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
 fn stdout_of(out: &std::process::Output) -> String {

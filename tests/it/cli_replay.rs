@@ -6,16 +6,8 @@
 
 use std::path::{Path, PathBuf};
 
-use assert_cmd::Command;
+use crate::{root, spomp};
 use spomp_mcap::{SeamCallMsg, decode_cdr, read_replay_log};
-
-fn spomp() -> Command {
-    Command::cargo_bin("spomp").unwrap()
-}
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
 
 /// Runs `mission` for `seconds` with `--replayable`; the trial's log.
 fn record(mission: &Path, seconds: &str, seed: &str, out: &Path) -> PathBuf {

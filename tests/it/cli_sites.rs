@@ -9,11 +9,7 @@
 
 use std::path::{Path, PathBuf};
 
-use assert_cmd::Command;
-
-fn spomp() -> Command {
-    Command::cargo_bin("spomp").unwrap()
-}
+use crate::spomp;
 
 fn sites() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/worlds/sites")

@@ -4,16 +4,12 @@
 
 use std::path::{Path, PathBuf};
 
-use assert_cmd::Command;
+use crate::spomp;
 use serde_json::Value;
 
 const ROAD: [u8; 3] = [128, 64, 128];
 const GRASS_SIDEWALK: [u8; 3] = [152, 251, 152];
 const RESOLUTION_M: f64 = 0.5;
-
-fn spomp() -> Command {
-    Command::cargo_bin("spomp").unwrap()
-}
 
 fn run_json(args: &[&str]) -> Value {
     let out = spomp().args(args).output().unwrap();

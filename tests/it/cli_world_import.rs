@@ -6,11 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use assert_cmd::Command;
-
-fn spomp() -> Command {
-    Command::cargo_bin("spomp").unwrap()
-}
+use crate::spomp;
 
 fn campus() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/worlds/campus")

@@ -22,3 +22,18 @@ mod experiment_fixtures;
 mod fuzz_replay;
 mod mission_fixtures;
 mod team_traffic;
+
+use std::path::Path;
+
+use assert_cmd::Command;
+
+/// The `spomp` binary of this build, as a command to run.
+#[allow(clippy::unwrap_used)] // tests fail loudly by design
+fn spomp() -> Command {
+    Command::cargo_bin("spomp").unwrap()
+}
+
+/// The workspace's root folder (the root package's): the shipped missions and the fixtures.
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
