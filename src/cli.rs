@@ -393,7 +393,7 @@ fn run_world(action: WorldCommand) -> anyhow::Result<ExitCode> {
     }
 }
 
-/// Runs the `spomp` command line with the built-in node types (`spomp_robot::registry()`).
+/// Runs the `spomp` command line with the built-in node types and mission sections (`spomp::registry()`).
 pub fn main() -> ExitCode {
     main_with(crate::registry())
 }

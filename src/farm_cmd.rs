@@ -13,7 +13,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use spomp_behaviors::mission::MissionFile;
+use spomp_behaviors::mission::{MissionFile, MissionSection};
 use spomp_core::{
     FlightCommand, GridSpec, MapTile, Odometry, OdometryCovariance, PanoramaFrame, PoseEstimate, RobotId, Time, Twist2,
 };
@@ -126,10 +126,14 @@ impl FarmDrivers {
         } else {
             options.drive.clone()
         };
-        let robots: Vec<(String, Option<spomp_behaviors::mission::schema::Ros2Spec>)> = candidates
-            .iter()
-            .map(|id| (id.clone(), mission.team.iter().find(|r| &r.id == id).and_then(|r| r.ros2.clone())))
-            .collect();
+        let mut robots: Vec<(String, Option<spomp_ros2::Ros2Spec>)> = Vec::with_capacity(candidates.len());
+        for id in &candidates {
+            let spec = match mission.team.iter().find(|r| &r.id == id) {
+                Some(r) if spomp_ros2::Ros2Spec::given_for(r) => Some(spomp_ros2::Ros2Spec::of_robot(r)?),
+                _ => None,
+            };
+            robots.push((id.clone(), spec));
+        }
         let first = robots.iter().find_map(|(_, s)| s.clone()).unwrap_or_default();
         let mut dds = DdsSettings::for_robot(&first).map_err(anyhow::Error::msg)?;
         if let Some(d) = options.domain_id {

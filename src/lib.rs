@@ -5,14 +5,15 @@
 //! use std::process::ExitCode;
 //!
 //! fn main() -> ExitCode {
-//!     let mut registry = spomp_robot::registry();
+//!     let mut registry = spomp::registry();
 //!     // registry.try_register(my_node_type()) …
 //!     spomp::cli::main_with(registry)
 //! }
 //! ```
 //!
 //! `validate`, `sim`, `run`, `nodes` and `schema` then see the added node types (the JSON Schema and
-//! the node reference include them). See `examples/custom-node/`.
+//! the node reference include them), and the mission sections of the adapters this binary links
+//! (see [`register_sections`]). See `examples/custom-node/`.
 
 /// `println!` that stops quietly when stdout is closed (e.g. piped into `head`) instead of
 /// panicking.
@@ -57,8 +58,22 @@ mod world_stage;
 pub use spomp_behaviors::NodeRegistry;
 pub use spomp_robot::RobotRuntime;
 
-/// The node registry the CLI loads missions with: the engine's node types and the robot
-/// layer's domain nodes; add a lab's own types to it and hand it to [`cli::main_with`].
+/// The node registry the CLI loads missions with: the engine's node types, the robot layer's
+/// domain nodes and the owners of every mission section ([`register_sections`]); add a lab's own
+/// types to it and hand it to [`cli::main_with`].
 pub fn registry() -> NodeRegistry<RobotRuntime> {
-    spomp_robot::registry()
+    let mut r = spomp_robot::registry();
+    register_sections(&mut r);
+    r
+}
+
+/// Registers the owners of the adapter sections of a mission this binary can run, as it
+/// registers node types: `sim:` (the world model, `spomp-world`), a robot's `ros2:`
+/// (`spomp-ros2`) and `team_link:` (`spomp-zenoh`); `comms:` comes with the robot layer's
+/// registry. Each owner gives the section's JSON Schema, defaults and checks.
+pub fn register_sections(r: &mut NodeRegistry<RobotRuntime>) {
+    use spomp_behaviors::mission::owner;
+    r.register_section(owner::<spomp_world::SimSpec>());
+    r.register_section(owner::<spomp_ros2::Ros2Spec>());
+    r.register_section(owner::<spomp_zenoh::TeamLinkSpec>());
 }

@@ -11,12 +11,13 @@
 
 use std::path::{Path, PathBuf};
 
-use spomp_behaviors::mission::schema::{MissionFile, WorldSpec};
+use spomp_behaviors::mission::MissionSection;
+use spomp_behaviors::mission::schema::MissionFile;
 use spomp_behaviors::mission::yaml::{self, Loc};
 use spomp_behaviors::mission::{Diagnostic, LoadedMission, Stage};
 use spomp_core::RobotKind;
 use spomp_sim::SensorParams;
-use spomp_world::World;
+use spomp_world::{SimSpec, World, WorldSpec};
 
 /// Cell size of generated worlds, metres (the aerial maps' 0.5 m).
 const GENERATED_CELL_M: f64 = 0.5;
@@ -181,7 +182,8 @@ pub fn machine_budget() -> Option<Budget> {
 /// The sizes of a mission's run: its world's cells (a generated city's from its size, a world
 /// folder's from its layers), the simulator's panorama, its team.
 pub fn sizes_of(mission: &MissionFile, base_dir: &Path) -> Result<Sizes, String> {
-    let cells = match mission.sim.as_ref().and_then(|s| s.world.as_ref()) {
+    let sim = SimSpec::of_mission(mission).map_err(|e| e.to_string())?;
+    let cells = match &sim.world {
         Some(WorldSpec::Dir(dir)) => {
             let world = World::load(base_dir.join(dir)).map_err(|e| e.to_string())?;
             world.spec().len() as f64
@@ -200,7 +202,7 @@ pub fn sizes_of(mission: &MissionFile, base_dir: &Path) -> Result<Sizes, String>
         ugvs: count(RobotKind::Ugv),
         uavs: count(RobotKind::Uav),
         basestations: count(RobotKind::Basestation),
-        prior_map: mission.sim.as_ref().is_some_and(|s| s.prior_map),
+        prior_map: sim.prior_map,
         duration_s: mission.time_limit_s,
     })
 }

@@ -10,7 +10,7 @@ use std::sync::atomic::AtomicBool;
 use anyhow::{Context, Result, bail};
 use spomp_behaviors::NodeRegistry;
 use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, read_text};
-use spomp_behaviors::mission::{LoadOptions, load_mission_str, load_mission_with};
+use spomp_behaviors::mission::{LoadOptions, MissionSection, load_mission_str, load_mission_with};
 use spomp_core::RobotId;
 use spomp_mcap::{Recorder, RecorderOptions, RobotConventions, SafeFile};
 use spomp_robot::{Robot, RobotRuntime, RobotSetup};
@@ -141,14 +141,14 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         out!("{:<18} {}", "team/status", settings.topics.status());
         return Ok(ExitCode::SUCCESS);
     }
-    let seed = args.seed.or(mission.sim.as_ref().and_then(|s| s.seed)).unwrap_or(1);
+    let seed = args.seed.unwrap_or(spomp_world::SimSpec::of_mission(mission)?.first_seed());
     if args.lockstep {
         settings.lockstep = Some(spomp_ros2::settings::LockstepSettings { seed, timeout_s: args.lockstep_timeout_s });
     }
     // The operating area (map grid, class table, prior map) is the mission's world, as in `sim`.
     let world = spomp_world::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the operating area of `{}`", mission.mission))?;
-    let area = spomp_world::operating_area(mission, &world);
+    let area = spomp_world::operating_area(mission, &world)?;
     let setup = RobotSetup::from_mission(mission, &args.robot, &area, seed)
         .with_context(|| format!("setting up robot `{}`", args.robot))?;
     // What a replay of the log needs to build this robot again.

@@ -14,7 +14,7 @@ use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 use spomp_behaviors::NodeRegistry;
-use spomp_behaviors::mission::{LoadOptions, LoadedMission, load_mission_with};
+use spomp_behaviors::mission::{LoadOptions, LoadedMission, MissionSection, load_mission_with};
 use spomp_core::RobotId;
 use spomp_mcap::{Recorder, RecorderOptions, SafeFile};
 use spomp_robot::RobotRuntime;
@@ -182,9 +182,9 @@ pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         return Ok(ExitCode::from(1));
     }
     let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
-    let sim_spec = mission.sim.as_ref();
-    let first_seed = args.seed.or(sim_spec.and_then(|s| s.seed)).unwrap_or(1);
-    let trials = args.trials.or(sim_spec.and_then(|s| s.trials)).unwrap_or(1).max(1);
+    let sim_spec = spomp_world::SimSpec::of_mission(mission)?;
+    let first_seed = args.seed.unwrap_or(sim_spec.first_seed());
+    let trials = args.trials.or(sim_spec.trials).unwrap_or(spomp_world::SimSpec::DEFAULT_TRIALS).max(1);
     // The same rules as the mission's own fields.
     for (robot, _) in &args.kill {
         if !mission.team.iter().any(|r| &r.id == robot) {
@@ -448,7 +448,7 @@ fn run_trial(
         ..SimOptions::default()
     };
     let run_info = if args.replayable {
-        let area = spomp_world::operating_area(mission, &world);
+        let area = spomp_world::operating_area(mission, &world)?;
         let level = options.map_compression.level;
         let info = spomp_mcap::replay::run_info(loaded, "sim", seed, &area, options.map_publish_period_s, level)?;
         Some(spomp_mcap::RunInfo { background_skills: options.skill_latency.is_some(), ..info })
@@ -500,14 +500,14 @@ fn run_trial(
             // Only the live view wants the messages: recorded into nothing, uncompressed.
             let options = RecorderOptions { compress: false, ..RecorderOptions::default() };
             let mut rec = Recorder::new(Discard::default(), options).context("starting the live view's recorder")?;
-            set_log_conventions(&mut rec, mission);
+            set_log_conventions(&mut rec, mission)?;
             rec.set_tap(Box::new(tap));
             run_observed(sim, Some(rec), settings, stop)?.0
         }
         (false, live) => {
             let mut rec = Recorder::create(&mcap_path, RecorderOptions::default())
                 .with_context(|| format!("creating {}", mcap_path.display()))?;
-            set_log_conventions(&mut rec, mission);
+            set_log_conventions(&mut rec, mission)?;
             if let Some(info) = &run_info {
                 rec.run_info(info).with_context(|| format!("writing the run's setup to {}", mcap_path.display()))?;
             }
@@ -528,20 +528,26 @@ fn run_trial(
 
 /// Names and frames each robot's messages as its ROS 2 side would (its `ros2:` settings), so a
 /// farm's log and a bag recorded from its DDS topics agree.
-fn set_log_conventions<W: Write + Seek>(rec: &mut Recorder<W>, mission: &spomp_behaviors::mission::MissionFile) {
+fn set_log_conventions<W: Write + Seek>(
+    rec: &mut Recorder<W>,
+    mission: &spomp_behaviors::mission::MissionFile,
+) -> Result<()> {
     for r in &mission.team {
-        let topics = spomp_ros2::TopicNames::resolve(&r.id, r.ros2.as_ref());
+        let ros = spomp_ros2::Ros2Spec::of_robot(r)?;
+        let given = spomp_ros2::Ros2Spec::given_for(r).then_some(&ros);
+        let topics = spomp_ros2::TopicNames::resolve(&r.id, given);
         let conventions = spomp_mcap::RobotConventions {
-            frames: spomp_ros2::frames::resolve(r.ros2.as_ref(), &topics),
-            cmd_vel_type: r.ros2.as_ref().map(|s| s.cmd_vel_type).unwrap_or_default(),
+            frames: spomp_ros2::frames::resolve(given, &topics),
+            cmd_vel_type: ros.cmd_vel_type,
             tf: topics.get("tf").to_string(),
             tf_static: topics.get("tf_static").to_string(),
-            depth_encoding: r.ros2.as_ref().map(|s| s.depth_encoding).unwrap_or_default(),
-            depth_scale_m: r.ros2.as_ref().and_then(|s| s.depth_scale_m),
+            depth_encoding: ros.depth_encoding,
+            depth_scale_m: ros.depth_scale_m,
             logger: spomp_ros_msgs::rcl_logger_name(topics.namespace(), spomp_ros_msgs::ROBOT_NODE_NAME),
         };
         rec.set_conventions(&r.id, conventions);
     }
+    Ok(())
 }
 
 fn write_trial_outputs(result: &RunResult, trial_dir: &Path) -> Result<()> {
@@ -715,7 +721,7 @@ pub fn dry_run(
     registry: &NodeRegistry<RobotRuntime>,
 ) -> Result<(bool, serde_json::Value)> {
     let Some(mission) = loaded.mission.as_ref() else { bail!("mission did not load") };
-    let seed = mission.sim.as_ref().and_then(|s| s.seed).unwrap_or(1);
+    let seed = spomp_world::SimSpec::of_mission(mission)?.first_seed();
     let world = spomp_world::world_for_mission(mission, &loaded.base_dir(), seed)
         .with_context(|| format!("building the world of `{}`", mission.mission))?;
     let spec = *world.spec();

@@ -9,12 +9,12 @@ use std::sync::Arc;
 use anyhow::{Context, Result};
 use spomp_behaviors::NodeRegistry;
 use spomp_behaviors::mission::schema::MissionFile;
-use spomp_behaviors::mission::{LoadOptions, load_mission_with};
+use spomp_behaviors::mission::{LoadOptions, MissionSection, load_mission_with};
 use spomp_core::RobotId;
 use spomp_robot::{Robot, RobotRuntime};
 use spomp_ros2::{RobotNode, TeamChannel};
 use spomp_teamstate::Tier;
-use spomp_zenoh::{KeyDir, LinkConfig, TeamLink};
+use spomp_zenoh::{KeyDir, LinkConfig, TeamLink, TeamLinkSpec};
 
 /// The team-link options of `spomp run`.
 #[derive(Debug, Clone, clap::Args)]
@@ -49,7 +49,7 @@ impl TeamLinkArgs {
         self.keys.is_some()
             || !self.listen.is_empty()
             || !self.connect.is_empty()
-            || mission.team.iter().any(|r| r.id == robot && r.team_link.is_some())
+            || mission.team.iter().any(|r| r.id == robot && TeamLinkSpec::given_for(r))
     }
 }
 
@@ -128,12 +128,15 @@ pub fn set_up(args: &TeamLinkArgs, mission: &MissionFile, robot_id: &str, robot:
     if !args.wanted(mission, robot_id) {
         return Ok(SetUp { link: None, notes });
     }
-    let spec = mission.team.iter().find(|r| r.id == robot_id).and_then(|r| r.team_link.clone()).unwrap_or_default();
+    let spec = match mission.team.iter().find(|r| r.id == robot_id) {
+        Some(r) => TeamLinkSpec::of_robot(r)?,
+        None => TeamLinkSpec::default(),
+    };
     let mut config = LinkConfig::new(&mission.mission, id.clone());
     config.listen = if args.listen.is_empty() { spec.listen } else { args.listen.clone() };
     config.connect = if args.connect.is_empty() { spec.connect } else { args.connect.clone() };
     for e in config.listen.iter().chain(&config.connect) {
-        spomp_behaviors::mission::check_endpoint(e).map_err(|why| anyhow::anyhow!("--listen/--connect: {why}"))?;
+        spomp_zenoh::check_endpoint(e).map_err(|why| anyhow::anyhow!("--listen/--connect: {why}"))?;
     }
     config.multicast_scouting = spec.multicast_scouting;
     // Only the team may send: the key directory's members, or the mission's robots. Messages

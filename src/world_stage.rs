@@ -19,16 +19,17 @@
 use std::path::PathBuf;
 
 use spomp_behaviors::BbValue;
+use spomp_behaviors::mission::MissionSection;
 use spomp_behaviors::mission::compile::{Ir, IrBinding, IrKind};
 use spomp_behaviors::mission::limits::resolve_inside;
-use spomp_behaviors::mission::schema::{CompleteWhen, WorldSpec};
+use spomp_behaviors::mission::schema::CompleteWhen;
 use spomp_behaviors::mission::yaml::{self, Loc, Node};
 use spomp_behaviors::mission::{Diagnostic, LoadOptions, LoadedMission, Stage};
 use spomp_core::classes::IMPASSABLE_RANK;
 use spomp_core::{Point2, Pose2, RobotKind};
 use spomp_robot::class_names::ClassNames;
 use spomp_sim::{Ugv, UgvParams};
-use spomp_world::World;
+use spomp_world::{SimSpec, World, WorldSpec};
 
 /// One step of a path into the mission's YAML: a mapping key or a list index.
 enum Step<'a> {
@@ -87,7 +88,7 @@ fn field_steps(field: &str) -> Vec<OwnedStep> {
 /// (none for a mission without a world folder).
 pub fn check(loaded: &LoadedMission, options: &LoadOptions) -> Vec<Diagnostic> {
     let Some(mission) = loaded.mission.as_ref().filter(|_| loaded.is_valid()) else { return Vec::new() };
-    let Some(WorldSpec::Dir(dir)) = mission.sim.as_ref().and_then(|s| s.world.as_ref()) else { return Vec::new() };
+    let Ok(SimSpec { world: Some(WorldSpec::Dir(dir)), .. }) = SimSpec::of_mission(mission) else { return Vec::new() };
     let Some(file) = loaded.files.first().cloned() else { return Vec::new() };
     let root = loaded.sources.first().and_then(|text| yaml::parse(text).ok());
     let at = |path: &[Step<'_>], node_path: &str, message: String| {
@@ -98,7 +99,7 @@ pub fn check(loaded: &LoadedMission, options: &LoadOptions) -> Vec<Diagnostic> {
     let base = loaded.base_dir();
     let roots: Vec<PathBuf> = std::iter::once(base.clone()).chain(options.allowed_dirs.iter().cloned()).collect();
     let world_path = [Step::Key("sim"), Step::Key("world"), Step::Key("dir")];
-    let world = match resolve_inside(&roots, &base, dir).map_err(|e| e.to_string()).and_then(|p| {
+    let world = match resolve_inside(&roots, &base, &dir).map_err(|e| e.to_string()).and_then(|p| {
         if p.is_dir() {
             World::load(&p).map_err(|e| e.to_string())
         } else {

@@ -381,13 +381,13 @@ fn a_killed_ugv_frees_its_goal_after_the_lease_and_resumes_from_its_state_file()
 #[test]
 fn a_resumed_uav_continues_its_survey_where_it_was() {
     use spomp_behaviors::mission::{LoadOptions, load_mission_with};
-    let registry = spomp_robot::registry();
+    let registry = spomp::registry();
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(MISSION);
     let loaded = load_mission_with(&path, &registry, &LoadOptions::default());
     assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
     let mission = loaded.mission.as_ref().expect("mission");
     let world = spomp_world::world_for_mission(mission, &loaded.base_dir(), 1).expect("world");
-    let area = spomp_world::operating_area(mission, &world);
+    let area = spomp_world::operating_area(mission, &world).expect("area");
     let make = |id: &str| spomp_robot::Robot::from_mission(&loaded, id, &area, 1, &registry).expect("robot");
 
     let state = make("uav1").resume_state();

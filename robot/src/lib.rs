@@ -22,6 +22,7 @@
 
 pub mod checks;
 pub mod class_names;
+pub mod mission_section;
 pub mod nodes;
 mod robot;
 pub mod runtime;
@@ -31,6 +32,7 @@ pub mod setup;
 pub mod team_round;
 
 pub use checks::MissionRobotChecks;
+pub use mission_section::CommsSpec;
 pub use nodes::registry;
 pub use robot::{ResumeError, Robot, RobotError, RobotView, TeamTraffic};
 pub use runtime::{JoinFn, RobotRuntime};

@@ -180,7 +180,13 @@ impl Robot {
                     .map_err(|e| RobotError::MissionGoal(e.to_string()))?;
             }
         }
-        let build = BuildOptions { base_dir: Some(loaded.base_dir()), map_origin: setup.map_origin };
+        // The area's georeference, else one the robot's own sections give it (its ROS 2
+        // section's `gps_origin`, through that section's registered owner).
+        let map_origin = setup.map_origin.or_else(|| {
+            let spec = mission.team.get(setup.index).filter(|r| r.id == robot_id.as_str())?;
+            registry.catalog().robot_geo_reference(spec)
+        });
+        let build = BuildOptions { base_dir: Some(loaded.base_dir()), map_origin };
         let tree = build_executor(role, registry, &robot_id, start, build)?;
         let tick_hz = if setup.tick_hz.is_finite() && setup.tick_hz > 0.0 {
             setup.tick_hz

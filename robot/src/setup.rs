@@ -30,8 +30,9 @@ pub struct OperatingArea {
     pub prior_map: Option<Arc<AerialMap>>,
     /// Where the map frame's origin (0, 0) lies on the Earth, when the area is georeferenced
     /// (an imported world's `gps_origin`): QGroundControl plans are placed by their coordinates
-    /// through it. `None`: a robot's own `ros2.gps_origin` if it has one, else each plan is laid
-    /// out around its planned home.
+    /// through it. `None`: a robot's own georeference if its sections give one (its
+    /// `ros2.gps_origin`, see `Robot::from_setup`), else each plan is laid out around its planned
+    /// home.
     pub map_origin: Option<GeoPoint>,
 }
 
@@ -79,8 +80,9 @@ pub struct RobotSetup {
     /// What the setup had to leave out (class names the area's table lacks), each with the
     /// mission field that named it: the robot reports them once as problems.
     pub warnings: Vec<String>,
-    /// Where the map frame's origin lies on the Earth: the area's, else the robot's
-    /// `ros2.gps_origin` (its tree's QGroundControl plans are placed through it).
+    /// Where the map frame's origin lies on the Earth: the area's (its tree's QGroundControl
+    /// plans are placed through it; without it, the robot's own sections may give one when it
+    /// is built).
     pub map_origin: Option<GeoPoint>,
 }
 
@@ -241,10 +243,7 @@ impl RobotSetup {
             role: spec.role.clone(),
             tick_hz: role.map_or(DEFAULT_TICK_HZ, |r| r.tick_hz),
             warnings,
-            map_origin: area.map_origin.or_else(|| {
-                let o = spec.ros2.as_ref()?.gps_origin.as_ref()?;
-                Some(GeoPoint::new(o.latitude_deg, o.longitude_deg))
-            }),
+            map_origin: area.map_origin,
         })
     }
 }

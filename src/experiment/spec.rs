@@ -9,11 +9,15 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use spomp_behaviors::NodeRegistry;
 use spomp_behaviors::mission::limits;
-use spomp_behaviors::mission::schema::{FaultSpec, LocalizationSpec, RobotSpec, SimSpec, StartPose, WorldSpec};
+use spomp_behaviors::mission::schema::{LocalizationSpec, RobotSpec, StartPose};
 use spomp_behaviors::mission::yaml::{Loc, Node, PathSeg, parse};
-use spomp_behaviors::mission::{Diagnostic, LoadOptions, LoadedMission, MissionFile, Stage, load_mission_str};
+use spomp_behaviors::mission::{
+    Diagnostic, LoadOptions, LoadedMission, MissionFile, MissionSection, Section, Stage, load_mission_str,
+};
 use spomp_core::RobotKind;
+use spomp_robot::CommsSpec;
 use spomp_robot::RobotRuntime;
+use spomp_world::{FaultSpec, SimSpec, WorldSpec};
 
 /// Most trials one experiment file may declare (configurations × seeds).
 pub const MAX_TRIALS: usize = 100_000;
@@ -934,22 +938,26 @@ fn resolve(
             prov.note(format!("roles.{name}.navigation"), at);
         }
     }
+    // The adapter sections are patched typed, by their owners' types, and written back.
+    let section = |value: Result<serde_json::Value, serde_json::Error>| value.ok().map(Section);
     if let Some(comms) = &c.comms {
-        let m = &mut mission.comms;
+        let Ok(mut m) = CommsSpec::of_mission(&mission) else {
+            p.at(&here("comms"), Stage::Schema, "the base mission's `comms` does not read");
+            return None;
+        };
+        let m = &mut m;
         m.position_range_m = comms.position_range_m.unwrap_or(m.position_range_m);
         m.data_range_m = comms.data_range_m.unwrap_or(m.data_range_m);
         m.bandwidth_bytes_per_s = comms.bandwidth_bytes_per_s.unwrap_or(m.bandwidth_bytes_per_s);
         m.ugv_to_ugv = comms.ugv_to_ugv.or(m.ugv_to_ugv);
+        mission.comms = section(serde_json::to_value(&*m));
         prov.note("comms", here("comms"));
     }
     if !c.faults.is_empty() || c.world.is_some() || c.prior_map.is_some() {
-        let sim = mission.sim.get_or_insert_with(|| SimSpec {
-            world: None,
-            trials: None,
-            seed: None,
-            faults: Vec::new(),
-            prior_map: false,
-        });
+        let Ok(mut sim) = SimSpec::of_mission(&mission) else {
+            p.at(&here("faults"), Stage::Schema, "the base mission's `sim` does not read");
+            return None;
+        };
         if !c.faults.is_empty() {
             let first = sim.faults.len();
             sim.faults.extend(c.faults.iter().cloned());
@@ -971,6 +979,7 @@ fn resolve(
             sim.prior_map = prior;
             prov.note("sim.prior_map", here("prior_map"));
         }
+        mission.sim = section(serde_json::to_value(&sim));
     }
     match (c.time_limit_s, file.time_limit_s) {
         (Some(t), _) => {

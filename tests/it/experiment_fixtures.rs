@@ -72,8 +72,10 @@ fn overrides_reach_the_patched_mission() {
     use spomp_behaviors::mission::schema::LocalizationMode;
     assert_eq!(ugvs[0].localization.as_ref().unwrap().mode, LocalizationMode::CrossView);
     assert_eq!(ugvs[2].localization.as_ref().unwrap().mode, LocalizationMode::GroundTruth);
-    assert_eq!((m.comms.data_range_m, m.comms.position_range_m), (20.0, 50.0));
-    let sim = m.sim.as_ref().unwrap();
+    use spomp_behaviors::mission::MissionSection;
+    let comms = spomp_robot::CommsSpec::of_mission(m).unwrap();
+    assert_eq!((comms.data_range_m, comms.position_range_m), (20.0, 50.0));
+    let sim = spomp_world::SimSpec::of_mission(m).unwrap();
     assert_eq!(sim.faults.len(), 2);
     assert!(sim.prior_map);
     assert_eq!(m.time_limit_s, 60.0, "the configuration's limit wins");

@@ -49,7 +49,7 @@ fn expectations(text: &str) -> Vec<Expect> {
 
 #[test]
 fn valid_fixtures_and_shipped_missions_validate() {
-    let registry = spomp_robot::registry();
+    let registry = spomp::registry();
     let mut files = fixtures("valid-");
     let missions = Path::new(env!("CARGO_MANIFEST_DIR")).join("missions");
     for e in std::fs::read_dir(missions).unwrap() {
@@ -68,7 +68,7 @@ fn valid_fixtures_and_shipped_missions_validate() {
 
 #[test]
 fn invalid_fixtures_report_the_right_place_and_field() {
-    let registry = spomp_robot::registry();
+    let registry = spomp::registry();
     let files = fixtures("invalid-");
     assert!(files.len() >= 25, "at least 25 invalid fixtures, found {}", files.len());
     for f in files {
@@ -105,7 +105,7 @@ fn invalid_fixtures_report_the_right_place_and_field() {
 
 #[test]
 fn several_errors_are_reported_in_one_run() {
-    let registry = spomp_robot::registry();
+    let registry = spomp::registry();
     let f = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/missions/invalid-several-errors.yaml");
     let loaded = load_mission(&f, &registry);
     assert_eq!(loaded.diagnostics.len(), 3, "{:#?}", loaded.diagnostics);

@@ -52,7 +52,7 @@ impl SimObserver for RecordedOut {}
 #[test]
 fn the_robots_own_traffic_counts_are_the_recorded_team_out_answers() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("missions/visit-all-vehicle-clusters.yaml");
-    let registry = spomp_robot::registry();
+    let registry = spomp::registry();
     let loaded = load_mission_with(&path, &registry, &LoadOptions::default());
     assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
     let mission = loaded.mission.as_ref().unwrap();

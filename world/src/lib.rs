@@ -20,6 +20,7 @@ mod city;
 mod error;
 mod files;
 mod mission;
+pub mod mission_section;
 mod terrain;
 mod world;
 
@@ -30,6 +31,7 @@ pub use files::{
     MAX_WORLD_CELLS, RESOLUTION_RANGE_M, WORLD_FILE, WorldFile, decode_depth_png, read_depth_png, render_png,
 };
 pub use mission::{operating_area, world_for_mission};
+pub use mission_section::{CircleSpec, FaultSpec, GenerateSpec, SimSpec, WorldSpec};
 pub use terrain::{
     FootprintHeights, Obstacle, UgvLimits, footprint_heights, ground_truth_traversability, reachable_cells,
 };

@@ -4,19 +4,19 @@
 use std::path::Path;
 
 use spomp_behaviors::mission::MissionFile;
-use spomp_behaviors::mission::schema::WorldSpec;
+use spomp_behaviors::mission::MissionSection;
 use spomp_robot::OperatingArea;
 
 use crate::city::{CityParams, generate_city};
 use crate::error::WorldError;
+use crate::mission_section::{SimSpec, WorldSpec};
 use crate::world::World;
 
 /// The world a mission names: generated (seeded by the mission's world seed, else the trial
 /// seed) or loaded from a folder relative to the mission file. A mission without `sim.world`
 /// gets the default generated city.
 pub fn world_for_mission(mission: &MissionFile, base_dir: &Path, trial_seed: u64) -> Result<World, WorldError> {
-    let spec = mission.sim.as_ref().and_then(|s| s.world.clone());
-    match spec {
+    match sim_section(mission)?.world {
         Some(WorldSpec::Dir(dir)) => World::load(base_dir.join(dir)),
         Some(WorldSpec::Generate(g)) => {
             let params = CityParams {
@@ -34,11 +34,16 @@ pub fn world_for_mission(mission: &MissionFile, base_dir: &Path, trial_seed: u64
 
 /// The operating area robots are set up over in `world`: its class table and grid, and the
 /// whole aerial map when the mission says the robots start with it (`sim.prior_map`).
-pub fn operating_area(mission: &MissionFile, world: &World) -> OperatingArea {
-    OperatingArea {
+pub fn operating_area(mission: &MissionFile, world: &World) -> Result<OperatingArea, WorldError> {
+    Ok(OperatingArea {
         classes: world.classes().clone(),
         grid: *world.spec(),
-        prior_map: mission.sim.as_ref().is_some_and(|s| s.prior_map).then(|| world.shared_map()),
+        prior_map: sim_section(mission)?.prior_map.then(|| world.shared_map()),
         map_origin: world.meta.gps_origin,
-    }
+    })
+}
+
+/// The mission's `sim:` section (its defaults when left out).
+fn sim_section(mission: &MissionFile) -> Result<SimSpec, WorldError> {
+    SimSpec::of_mission(mission).map_err(|e| WorldError::Invalid { what: "mission section", message: e.to_string() })
 }

@@ -16,7 +16,7 @@ fn a_mission_without_a_world_gets_the_default_city_of_the_trial_seed() {
     let m = mission("");
     let world = world_for_mission(&m, std::path::Path::new("."), 7).expect("a world");
     assert_eq!(world, generate_city(&CityParams::default(), 7).expect("a city"));
-    let area = operating_area(&m, &world);
+    let area = operating_area(&m, &world).expect("area");
     assert_eq!(area.grid, *world.spec());
     assert!(area.prior_map.is_none(), "no prior map unless the mission asks for one");
 }
@@ -30,7 +30,7 @@ fn a_generated_world_takes_the_missions_size_and_seed_and_the_prior_map_is_the_a
     let params =
         CityParams { width_m: 120.0, height_m: 90.0, vehicle_clusters: 2, roadblocks: 0, ..CityParams::default() };
     assert_eq!(world, generate_city(&params, 3).expect("a city"), "the mission's world seed wins over the trial's");
-    let area = operating_area(&m, &world);
+    let area = operating_area(&m, &world).expect("area");
     assert_eq!(area.prior_map.as_deref(), Some(&*world.shared_map()));
 }
 

@@ -8,10 +8,9 @@ use std::sync::atomic::{AtomicU8, Ordering};
 
 use byteorder::LittleEndian;
 use spomp_behaviors::Status;
-use spomp_behaviors::mission::schema::CmdVelType;
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::{AerialMap, ClassTable, DepthPanorama, Pose2, ReachabilityScan, SemanticPanorama, Time, Twist2};
-use spomp_ros_msgs::{self as ros, DepthEncoding, RobotFrames, RosMessage};
+use spomp_ros_msgs::{self as ros, CmdVelType, DepthEncoding, RobotFrames, RosMessage};
 
 use crate::safe::{FLUSH_CHUNK, FLUSH_IGNORE, FLUSH_LAST, SafeFile};
 

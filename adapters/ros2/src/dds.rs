@@ -60,7 +60,7 @@ impl DdsSettings {
 impl DdsSettings {
     /// A robot's `ros2:` domain and interfaces, then the ROS 2 environment
     /// ([`DdsSettings::with_ros_environment`]).
-    pub fn for_robot(spec: &spomp_behaviors::mission::schema::Ros2Spec) -> Result<Self, String> {
+    pub fn for_robot(spec: &crate::mission_section::Ros2Spec) -> Result<Self, String> {
         let interfaces = spec
             .interfaces
             .iter()

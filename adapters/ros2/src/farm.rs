@@ -5,13 +5,13 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
+use crate::mission_section::Ros2Spec;
 use ros2_client::{Publisher, Subscription};
-use spomp_behaviors::mission::schema::{CmdVelType, Ros2Spec};
 use spomp_core::{
     FlightCommand, GridSpec, MapTile, Odometry, OdometryCovariance, PanoramaFrame, Point2, PoseEstimate, Time, Twist2,
 };
 use spomp_ros_msgs as ros;
-use spomp_ros_msgs::{DepthEncoding, RobotFrames};
+use spomp_ros_msgs::{CmdVelType, DepthEncoding, RobotFrames};
 use spomp_teamstate::GoalView;
 
 use crate::clock::TimeBase;

@@ -10,7 +10,7 @@
 
 use std::collections::BTreeMap;
 
-use spomp_behaviors::mission::schema::Ros2Spec;
+use crate::mission_section::Ros2Spec;
 use spomp_ros_msgs::RobotFrames;
 
 use crate::topics::TopicNames;

@@ -18,6 +18,7 @@ pub mod dds;
 pub mod farm;
 pub mod frames;
 pub mod lockstep;
+pub mod mission_section;
 
 pub mod pairing;
 pub mod run;
@@ -29,6 +30,7 @@ pub mod workers;
 pub use clock::TimeBase;
 pub use dds::{DdsError, DdsSettings};
 pub use farm::FarmLink;
+pub use mission_section::Ros2Spec;
 
 pub use run::{RobotNode, RunObserver, RunReport};
 pub use settings::{RunSettings, SettingsError};

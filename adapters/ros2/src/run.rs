@@ -17,12 +17,12 @@ use std::time::{Duration, Instant};
 
 use ros2_client::{Publisher, Subscription};
 use serde::Serialize;
-use spomp_behaviors::mission::schema::CmdVelType;
 use spomp_behaviors::trace::Recorder;
 use spomp_core::{FlightCommand, PanoramaFrame, Point2, PoseEstimate, RobotId, RobotKind, Time, Twist2};
 use spomp_robot::runtime::WorkKind;
 use spomp_robot::{LinkCredit, ModelledWork, Robot, RobotObserver, RobotView, RoundShape, WorkLatency};
 use spomp_ros_msgs as ros;
+use spomp_ros_msgs::CmdVelType;
 use spomp_teamstate::TierSet;
 
 use crate::clock::{TimeBase, ros_nanos, wall_nanos};
@@ -1591,7 +1591,7 @@ mod tests {
         assert!(why.contains("/ugv1/pose_estimate") && why.contains("PoseWithCovarianceStamped"), "{why}");
         // The command type the settings choose.
         let spec = mission.team.iter_mut().find(|r| r.id == "ugv1").and_then(|r| r.ros2.as_mut()).expect("ros2");
-        spec.cmd_vel_type = CmdVelType::Twist;
+        spec.0["cmd_vel_type"] = serde_json::json!("twist");
         let twist = RunSettings::from_mission(&mission, "ugv1", None).expect("settings");
         assert!(check_topic_types(&twist, &right).is_err());
         assert_eq!(check_topic_types(&twist, &created(&[("/ugv1/cmd_vel", "geometry_msgs/msg/Twist")])), Ok(()));

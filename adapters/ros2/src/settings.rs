@@ -1,7 +1,10 @@
 //! What `spomp run` needs to know beyond the robot itself: names, DDS, input formats, limits.
 
-use spomp_behaviors::mission::schema::{CmdVelType, MissionFile};
-use spomp_ros_msgs::{DepthEncoding, RobotFrames};
+use spomp_behaviors::mission::{MissionFile, MissionSection};
+use spomp_robot::CommsSpec;
+use spomp_ros_msgs::{CmdVelType, DepthEncoding, RobotFrames};
+
+use crate::mission_section::Ros2Spec;
 
 use crate::dds::DdsSettings;
 use crate::topics::TopicNames;
@@ -69,13 +72,6 @@ pub struct LockstepSettings {
 /// Team-state messages go to each peer at most this often, seconds.
 const TEAM_PERIOD_S: f64 = 1.0;
 
-/// What a link may carry in one round of `period_s`: the mission's `comms.bandwidth_bytes_per_s`
-/// means bytes per second per link, in the simulator's radio and here alike.
-fn link_budget_bytes(bandwidth_bytes_per_s: f64, period_s: f64) -> usize {
-    // The loader refuses a rate that is not positive; the bound keeps the cast exact.
-    (bandwidth_bytes_per_s * period_s).floor().clamp(0.0, u32::MAX as f64) as usize
-}
-
 impl RunSettings {
     /// Robot `id` of `mission` with its `ros2:` settings; `domain_id` (the command line's)
     /// overrides the mission's, and the ROS 2 environment (`ROS_DOMAIN_ID`,
@@ -87,13 +83,16 @@ impl RunSettings {
                 mission.team.iter().map(|r| r.id.as_str()).collect::<Vec<_>>().join(", "),
             )
         })?;
-        let ros = spec.ros2.clone().unwrap_or_default();
+        let ros = Ros2Spec::of_robot(spec).map_err(|e| SettingsError::Invalid(e.to_string()))?;
+        let comms = CommsSpec::of_mission(mission).map_err(|e| SettingsError::Invalid(e.to_string()))?;
+        // A robot without the section resolves its names as one with the defaults does.
+        let given = Ros2Spec::given_for(spec).then_some(&ros);
         let mut dds = DdsSettings::for_robot(&ros).map_err(SettingsError::Invalid)?;
         if let Some(d) = domain_id {
             dds.domain_id = d;
         }
-        let topics = TopicNames::resolve(id, spec.ros2.as_ref());
-        let frames = crate::frames::resolve(spec.ros2.as_ref(), &topics);
+        let topics = TopicNames::resolve(id, given);
+        let frames = crate::frames::resolve(given, &topics);
         let setting_path = format!("team[{index}] ({id}) ros2");
         if let Some((a, b, frame)) = crate::frames::collision(&frames) {
             return Err(SettingsError::Invalid(format!(
@@ -116,7 +115,7 @@ impl RunSettings {
             use_sim_time: ros.use_sim_time,
             gps_origin: ros.gps_origin.map(|o| (o.latitude_deg, o.longitude_deg)),
             team_period_s: TEAM_PERIOD_S,
-            team_budget_bytes: link_budget_bytes(mission.comms.bandwidth_bytes_per_s, TEAM_PERIOD_S),
+            team_budget_bytes: usize::try_from(comms.round_budget_bytes(TEAM_PERIOD_S)).unwrap_or(usize::MAX),
             lockstep: None,
         })
     }

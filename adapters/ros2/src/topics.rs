@@ -2,7 +2,7 @@
 
 use std::collections::BTreeMap;
 
-use spomp_behaviors::mission::schema::Ros2Spec;
+use crate::mission_section::Ros2Spec;
 
 /// Default topic of each role, relative to the robot's namespace (an absolute name stays as
 /// it is), with its type: [`spomp_ros_msgs::ROBOT_TOPICS`], the table the recorder shares. The
@@ -85,7 +85,7 @@ mod tests {
     #[test]
     fn the_mission_language_accepts_exactly_these_roles() {
         let ours: Vec<&str> = ROBOT_TOPICS.iter().map(|t| t.role).collect();
-        assert_eq!(ours, spomp_behaviors::mission::load::ROS2_TOPIC_ROLES);
+        assert_eq!(ours, crate::mission_section::ROS2_TOPIC_ROLES);
     }
 
     #[test]

@@ -24,10 +24,10 @@ pub struct RadioParams {
 }
 
 impl Default for RadioParams {
-    /// A mission's `comms:` defaults (their one home is the mission's `CommsSpec`); the small
+    /// A mission's `comms:` defaults (their one home is `spomp_robot::CommsSpec`); the small
     /// tier's rate is the radio's own.
     fn default() -> Self {
-        let comms = spomp_behaviors::mission::schema::CommsSpec::default();
+        let comms = spomp_robot::CommsSpec::default();
         RadioParams {
             small_range_m: comms.position_range_m,
             full_range_m: comms.data_range_m,
@@ -252,7 +252,8 @@ impl Radio {
         if self.blackouts.iter().any(|bo| bo.cuts(t, a.position, b.position)) {
             return None;
         }
-        let budget = if dt_s.is_finite() && dt_s > 0.0 { (rate * dt_s).floor().min(u64::MAX as f64) as u64 } else { 0 };
+        // The same rule as a robot process's send round (one meaning of a link's bandwidth).
+        let budget = spomp_robot::mission_section::round_budget_bytes(rate, dt_s);
         Some(Link { tier, budget_bytes: budget })
     }
 

@@ -107,7 +107,8 @@ fn with_the_ugv_radio_off_the_uav_relays_and_the_mission_still_completes() {
         "radio-off",
         &[("bandwidth_bytes_per_s: 1000000 }", "bandwidth_bytes_per_s: 1000000, ugv_to_ugv: false }")],
     );
-    assert_eq!(loaded.mission.as_ref().unwrap().comms.ugv_to_ugv, Some(false));
+    use spomp_behaviors::mission::MissionSection;
+    assert_eq!(spomp_robot::CommsSpec::of_mission(loaded.mission.as_ref().unwrap()).unwrap().ugv_to_ugv, Some(false));
     let mut sim = simulation(&loaded, options());
     // Claims of another UGV each UGV learned, without ever hearing that UGV directly.
     let mut learned: BTreeMap<&str, BTreeSet<String>> = BTreeMap::new();

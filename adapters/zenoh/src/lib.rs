@@ -12,10 +12,12 @@
 
 pub mod keys;
 pub mod link;
+pub mod mission_section;
 pub mod state_file;
 
 pub use keys::{KeyDir, KeyDirError, RobotKeys};
 pub use link::{
     Credentials, Intake, LinkConfig, LinkError, LinkStats, MAX_UNLISTED_SENDERS, Refusals, TeamLink, TierCounts,
 };
+pub use mission_section::{TeamLinkSpec, check_endpoint};
 pub use state_file::{StateFileError, read_state, write_state};

@@ -8,6 +8,7 @@ use crate::blackboard::PortType;
 use crate::registry::{Category, NodeCatalog, NodeTypeSpec, PortDirection};
 
 use super::schema::MissionFile;
+use super::sections::{SECTION_SLOTS, SectionOwner, SectionPlace};
 
 const REF_PATTERN: &str = r"^\{[A-Za-z_][A-Za-z0-9_.]*\}$";
 
@@ -171,8 +172,49 @@ pub fn mission_schema(registry: &NodeCatalog) -> Value {
             }
         }
     }
+    for owner in registry.section_owners() {
+        insert_section(&mut root, owner);
+    }
     if let Value::Object(o) = &mut root {
         o.insert("title".into(), Value::String("spomp mission".into()));
     }
     root
+}
+
+/// An adapter section's schema, from its owner: its definitions added to the mission's, its
+/// slot (top level or in each robot) pointing at it with the slot's own description.
+fn insert_section(root: &mut Value, owner: &dyn SectionOwner) {
+    let Some(place) = SECTION_SLOTS.iter().find(|(n, _)| *n == owner.name()).map(|(_, p)| *p) else { return };
+    let mut schema = owner.schema();
+    let extra = schema.as_object_mut().and_then(|o| o.remove("$defs"));
+    if let Some(o) = schema.as_object_mut() {
+        o.remove("$schema");
+        o.remove("title");
+    }
+    let name = owner.def_name();
+    let reference = json!({"$ref": format!("#/$defs/{name}")});
+    let slot = match owner.default_value() {
+        Some(default) => json!({"$ref": format!("#/$defs/{name}"), "default": default}),
+        None => json!({"anyOf": [reference, {"type": "null"}], "default": null}),
+    };
+    let pointer = match place {
+        SectionPlace::Mission => format!("/properties/{}", owner.name()),
+        SectionPlace::Robot => format!("/$defs/RobotSpec/properties/{}", owner.name()),
+    };
+    if let Some(p) = root.pointer_mut(&pointer) {
+        let description = p.get("description").cloned().unwrap_or(Value::Null);
+        let mut slot = slot;
+        if let Value::Object(o) = &mut slot {
+            o.insert("description".into(), description);
+        }
+        *p = slot;
+    }
+    if let Some(Value::Object(defs)) = root.get_mut("$defs") {
+        if let Some(Value::Object(extra)) = extra {
+            for (k, v) in extra {
+                defs.entry(k).or_insert(v);
+            }
+        }
+        defs.insert(name, schema);
+    }
 }

@@ -15,6 +15,7 @@ use super::compile::{Compiler, FileId, Ir, IrKind, SubtreeDef, check_wiring};
 use super::diagnostic::{Diagnostic, Stage};
 use super::limits;
 use super::schema::{IncludeFile, MissionFile, RobotSpec};
+use super::sections::{SECTION_SLOTS, SectionContext, SectionPlace};
 use super::yaml::{DeError, Loc, Node, parse};
 
 /// Blackboard entries every robot's executor provides before the first tick.
@@ -151,7 +152,7 @@ pub fn load_mission_str<E: 'static>(
         }
     };
     let mut diags = Vec::new();
-    let Some(mission) = schema_stage(&root, path, &roots, &mut diags) else {
+    let Some(mission) = schema_stage(&root, path, registry, &roots, &mut diags) else {
         if root.as_map().is_none() {
             // Not even a mapping: nothing later stages could read.
             out.diagnostics = diags;
@@ -236,7 +237,13 @@ const SECTIONS: &[&str] = &[
 
 /// Stage schema: each section on its own, so every broken section is reported; then the whole
 /// typed mission and the ranges of its values. `None` when any section is broken.
-pub fn schema_stage(root: &Node, path: &Path, roots: &[PathBuf], diags: &mut Vec<Diagnostic>) -> Option<MissionFile> {
+pub fn schema_stage(
+    root: &Node,
+    path: &Path,
+    registry: &NodeCatalog,
+    roots: &[PathBuf],
+    diags: &mut Vec<Diagnostic>,
+) -> Option<MissionFile> {
     let Some(entries) = root.as_map() else {
         diags.push(Diagnostic::new(
             path,
@@ -263,7 +270,7 @@ pub fn schema_stage(root: &Node, path: &Path, roots: &[PathBuf], diags: &mut Vec
             section_ok = false;
             continue;
         }
-        match check_section(&k.name, v, path, diags) {
+        match check_section(&k.name, v, path, registry, diags) {
             Ok(()) => {}
             Err(Some(e)) => {
                 diags.push(de_diag(path, &k.name, &e, v.loc));
@@ -277,7 +284,8 @@ pub fn schema_stage(root: &Node, path: &Path, roots: &[PathBuf], diags: &mut Vec
     }
     match root.deserialize::<MissionFile>() {
         Ok(m) => {
-            check_ranges(&m, root, path, roots, diags);
+            check_ranges(&m, root, path, diags);
+            check_sections(&m, root, path, registry, roots, diags);
             Some(m)
         }
         Err(e) => {
@@ -289,7 +297,13 @@ pub fn schema_stage(root: &Node, path: &Path, roots: &[PathBuf], diags: &mut Vec
 
 /// One known section against its type. `Err(None)`: the problems are in `diags` already (a
 /// list or mapping whose items were checked one by one).
-fn check_section(name: &str, v: &Node, path: &Path, diags: &mut Vec<Diagnostic>) -> Result<(), Option<DeError>> {
+fn check_section(
+    name: &str,
+    v: &Node,
+    path: &Path,
+    registry: &NodeCatalog,
+    diags: &mut Vec<Diagnostic>,
+) -> Result<(), Option<DeError>> {
     let not_a = |what: &str| {
         Err(Some(DeError {
             message: format!("expected {what}, found {}", v.value.kind()),
@@ -305,6 +319,16 @@ fn check_section(name: &str, v: &Node, path: &Path, diags: &mut Vec<Diagnostic>)
                 if let Err(e) = item.deserialize::<RobotSpec>() {
                     diags.push(de_diag(path, &format!("team[{i}]"), &e, item.loc));
                     ok = false;
+                    continue;
+                }
+                // The robot's adapter sections, each read by its owner.
+                for (name, _) in SECTION_SLOTS.iter().filter(|(_, place)| *place == SectionPlace::Robot) {
+                    if let (Some(owner), Some(section)) = (registry.section_owner(name), item.get(name))
+                        && let Err(e) = owner.parse(section)
+                    {
+                        diags.push(de_diag(path, &format!("team[{i}].{name}"), &e, section.loc));
+                        ok = false;
+                    }
                 }
             }
             if ok { Ok(()) } else { Err(None) }
@@ -326,8 +350,7 @@ fn check_section(name: &str, v: &Node, path: &Path, diags: &mut Vec<Diagnostic>)
         "subtrees" => v.deserialize::<BTreeMap<String, super::schema::TreeNode>>().map(|_| ()).map_err(Some),
         "complete_when" => v.deserialize::<super::schema::CompleteWhen>().map(|_| ()).map_err(Some),
         "time_limit_s" => v.deserialize::<f64>().map(|_| ()).map_err(Some),
-        "comms" => v.deserialize::<super::schema::CommsSpec>().map(|_| ()).map_err(Some),
-        "sim" => v.deserialize::<Option<super::schema::SimSpec>>().map(|_| ()).map_err(Some),
+        "comms" | "sim" => registry.section_owner(name).map_or(Ok(()), |owner| owner.parse(v).map_err(Some)),
         "classes" => v.deserialize::<BTreeMap<String, String>>().map(|_| ()).map_err(Some),
         _ => Ok(()),
     }
@@ -647,7 +670,7 @@ fn loc_at(root: &Node, path: &[&str]) -> Loc {
     loc
 }
 
-fn check_ranges(m: &MissionFile, root: &Node, file: &Path, roots: &[PathBuf], diags: &mut Vec<Diagnostic>) {
+fn check_ranges(m: &MissionFile, root: &Node, file: &Path, diags: &mut Vec<Diagnostic>) {
     let mut bad = |path: &[&str], msg: String| {
         diags.push(Diagnostic::new(file, loc_at(root, path), path.join("."), Stage::Schema, msg));
     };
@@ -656,33 +679,6 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, roots: &[PathBuf], di
     }
     if let Err(e) = limits::check_identifier("the mission name", &m.mission) {
         bad(&["mission"], e);
-    }
-    if m.comms.position_range_m < 0.0 {
-        bad(
-            &["comms", "position_range_m"],
-            format!("expected a non-negative distance in metres, found {}", m.comms.position_range_m),
-        );
-    }
-    if m.comms.data_range_m < 0.0 {
-        bad(
-            &["comms", "data_range_m"],
-            format!("expected a non-negative distance in metres, found {}", m.comms.data_range_m),
-        );
-    }
-    if m.comms.data_range_m > m.comms.position_range_m {
-        bad(
-            &["comms", "data_range_m"],
-            format!(
-                "the data range ({} m) cannot exceed the position range ({} m)",
-                m.comms.data_range_m, m.comms.position_range_m
-            ),
-        );
-    }
-    if m.comms.bandwidth_bytes_per_s <= 0.0 {
-        bad(
-            &["comms", "bandwidth_bytes_per_s"],
-            format!("expected a positive rate, found {}", m.comms.bandwidth_bytes_per_s),
-        );
     }
     if let Some(g) = &m.goals {
         if g.time_limit_per_m_s <= 0.0 {
@@ -719,62 +715,38 @@ fn check_ranges(m: &MissionFile, root: &Node, file: &Path, roots: &[PathBuf], di
         {
             bad(&["team", &idx, "localization"], "uncertainties and noise cannot be negative".into());
         }
-        if let Some(ros) = &r.ros2 {
-            check_ros2(ros, &idx, &mut bad);
+    }
+}
+
+/// The adapter sections of a typed mission, each checked by its owner; a problem is reported at
+/// its field's line and column.
+fn check_sections(
+    m: &MissionFile,
+    root: &Node,
+    file: &Path,
+    registry: &NodeCatalog,
+    roots: &[PathBuf],
+    diags: &mut Vec<Diagnostic>,
+) {
+    let ctx = SectionContext { mission: m, roots };
+    let mut report = |prefix: &[&str], problems: Vec<super::sections::SectionProblem>| {
+        for p in problems {
+            let segs: Vec<&str> = prefix.iter().copied().chain(p.path.iter().map(String::as_str)).collect();
+            diags.push(Diagnostic::new(file, loc_at(root, &segs), segs.join("."), Stage::Schema, p.message));
         }
-        if let Some(link) = &r.team_link {
-            for (field, list) in [("listen", &link.listen), ("connect", &link.connect)] {
-                for (k, e) in list.iter().enumerate() {
-                    if let Err(why) = check_endpoint(e) {
-                        bad(&["team", &idx, "team_link", field, &k.to_string()], why);
+    };
+    for (name, place) in SECTION_SLOTS {
+        let Some(owner) = registry.section_owner(name) else { continue };
+        match place {
+            SectionPlace::Mission => report(&[name], owner.check(m.section(name), &ctx)),
+            SectionPlace::Robot => {
+                for (i, r) in m.team.iter().enumerate() {
+                    // A robot without the section has nothing of it to check.
+                    if let Some(value) = r.section(name) {
+                        let idx = i.to_string();
+                        report(&["team", &idx, name], owner.check(Some(value), &ctx));
                     }
                 }
-            }
-        }
-    }
-    if let Some(sim) = &m.sim {
-        if let Some(super::schema::WorldSpec::Dir(dir)) = &sim.world
-            && let Err(e) = limits::resolve_inside(roots, &roots[0], dir)
-        {
-            bad(&["sim", "world"], format!("the world folder {e}"));
-        }
-        if let Some(super::schema::WorldSpec::Generate(g)) = &sim.world
-            && g.size_m.iter().any(|s| !(*s >= 50.0 && *s <= 5000.0))
-        {
-            bad(
-                &["sim", "world", "generate", "size_m"],
-                format!("each side must be between 50 and 5000 m, found {:?}", g.size_m),
-            );
-        }
-        if sim.trials == Some(0) {
-            bad(&["sim", "trials"], "expected at least one trial".into());
-        }
-        for (i, f) in sim.faults.iter().enumerate() {
-            let idx = i.to_string();
-            use super::schema::FaultSpec;
-            let negative = match f {
-                FaultSpec::Kill { at_s, .. } => limits::duration_from_secs(*at_s).is_err(),
-                FaultSpec::Blackout { from_s, to_s, region } => {
-                    limits::duration_from_secs(*from_s).is_err()
-                        || limits::duration_from_secs(*to_s).is_err()
-                        || to_s < from_s
-                        || region.as_ref().is_some_and(|c| c.radius_m.is_nan() || c.radius_m < 0.0)
-                }
-                FaultSpec::OdometryNoise { scale } | FaultSpec::LocalizationNoise { scale } => {
-                    !(scale.is_finite() && (0.0..=100.0).contains(scale))
-                }
-            };
-            if negative {
-                bad(
-                    &["sim", "faults", &idx],
-                    "times must be between 0 and 1e9 s and in order, radii non-negative, scales between 0 and 100"
-                        .into(),
-                );
-            }
-            if let FaultSpec::Kill { robot, .. } = f
-                && !m.team.iter().any(|r| &r.id == robot)
-            {
-                bad(&["sim", "faults", &idx, "kill", "robot"], format!("no robot `{robot}` in the team"));
             }
         }
     }
@@ -921,158 +893,4 @@ fn check_team(
             ));
         }
     }
-}
-
-/// Checks a team-link endpoint: `tcp/HOST:PORT` with a port in 1..=65535.
-pub fn check_endpoint(e: &str) -> Result<(), String> {
-    let expected = || format!("expected an endpoint `tcp/HOST:PORT`, found `{e}`");
-    let rest = e.strip_prefix("tcp/").ok_or_else(expected)?;
-    let (host, port) = rest.rsplit_once(':').ok_or_else(expected)?;
-    match port.parse::<u16>() {
-        Ok(p) if p > 0 && !host.is_empty() => Ok(()),
-        _ => Err(expected()),
-    }
-}
-
-/// Topic roles a robot's `ros2.topics` may rename (the ROS 2 adapter's inputs and outputs).
-pub const ROS2_TOPIC_ROLES: &[&str] = &[
-    "odom",
-    "panorama/depth",
-    "panorama/semantic",
-    "gps",
-    "pose_in",
-    "camera/tiles",
-    "cmd_vel",
-    "setpoint",
-    "setpoint_speed",
-    "pose_estimate",
-    "path",
-    "goals",
-    "reachability",
-    "diagnostics",
-    "estop",
-    "team/in",
-    "team/out",
-    "tf",
-    "tf_static",
-];
-
-fn check_ros2(ros: &super::schema::Ros2Spec, idx: &str, bad: &mut impl FnMut(&[&str], String)) {
-    for (field, v) in [("odometry_timeout_s", ros.odometry_timeout_s), ("panorama_timeout_s", ros.panorama_timeout_s)] {
-        if !(v.is_finite() && v > 0.0 && v <= 3600.0) {
-            bad(&["team", idx, "ros2", field], format!("expected a time in (0, 3600] seconds, found {v}"));
-        }
-    }
-    if !(ros.panorama_v_fov_deg.is_finite() && ros.panorama_v_fov_deg > 0.0 && ros.panorama_v_fov_deg <= 180.0) {
-        bad(
-            &["team", idx, "ros2", "panorama_v_fov_deg"],
-            format!("expected (0, 180] degrees, found {}", ros.panorama_v_fov_deg),
-        );
-    }
-    if !(ros.sensor_height_m.is_finite() && (0.0..=100.0).contains(&ros.sensor_height_m)) {
-        bad(&["team", idx, "ros2", "sensor_height_m"], format!("expected 0..100 m, found {}", ros.sensor_height_m));
-    }
-    if let Some(scale) = ros.depth_scale_m
-        && !(scale.is_finite() && scale > 0.0 && scale <= 1.0)
-    {
-        bad(&["team", idx, "ros2", "depth_scale_m"], format!("expected metres per count in (0, 1], found {scale}"));
-    }
-    if ros.depth_scale_m.is_some() && ros.depth_encoding.default_scale_m().is_none() {
-        bad(
-            &["team", idx, "ros2", "depth_scale_m"],
-            format!(
-                "a scale applies to integer depth images; depth_encoding is {} (metres): set depth_encoding: 16UC1 or mono16, or remove depth_scale_m",
-                ros.depth_encoding.name()
-            ),
-        );
-    }
-    if let Some(o) = &ros.gps_origin {
-        if !(o.latitude_deg.is_finite() && o.latitude_deg.abs() <= 90.0) {
-            bad(
-                &["team", idx, "ros2", "gps_origin", "latitude_deg"],
-                format!("expected -90..90 degrees, found {}", o.latitude_deg),
-            );
-        }
-        if !(o.longitude_deg.is_finite() && o.longitude_deg.abs() <= 180.0) {
-            bad(
-                &["team", idx, "ros2", "gps_origin", "longitude_deg"],
-                format!("expected -180..180 degrees, found {}", o.longitude_deg),
-            );
-        }
-        if !o.altitude_m.is_finite() {
-            bad(
-                &["team", idx, "ros2", "gps_origin", "altitude_m"],
-                format!("expected a finite height, found {}", o.altitude_m),
-            );
-        }
-    }
-    for (i, addr) in ros.interfaces.iter().enumerate() {
-        if addr.parse::<std::net::IpAddr>().is_err() {
-            bad(
-                &["team", idx, "ros2", "interfaces", &i.to_string()],
-                format!("expected an IP address, found `{addr}`"),
-            );
-        }
-    }
-    for (role, name) in &ros.topics {
-        if !ROS2_TOPIC_ROLES.contains(&role.as_str()) {
-            bad(
-                &["team", idx, "ros2", "topics", role],
-                format!("unknown topic role `{role}`; roles are: {}", ROS2_TOPIC_ROLES.join(", ")),
-            );
-        } else if !valid_ros_name(name) {
-            bad(
-                &["team", idx, "ros2", "topics", role],
-                format!(
-                    "`{name}` is not a ROS 2 topic name (letters, digits, `_` and `/` separators, not starting with a digit)"
-                ),
-            );
-        }
-    }
-    if let Some(ns) = &ros.namespace
-        && !(ns.is_empty() || ns == "/" || valid_ros_name(ns))
-    {
-        bad(&["team", idx, "ros2", "namespace"], format!("`{ns}` is not a ROS 2 namespace"));
-    }
-    if let Some(prefix) = &ros.frame_prefix
-        && !(prefix.is_empty() || valid_frame_id(prefix.strip_suffix('/').unwrap_or(prefix)))
-    {
-        bad(
-            &["team", idx, "ros2", "frame_prefix"],
-            format!("`{prefix}` is not a frame prefix (frame-id tokens, no leading `/`; empty for none)"),
-        );
-    }
-    let mut seen: Vec<(&str, &str)> = Vec::new();
-    for (field, id) in ros.frames.given() {
-        if !valid_frame_id(id) {
-            bad(
-                &["team", idx, "ros2", "frames", field],
-                format!("`{id}` is not a frame id (tf2: letters, digits, `_`, `/` separators, no leading `/`)"),
-            );
-        } else if let Some((other, _)) = seen.iter().find(|(_, o)| *o == id) {
-            bad(
-                &["team", idx, "ros2", "frames", field],
-                format!("`{id}` is also `frames.{other}`: each frame of the tf tree needs its own id"),
-            );
-        }
-        seen.push((field, id));
-    }
-}
-
-/// A tf2 frame id: a ROS name without the leading `/` (tf2 refuses one).
-pub fn valid_frame_id(id: &str) -> bool {
-    !id.starts_with('/') && valid_ros_name(id)
-}
-
-/// A ROS 2 topic or namespace name: `/`-separated tokens of letters, digits and `_`, no token
-/// starting with a digit, no empty token but an optional leading `/`.
-pub fn valid_ros_name(name: &str) -> bool {
-    let body = name.strip_prefix('/').unwrap_or(name);
-    !body.is_empty()
-        && body.split('/').all(|t| {
-            !t.is_empty()
-                && !t.starts_with(|c: char| c.is_ascii_digit())
-                && t.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
-                && !t.contains("__")
-        })
 }

@@ -10,6 +10,7 @@ pub mod limits;
 pub mod load;
 pub mod output;
 pub mod schema;
+pub mod sections;
 pub mod tree;
 pub mod yaml;
 
@@ -17,8 +18,11 @@ pub use build::{BuildError, BuildOptions, build_executor, build_tree};
 pub use checks::{RobotChecks, RobotProblem};
 pub use diagnostic::{Diagnostic, Rendered, Severity, Stage};
 pub use load::{
-    CompiledRole, LoadOptions, LoadedMission, PROVIDED_ENTRIES, check_endpoint, load_mission, load_mission_str,
-    load_mission_with, skills_of,
+    CompiledRole, LoadOptions, LoadedMission, PROVIDED_ENTRIES, load_mission, load_mission_str, load_mission_with,
+    skills_of,
 };
 pub use schema::MissionFile;
+pub use sections::{
+    MissionSection, Section, SectionContext, SectionError, SectionOwner, SectionPlace, SectionProblem, owner,
+};
 pub use tree::{TreeNode, load_tree_str};

@@ -1454,6 +1454,18 @@ impl RosMessage for BytesMsg {
     const DEFINITION: &'static str = concat!("MultiArrayLayout layout\nuint8[] data\n", multi_array_layout_deps!());
 }
 
+// A robot's `ros2.cmd_vel_type`: what the ROS 2 adapter publishes and the MCAP recorder logs.
+/// Type of a robot's velocity command on `cmd_vel`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum CmdVelType {
+    /// `geometry_msgs/Twist`.
+    Twist,
+    /// `geometry_msgs/TwistStamped` (stamp and `base_link` frame in the header).
+    #[default]
+    TwistStamped,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

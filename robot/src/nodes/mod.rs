@@ -59,7 +59,8 @@ pub(crate) fn number(b: &Binding, ctx: &mut Ctx<'_>, node: &str, port: &str, pos
 }
 
 /// Every node type of a robot: the engine's (structural, generic leaves) and the domain nodes,
-/// with the robot layer's checks of robot settings. `spomp validate`, `sim`, `run`, `nodes` and
+/// with the robot layer's checks of robot settings and the mission section it owns (`comms:`;
+/// the adapters' sections are registered by whoever links the adapters, `spomp::registry`). `spomp validate`, `sim`, `run`, `nodes` and
 /// `schema` all use it; a lab's own binary adds its node types to it.
 pub fn registry() -> NodeRegistry<RobotRuntime> {
     let mut r = engine_registry();
@@ -68,6 +69,7 @@ pub fn registry() -> NodeRegistry<RobotRuntime> {
     register_coordination(&mut r);
     register_teammates(&mut r);
     r.set_robot_checks(Arc::new(MissionRobotChecks));
+    r.register_section(spomp_behaviors::mission::owner::<crate::CommsSpec>());
     r
 }
 

@@ -44,7 +44,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use spomp_behaviors::NodeRegistry;
 use spomp_behaviors::mission::schema::CompleteWhen;
-use spomp_behaviors::mission::{LoadedMission, MissionFile};
+use spomp_behaviors::mission::{LoadedMission, MissionFile, MissionSection};
 use spomp_behaviors::trace::Recorder;
 use spomp_core::{
     AerialMap, ClassId, GoalId, Odometry, PanoramaFrame, PanoramaGeometry, Point2, Pose2, PoseEstimate, RobotId,
@@ -53,8 +53,8 @@ use spomp_core::{
 use spomp_mapping::{CompressionParams, PngLevel};
 use spomp_robot::runtime::{FinishedWork, SkillWork, WorkKind};
 use spomp_robot::{
-    LinkCredit, ModelledWork, PoseInput, Robot, RobotObserver, RobotRuntime, RobotSetup, RobotView, RoundShape,
-    SetupOptions, TeamTraffic,
+    CommsSpec, LinkCredit, ModelledWork, PoseInput, Robot, RobotObserver, RobotRuntime, RobotSetup, RobotView,
+    RoundShape, SetupOptions, TeamTraffic,
 };
 use spomp_teamstate::{GoalOrigin, Tier, TierSet};
 
@@ -168,9 +168,14 @@ impl Simulation {
         if !(options.dt_s.is_finite() && options.dt_s > 0.0 && options.sync_period_s > 0.0) {
             return Err(SimError::invalid("simulation options", "dt_s and sync_period_s must be positive"));
         }
-        let faults = faults_for_mission(&mission, &options.faults);
-        let radio = Radio::new(radio_for_mission(&mission), &faults)?;
-        let area = spomp_world::operating_area(&mission, &world);
+        let faults = faults_for_mission(&mission, &options.faults)?;
+        let radio = Radio::new(radio_for_mission(&mission)?, &faults)?;
+        let area =
+            spomp_world::operating_area(&mission, &world).map_err(|e| SimError::invalid("mission", e.to_string()))?;
+        let ugv_to_ugv = CommsSpec::of_mission(&mission)
+            .map_err(|e| SimError::invalid("mission", e.to_string()))?
+            .ugv_to_ugv
+            .unwrap_or(true);
         // Through the mission's mapping: looked up by the built-in name alone, a renamed table's
         // bodies (`Car`) fell back to index 4, another class there (the yard's grass).
         let ugv_body_class = spomp_robot::class_names::ClassNames::new(&mission, world.classes())
@@ -271,7 +276,7 @@ impl Simulation {
         let time_limit_s = options.time_limit_s.unwrap_or(mission.time_limit_s);
         let n_robots = robots.len();
         Ok(Simulation {
-            ugv_to_ugv: mission.comms.ugv_to_ugv.unwrap_or(true),
+            ugv_to_ugv,
             mission,
             dt_ns: (options.dt_s * 1e9).round() as i64,
             options,
