@@ -175,7 +175,7 @@ impl Robot {
         if let Some(goals) = &mission.goals {
             for (k, g) in goals.manual.iter().enumerate() {
                 runtime
-                    .team_mut()
+                    .team_state_mut()
                     .add_mission_goal(k as u32, Point2::new(g.x_m, g.y_m))
                     .map_err(|e| RobotError::MissionGoal(e.to_string()))?;
             }
@@ -280,14 +280,14 @@ impl Robot {
             SeamCall::TeamIn { from, bytes } => {
                 self.traffic.received_messages += 1;
                 self.traffic.received_bytes += bytes.len() as u64;
-                let result = self.runtime.team_mut().apply_bytes(from, bytes);
+                let result = self.runtime.team_state_mut().apply_bytes(from, bytes);
                 if let Err(e) = &result {
                     self.runtime.report(format!("sync from {from} rejected: {e}"));
                 }
                 SeamReply::TeamIn(result)
             }
             SeamCall::TeamOut { to, tiers, budget_bytes, sent } => {
-                *sent = self.runtime.team_mut().make_sync(to, *tiers, *budget_bytes).map(|m| {
+                *sent = self.runtime.team_state_mut().make_sync(to, *tiers, *budget_bytes).map(|m| {
                     let bytes = m.encode();
                     self.traffic.count_sent(*tiers, &m, bytes.len());
                     bytes
@@ -394,13 +394,13 @@ impl Robot {
     /// Signs this robot's team-state records and messages and checks its peers' (a secured
     /// team; see `spomp_teamstate::auth`).
     pub fn secure_team(&mut self, security: Arc<TeamSecurity>) -> Result<(), TeamStateError> {
-        self.runtime.team_mut().set_security(security)
+        self.runtime.team_state_mut().set_security(security)
     }
 
     /// Which boot of this robot this is (larger at every boot): peers forget what they knew of
     /// its earlier messages.
     pub fn set_team_session(&mut self, session: u64) {
-        self.runtime.team_mut().set_session(session);
+        self.runtime.team_state_mut().set_session(session);
     }
 
     /// What a reboot resumes from: the team state and the role's kept blackboard entries.
@@ -451,7 +451,7 @@ impl Robot {
         }
         let mut team_state = self.runtime.team().clone();
         let summary = team_state.restore(team)?;
-        *self.runtime.team_mut() = team_state;
+        *self.runtime.team_state_mut() = team_state;
         for (name, value) in values {
             self.tree.blackboard_mut().set_by_name(&name, value);
         }

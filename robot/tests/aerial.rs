@@ -642,15 +642,15 @@ time_limit_s: 1000
 "#;
 
 /// Everything `from` holds, copied into `to` (a one-way radio burst; acknowledgements dropped).
-fn tell(from: &mut RobotRuntime, to: &mut RobotRuntime) {
+fn tell(from: &mut DrivenRuntime, to: &mut DrivenRuntime) {
     let to_id = to.id().clone();
-    if let Some(m) = from.team_mut().make_sync(&to_id, TierSet::ALL, usize::MAX) {
-        to.team_mut().apply(from.id(), &m).unwrap();
+    if let Some(m) = from.team_state_mut().make_sync(&to_id, TierSet::ALL, usize::MAX) {
+        to.team_state_mut().apply(from.id(), &m).unwrap();
     }
 }
 
 /// A full two-way exchange, as robots in radio contact do.
-fn exchange(a: &mut RobotRuntime, b: &mut RobotRuntime) {
+fn exchange(a: &mut DrivenRuntime, b: &mut DrivenRuntime) {
     for _ in 0..3 {
         tell(a, b);
         tell(b, a);
@@ -669,7 +669,7 @@ fn seek_robot_rotates_round_robin_and_flies_to_the_path_end_of_a_stale_robot() {
     fix(&mut ugv1, Point2::new(100.0, 0.0), t0);
     // ugv2 was last heard at t = 0, heading to (0, 200): at t0 its pose is stale.
     fix(&mut ugv2, Point2::new(0.0, 100.0), Time::ZERO);
-    ugv2.team_mut().set_path_end(Some(Point2::new(0.0, 200.0))).unwrap();
+    ugv2.team_state_mut().set_path_end(Some(Point2::new(0.0, 200.0))).unwrap();
     for r in [&mut base, &mut ugv1, &mut ugv2] {
         tell(r, &mut uav.rt);
     }
@@ -744,7 +744,7 @@ fn wait_for_sync_needs_a_full_exchange_during_the_wait_and_times_out_otherwise()
     let mut ugv = runtime("ugv1", RobotKind::Ugv, 1, Pose2::default());
     let ugv_at = Point2::new(20.0, 5.0);
     // Some team data on both sides, as in a mission.
-    ugv.team_mut().add_mission_goal(0, Point2::new(60.0, 60.0)).unwrap();
+    ugv.team_state_mut().add_mission_goal(0, Point2::new(60.0, 60.0)).unwrap();
     fix(&mut ugv, ugv_at, Time::ZERO);
 
     // Nothing heard yet: hover (no command), not complete.

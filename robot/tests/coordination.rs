@@ -64,8 +64,8 @@ fn robots() -> (Robot, Robot) {
                 .into();
         rt.on_external_pose(PoseEstimate { pose: start, confidence: 1.0, ..Default::default() });
         // Operator goals: A near both robots, B farther away.
-        rt.team_mut().add_mission_goal(0, Point2::new(10.0, 0.0)).unwrap();
-        rt.team_mut().add_mission_goal(1, Point2::new(60.0, 0.0)).unwrap();
+        rt.team_state_mut().add_mission_goal(0, Point2::new(10.0, 0.0)).unwrap();
+        rt.team_state_mut().add_mission_goal(1, Point2::new(60.0, 0.0)).unwrap();
         let ex = build_executor(role, &registry, rt.id(), start, BuildOptions::default()).unwrap();
         Robot { rt, ex }
     };
@@ -79,11 +79,11 @@ fn tick(r: &mut Robot, t: Time) -> Status {
 /// A full exchange both ways, as robots in radio contact would do.
 fn exchange(a: &mut Robot, b: &mut Robot) {
     for _ in 0..3 {
-        if let Some(m) = a.rt.team_mut().make_sync(b.rt.id(), TierSet::ALL, usize::MAX) {
-            b.rt.team_mut().apply(a.rt.id(), &m).unwrap();
+        if let Some(m) = a.rt.team_state_mut().make_sync(b.rt.id(), TierSet::ALL, usize::MAX) {
+            b.rt.team_state_mut().apply(a.rt.id(), &m).unwrap();
         }
-        if let Some(m) = b.rt.team_mut().make_sync(a.rt.id(), TierSet::ALL, usize::MAX) {
-            a.rt.team_mut().apply(b.rt.id(), &m).unwrap();
+        if let Some(m) = b.rt.team_state_mut().make_sync(a.rt.id(), TierSet::ALL, usize::MAX) {
+            a.rt.team_state_mut().apply(b.rt.id(), &m).unwrap();
         }
     }
 }
@@ -205,11 +205,11 @@ mod detection {
         map
     }
 
-    fn detecting_runtime(id: &str, spec: GridSpec) -> RobotRuntime {
+    fn detecting_runtime(id: &str, spec: GridSpec) -> spomp_robot::runtime::DrivenRuntime {
         let config = RuntimeConfig::basic(RobotId::new(id), RobotKind::Ugv, 1, Pose2::default())
             .with_detection(GoalDetectionParams::default())
             .with_map_spec(spec);
-        RobotRuntime::from_config(config).unwrap()
+        RobotRuntime::from_config(config).unwrap().into()
     }
 
     /// Ticks a fresh `detect_goals` node once and returns (status, new_goals, reports).
@@ -238,7 +238,7 @@ mod detection {
         // No map yet: one pass, nothing found, no error.
         assert_eq!(detect(&mut a, Time::ZERO), (Status::Success, Some(0), vec![]));
 
-        a.team_mut().add_map_version(map.version, Time::ZERO, blob).unwrap();
+        a.team_state_mut().add_map_version(map.version, Time::ZERO, blob).unwrap();
         let (status, n, reports) = detect(&mut a, Time::from_millis(100));
         assert_eq!((status, n), (Status::Success, Some(2)), "{reports:?}");
         let xs: Vec<f64> = a.team().goals().iter().map(|g| g.position.x).collect();
@@ -248,11 +248,11 @@ mod detection {
         // ugv2 receives the goals and the map through the team state, detects the same clusters,
         // and adds nothing.
         for _ in 0..3 {
-            if let Some(m) = a.team_mut().make_sync(b.id(), TierSet::ALL, usize::MAX) {
-                b.team_mut().apply(a.id(), &m).unwrap();
+            if let Some(m) = a.team_state_mut().make_sync(b.id(), TierSet::ALL, usize::MAX) {
+                b.team_state_mut().apply(a.id(), &m).unwrap();
             }
-            if let Some(m) = b.team_mut().make_sync(a.id(), TierSet::ALL, usize::MAX) {
-                a.team_mut().apply(b.id(), &m).unwrap();
+            if let Some(m) = b.team_state_mut().make_sync(a.id(), TierSet::ALL, usize::MAX) {
+                a.team_state_mut().apply(b.id(), &m).unwrap();
             }
         }
         assert_eq!(b.team().goals().len(), 2);
@@ -266,7 +266,7 @@ mod detection {
     fn a_corrupt_map_version_is_reported_and_changes_nothing() {
         let spec = GridSpec::new(Point2::new(0.0, 0.0), 0.5, 200, 100);
         let mut a = detecting_runtime("ugv1", spec);
-        a.team_mut().add_map_version(1, Time::ZERO, vec![1, 2, 3, 4]).unwrap();
+        a.team_state_mut().add_map_version(1, Time::ZERO, vec![1, 2, 3, 4]).unwrap();
         let (status, n, reports) = detect(&mut a, Time::from_millis(100));
         assert_eq!((status, n), (Status::Success, Some(0)));
         assert!(reports.iter().any(|r| r.contains("unusable")), "{reports:?}");

@@ -88,7 +88,7 @@ fn a_goal_found_while_heading_home_is_claimed_at_once() {
     assert!(r.rt.team().goals().is_empty());
 
     // A teammate's goal arrives (here written straight into the team state).
-    let goal = r.rt.team_mut().add_mission_goal(0, Point2::new(80.0, 0.0)).unwrap();
+    let goal = r.rt.team_state_mut().add_mission_goal(0, Point2::new(80.0, 0.0)).unwrap();
     run(&mut r, 2_000, 2_300);
     // `claim_goal` wrote it: the trip home was abandoned within a few ticks (before, the robot
     // drove all the way home and waited 10 s first). What follows the claim is not looked at:
@@ -99,7 +99,7 @@ fn a_goal_found_while_heading_home_is_claimed_at_once() {
 #[test]
 fn with_nothing_to_claim_the_robot_keeps_heading_home() {
     let mut r = robot_away_from_home("keep-going");
-    let goal = r.rt.team_mut().add_mission_goal(0, Point2::new(80.0, 0.0)).unwrap();
+    let goal = r.rt.team_state_mut().add_mission_goal(0, Point2::new(80.0, 0.0)).unwrap();
     // The only goal failed for this robot: it is not claimable until the robot has been home
     // and waited, so the robot keeps going home and does not take it.
     r.rt.team_mut().mark_unreachable(&goal, Time::ZERO).unwrap();

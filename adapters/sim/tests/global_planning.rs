@@ -19,7 +19,7 @@ use common::{DriverSetup, DrivingRobot, fill, ring};
 use spomp_behaviors::Status;
 use spomp_core::{Cell, Point2, Pose2, Twist2, normalize_angle};
 use spomp_global_planner::{GlobalPlannerParams, SharingMode};
-use spomp_robot::RobotRuntime;
+use spomp_robot::runtime::DrivenRuntime;
 use spomp_teamstate::{TeamStateParams, TierSet};
 use spomp_world::World;
 
@@ -147,14 +147,14 @@ fn with_graph_updates_off_the_robot_never_gets_past_the_block() {
 }
 
 /// Copies every record of `from`'s team state into `to`'s, as a radio link in range would.
-fn sync(from: &mut RobotRuntime, to: &mut RobotRuntime) {
+fn sync(from: &mut DrivenRuntime, to: &mut DrivenRuntime) {
     let (a, b) = (from.id().clone(), to.id().clone());
     for _ in 0..1000 {
-        let forward = from.team_mut().make_sync(&b, TierSet::ALL, 1 << 20);
-        let back = forward.as_ref().map(|m| to.team_mut().apply(&a, m).unwrap());
-        let reply = to.team_mut().make_sync(&a, TierSet::ALL, 1 << 20);
+        let forward = from.team_state_mut().make_sync(&b, TierSet::ALL, 1 << 20);
+        let back = forward.as_ref().map(|m| to.team_state_mut().apply(&a, m).unwrap());
+        let reply = to.team_state_mut().make_sync(&a, TierSet::ALL, 1 << 20);
         if let Some(m) = &reply {
-            from.team_mut().apply(&b, m).unwrap();
+            from.team_state_mut().apply(&b, m).unwrap();
         }
         if back.is_none() && reply.is_none() {
             break;

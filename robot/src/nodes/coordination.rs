@@ -174,7 +174,7 @@ impl Behavior<RobotRuntime> for MarkVisited {
     fn tick(&mut self, _prev: Status, ctx: &mut Ctx<'_>) -> Status {
         let now = ctx.now;
         let Some(goal) = goal_of(&self.goal, ctx, "mark_visited") else { return Status::Failure };
-        let team = ctx.env.team_mut();
+        let mut team = ctx.env.team_mut();
         let result = team.mark_visited(&goal, now).and_then(|()| team.release(&goal, now));
         match result {
             Ok(()) => Status::Success,

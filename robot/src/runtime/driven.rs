@@ -36,6 +36,13 @@ impl DerefMut for DrivenRuntime {
 }
 
 impl DrivenRuntime {
+    /// The whole team database, as a link and the mission set-up change it (sync messages,
+    /// mission goals, the robot's published path end): what `Robot` does through its seam, for
+    /// a harness without one. Nodes get `RobotRuntime::team_mut` only.
+    pub fn team_state_mut(&mut self) -> &mut spomp_teamstate::TeamState {
+        self.0.team_state_mut()
+    }
+
     /// Clears this tick's outputs; call before the tree is ticked.
     pub fn begin_tick(&mut self) {
         self.0.begin_tick();

@@ -8,6 +8,7 @@
 mod driven;
 mod localization;
 mod navigation;
+mod team_goals;
 mod work;
 
 use std::collections::HashMap;
@@ -25,6 +26,7 @@ use spomp_teamstate::{GoalOrigin, IdentifyOutcome, TeamState, TeamStateError, Te
 pub use driven::DrivenRuntime;
 pub use localization::{Localization, LocalizationSetup, UpdateSchedule};
 pub use navigation::{LocalView, NavParams, NavStack};
+pub use team_goals::TeamGoalsMut;
 pub use work::{FinishedWork, JoinFn, SkillWork, WorkKind};
 
 use work::{FinishedParts, PerceptionJob, PerceptionResult};
@@ -629,8 +631,16 @@ impl RobotRuntime {
         &self.team
     }
 
-    /// The team database, to claim, release and mark goals and publish what the robot knows.
-    pub fn team_mut(&mut self) -> &mut TeamState {
+    /// The team database as a node changes it: claim, release and mark goals (reads through
+    /// it too). The sync with teammates and what the robot publishes of itself are the robot's
+    /// own ([`TeamGoalsMut`]).
+    pub fn team_mut(&mut self) -> TeamGoalsMut<'_> {
+        TeamGoalsMut::new(&mut self.team)
+    }
+
+    /// The whole team database, for the robot's seam and upkeep (and a harness's, through
+    /// [`DrivenRuntime::team_state_mut`]).
+    pub(crate) fn team_state_mut(&mut self) -> &mut TeamState {
         &mut self.team
     }
 
