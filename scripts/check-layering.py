@@ -6,8 +6,9 @@ Layers, bottom to top: core < messages < skills < behaviors (engine + mission la
 - core depends on no spomp crate;
 - messages (`core/ros_msgs`: the ROS 2 message types as plain data) depend on core only;
 - a skill depends only on core and other skills (never behaviours, the robot or adapters);
-- behaviours (the engine and the mission language) depend on core and the messages only (a
-  robot's `ros2:` section names a depth encoding): they know no skill, no robot and no adapter;
+- behaviours (the engine and the mission language) depend on core only: they know no message
+  type, skill, robot or adapter (an adapter's mission section is an opaque value to the
+  language, typed and checked by its owner, registered beside the node types);
 - the robot (runtime, domain nodes, mission → robot) depends on core, messages, skills and
   behaviours;
 - the world model (`world/`: layers, world files, the city generator, a mission's world and
@@ -66,7 +67,7 @@ ALLOWED = {
     "core": set(),
     "skill": {"core", "skill"},
     "messages": {"core"},
-    "behaviors": {"core", "messages"},
+    "behaviors": {"core"},
     "robot": {"core", "messages", "skill", "behaviors"},
     "world": {"core", "skill", "behaviors", "robot"},
     "adapter": {"core", "messages", "skill", "behaviors", "robot", "world"},

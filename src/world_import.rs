@@ -34,8 +34,7 @@ use serde_json::json;
 use spomp_behaviors::mission::limits::{MAX_SOURCE_BYTES, read_regular, read_text};
 use spomp_behaviors::mission::yaml;
 use spomp_core::{AerialMap, ClassId, ClassInfo, ClassTable, GridSpec, Point2, Pose2};
-use spomp_sim::{Ugv, UgvParams};
-use spomp_world::{DerivedElevationParams, World, WorldMeta};
+use spomp_world::{DerivedElevationParams, UgvLimits, World, WorldMeta};
 
 /// The largest raster file read, bytes.
 pub const MAX_RASTER_BYTES: u64 = 64 << 20;
@@ -692,7 +691,7 @@ pub fn start_poses(world: &World, near: Point2, count: usize) -> Vec<Pose2> {
         // Round to centimetres and centiradians so the poses read well in a mission file.
         let pose =
             Pose2::new((p.x * 100.0).round() / 100.0, (p.y * 100.0).round() / 100.0, (yaw * 100.0).round() / 100.0);
-        if Ugv::new(world, UgvParams::default(), pose).is_ok() {
+        if UgvLimits::default().stand_at(world, pose.position()).is_ok() {
             out.push(pose);
         }
     }

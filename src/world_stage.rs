@@ -28,8 +28,7 @@ use spomp_behaviors::mission::{Diagnostic, LoadOptions, LoadedMission, Stage};
 use spomp_core::classes::IMPASSABLE_RANK;
 use spomp_core::{Point2, Pose2, RobotKind};
 use spomp_robot::class_names::ClassNames;
-use spomp_sim::{Ugv, UgvParams};
-use spomp_world::{SimSpec, World, WorldSpec};
+use spomp_world::{SimSpec, UgvLimits, World, WorldSpec};
 
 /// One step of a path into the mission's YAML: a mapping key or a list index.
 enum Step<'a> {
@@ -172,11 +171,15 @@ pub fn check(loaded: &LoadedMission, options: &LoadOptions) -> Vec<Diagnostic> {
                     ground.join(", ")
                 ),
             ));
-        } else if let Err(e) = Ugv::new(&world, UgvParams::default(), pose) {
+        } else if let Err(e) = UgvLimits::default().stand_at(&world, pose.position()) {
+            // Worded as the simulator refuses the same start.
             out.push(at(
                 &path,
                 &node_path,
-                format!("UGV `{}` cannot stand at ({}, {}) on `{name}`: {e}", robot.id, pose.x, pose.y),
+                format!(
+                    "UGV `{}` cannot stand at ({}, {}) on `{name}`: invalid UGV start pose: {e}",
+                    robot.id, pose.x, pose.y
+                ),
             ));
         }
     }

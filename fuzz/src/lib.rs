@@ -22,8 +22,15 @@ use spomp_behaviors::registry::{Category, NodeRegistry};
 use spomp_robot::RobotRuntime;
 
 thread_local! {
-    /// The command line's node registry, built once per fuzzing process.
-    static REGISTRY: NodeRegistry<RobotRuntime> = spomp_robot::registry();
+    /// The command line's node registry, built once per fuzzing process, with the owners of the
+    /// mission sections this crate links (`sim:`, `team_link:`; `comms:` comes with the robot's;
+    /// the fuzz crate does not link the ROS 2 adapter, so a `ros2:` section is kept unchecked).
+    static REGISTRY: NodeRegistry<RobotRuntime> = {
+        let mut r = spomp_robot::registry();
+        r.register_section(spomp_behaviors::mission::owner::<spomp_world::SimSpec>());
+        r.register_section(spomp_behaviors::mission::owner::<spomp_zenoh::TeamLinkSpec>());
+        r
+    };
 }
 
 /// A scratch folder for this process and target (in memory when `/dev/shm` exists): the loaders

@@ -33,6 +33,6 @@ pub use files::{
 pub use mission::{operating_area, world_for_mission};
 pub use mission_section::{CircleSpec, FaultSpec, GenerateSpec, SimSpec, WorldSpec};
 pub use terrain::{
-    FootprintHeights, Obstacle, UgvLimits, footprint_heights, ground_truth_traversability, reachable_cells,
+    FootprintHeights, Obstacle, StandError, UgvLimits, footprint_heights, ground_truth_traversability, reachable_cells,
 };
 pub use world::{World, WorldMeta};

@@ -1,8 +1,11 @@
 //! Ground-truth traversability from geometry alone (step height and slope under the robot's
-//! footprint). Only the simulator uses it, to move robots; the robots' own planners never see it.
+//! footprint). The simulator uses it to move robots, and the tools that judge a UGV's start pose
+//! ([`UgvLimits::stand_at`]: `spomp validate`'s world stage, `spomp world import`) use its one
+//! rule of where a UGV can stand; the robots' own planners never see it.
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
+use spomp_core::classes::IMPASSABLE_RANK;
 use spomp_core::{ClassId, Grid, Point2};
 
 use crate::world::World;
@@ -67,7 +70,40 @@ pub fn footprint_heights(world: &World, p: Point2, radius_m: f64) -> Option<Foot
     Some(FootprintHeights { min_m, max_m, center_m })
 }
 
+/// Why a UGV cannot stand where it is put ([`UgvLimits::stand_at`]).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum StandError {
+    /// The place is on an impassable class: geometry alone would let a robot stand on a roof.
+    #[error("({x:.2}, {y:.2}) is on an impassable class")]
+    Impassable {
+        /// East, metres.
+        x: f64,
+        /// North, metres.
+        y: f64,
+    },
+    /// The ground under the footprint is too uneven or steep (or outside the world).
+    #[error("the robot cannot stand at ({x:.2}, {y:.2})")]
+    CannotStand {
+        /// East, metres.
+        x: f64,
+        /// North, metres.
+        y: f64,
+    },
+}
+
 impl UgvLimits {
+    /// Where a UGV with these limits stands when it is put at `p` (a start pose): the base
+    /// height under it, or why it cannot stand there. The one rule of a standable start, for the
+    /// simulator's UGV and for the tools that judge start poses without a simulator.
+    pub fn stand_at(&self, world: &World, p: Point2) -> Result<f32, StandError> {
+        let impassable = world.class_at(p).is_some_and(|c| world.classes().rank(c) >= IMPASSABLE_RANK);
+        if impassable {
+            return Err(StandError::Impassable { x: p.x, y: p.y });
+        }
+        let base = world.elevation_at(p).unwrap_or(f32::NAN);
+        self.admits(world, p, base).ok_or(StandError::CannotStand { x: p.x, y: p.y })
+    }
+
     /// Whether the robot, standing at base height `base_m`, may place its footprint at `p`:
     /// every touched cell within a step of the base and of the cell under the new centre, and
     /// the ground under it no steeper than the slope limit. Returns the new base height (the cell under the centre) when it may.

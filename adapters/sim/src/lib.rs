@@ -20,14 +20,6 @@ pub mod run;
 mod uav;
 mod ugv;
 
-/// The world model the models move through, by the paths they name it.
-mod world {
-    pub(crate) use spomp_world::World;
-}
-/// Ground-truth terrain: what a body can drive, and the bodies the world does not hold.
-mod terrain {
-    pub(crate) use spomp_world::{Obstacle, UgvLimits};
-}
 #[cfg(test)]
 use spomp_world::{CityParams, generate_city};
 

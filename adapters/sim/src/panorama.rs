@@ -15,8 +15,8 @@ use serde::{Deserialize, Serialize};
 use spomp_core::{DepthPanorama, PanoramaFrame, PanoramaGeometry, Pose2, SemanticPanorama, Time, UNKNOWN_CLASS};
 
 use crate::error::SimError;
-use crate::terrain::Obstacle;
-use crate::world::World;
+use spomp_world::Obstacle;
+use spomp_world::World;
 
 /// Parameters of the panoramic depth + semantics sensor.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]

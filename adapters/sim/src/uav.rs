@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use spomp_core::{ClassId, MapTile, Point2, Pose2, UNKNOWN_CLASS};
 
 use crate::error::SimError;
-use crate::world::World;
+use spomp_world::World;
 
 /// Parameters of the aerial robot and its camera.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]

@@ -9,8 +9,8 @@ use serde::{Deserialize, Serialize};
 use spomp_core::{Odometry, OdometryCovariance, Point2, Pose2, Time, Twist2, normalize_angle};
 
 use crate::error::SimError;
-use crate::terrain::{Obstacle, UgvLimits};
-use crate::world::World;
+use spomp_world::World;
+use spomp_world::{Obstacle, UgvLimits};
 
 /// Parameters of the ground robot model.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -107,21 +107,10 @@ impl Ugv {
                 "speeds and accelerations must be finite and non-negative, max_substep_m positive",
             ));
         }
-        // Geometry alone would let a robot stand on a roof: starts on impassable classes are
-        // refused as well.
-        if world
-            .class_at(pose.position())
-            .is_some_and(|c| world.classes().rank(c) >= spomp_core::classes::IMPASSABLE_RANK)
-        {
-            return Err(SimError::invalid(
-                "UGV start pose",
-                format!("({:.2}, {:.2}) is on an impassable class", pose.x, pose.y),
-            ));
-        }
-        let base = world.elevation_at(pose.position()).unwrap_or(f32::NAN);
-        let base_m = params.limits.admits(world, pose.position(), base).ok_or_else(|| {
-            SimError::invalid("UGV start pose", format!("the robot cannot stand at ({:.2}, {:.2})", pose.x, pose.y))
-        })?;
+        let base_m = params
+            .limits
+            .stand_at(world, pose.position())
+            .map_err(|e| SimError::invalid("UGV start pose", e.to_string()))?;
         Ok(Ugv { params, pose, twist: Twist2::ZERO, base_m, distance_m: 0.0, collisions: 0, contact: None })
     }
 

@@ -247,7 +247,8 @@ pub struct RobotRuntime {
     perception_join: Option<JoinFn>,
 }
 
-/// What one goal-detection pass did.
+/// What one goal-detection pass did: a plain result value handed to the node (public fields by
+/// the rule in docs/ARCHITECTURE.md, "Public fields"; it holds no runtime state).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct DetectionPass {
     /// Goals new to the team state.

@@ -70,7 +70,9 @@ fn give_back_analyzer(analyzer: Box<TerrainAnalyzer>) {
     }
 }
 
-/// Navigation parameters of a UGV.
+/// Navigation parameters of a UGV: a plain value of parameters (public fields, each the
+/// skill's own params type; the rule in docs/ARCHITECTURE.md, "Public fields"), resolved once
+/// by `RobotSetup` and read by the runtime.
 #[derive(Clone, Debug, Default)]
 pub struct NavParams {
     /// Local planner (terrain analysis, local goal, DWA).

@@ -75,10 +75,10 @@ use robots::{
 use crate::error::SimError;
 use crate::panorama::{PanoramaSensor, SensorParams};
 use crate::radio::{Faults, Link, LinkTier, Radio, RadioNode};
-use crate::terrain::Obstacle;
 use crate::uav::{OrthoCamera, Uav, UavParams};
 use crate::ugv::{NoisyPoseSource, OdometryModel, OdometryNoiseParams, PoseNoiseParams, Ugv, UgvParams};
-use crate::world::World;
+use spomp_world::Obstacle;
+use spomp_world::World;
 
 /// Everything a finished run leaves: the summary and what plots need.
 pub struct RunResult {
