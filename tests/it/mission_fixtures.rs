@@ -110,3 +110,24 @@ fn several_errors_are_reported_in_one_run() {
     let loaded = load_mission(&f, &registry);
     assert_eq!(loaded.diagnostics.len(), 3, "{:#?}", loaded.diagnostics);
 }
+
+#[test]
+fn every_adapter_section_has_its_owner_in_the_cli_registry() {
+    use spomp_behaviors::mission::json_schema::mission_schema;
+    use spomp_behaviors::mission::sections::{SECTION_SLOTS, SectionPlace};
+    let registry = spomp::registry();
+    let schema = mission_schema(registry.catalog());
+    let owned = [("comms", "CommsSpec"), ("sim", "SimSpec"), ("ros2", "Ros2Spec"), ("team_link", "TeamLinkSpec")];
+    assert_eq!(SECTION_SLOTS.len(), owned.len());
+    for (name, place) in SECTION_SLOTS {
+        let owner = registry.catalog().section_owner(name).unwrap_or_else(|| panic!("no owner of `{name}`"));
+        let def = owned.iter().find(|(n, _)| n == name).map(|(_, d)| *d).unwrap();
+        assert_eq!(owner.def_name(), def);
+        let slot = match place {
+            SectionPlace::Mission => &schema["properties"][name],
+            SectionPlace::Robot => &schema["$defs"]["RobotSpec"]["properties"][name],
+        };
+        assert!(slot.to_string().contains(&format!("#/$defs/{def}")), "{name}: {slot:#}");
+        assert!(schema["$defs"][def].is_object(), "{def} missing from the schema");
+    }
+}

@@ -62,3 +62,20 @@ fn only_the_lab_registry_knows_the_lab_type() {
     let mut twice = lab.clone();
     assert!(custom_node::register(&mut twice, Default::default()).is_err());
 }
+
+#[test]
+fn the_lab_binary_checks_the_adapter_sections_as_spomp_does() {
+    // `spomp::registry()` brings the owners of `comms:`, `sim:`, `ros2:` and `team_link:`: a bad
+    // key inside a robot's `ros2:` is reported at its place by the lab's binary too.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let fixture = root.join("tests/missions/invalid-ros2-unknown-key.yaml");
+    let out = lab().arg("validate").arg(&fixture).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains("11:32") && text.contains("team[1].ros2.odometry_timout_s"), "{text}");
+    let schema = stdout(lab().arg("schema"));
+    for def in ["\"CommsSpec\"", "\"SimSpec\"", "\"Ros2Spec\"", "\"TeamLinkSpec\""] {
+        assert!(schema.contains(def), "{def} missing from the lab's schema");
+    }
+}
+
