@@ -10,9 +10,7 @@ use std::path::Path;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use spomp_behaviors::mission::json_schema::mission_schema;
-use spomp_behaviors::mission::{
-    LoadOptions, LoadedMission, MissionSection, SectionContext, load_mission_str, owner,
-};
+use spomp_behaviors::mission::{LoadOptions, LoadedMission, MissionSection, SectionContext, load_mission_str, owner};
 use spomp_behaviors::{NodeRegistry, engine_registry};
 
 /// A lab's radio settings, owning `comms:`.

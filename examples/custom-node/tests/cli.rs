@@ -78,4 +78,3 @@ fn the_lab_binary_checks_the_adapter_sections_as_spomp_does() {
         assert!(schema.contains(def), "{def} missing from the lab's schema");
     }
 }
-
