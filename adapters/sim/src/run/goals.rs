@@ -154,6 +154,11 @@ impl Simulation {
                         m.visited_s = Some(t);
                         m.visited_by = g.visited_by.clone();
                     }
+                    if let Some(t) = g.cancelled_s
+                        && m.cancelled_s.is_none_or(|s| t < s)
+                    {
+                        m.cancelled_s = Some(t);
+                    }
                 }
             }
         }
@@ -162,7 +167,8 @@ impl Simulation {
 
     pub(super) fn all_goals_visited(&self) -> bool {
         let goals = self.merged_goals();
-        if goals.is_empty() || goals.iter().any(|g| g.visited_s.is_none()) {
+        // A goal the operator cancelled is done (issue 37).
+        if goals.is_empty() || goals.iter().any(|g| g.visited_s.is_none() && g.cancelled_s.is_none()) {
             return false;
         }
         // With detection in a generated world, every vehicle cluster must have been found too.
