@@ -21,6 +21,7 @@ mod error;
 mod files;
 mod mission;
 pub mod mission_section;
+pub mod operator_script;
 mod terrain;
 mod world;
 

@@ -33,6 +33,9 @@ pub struct SimSpec {
     /// without a UAV.
     #[serde(default)]
     pub prior_map: bool,
+    /// Operator commands scripted at simulated times (see [`crate::operator_script`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub operator: Vec<crate::operator_script::ScriptedCommand>,
 }
 
 /// Which world to simulate.
@@ -183,6 +186,17 @@ impl MissionSection for SimSpec {
                 && !ctx.mission.team.iter().any(|r| &r.id == robot)
             {
                 bad(&["faults", &idx, "kill", "robot"], format!("no robot `{robot}` in the team"));
+            }
+        }
+        let robots: Vec<&str> = ctx.mission.team.iter().map(|r| r.id.as_str()).collect();
+        for (i, entry) in self.operator.iter().enumerate() {
+            if let Err((field, message)) = entry.check(&robots) {
+                let idx = i.to_string();
+                let mut at = vec!["operator", idx.as_str()];
+                if !field.is_empty() {
+                    at.push(field.as_str());
+                }
+                bad(&at, message);
             }
         }
     }

@@ -163,7 +163,8 @@ pub fn load_mission_str<E: 'static>(
     let subtrees = include_stage(&root, path, &roots, &mut out, &mut diags);
     wiring_stage(&root, path, registry, &subtrees, &roots, &mut out, &mut diags);
     team_stage(&mission, &root, path, registry, &out.roles, &mut diags);
-    if diags.is_empty() {
+    // Warnings (a role that ignores the operator) do not stop the node factories' checks.
+    if !diags.iter().any(Diagnostic::is_error) {
         build_stage(nodes, path, &out, &mut diags);
     }
     finish(out, Some(mission), diags)
@@ -505,6 +506,33 @@ pub fn team_stage(
             let segs: Vec<&str> = p.path.iter().map(String::as_str).collect();
             diags.push(Diagnostic::new(path, loc_at(root, &segs), p.path.join("."), Stage::Schema, p.message));
         }
+        let role_nodes: BTreeMap<String, std::collections::BTreeSet<String>> = roles
+            .iter()
+            .map(|(name, role)| {
+                let mut types = std::collections::BTreeSet::new();
+                node_types(&role.tree, &mut types);
+                (name.clone(), types)
+            })
+            .collect();
+        for p in checks.warnings(mission, &role_nodes) {
+            let segs: Vec<&str> = p.path.iter().map(String::as_str).collect();
+            let d = Diagnostic::new(path, loc_at(root, &segs), p.path.join("."), Stage::Schema, p.message);
+            diags.push(d.into_warning());
+        }
+    }
+}
+
+/// Every node type in a compiled tree (subtrees are expanded in it).
+fn node_types(ir: &super::compile::Ir, out: &mut std::collections::BTreeSet<String>) {
+    use super::compile::IrKind;
+    out.insert(ir.type_name.clone());
+    match &ir.kind {
+        IrKind::Control { children, .. } => children.iter().for_each(|c| node_types(c, out)),
+        IrKind::Decorator { child, .. } => node_types(child, out),
+        IrKind::StateMachine { states, .. } => {
+            states.iter().filter_map(|s| s.run.as_ref()).for_each(|r| node_types(r, out))
+        }
+        IrKind::Leaf { .. } => {}
     }
 }
 

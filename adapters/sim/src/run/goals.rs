@@ -27,6 +27,7 @@ impl Simulation {
                                 GoalOrigin::Detected => "detected",
                                 GoalOrigin::Mission => "mission",
                                 GoalOrigin::Basestation => "basestation",
+                                GoalOrigin::Operator => "operator",
                             }
                             .to_string(),
                             identified_s: g.identified_at.as_secs_f64(),
@@ -36,6 +37,7 @@ impl Simulation {
                             visited_s: None,
                             visited_by: None,
                             revisits_in_contact: 0,
+                            cancelled_s: None,
                         };
                         observer.on_event(
                             now,
@@ -60,6 +62,12 @@ impl Simulation {
                     && by == &r.id
                 {
                     own_visits.push((g.id.clone(), ri, *t));
+                }
+                if let Some(by) = &g.cancelled
+                    && entry.cancelled_s.is_none()
+                {
+                    entry.cancelled_s = Some(now.as_secs_f64());
+                    observer.on_event(now, &SimEvent::GoalCancelled { goal: entry.id.clone(), by: by.to_string() });
                 }
                 if let Some((t, by)) = &g.visited {
                     let t = t.as_secs_f64();
@@ -146,6 +154,11 @@ impl Simulation {
                         m.visited_s = Some(t);
                         m.visited_by = g.visited_by.clone();
                     }
+                    if let Some(t) = g.cancelled_s
+                        && m.cancelled_s.is_none_or(|s| t < s)
+                    {
+                        m.cancelled_s = Some(t);
+                    }
                 }
             }
         }
@@ -154,7 +167,8 @@ impl Simulation {
 
     pub(super) fn all_goals_visited(&self) -> bool {
         let goals = self.merged_goals();
-        if goals.is_empty() || goals.iter().any(|g| g.visited_s.is_none()) {
+        // A goal the operator cancelled is done (issue 37).
+        if goals.is_empty() || goals.iter().any(|g| g.visited_s.is_none() && g.cancelled_s.is_none()) {
             return false;
         }
         // With detection in a generated world, every vehicle cluster must have been found too.
