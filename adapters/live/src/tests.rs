@@ -116,3 +116,63 @@ fn a_viewer_offering_only_the_current_name_connects() {
 fn a_viewer_offering_only_the_original_name_connects() {
     a_viewer_offering_only(LEGACY_SUBPROTOCOL);
 }
+
+/// Foxglove's 3-D panel "Publish point": a client channel of `geometry_msgs/PointStamped`, in
+/// json (what Foxglove writes when the server lists json first) or cdr; each point goes to the
+/// handler, and its answer back to the viewer. Other types are refused with a status.
+#[test]
+fn points_a_viewer_publishes_reach_the_handler_and_its_answer_reaches_the_viewer() {
+    use std::sync::Mutex;
+    let got: Arc<Mutex<Vec<PublishedPoint>>> = Arc::default();
+    let handler: PointHandler = {
+        let got = got.clone();
+        Arc::new(move |p: &PublishedPoint| {
+            if p.frame_id != "map" {
+                return Err(format!("frame `{}`, not map", p.frame_id));
+            }
+            got.lock().unwrap().push(p.clone());
+            Ok(format!("goal requested at ({}, {})", p.x, p.y))
+        })
+    };
+    let options = LiveOptions { points: Some(handler) };
+    let server = LiveServer::start_with(loopback_any_port(), "spomp", options).unwrap();
+    let mut viewer = Viewer::connect(server.local_addr(), WAIT).unwrap();
+    let capabilities = viewer.server_info["capabilities"].as_array().unwrap();
+    assert!(capabilities.iter().any(|c| c == "clientPublish"), "{:?}", viewer.server_info);
+    assert_eq!(viewer.server_info["supportedEncodings"], serde_json::json!(["json", "cdr"]));
+
+    viewer.advertise(1, "/clicked_point", "json", "geometry_msgs/PointStamped").unwrap();
+    viewer.wait_for_status("becomes an operator's goal", WAIT).unwrap();
+    let json = br#"{"header":{"stamp":{"sec":1,"nsec":0},"frame_id":"map"},"point":{"x":40,"y":12.5,"z":0}}"#;
+    viewer.publish(1, json).unwrap();
+    viewer.wait_for_status("goal requested at (40, 12.5)", WAIT).unwrap();
+    viewer.publish(1, br#"{"header":{"frame_id":"ugv1/base_link"},"point":{"x":1,"y":2,"z":0}}"#).unwrap();
+    viewer.wait_for_status("refused: frame `ugv1/base_link`", WAIT).unwrap();
+    viewer.publish(1, b"not json").unwrap();
+    viewer.wait_for_status("refused: a json point that is not JSON", WAIT).unwrap();
+
+    viewer.advertise(2, "/ros2_point", "cdr", "geometry_msgs/msg/PointStamped").unwrap();
+    viewer.publish(2, &points::tests::cdr_point("map", 3, 0, [-7.0, 8.0, 0.0])).unwrap();
+    viewer.wait_for_status("goal requested at (-7, 8)", WAIT).unwrap();
+
+    viewer.advertise(3, "/move_base_simple/goal", "json", "geometry_msgs/PoseStamped").unwrap();
+    viewer.wait_for_status("/move_base_simple/goal: schema `geometry_msgs/PoseStamped` is not taken", WAIT).unwrap();
+    viewer.publish(3, b"{}").unwrap();
+    viewer.wait_for_status("/move_base_simple/goal: refused", WAIT).unwrap();
+
+    let got = got.lock().unwrap().clone();
+    let summary: Vec<(&str, f64, f64)> = got.iter().map(|p| (p.topic.as_str(), p.x, p.y)).collect();
+    assert_eq!(summary, [("/clicked_point", 40.0, 12.5), ("/ros2_point", -7.0, 8.0)]);
+    server.stop();
+}
+
+#[test]
+fn without_a_point_handler_a_viewer_may_not_publish() {
+    let server = LiveServer::start(loopback_any_port(), "spomp").unwrap();
+    let mut viewer = Viewer::connect(server.local_addr(), WAIT).unwrap();
+    let capabilities = viewer.server_info["capabilities"].as_array().unwrap();
+    assert!(!capabilities.iter().any(|c| c == "clientPublish"), "{:?}", viewer.server_info);
+    viewer.advertise(1, "/clicked_point", "json", "geometry_msgs/PointStamped").unwrap();
+    viewer.wait_for_status("clientPublish", WAIT).unwrap();
+    server.stop();
+}
