@@ -32,5 +32,5 @@ pub use farm::FarmLink;
 
 pub use run::{RobotNode, RunObserver, RunReport};
 pub use settings::{RunSettings, SettingsError};
-pub use team::{StateSink, TeamChannel};
+pub use team::{OperatorDesk, StateSink, TeamChannel};
 pub use topics::TopicNames;
