@@ -176,3 +176,43 @@ fn without_a_point_handler_a_viewer_may_not_publish() {
     viewer.wait_for_status("clientPublish", WAIT).unwrap();
     server.stop();
 }
+
+/// The stdlib-only Python client (`scripts/foxglove-publish-point.py`, written from the
+/// protocol's description like a third-party tool) publishes a point in each encoding: each
+/// reaches the handler, and the client reads the handler's answer. Skipped where there is no
+/// `python3`.
+#[test]
+fn the_python_client_publishes_a_point_in_json_and_in_cdr() {
+    use std::process::Command;
+    use std::sync::Mutex;
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/foxglove-publish-point.py");
+    if Command::new("python3").arg("--version").output().is_err() {
+        eprintln!("no python3: skipped");
+        return;
+    }
+    let got: Arc<Mutex<Vec<PublishedPoint>>> = Arc::default();
+    let handler: PointHandler = {
+        let got = got.clone();
+        Arc::new(move |p: &PublishedPoint| {
+            got.lock().unwrap().push(p.clone());
+            if p.frame_id == "map" { Ok(format!("goal at ({}, {})", p.x, p.y)) } else { Err("not map".into()) }
+        })
+    };
+    let server = LiveServer::start_with(loopback_any_port(), "spomp", LiveOptions { points: Some(handler) }).unwrap();
+    let run = |args: &[&str]| {
+        let out = Command::new("python3").arg(&script).arg(server.url()).args(args).output().unwrap();
+        (out.status.code(), String::from_utf8_lossy(&out.stdout).trim().to_string())
+    };
+    assert_eq!(run(&["40", "12.5"]), (Some(0), "/clicked_point: goal at (40, 12.5)".to_string()));
+    assert_eq!(run(&["-3", "7", "--encoding", "cdr"]), (Some(0), "/clicked_point: goal at (-3, 7)".to_string()));
+    let (code, text) = run(&["1", "2", "--frame", "ugv1/base_link"]);
+    assert_eq!((code, text.as_str()), (Some(1), "/clicked_point: refused: not map"));
+    let got: Vec<(String, f64, f64)> = got.lock().unwrap().iter().map(|p| (p.frame_id.clone(), p.x, p.y)).collect();
+    assert_eq!(got, [("map".into(), 40.0, 12.5), ("map".into(), -3.0, 7.0), ("ugv1/base_link".into(), 1.0, 2.0)]);
+    // A server that takes no points: the client says so.
+    let plain = LiveServer::start(loopback_any_port(), "spomp").unwrap();
+    let out = Command::new("python3").arg(&script).arg(plain.url()).args(["1", "2"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stdout));
+    server.stop();
+    plain.stop();
+}
