@@ -140,7 +140,13 @@ pub fn set_up(args: &TeamLinkArgs, mission: &MissionFile, robot_id: &str, robot:
     // naming anyone else are refused and counted by the link before anything is kept of them.
     config.members = Some(match &keys {
         Some(k) => k.members().cloned().collect(),
-        None => mission.team.iter().map(|r| RobotId::new(&r.id)).collect(),
+        // The operator (issue 37) is admitted like a robot.
+        None => mission
+            .team
+            .iter()
+            .map(|r| RobotId::new(&r.id))
+            .chain(std::iter::once(RobotId::new(spomp_teamstate::OPERATOR_ID)))
+            .collect(),
     });
     match &keys {
         Some(k) => config.credentials = Some(k.credentials(&id)?),
@@ -193,7 +199,7 @@ pub fn generate(mission: &Path, out: &Path, registry: &NodeRegistry<RobotRuntime
     match KeyDir::generate(out, &m.mission, &robots) {
         Ok(_) => {
             out!(
-                "keys of team `{}` for {} robots in {}: team.json and transport.passwords go to every robot, <robot>.key.json only to its robot",
+                "keys of team `{}` for {} robots and the operator in {}: team.json and transport.passwords go to every robot, <robot>.key.json only to its robot, operator.key.json to the operator (and a robot that serves an operator interface)",
                 m.mission,
                 robots.len(),
                 out.display()

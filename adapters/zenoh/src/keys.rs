@@ -2,9 +2,14 @@
 //!
 //! | file | holds | who needs it |
 //! |---|---|---|
-//! | `team.json` | the team's name and every member's Ed25519 public key | every robot |
+//! | `team.json` | the team's name, every robot's and the operator's Ed25519 public key | every robot |
 //! | `<robot>.key.json` | that robot's Ed25519 secret key and transport password | that robot only |
+//! | `operator.key.json` | the operator's secret key and transport password (issue 37) | the operator's machine, and a robot that serves an operator interface |
 //! | `transport.passwords` | every member's `user:password` line (Zenoh's dictionary) | every robot |
+//!
+//! The operator (reserved id [`OPERATOR_ID`]) is a member like a robot: the transport admits it
+//! with its password ([`KeyDir::credentials`]) and it signs with its key ([`KeyDir::security`]);
+//! only its key may issue operator commands (`team.json` lists it under `operators`).
 //!
 //! Secret files are written readable by their owner only (mode 0600), and a secret file that
 //! group or others may read or write is refused, as ssh refuses such keys. A robot loads
@@ -20,7 +25,7 @@ use std::sync::Arc;
 use rand::RngCore;
 use serde::{Deserialize, Serialize};
 use spomp_core::RobotId;
-use spomp_teamstate::{TeamKeys, TeamSecurity};
+use spomp_teamstate::{OPERATOR_ID, TeamKeys, TeamSecurity};
 
 use crate::link::Credentials;
 
@@ -61,6 +66,10 @@ struct TeamFile {
     team: String,
     /// Robot id → public key (64 hex digits).
     members: BTreeMap<String, String>,
+    /// Operator id → public key (64 hex digits): members whose key issues operator commands.
+    /// Absent in key directories made before operators existed.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    operators: BTreeMap<String, String>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -97,7 +106,10 @@ impl std::fmt::Debug for RobotKeys {
 pub struct KeyDir {
     dir: PathBuf,
     team: String,
+    /// The robots' public keys.
     members: BTreeMap<RobotId, [u8; 32]>,
+    /// The operators' public keys.
+    operators: BTreeMap<RobotId, [u8; 32]>,
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> KeyDirError + '_ {
@@ -164,12 +176,16 @@ fn is_identifier(s: &str) -> bool {
 }
 
 impl KeyDir {
-    /// Makes a key directory for `team` with one key pair and password per robot in `robots`.
-    /// `dir` must not hold keys already (nothing is overwritten).
+    /// Makes a key directory for `team` with one key pair and password per robot in `robots`,
+    /// and one for the operator ([`OPERATOR_ID`]). `dir` must not hold keys already (nothing is
+    /// overwritten).
     pub fn generate(dir: &Path, team: &str, robots: &[RobotId]) -> Result<KeyDir, KeyDirError> {
         for r in robots {
             if !is_identifier(r.as_str()) {
                 return Err(invalid(dir, format!("robot id `{r}` is not an identifier ([A-Za-z0-9_-])")));
+            }
+            if r.as_str() == OPERATOR_ID {
+                return Err(invalid(dir, format!("robot id `{r}` is reserved for the team's operator")));
             }
         }
         fs::create_dir_all(dir).map_err(io(dir))?;
@@ -179,8 +195,10 @@ impl KeyDir {
         }
         let mut rng = rand::rng();
         let mut members = BTreeMap::new();
+        let mut operators = BTreeMap::new();
         let mut passwords = String::new();
-        for robot in robots {
+        let operator = RobotId::new(OPERATOR_ID);
+        for robot in robots.iter().chain(std::iter::once(&operator)) {
             let mut secret = [0u8; 32];
             rng.fill_bytes(&mut secret);
             let mut pw = [0u8; 24];
@@ -196,17 +214,22 @@ impl KeyDir {
             let text = serde_json::to_string_pretty(&file).map_err(|e| invalid(dir, e.to_string()))?;
             write_file(&dir.join(format!("{robot}.key.json")), &(text + "\n"), true)?;
             passwords.push_str(&format!("{robot}:{password}\n"));
-            members.insert(robot.clone(), TeamSecurity::public_key_of(&secret));
+            let public = TeamSecurity::public_key_of(&secret);
+            match robot == &operator {
+                true => operators.insert(robot.clone(), public),
+                false => members.insert(robot.clone(), public),
+            };
         }
         write_file(&dir.join(PASSWORDS_FILE), &passwords, true)?;
         let file = TeamFile {
             format: TEAM_FORMAT.into(),
             team: team.into(),
             members: members.iter().map(|(r, k)| (r.to_string(), hex::encode(k))).collect(),
+            operators: operators.iter().map(|(r, k)| (r.to_string(), hex::encode(k))).collect(),
         };
         let text = serde_json::to_string_pretty(&file).map_err(|e| invalid(dir, e.to_string()))?;
         write_file(&team_path, &(text + "\n"), false)?;
-        Ok(KeyDir { dir: dir.to_path_buf(), team: team.into(), members })
+        Ok(KeyDir { dir: dir.to_path_buf(), team: team.into(), members, operators })
     }
 
     /// Reads the team's public keys from `dir/team.json`.
@@ -221,9 +244,22 @@ impl KeyDir {
         }
         let mut members = BTreeMap::new();
         for (robot, key) in &file.members {
+            if robot == OPERATOR_ID {
+                return Err(invalid(
+                    &path,
+                    format!("`{OPERATOR_ID}` is listed as a robot; it belongs under `operators`"),
+                ));
+            }
             members.insert(RobotId::new(robot), key_from_hex(&path, &format!("public key of {robot}"), key)?);
         }
-        Ok(KeyDir { dir: dir.to_path_buf(), team: file.team, members })
+        let mut operators = BTreeMap::new();
+        for (op, key) in &file.operators {
+            if file.members.contains_key(op) {
+                return Err(invalid(&path, format!("`{op}` is listed both as a robot and as an operator")));
+            }
+            operators.insert(RobotId::new(op), key_from_hex(&path, &format!("public key of operator {op}"), key)?);
+        }
+        Ok(KeyDir { dir: dir.to_path_buf(), team: file.team, members, operators })
     }
 
     /// The team's name.
@@ -231,22 +267,53 @@ impl KeyDir {
         &self.team
     }
 
-    /// The members.
+    /// The members: every robot and operator, in id order (who the transport admits).
     pub fn members(&self) -> impl Iterator<Item = &RobotId> {
+        let mut all: Vec<&RobotId> = self.members.keys().chain(self.operators.keys()).collect();
+        all.sort();
+        all.into_iter()
+    }
+
+    /// The robots (members that are not operators), in id order.
+    pub fn robots(&self) -> impl Iterator<Item = &RobotId> {
         self.members.keys()
     }
 
-    /// The team's public keys, for checking signatures.
+    /// The operators, in id order (one, [`OPERATOR_ID`], in a generated directory; none in one
+    /// made before operators existed).
+    pub fn operators(&self) -> impl Iterator<Item = &RobotId> {
+        self.operators.keys()
+    }
+
+    /// The team's public keys, for checking signatures (the operators marked as such).
     pub fn team_keys(&self) -> Result<TeamKeys, KeyDirError> {
         let mut keys = TeamKeys::new(self.team.clone());
         for (robot, key) in &self.members {
             keys.add(robot.clone(), key)
                 .map_err(|e| invalid(&self.dir.join(TEAM_FILE), format!("public key of {robot}: {e}")))?;
         }
+        for (op, key) in &self.operators {
+            keys.add_operator(op.clone(), key)
+                .map_err(|e| invalid(&self.dir.join(TEAM_FILE), format!("public key of operator {op}: {e}")))?;
+        }
         Ok(keys)
     }
 
-    /// Reads `robot`'s secrets from `dir/<robot>.key.json`.
+    /// What the operator signs commands with: its secret key (`operator.key.json`) and the
+    /// team's public keys. A short-lived operator member sets it as its team state's security;
+    /// a robot that serves an operator interface passes it to
+    /// [`spomp_teamstate::TeamState::issue_command_as`].
+    pub fn operator_security(&self) -> Result<TeamSecurity, KeyDirError> {
+        self.security(&RobotId::new(OPERATOR_ID))
+    }
+
+    /// The operator's transport credentials (user [`OPERATOR_ID`], its password, the team's
+    /// dictionary): the operator opens the team link with these like a robot.
+    pub fn operator_credentials(&self) -> Result<Credentials, KeyDirError> {
+        self.credentials(&RobotId::new(OPERATOR_ID))
+    }
+
+    /// Reads `robot`'s secrets from `dir/<robot>.key.json` (the operator's: `operator.key.json`).
     pub fn robot_keys(&self, robot: &RobotId) -> Result<RobotKeys, KeyDirError> {
         let path = self.dir.join(format!("{}.key.json", robot));
         let text = read_small(&path, true)?;
@@ -312,6 +379,33 @@ mod tests {
         fs::write(dir.join(TEAM_FILE), "{\"format\": 1}").unwrap();
         let err = KeyDir::load(&dir).unwrap_err().to_string();
         assert!(err.contains("team.json") && err.contains("expected"), "{err}");
+        let _ = fs::remove_dir_all(&dir);
+    }
+
+    /// Issue 37: the operator's key pair is generated beside the robots', loaded as an operator
+    /// (only its key issues commands), and the transport admits it like a robot.
+    #[test]
+    fn the_operator_key_is_generated_loaded_and_admitted() {
+        let dir = std::env::temp_dir().join(format!("spomp-keys-op-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        let robots = [RobotId::new("ugv1"), RobotId::new("uav1")];
+        KeyDir::generate(&dir, "city", &robots).unwrap();
+        let keys = KeyDir::load(&dir).unwrap();
+        let operator = RobotId::new(OPERATOR_ID);
+        assert_eq!(keys.robots().cloned().collect::<Vec<_>>(), vec![RobotId::new("uav1"), RobotId::new("ugv1")]);
+        assert_eq!(keys.operators().collect::<Vec<_>>(), vec![&operator]);
+        assert!(keys.members().any(|m| m == &operator), "the transport's roster admits the operator");
+        let team = keys.team_keys().unwrap();
+        assert!(team.is_operator(&operator) && !team.is_operator(&RobotId::new("ugv1")));
+        assert_eq!(keys.operator_security().unwrap().robot(), &operator);
+        let credentials = keys.operator_credentials().unwrap();
+        assert_eq!(credentials.user, OPERATOR_ID);
+        let dictionary = fs::read_to_string(dir.join(PASSWORDS_FILE)).unwrap();
+        assert!(dictionary.lines().any(|l| l == format!("{OPERATOR_ID}:{}", credentials.password)));
+        let _ = fs::remove_dir_all(&dir);
+        // A robot may not take the operator's id.
+        let err = KeyDir::generate(&dir, "city", &[operator]).unwrap_err().to_string();
+        assert!(err.contains("reserved"), "{err}");
         let _ = fs::remove_dir_all(&dir);
     }
 

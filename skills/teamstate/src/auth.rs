@@ -78,22 +78,50 @@ pub enum KeyError {
 }
 
 /// The public keys of a team: who is a member, and how to check what each one signed.
+///
+/// Members are the robots and the operators (issue 37): an operator is a member like a robot
+/// (it may send sync messages and relay), and only an operator's key may write operator
+/// commands ([`crate::OperatorCommand`]).
 #[derive(Clone)]
 pub struct TeamKeys {
     team: String,
     members: BTreeMap<RobotId, VerifyingKey>,
+    /// The members whose key issues operator commands (a subset of `members`).
+    operators: std::collections::BTreeSet<RobotId>,
 }
 
 impl fmt::Debug for TeamKeys {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.debug_struct("TeamKeys").field("team", &self.team).field("members", &self.members.keys()).finish()
+        f.debug_struct("TeamKeys")
+            .field("team", &self.team)
+            .field("members", &self.members.keys())
+            .field("operators", &self.operators)
+            .finish()
     }
 }
 
 impl TeamKeys {
     /// The keys of team `team` (the mission's name: signatures of another team do not check).
     pub fn new(team: impl Into<String>) -> Self {
-        TeamKeys { team: team.into(), members: BTreeMap::new() }
+        TeamKeys { team: team.into(), members: BTreeMap::new(), operators: Default::default() }
+    }
+
+    /// Adds an operator with its 32-byte public key: a member whose key (and only whose key)
+    /// issues operator commands. The operator's id must not be a robot's.
+    pub fn add_operator(&mut self, operator: RobotId, public_key: &[u8; KEY_BYTES]) -> Result<(), KeyError> {
+        self.add(operator.clone(), public_key)?;
+        self.operators.insert(operator);
+        Ok(())
+    }
+
+    /// Whether `id` is an operator of the team (its key may issue operator commands).
+    pub fn is_operator(&self, id: &RobotId) -> bool {
+        self.operators.contains(id)
+    }
+
+    /// The operators, in id order.
+    pub fn operators(&self) -> impl Iterator<Item = &RobotId> {
+        self.operators.iter()
     }
 
     /// Adds a member with its 32-byte public key.
@@ -108,12 +136,12 @@ impl TeamKeys {
         &self.team
     }
 
-    /// Whether `robot` is a member.
+    /// Whether `robot` is a member (a robot or an operator).
     pub fn is_member(&self, robot: &RobotId) -> bool {
         self.members.contains_key(robot)
     }
 
-    /// The members, in id order.
+    /// The members (robots and operators), in id order.
     pub fn members(&self) -> impl Iterator<Item = &RobotId> {
         self.members.keys()
     }
@@ -229,6 +257,7 @@ mod tests {
         assert!(!b.message_signed_by(&RobotId::new("a"), b"claim", &sig), "other domain");
         assert!(!b.record_signed_by(&RobotId::new("x"), b"claim", &sig), "non-member");
         let other_team = Arc::new(TeamKeys { team: "u".into(), ..(*keys).clone() });
+        assert!(!keys.is_operator(&RobotId::new("a")));
         let a2 = TeamSecurity::new(RobotId::new("a"), &[1; 32], other_team).unwrap();
         assert!(!b.record_signed_by(&RobotId::new("a"), b"claim", &a2.sign_record(b"claim")), "other team");
     }

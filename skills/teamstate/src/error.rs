@@ -27,6 +27,14 @@ pub enum TeamStateError {
         /// The holder.
         robot: spomp_core::RobotId,
     },
+    /// The operator cancelled the goal.
+    #[error("goal {goal} was cancelled by operator command {by}")]
+    Cancelled {
+        /// Canonical id of the goal.
+        goal: GoalId,
+        /// The cancelling command.
+        by: String,
+    },
     /// A position, pose or scan has non-finite or out-of-range values.
     #[error("invalid input: {0}")]
     InvalidInput(String),

@@ -30,6 +30,7 @@
 pub mod auth;
 mod error;
 mod intern;
+mod operator;
 mod params;
 mod record;
 mod snapshot;
@@ -39,6 +40,10 @@ mod view;
 
 pub use auth::{KeyError, SecurityError, Signature, TeamKeys, TeamSecurity};
 pub use error::{SyncError, TeamStateError};
+pub use operator::{
+    CommandAckRecord, CommandId, CommandTarget, CommandView, MAX_COMMAND_TEXT, OPERATOR_ID, OperatorAction,
+    OperatorCommand, OperatorMode, RobotOrders,
+};
 pub use params::TeamStateParams;
 pub use record::{
     ClaimRecord, GoalOrigin, GoalRecord, MAX_DOT, MapVersion, Record, RecordBody, RecordKey, RobotRecord, Tier,

@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use spomp_core::{GoalId, Point2, Pose2, ReachabilityScan, RobotId, Time};
 
 use crate::auth::Signature;
+use crate::operator::{CommandAckRecord, CommandId, OperatorCommand};
 
 /// Priority tier of a record for sync: lower tiers go first.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
@@ -113,6 +114,15 @@ pub enum RecordKey {
     },
     /// The latest aerial-map version published by a robot.
     Map(RobotId),
+    /// An operator command (issue 37); written once by the operator named in the id.
+    Command(CommandId),
+    /// A robot's acknowledgement that it applied an operator command; written once by the robot.
+    CommandAck {
+        /// The command.
+        command: CommandId,
+        /// The robot that applied it.
+        robot: RobotId,
+    },
 }
 
 impl RecordKey {
@@ -125,6 +135,8 @@ impl RecordKey {
                 robot
             }
             RecordKey::RetryEpoch(r) | RecordKey::Robot(r) | RecordKey::Map(r) => r,
+            RecordKey::Command(c) => &c.operator,
+            RecordKey::CommandAck { robot, .. } => robot,
         }
     }
 
@@ -149,12 +161,23 @@ impl RecordKey {
             RecordKey::Robot(_) => 5,
             RecordKey::Scan { .. } => 6,
             RecordKey::Map(_) => 7,
+            // Operator commands go first (a cancel before the claims it overrides); the
+            // acknowledgements with the other status records.
+            RecordKey::Command(_) => 0,
+            RecordKey::CommandAck { .. } => 4,
         }
     }
 
     /// Whether records of this key are immutable (only ever written once, dot 1).
     pub fn is_immutable(&self) -> bool {
-        matches!(self, RecordKey::Goal(_) | RecordKey::Visit { .. } | RecordKey::Scan { .. })
+        matches!(
+            self,
+            RecordKey::Goal(_)
+                | RecordKey::Visit { .. }
+                | RecordKey::Scan { .. }
+                | RecordKey::Command(_)
+                | RecordKey::CommandAck { .. }
+        )
     }
 
     /// The goal a goal-status record refers to.
@@ -178,6 +201,8 @@ pub enum GoalOrigin {
     Mission,
     /// Sent by the basestation (operator).
     Basestation,
+    /// Added by an operator command during the mission ([`crate::OperatorAction::AddGoal`]).
+    Operator,
 }
 
 /// An identified goal (immutable).
@@ -266,6 +291,10 @@ pub enum RecordBody {
     Scan(Arc<ReachabilityScan>),
     /// For [`RecordKey::Map`].
     Map(MapVersion),
+    /// For [`RecordKey::Command`]. Boxed: rare, and larger than the other bodies.
+    Command(Box<OperatorCommand>),
+    /// For [`RecordKey::CommandAck`].
+    CommandAck(CommandAckRecord),
 }
 
 /// A record: key, the writer's counter at the write, and content.
@@ -370,6 +399,8 @@ impl Record {
                     return Err(format!("map blob of {} bytes is too large", m.blob.len()));
                 }
             }
+            (RecordKey::Command(_), RecordBody::Command(c)) => c.validate()?,
+            (RecordKey::CommandAck { .. }, RecordBody::CommandAck(_)) => {}
             _ => return Err("key and body kinds differ".into()),
         }
         Ok(())
@@ -385,7 +416,10 @@ pub(crate) fn record_stamp(body: &RecordBody) -> Option<Time> {
         RecordBody::Unreachable(u) => Some(u.stamp),
         RecordBody::Robot(r) => Some(r.stamp),
         RecordBody::Map(m) => Some(m.stamp),
-        RecordBody::RetryEpoch(_) | RecordBody::Scan(_) => None,
+        RecordBody::CommandAck(a) => Some(a.stamp),
+        // An operator's clock (a laptop's wall time) need not be the robots': the issue time
+        // is for the log only, no lease depends on it, so it is never judged.
+        RecordBody::RetryEpoch(_) | RecordBody::Scan(_) | RecordBody::Command(_) => None,
     }
 }
 

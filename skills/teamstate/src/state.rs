@@ -125,6 +125,12 @@ pub struct TeamState {
     security: Option<Arc<TeamSecurity>>,
     /// Which boot of this robot this is (see [`SyncMessage::session`]).
     session: u64,
+    /// Operator commands issued here are numbered above this (see
+    /// [`TeamState::set_command_seq_floor`]).
+    command_seq_floor: u32,
+    /// Messages refused because of an operator record: a command signed by a key that is not
+    /// the operator's, or written by a robot (a secured team).
+    refused_operator_records: u64,
 }
 
 impl TeamState {
@@ -150,6 +156,8 @@ impl TeamState {
             own_claims_checked: None,
             security: None,
             session: 0,
+            command_seq_floor: 0,
+            refused_operator_records: 0,
         })
     }
 
@@ -192,6 +200,31 @@ impl TeamState {
         self.session
     }
 
+    /// Numbers the operator commands issued from this team state above `floor`: a short-lived
+    /// operator process (a new `TeamState` per invocation) passes a number above any it used
+    /// before (e.g. its wall clock in seconds since a fixed date), so two invocations never
+    /// issue two commands under one id. Commands learnt from peers raise the numbering too.
+    pub fn set_command_seq_floor(&mut self, floor: u32) {
+        self.command_seq_floor = self.command_seq_floor.max(floor);
+    }
+
+    /// See [`TeamState::set_command_seq_floor`].
+    pub fn command_seq_floor(&self) -> u32 {
+        self.command_seq_floor
+    }
+
+    /// Messages this robot refused because of an operator record (issue 37): a command signed
+    /// by a key other than the operator's, a command written by a robot, or another record
+    /// written under an operator's id. Each also counts as a refused message of its kind.
+    pub fn refused_operator_records(&self) -> u64 {
+        self.refused_operator_records
+    }
+
+    /// The records (for the operator module).
+    pub(crate) fn records_set(&self) -> &RecordSet {
+        &self.records
+    }
+
     /// This robot's id.
     pub fn self_id(&self) -> &RobotId {
         &self.self_id
@@ -217,15 +250,22 @@ impl TeamState {
     }
 
     /// Inserts a record this robot wrote (or a mission record) and keeps derived state current.
-    fn put(&mut self, key: RecordKey, dot: u64, mut body: RecordBody) {
-        crate::intern::share_body(&key, &mut body);
-        let mut rec = Record { key: key.clone(), dot, body, sig: None };
+    fn put(&mut self, key: RecordKey, dot: u64, body: RecordBody) {
+        self.put_record(Record { key, dot, body, sig: None });
+    }
+
+    /// Inserts a record written here (signed now if it is this robot's and unsigned) and keeps
+    /// derived state current.
+    pub(crate) fn put_record(&mut self, mut rec: Record) {
+        crate::intern::share_body(&rec.key, &mut rec.body);
         if let Some(security) = &self.security
-            && key.writer() == &self.self_id
+            && rec.sig.is_none()
+            && rec.key.writer() == &self.self_id
         {
             rec.sig = Some(Box::new(security.sign_record(&record_bytes(&rec))));
         }
-        let goal_related = key.goal().is_some() || matches!(key, RecordKey::RetryEpoch(_));
+        let key = rec.key.clone();
+        let goal_related = changes_goals(&key);
         if let RecordBody::Scan(s) = &rec.body {
             self.scan_log.push(s.clone());
         }
@@ -421,6 +461,9 @@ impl TeamState {
         if view.status == crate::view::GoalStatus::Visited {
             return Err(TeamStateError::AlreadyVisited(view.id.clone()));
         }
+        if let Some(by) = &view.cancelled {
+            return Err(TeamStateError::Cancelled { goal: view.id.clone(), by: by.to_string() });
+        }
         if let Some(holder) = view
             .claimant
             .as_ref()
@@ -449,6 +492,16 @@ impl TeamState {
         self.release_own(Some(&canonical), stamp);
         self.clear_current_goal_if(&canonical);
         Ok(())
+    }
+
+    /// Releases every claim of this robot (a recalled robot gives its goal back at once) and
+    /// clears its current goal; returns whether it held any.
+    pub fn release_all_claims(&mut self, stamp: Time) -> bool {
+        let released = self.release_own(None, stamp);
+        if self.own_robot_record().current_goal.is_some() {
+            self.write_robot(|r| r.current_goal = None);
+        }
+        released
     }
 
     fn clear_current_goal_if(&mut self, canonical: &GoalId) {
@@ -591,25 +644,29 @@ impl TeamState {
             .min_by(|a, b| a.position.distance(position).total_cmp(&b.position.distance(position)))
     }
 
-    /// Goals `robot` may claim, nearest to `position` first: not visited, not unreachable for
-    /// it, and not claimed by another robot.
+    /// Goals `robot` may claim, most urgent first (operator priority, higher first), nearest to
+    /// `position` first among equals: not visited, not cancelled, not unreachable for it, and
+    /// not claimed by another robot.
     pub fn claimable_goals_for(&self, robot: &RobotId, position: Point2) -> Vec<&GoalView> {
         let mut out: Vec<&GoalView> = self
             .goals()
             .iter()
-            .filter(|v| v.visited.is_none())
+            .filter(|v| v.visited.is_none() && v.cancelled.is_none())
             .filter(|v| !v.is_unreachable_for(robot))
             .filter(|v| v.claims.iter().all(|c| &c.robot == robot))
             .collect();
         out.sort_by(|a, b| {
-            a.position.distance(position).total_cmp(&b.position.distance(position)).then_with(|| a.id.cmp(&b.id))
+            b.priority
+                .cmp(&a.priority)
+                .then_with(|| a.position.distance(position).total_cmp(&b.position.distance(position)))
+                .then_with(|| a.id.cmp(&b.id))
         });
         out
     }
 
-    /// Whether every goal is visited (and there is at least one).
+    /// Whether every goal is visited or cancelled by the operator (and there is at least one).
     pub fn all_goals_visited(&self) -> bool {
-        !self.goals().is_empty() && self.goals().iter().all(|v| v.visited.is_some())
+        !self.goals().is_empty() && self.goals().iter().all(|v| v.visited.is_some() || v.cancelled.is_some())
     }
 
     /// The last known state (pose, stamp, current goal, path end) of a robot.
@@ -871,8 +928,11 @@ impl TeamState {
         for (index, rec) in msg.records.iter().enumerate() {
             rec.validate(&limits).map_err(|reason| SyncError::InvalidRecord { index, reason })?;
         }
-        if let Some(security) = &self.security {
-            self.authenticate(security, from, msg)?;
+        if let Some(security) = &self.security
+            && let Err((e, operator_record)) = self.authenticate(security, from, msg)
+        {
+            self.refused_operator_records += u64::from(operator_record);
+            return Err(e);
         }
         let peer_restarted = match self.peers.get(from) {
             Some(p) if msg.session < p.session => {
@@ -932,7 +992,7 @@ impl TeamState {
                 continue;
             }
             report.records_changed += 1;
-            goals_touched |= rec.key.goal().is_some() || matches!(rec.key, RecordKey::RetryEpoch(_));
+            goals_touched |= changes_goals(&rec.key);
             let mut rec = rec.clone();
             crate::intern::share_body(&rec.key, &mut rec.body);
             match &rec.body {
@@ -989,17 +1049,24 @@ impl TeamState {
     }
 
     /// Checks a message's signatures: the sender's over the message, each writer's over its
-    /// record. Any failure rejects the whole message.
-    fn authenticate(&self, security: &TeamSecurity, from: &RobotId, msg: &SyncMessage) -> Result<(), SyncError> {
+    /// record; and that operator commands are written by an operator and operators write
+    /// nothing else. Any failure rejects the whole message; the flag says whether an operator
+    /// record was the cause.
+    fn authenticate(
+        &self,
+        security: &TeamSecurity,
+        from: &RobotId,
+        msg: &SyncMessage,
+    ) -> Result<(), (SyncError, bool)> {
         let keys = security.keys();
         if !keys.is_member(from) {
-            return Err(SyncError::NotAMember(from.to_string()));
+            return Err((SyncError::NotAMember(from.to_string()), false));
         }
         let Some(signature) = &msg.signature else {
-            return Err(SyncError::Unsigned(from.to_string()));
+            return Err((SyncError::Unsigned(from.to_string()), false));
         };
         if !security.message_signed_by(from, &msg.signed_part(true), signature) {
-            return Err(SyncError::BadSignature { from: from.to_string(), what: "the message".into() });
+            return Err((SyncError::BadSignature { from: from.to_string(), what: "the message".into() }, false));
         }
         for (index, rec) in msg.records.iter().enumerate() {
             let writer = rec.key.writer();
@@ -1007,28 +1074,37 @@ impl TeamState {
                 continue;
             }
             if !keys.is_member(writer) {
-                return Err(SyncError::InvalidRecord { index, reason: format!("written by non-member {writer}") });
+                let reason = format!("written by non-member {writer}");
+                return Err((SyncError::InvalidRecord { index, reason }, matches!(rec.key, RecordKey::Command(_))));
+            }
+            let is_command = matches!(rec.key, RecordKey::Command(_));
+            let by_operator = keys.is_operator(writer);
+            if is_command != by_operator {
+                let reason = if is_command {
+                    format!("an operator command written by {writer}, which is not an operator")
+                } else {
+                    format!("a {:?} record under operator {writer}'s id (operators write only commands)", rec.tier())
+                };
+                return Err((SyncError::InvalidRecord { index, reason }, true));
             }
             let checks = rec.sig.as_ref().is_some_and(|sig| security.record_signed_by(writer, &record_bytes(rec), sig));
             if !checks {
-                return Err(SyncError::BadSignature {
-                    from: from.to_string(),
-                    what: format!("record {index} ({writer}'s {:?})", rec.key.tier()),
-                });
+                let what = format!("record {index} ({writer}'s {:?})", rec.key.tier());
+                return Err((SyncError::BadSignature { from: from.to_string(), what }, is_command));
             }
         }
         Ok(())
     }
 
-    /// Releases own claims whose goal group is visited or held by a higher-priority robot;
-    /// returns the canonical ids released.
-    fn resolve_own_conflicts(&mut self) -> Vec<GoalId> {
+    /// Releases own claims whose goal group is visited, cancelled by the operator or held by a
+    /// higher-priority robot; returns the canonical ids released.
+    pub(crate) fn resolve_own_conflicts(&mut self) -> Vec<GoalId> {
         // No clock here: the release is stamped with the robot's latest pose time.
         let stamp = self.own_robot_record().stamp;
         let mut released = Vec::new();
         for g in self.own_active_claims() {
             let Some(view) = self.goal(&g) else { continue };
-            if view.visited.is_some() || !view.is_held_by(&self.self_id) {
+            if view.visited.is_some() || view.cancelled.is_some() || !view.is_held_by(&self.self_id) {
                 let canonical = view.id.clone();
                 self.write_release(g, stamp);
                 self.clear_current_goal_if(&canonical);
@@ -1069,6 +1145,12 @@ impl TeamState {
             peer_entries: self.peers.values().map(|p| p.in_flight.len() + p.sent.len() + p.pending.len()).sum(),
         }
     }
+}
+
+/// Whether a change of a record with this key changes the goal view: goal records and their
+/// status, retry epochs, operator commands.
+fn changes_goals(key: &RecordKey) -> bool {
+    key.goal().is_some() || matches!(key, RecordKey::RetryEpoch(_) | RecordKey::Command(_))
 }
 
 /// The bytes a record's signature covers: its encoding (key, dot, body; the signature itself is

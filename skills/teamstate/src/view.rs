@@ -64,6 +64,23 @@ pub struct GoalView {
     pub visited: Option<(Time, RobotId)>,
     /// Robots for which the goal is currently marked unreachable.
     pub unreachable_for: Vec<RobotId>,
+    /// Its priority set by the operator (issue 37): 0 for an ordinary goal, higher is more
+    /// urgent. Left out of the serialised view when 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub priority: i32,
+    /// The operator command that cancelled it, if it is cancelled (never claimed again).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cancelled: Option<crate::operator::CommandId>,
+    /// The name an operator gave it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// The class an operator gave it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub class: Option<String>,
+}
+
+fn is_zero(p: &i32) -> bool {
+    *p == 0
 }
 
 impl GoalView {
@@ -106,12 +123,15 @@ impl Lease<'_> {
 }
 
 pub(crate) fn build_goal_index(records: &RecordSet, radius_m: f64, lease: &Lease<'_>) -> GoalIndex {
+    // Goal records, and the goals operator commands add (owned: derived from the command).
+    let added = crate::operator::operator_goals(records);
     let mut goals: Vec<(&GoalId, &crate::record::GoalRecord)> = records
         .values()
         .filter_map(|r| match (&r.key, &r.body) {
             (RecordKey::Goal(id), RecordBody::Goal(g)) => Some((id, g)),
             _ => None,
         })
+        .chain(added.iter().map(|(id, g)| (id, g)))
         .collect();
     goals.sort_by(|a, b| a.1.identified_at.cmp(&b.1.identified_at).then_with(|| a.0.cmp(b.0)));
 
@@ -139,6 +159,10 @@ pub(crate) fn build_goal_index(records: &RecordSet, radius_m: f64, lease: &Lease
                     claims: Vec::new(),
                     visited: None,
                     unreachable_for: Vec::new(),
+                    priority: 0,
+                    cancelled: None,
+                    name: None,
+                    class: None,
                 });
             }
         }
@@ -189,6 +213,7 @@ pub(crate) fn build_goal_index(records: &RecordSet, radius_m: f64, lease: &Lease
             view.claims.push(ClaimInfo { robot: robot.clone(), priority: c.priority, stamp: c.stamp });
         }
     }
+    crate::operator::apply_goal_commands(records, &mut index);
     for v in &mut index.views {
         v.claims.sort_by(|a, b| a.priority.cmp(&b.priority).then_with(|| a.robot.cmp(&b.robot)));
         v.unreachable_for.sort();

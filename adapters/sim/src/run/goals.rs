@@ -27,6 +27,7 @@ impl Simulation {
                                 GoalOrigin::Detected => "detected",
                                 GoalOrigin::Mission => "mission",
                                 GoalOrigin::Basestation => "basestation",
+                                GoalOrigin::Operator => "operator",
                             }
                             .to_string(),
                             identified_s: g.identified_at.as_secs_f64(),
