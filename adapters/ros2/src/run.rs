@@ -275,14 +275,20 @@ pub struct RobotNode {
     team_credit: LinkCredit,
     /// Where the resume state goes, and how often (seconds).
     state_sink: Option<(StateSink, f64)>,
-    /// The operator's tools wired to this robot, and the clicked-point topic when it is read.
-    operator: Option<(Box<dyn OperatorDesk>, Option<Subscription<ros::PointStamped>>)>,
+    /// The operator's tools wired to this robot.
+    operator: Option<Operator>,
     // Entities before the node: they are dropped first.
     /// A farm's lockstep calls and this robot's answers (`--lockstep`).
     lockstep: Option<(Subscription<LockstepIn>, Publisher<LockstepOut>)>,
     inputs: Inputs,
     outputs: Outputs,
     node: DdsNode,
+}
+
+/// The operator's tools wired to a robot: the desk, and the clicked-point topic when it is read.
+struct Operator {
+    desk: Box<dyn OperatorDesk>,
+    clicked_point: Option<Subscription<ros::PointStamped>>,
 }
 
 /// Wall-clock budget of one pass when nothing arrives: the loop sleeps this long at most.
@@ -394,15 +400,15 @@ impl RobotNode {
             Some(topic) => Some(self.node.subscription(topic, &state_qos(16))?),
             None => None,
         };
-        self.operator = Some((desk, sub));
+        self.operator = Some(Operator { desk, clicked_point: sub });
         Ok(())
     }
 
     /// Takes the clicked points and polls the desk (see [`RobotNode::set_operator_desk`]).
     fn serve_operator(&mut self, state: &mut LoopState, now: Time) {
-        let Some((desk, sub)) = self.operator.as_mut() else { return };
+        let Some(Operator { desk, clicked_point }) = self.operator.as_mut() else { return };
         let mut answers = Vec::new();
-        if let Some(sub) = sub.as_ref() {
+        if let Some(sub) = clicked_point.as_ref() {
             while let Some(msg) = take(sub, &mut state.report.malformed_inputs) {
                 state.report.received.operator_points += 1;
                 let answer = if msg.header.frame_id != self.settings.frames.map {
