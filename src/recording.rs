@@ -44,6 +44,7 @@ struct GoalState {
     position: Point2,
     claimed_by: Option<String>,
     visited_by: Option<String>,
+    cancelled: bool,
 }
 
 /// Records a run to MCAP (and through it the live view) and drives the progress bar.
@@ -123,6 +124,7 @@ impl<W: Write + Seek> LogObserver<W> {
                     position: Point2::new(position[0], position[1]),
                     claimed_by: None,
                     visited_by: None,
+                    cancelled: false,
                 });
             }
             SimEvent::GoalClaimed { goal, by } => {
@@ -140,7 +142,15 @@ impl<W: Write + Seek> LogObserver<W> {
                 let Some(k) = find(&self.goals, goal) else { return false };
                 self.goals[k].visited_by = Some(by.clone());
             }
-            SimEvent::RobotKilled { .. } | SimEvent::RobotStuck { .. } | SimEvent::MissionEnded { .. } => return false,
+            SimEvent::GoalCancelled { goal, .. } => {
+                let Some(k) = find(&self.goals, goal) else { return false };
+                self.goals[k].cancelled = true;
+            }
+            SimEvent::RobotKilled { .. }
+            | SimEvent::RobotStuck { .. }
+            | SimEvent::MissionEnded { .. }
+            | SimEvent::OperatorCommand { .. }
+            | SimEvent::OperatorAcknowledged { .. } => return false,
         }
         true
     }
@@ -250,6 +260,8 @@ impl<W: Write + Seek> SimObserver for LogObserver<W> {
                         position: g.position,
                         claimed_by: g.claimed_by.as_deref(),
                         visited_by: g.visited_by.as_deref(),
+                        cancelled: g.cancelled,
+                        priority: 0,
                     }),
                 )
             });

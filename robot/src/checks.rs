@@ -2,6 +2,8 @@
 //! is set up as [`crate::RobotSetup`] will set it up, and each parameter is checked by its
 //! skill's own `validate()`; problems point at the mission field the value came from.
 
+use std::collections::{BTreeMap, BTreeSet};
+
 use serde_json::Value;
 use spomp_behaviors::mission::MissionFile;
 use spomp_behaviors::mission::{RobotChecks, RobotProblem};
@@ -78,6 +80,63 @@ impl RobotChecks for MissionRobotChecks {
                 }
             }
         }
+        problems.extend(operator_script_problems(mission));
         problems
     }
+
+    fn warnings(&self, mission: &MissionFile, role_nodes: &BTreeMap<String, BTreeSet<String>>) -> Vec<RobotProblem> {
+        roles_ignoring_the_operator(mission, role_nodes)
+    }
+}
+
+/// `sim.operator` entries checked against the team (issue 37).
+fn operator_script_problems(mission: &MissionFile) -> Vec<RobotProblem> {
+    let robots: Vec<&str> = mission.team.iter().map(|r| r.id.as_str()).collect();
+    let Some(sim) = &mission.sim else { return Vec::new() };
+    let mut problems = Vec::new();
+    for (i, entry) in sim.operator.iter().enumerate() {
+        if let Err((field, message)) = entry.check(&robots) {
+            let mut at = vec!["sim".to_string(), "operator".to_string(), i.to_string()];
+            if !field.is_empty() {
+                at.push(field);
+            }
+            problems.push(RobotProblem { path: at, message });
+        }
+    }
+    if let Some(r) = mission.team.iter().position(|r| r.id == spomp_teamstate::OPERATOR_ID) {
+        problems.push(RobotProblem {
+            path: path(&["team", &r.to_string(), "id"]),
+            message: format!("`{}` is reserved for the team's operator", spomp_teamstate::OPERATOR_ID),
+        });
+    }
+    problems
+}
+
+/// Roles of UGVs and UAVs whose tree (its subtrees expanded) has no `operator_hold` or no
+/// `operator_recall` node: such a robot still stops when held (the command output's floor), but
+/// a held mission's nodes keep running (a drive may time out) and a recall is not obeyed.
+fn roles_ignoring_the_operator(
+    mission: &MissionFile,
+    role_nodes: &BTreeMap<String, BTreeSet<String>>,
+) -> Vec<RobotProblem> {
+    let mut warnings = Vec::new();
+    let mut done = BTreeSet::new();
+    for robot in &mission.team {
+        if !matches!(robot.kind, RobotKind::Ugv | RobotKind::Uav) || !done.insert(robot.role.clone()) {
+            continue;
+        }
+        let Some(names) = role_nodes.get(&robot.role) else { continue };
+        let missing: Vec<&str> = crate::nodes::OPERATOR_NODES.iter().copied().filter(|n| !names.contains(*n)).collect();
+        if !missing.is_empty() {
+            warnings.push(RobotProblem {
+                path: path(&["roles", &robot.role, "tree"]),
+                message: format!(
+                    "role `{}` ignores the operator: no {} node (a held robot still stops, but its mission keeps running; see docs/missions.md, \"The operator\")",
+                    robot.role,
+                    missing.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(" or ")
+                ),
+            });
+        }
+    }
+    warnings
 }

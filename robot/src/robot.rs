@@ -477,6 +477,13 @@ impl Robot {
 
     fn tick_tree(&mut self, now: Time, observer: Option<&mut dyn TreeObserver>) -> Status {
         self.runtime.begin_tick();
+        self.runtime.apply_operator(now);
+        let status = self.tick_tree_inner(now, observer);
+        self.runtime.enforce_hold();
+        status
+    }
+
+    fn tick_tree_inner(&mut self, now: Time, observer: Option<&mut dyn TreeObserver>) -> Status {
         let last = self.tree.status();
         if last.is_done() {
             return last;

@@ -949,6 +949,7 @@ fn resolve(
             seed: None,
             faults: Vec::new(),
             prior_map: false,
+            operator: Vec::new(),
         });
         if !c.faults.is_empty() {
             let first = sim.faults.len();

@@ -329,6 +329,8 @@ pub fn goals_to_ros(goals: &[GoalView], map: &str, stamp: Time, base: &TimeBase)
         position: g.position,
         claimed_by: g.claimant.as_ref().map(|c| c.robot.as_str()),
         visited_by: g.visited.as_ref().map(|(_, r)| r.as_str()),
+        cancelled: g.cancelled.is_some(),
+        priority: g.priority,
     });
     let mut markers = ros::MarkerArray::goals(goals, base.to_ros(stamp));
     for m in &mut markers.markers {

@@ -26,6 +26,16 @@ pub trait RobotChecks: Send + Sync {
     fn navigation_schema(&self) -> serde_json::Value;
     /// Checks every robot of a typed mission as the robot layer will set it up.
     fn check(&self, mission: &MissionFile) -> Vec<RobotProblem>;
+    /// What the robot layer finds questionable but valid (e.g. a role that ignores the
+    /// operator's holds and recalls), given the node types each role's tree uses (its subtrees
+    /// expanded): reported as warnings.
+    fn warnings(
+        &self,
+        _mission: &MissionFile,
+        _role_nodes: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>,
+    ) -> Vec<RobotProblem> {
+        Vec::new()
+    }
 }
 
 /// The registered checks, as the registry keeps them (one value per type).

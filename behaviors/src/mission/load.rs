@@ -482,6 +482,33 @@ pub fn team_stage(
             let segs: Vec<&str> = p.path.iter().map(String::as_str).collect();
             diags.push(Diagnostic::new(path, loc_at(root, &segs), p.path.join("."), Stage::Schema, p.message));
         }
+        let role_nodes: BTreeMap<String, std::collections::BTreeSet<String>> = roles
+            .iter()
+            .map(|(name, role)| {
+                let mut types = std::collections::BTreeSet::new();
+                node_types(&role.tree, &mut types);
+                (name.clone(), types)
+            })
+            .collect();
+        for p in checks.warnings(mission, &role_nodes) {
+            let segs: Vec<&str> = p.path.iter().map(String::as_str).collect();
+            let d = Diagnostic::new(path, loc_at(root, &segs), p.path.join("."), Stage::Schema, p.message);
+            diags.push(d.into_warning());
+        }
+    }
+}
+
+/// Every node type in a compiled tree (subtrees are expanded in it).
+fn node_types(ir: &super::compile::Ir, out: &mut std::collections::BTreeSet<String>) {
+    use super::compile::IrKind;
+    out.insert(ir.type_name.clone());
+    match &ir.kind {
+        IrKind::Control { children, .. } => children.iter().for_each(|c| node_types(c, out)),
+        IrKind::Decorator { child, .. } => node_types(child, out),
+        IrKind::StateMachine { states, .. } => {
+            states.iter().filter_map(|s| s.run.as_ref()).for_each(|r| node_types(r, out))
+        }
+        IrKind::Leaf { .. } => {}
     }
 }
 

@@ -8,6 +8,7 @@ pub mod diagnostic;
 pub mod json_schema;
 pub mod limits;
 pub mod load;
+pub mod operator_script;
 pub mod output;
 pub mod schema;
 pub mod tree;

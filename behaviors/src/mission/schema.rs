@@ -523,6 +523,9 @@ pub struct SimSpec {
     /// without a UAV.
     #[serde(default)]
     pub prior_map: bool,
+    /// Operator commands scripted at simulated times (issue 37; see `operator_script`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub operator: Vec<super::operator_script::ScriptedCommand>,
 }
 
 /// Which world to simulate.

@@ -1122,17 +1122,23 @@ pub struct GoalMarkerInput<'a> {
     pub claimed_by: Option<&'a str>,
     /// Who visited it.
     pub visited_by: Option<&'a str>,
+    /// The operator cancelled it (issue 37): drawn dark red, labelled `cancelled`.
+    pub cancelled: bool,
+    /// Its operator priority (0 ordinary): labelled when not 0.
+    pub priority: i32,
 }
 
 impl MarkerArray {
     /// Goals and claims in `map`: one cylinder per goal (grey open, orange claimed, green
-    /// visited) and a text label with its id and holder. The first marker deletes all earlier
+    /// visited, dark red cancelled by the operator) and a text label with its id, holder and
+    /// operator priority. The first marker deletes all earlier
     /// ones, so goals that merged disappear.
     pub fn goals<'a>(goals: impl IntoIterator<Item = GoalMarkerInput<'a>>, stamp: RosTime) -> Self {
         let header = Header { stamp, frame_id: "map".into() };
         let mut markers = vec![Marker { header: header.clone(), ns: "goals".into(), action: 3, ..Default::default() }];
         for (k, g) in goals.into_iter().enumerate() {
             let color = match (g.visited_by, g.claimed_by) {
+                _ if g.cancelled => ColorRgba { r: 0.5, g: 0.05, b: 0.05, a: 0.6 },
                 (Some(_), _) => ColorRgba { r: 0.2, g: 0.8, b: 0.2, a: 0.9 },
                 (None, Some(_)) => ColorRgba { r: 1.0, g: 0.6, b: 0.0, a: 0.9 },
                 (None, None) => ColorRgba { r: 0.6, g: 0.6, b: 0.6, a: 0.9 },
@@ -1148,10 +1154,16 @@ impl MarkerArray {
                 color,
                 ..Default::default()
             });
-            let holder = g
+            let mut holder = g
                 .visited_by
                 .map(|r| format!(" visited by {r}"))
                 .or_else(|| g.claimed_by.map(|r| format!(" claimed by {r}")));
+            if g.cancelled {
+                holder = Some(format!("{} cancelled", holder.unwrap_or_default()));
+            }
+            if g.priority != 0 {
+                holder = Some(format!("{} priority {}", holder.unwrap_or_default(), g.priority));
+            }
             let mut text_pose = pose;
             text_pose.position.z = 3.5;
             markers.push(Marker {
@@ -1576,19 +1588,39 @@ mod tests {
     #[test]
     fn goal_markers_clear_the_old_set_then_show_each_goal_coloured_by_its_state() {
         let (a, b, c) = ("uav1-1".to_string(), "uav1-2".to_string(), "uav1-3".to_string());
+        let d = "operator/4".to_string();
         let goals = [
-            GoalMarkerInput { id: &a, position: spomp_core::Point2::new(1.0, 2.0), claimed_by: None, visited_by: None },
+            GoalMarkerInput {
+                id: &a,
+                position: spomp_core::Point2::new(1.0, 2.0),
+                claimed_by: None,
+                visited_by: None,
+                cancelled: false,
+                priority: 0,
+            },
             GoalMarkerInput {
                 id: &b,
                 position: spomp_core::Point2::new(3.0, 4.0),
                 claimed_by: Some("ugv1"),
                 visited_by: None,
+                cancelled: false,
+                priority: 0,
             },
             GoalMarkerInput {
                 id: &c,
                 position: spomp_core::Point2::new(5.0, 6.0),
                 claimed_by: Some("ugv1"),
                 visited_by: Some("ugv2"),
+                cancelled: false,
+                priority: 0,
+            },
+            GoalMarkerInput {
+                id: &d,
+                position: spomp_core::Point2::new(7.0, 8.0),
+                claimed_by: None,
+                visited_by: None,
+                cancelled: true,
+                priority: 2,
             },
         ];
         let array = MarkerArray::goals(goals, RosTime::default());
@@ -1596,10 +1628,17 @@ mod tests {
         assert_eq!(array.markers[0].action, 3, "delete all first");
         let cylinders: Vec<&Marker> = array.markers.iter().filter(|m| m.ns == "goals" && m.r#type == 3).collect();
         let colours: Vec<(f32, f32, f32)> = cylinders.iter().map(|m| (m.color.r, m.color.g, m.color.b)).collect();
-        assert_eq!(colours, vec![(0.6, 0.6, 0.6), (1.0, 0.6, 0.0), (0.2, 0.8, 0.2)], "open, claimed, visited");
+        assert_eq!(
+            colours,
+            vec![(0.6, 0.6, 0.6), (1.0, 0.6, 0.0), (0.2, 0.8, 0.2), (0.5, 0.05, 0.05)],
+            "open, claimed, visited, cancelled"
+        );
         assert_eq!((cylinders[1].pose.position.x, cylinders[1].pose.position.y), (3.0, 4.0));
         let labels: Vec<&str> = array.markers.iter().filter(|m| m.r#type == 9).map(|m| m.text.as_str()).collect();
-        assert_eq!(labels, vec!["uav1-1", "uav1-2 claimed by ugv1", "uav1-3 visited by ugv2"]);
+        assert_eq!(
+            labels,
+            vec!["uav1-1", "uav1-2 claimed by ugv1", "uav1-3 visited by ugv2", "operator/4 cancelled priority 2"]
+        );
     }
 
     #[test]

@@ -1,11 +1,12 @@
 //! The domain nodes of the paper's missions, acting on a [`RobotRuntime`]: driving
 //! (`navigate_to`, `navigate_local`, `return_home`), the UAV's time-sharing (`follow_waypoints`,
 //! `seek_robot`, `wait_for_sync`), goal coordination (`detect_goals`, `claim_goal`, …), team-wide triggers
-//! (`wait_for_robot_at`).
+//! (`wait_for_robot_at`), the operator's orders (`operator_hold`, `operator_recall`).
 
 mod aerial;
 mod coordination;
 mod navigation;
+mod operator;
 mod qgc_plan;
 mod teammates;
 
@@ -14,6 +15,7 @@ use std::sync::Arc;
 pub use aerial::register_aerial;
 pub use coordination::register_coordination;
 pub use navigation::register_navigation;
+pub use operator::{OPERATOR_NODES, register_operator};
 pub use qgc_plan::{PlanError, PlanProblem, plan_waypoints};
 pub use teammates::register_teammates;
 
@@ -67,6 +69,7 @@ pub fn registry() -> NodeRegistry<RobotRuntime> {
     register_aerial(&mut r);
     register_coordination(&mut r);
     register_teammates(&mut r);
+    register_operator(&mut r);
     r.set_robot_checks(Arc::new(MissionRobotChecks));
     r
 }

@@ -20,7 +20,9 @@ use spomp_core::{
     RobotId, RobotKind, Time, Twist2,
 };
 use spomp_mapping::{CompressedMap, CompressionParams, GoalDetectionParams, GoalDetector, MappingError, Orthomap};
-use spomp_teamstate::{GoalOrigin, IdentifyOutcome, TeamState, TeamStateError, TeamStateParams};
+use spomp_teamstate::{
+    CommandId, GoalOrigin, IdentifyOutcome, OperatorMode, RobotOrders, TeamState, TeamStateError, TeamStateParams,
+};
 
 pub use driven::DrivenRuntime;
 pub use localization::{Localization, LocalizationSetup, UpdateSchedule};
@@ -243,6 +245,8 @@ pub struct RobotRuntime {
     superseded_panoramas: u64,
     /// How a panorama's localization and terrain analysis may run side by side.
     perception_join: Option<JoinFn>,
+    /// The operator's orders for this robot as of this tick (issue 37).
+    operator: RobotOrders,
 }
 
 /// What one goal-detection pass did.
@@ -298,6 +302,7 @@ impl RobotRuntime {
             next_work_id: 0,
             superseded_panoramas: 0,
             perception_join: None,
+            operator: RobotOrders::default(),
         })
     }
 
@@ -356,6 +361,41 @@ impl RobotRuntime {
     pub(crate) fn begin_tick(&mut self) {
         self.command = None;
         self.flight = None;
+    }
+
+    /// Applies the operator's commands held in the team state (issue 37), at the start of a
+    /// tick: takes this robot's hold / recall / resume in force (a recall also releases the
+    /// robot's claims at once, so another robot takes its goal), and acknowledges every command
+    /// that concerns it and that it has not acknowledged yet (goal commands are in force in the
+    /// goal view as soon as they are held). Returns the commands acknowledged now.
+    pub(crate) fn apply_operator(&mut self, now: Time) -> Vec<CommandId> {
+        let orders = self.team.operator_mode(&self.id);
+        if orders.mode == OperatorMode::Recall && self.operator.mode != OperatorMode::Recall {
+            self.team.release_all_claims(now);
+        }
+        self.operator = orders;
+        let due = self.team.commands_to_acknowledge();
+        for id in &due {
+            if let Err(e) = self.team.acknowledge(id, now) {
+                self.report(format!("operator command {id}: {e}"));
+            }
+        }
+        due
+    }
+
+    /// The safety floor of a hold (issue 37): whatever the tree commanded, a held robot stops
+    /// (a UGV commands zero, a UAV hovers) in the tick that saw the hold, even if its mission
+    /// has no `operator_hold` branch.
+    pub(crate) fn enforce_hold(&mut self) {
+        if self.operator.mode == OperatorMode::Hold {
+            self.command = None;
+            self.flight = None;
+        }
+    }
+
+    /// The operator's orders in force for this robot (as of the last tick).
+    pub fn operator_orders(&self) -> &RobotOrders {
+        &self.operator
     }
 
     /// A pose from outside the robot's own estimation: GPS on the UAV, the basestation's

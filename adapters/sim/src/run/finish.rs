@@ -94,6 +94,14 @@ impl Simulation {
                 r.ticked.iter().zip(&r.node_paths).filter(|(t, _)| !**t).map(move |(_, p)| format!("{}: {p}", r.id))
             })
             .collect();
+        let operator = self.operator_summary();
+        if let Some(op) = self.operator.as_ref().filter(|op| op.never_issued() > 0) {
+            let message = format!(
+                "operator: {} scripted command(s) never issued (due after the end, or their goal never became known to the operator)",
+                op.never_issued()
+            );
+            note_problem(&mut self.problems, &op.id, message, self.now);
+        }
         let summary = RunSummary {
             mission: self.mission.mission.clone(),
             seed: self.options.seed,
@@ -111,6 +119,7 @@ impl Simulation {
             nodes_total,
             nodes_never_ticked,
             problems: self.problems.into_values().collect(),
+            operator,
         };
         let localization_errors = self
             .robots

@@ -37,6 +37,7 @@ impl Simulation {
                             visited_s: None,
                             visited_by: None,
                             revisits_in_contact: 0,
+                            cancelled_s: None,
                         };
                         observer.on_event(
                             now,
@@ -61,6 +62,12 @@ impl Simulation {
                     && by == &r.id
                 {
                     own_visits.push((g.id.clone(), ri, *t));
+                }
+                if let Some(by) = &g.cancelled
+                    && entry.cancelled_s.is_none()
+                {
+                    entry.cancelled_s = Some(now.as_secs_f64());
+                    observer.on_event(now, &SimEvent::GoalCancelled { goal: entry.id.clone(), by: by.to_string() });
                 }
                 if let Some((t, by)) = &g.visited {
                     let t = t.as_secs_f64();

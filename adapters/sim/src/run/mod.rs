@@ -29,6 +29,7 @@ mod external;
 mod finish;
 mod goals;
 mod observer;
+mod operator;
 mod options;
 mod pace;
 mod radio_sync;
@@ -60,6 +61,7 @@ use spomp_teamstate::{GoalOrigin, Tier, TierSet};
 
 pub use external::{DrivenStep, DrivenTeamMessage, ExternalDrivers};
 pub use observer::{NoObserver, RobotSnapshot, SimEvent, SimObserver};
+pub use operator::OperatorCommandSummary;
 pub use options::{SimOptions, SkillLatency};
 pub use pace::RealTimePacer;
 pub use setup::{faults_for_mission, radio_for_mission};
@@ -135,6 +137,8 @@ pub struct Simulation {
     map_shown: bool,
     /// Whether the robots record their seam calls: what the observer of the last step wanted.
     recording_seam: bool,
+    /// The operator of `sim.operator:` (issue 37), if the mission scripts one.
+    operator: Option<operator::SimOperator>,
 }
 
 /// A UGV whose every commanded motion was refused for this long is stuck (a counted event and
@@ -270,6 +274,7 @@ impl Simulation {
         }
         let time_limit_s = options.time_limit_s.unwrap_or(mission.time_limit_s);
         let n_robots = robots.len();
+        let operator = operator::SimOperator::for_mission(&mission)?;
         Ok(Simulation {
             ugv_to_ugv: mission.comms.ugv_to_ugv.unwrap_or(true),
             mission,
@@ -298,6 +303,7 @@ impl Simulation {
             pacer: None,
             map_shown: false,
             recording_seam: false,
+            operator,
         })
     }
 
@@ -432,6 +438,7 @@ impl Simulation {
         self.report_stuck(observer);
         self.sense(observer);
         self.exchange_work(observer);
+        self.operator_step(observer);
         if now >= self.next_sync {
             self.sync_radio(observer);
             self.next_sync = Time::from_nanos(now.nanos + (self.options.sync_period_s * 1e9).round() as i64);
@@ -462,6 +469,7 @@ impl Simulation {
             }
             self.track_still();
             self.track_goals(observer);
+            self.track_acknowledgements(observer);
             self.show_maps(observer);
             self.check_end(observer);
         }

@@ -50,6 +50,30 @@ pub enum SimEvent {
         /// Robot id.
         robot: String,
     },
+    /// A goal was cancelled by the operator (first seen in a robot's team state).
+    GoalCancelled {
+        /// Goal id.
+        goal: String,
+        /// The cancelling command.
+        by: String,
+    },
+    /// The operator issued a command (`sim.operator`, issue 37).
+    OperatorCommand {
+        /// Command id (`operator#3`).
+        command: String,
+        /// `goal_add`, `goal_cancel`, `goal_priority`, `recall`, `hold` or `resume`.
+        kind: String,
+        /// The command in words.
+        action: String,
+    },
+    /// A robot applied an operator command (its acknowledgement record, as its own team state
+    /// holds it).
+    OperatorAcknowledged {
+        /// Command id.
+        command: String,
+        /// The robot.
+        robot: String,
+    },
     /// The mission ended.
     MissionEnded {
         /// How.

@@ -7,10 +7,18 @@ use super::*;
 
 impl Simulation {
     pub(super) fn sync_radio(&mut self, observer: &mut dyn SimObserver) {
-        let nodes: Vec<RadioNode> =
+        let mut nodes: Vec<RadioNode> =
             self.robots.iter().map(|r| RadioNode { position: r.truth().position(), alive: r.alive() }).collect();
+        // The operator (issue 37) is the last node, when there is one.
+        if let Some(op) = &self.operator {
+            nodes.push(RadioNode { position: op.position, alive: true });
+        }
         let mut links = std::mem::take(&mut self.links);
         self.radio.links_into(self.now, &nodes, self.options.sync_period_s, &mut links);
+        let n = self.robots.len();
+        let operator_links: Vec<(usize, Link)> =
+            links.iter().filter(|(_, j, _)| *j == n).map(|&(i, _, l)| (i, l)).collect();
+        links.retain(|(_, j, _)| *j < n);
         if !self.ugv_to_ugv {
             let robots = &self.robots;
             links.retain(|(i, j, _)| !(robots[*i].kind == RobotKind::Ugv && robots[*j].kind == RobotKind::Ugv));
@@ -21,10 +29,14 @@ impl Simulation {
             up[i].push((self.robots[j].id.clone(), link.budget_bytes));
             up[j].push((self.robots[i].id.clone(), link.budget_bytes));
         }
+        if let Some(op) = &self.operator {
+            for &(i, link) in &operator_links {
+                up[i].push((op.id.clone(), link.budget_bytes));
+            }
+        }
         for (r, up) in self.robots.iter_mut().zip(&up) {
             r.link_credit.begin_round(up.iter().map(|(peer, budget)| (peer, *budget)));
         }
-        let n = self.robots.len();
         for &(i, j, link) in &links {
             let tiers = match link.tier {
                 LinkTier::All => TierSet::ALL,
@@ -83,8 +95,35 @@ impl Simulation {
                 }
             }
         }
+        self.sync_operator(&operator_links, observer);
         // What driven robots sent over links that are down is lost, as on a radio.
         self.driven_outbox.clear();
         self.links = links;
+    }
+
+    /// The operator's links (issue 37): one message each way per link that is up, within the
+    /// link's tiers and bytes, as between robots (robots driven from outside are not reached).
+    fn sync_operator(&mut self, operator_links: &[(usize, Link)], observer: &mut dyn SimObserver) {
+        let Some(op) = self.operator.as_mut() else { return };
+        for &(i, link) in operator_links {
+            let tiers = match link.tier {
+                LinkTier::All => TierSet::ALL,
+                LinkTier::Small => TierSet::only(Tier::Coordination),
+            };
+            let r = &mut self.robots[i];
+            if r.external {
+                continue;
+            }
+            let budget = usize::try_from(link.budget_bytes).unwrap_or(usize::MAX);
+            if let Some(msg) = op.team.make_sync(&r.id, tiers, budget) {
+                let _ = r.robot.on_team_message(self.now, &op.id, msg.encode());
+                r.robot.deliver_recorded(observer);
+            }
+            let sent = r.robot.team_round(self.now, &op.id, tiers, RoundShape::OneMessage, &mut r.link_credit);
+            r.robot.deliver_recorded(observer);
+            for (_, bytes) in sent {
+                let _ = op.team.apply_bytes(&r.id, &bytes);
+            }
+        }
     }
 }

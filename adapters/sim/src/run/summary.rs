@@ -49,6 +49,9 @@ pub struct GoalSummary {
     /// that were in radio contact (directly or relayed within the last 10 s) with the first
     /// visitor when they arrived; should be 0.
     pub revisits_in_contact: u32,
+    /// When a robot first held the operator's cancel of it, seconds (issue 37); absent if never.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cancelled_s: Option<f64>,
 }
 
 /// Median and maximum of an error series.
@@ -187,6 +190,9 @@ pub struct RunSummary {
     pub nodes_never_ticked: Vec<String>,
     /// Problems nodes and skills reported (first occurrences, with counts).
     pub problems: Vec<ProblemCount>,
+    /// The operator's commands (`sim.operator`) and which robots applied them; absent without.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub operator: Vec<super::OperatorCommandSummary>,
 }
 
 /// A reported problem and how often it came up.
