@@ -127,6 +127,8 @@ pub enum GoalArg {
 /// The operator's member of the team: its team state and its end of the link.
 struct Member {
     state: TeamState,
+    /// The mission's named goals: (name, id).
+    mission_names: Vec<(String, GoalId)>,
     link: TeamLink,
     robots: BTreeSet<RobotId>,
     /// Robots reached at some point during this run.
@@ -162,6 +164,17 @@ impl Member {
         })?;
         let mut state = TeamState::new(operator.clone(), u32::MAX, TeamStateParams::default())
             .context("the operator's team state")?;
+        // The mission's goals, as every robot adds them (`mission/<index>`): the team's claims
+        // and visits of them refer to them, and their names address them.
+        let mut mission_names = Vec::new();
+        for (k, g) in mission.goals.iter().flat_map(|g| g.manual.iter()).enumerate() {
+            let id = state
+                .add_mission_goal(k as u32, Point2::new(g.x_m, g.y_m))
+                .with_context(|| format!("goals.manual[{k}]"))?;
+            if let Some(name) = &g.name {
+                mission_names.push((name.clone(), id));
+            }
+        }
         state.set_security(Arc::new(security)).context("securing the operator's team state")?;
         let now = wall_now();
         // Every run a larger session (robots take each session's messages once), and command
@@ -181,7 +194,15 @@ impl Member {
         })?);
         let link = TeamLink::open(&config)?;
         let robots = mission.team.iter().map(|r| RobotId::new(&r.id)).collect();
-        Ok(Member { state, link, robots, reached: BTreeSet::new(), heard: BTreeMap::new(), refused: BTreeMap::new() })
+        Ok(Member {
+            state,
+            mission_names,
+            link,
+            robots,
+            reached: BTreeSet::new(),
+            heard: BTreeMap::new(),
+            refused: BTreeMap::new(),
+        })
     }
 
     /// The team's robots the link reaches now.
@@ -241,9 +262,13 @@ fn wall_now() -> Duration {
     std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default()
 }
 
-/// The goal `name` names: its operator name, its canonical id or an alias (`origin/seq`).
-fn resolve_goal(goals: &[GoalView], name: &str) -> Result<GoalId> {
-    let by_name: Vec<&GoalView> = goals.iter().filter(|g| g.name.as_deref() == Some(name)).collect();
+/// The goal `name` names: its operator name, its name in the mission (`mission_names`), its
+/// canonical id or an alias (`origin/seq`).
+fn resolve_goal(goals: &[GoalView], mission_names: &[(String, GoalId)], name: &str) -> Result<GoalId> {
+    let by_name: Vec<&GoalView> = goals
+        .iter()
+        .filter(|g| g.name.as_deref() == Some(name) || mission_names.iter().any(|(n, id)| n == name && g.includes(id)))
+        .collect();
     match by_name.as_slice() {
         [one] => return Ok(one.id.clone()),
         [] => {}
@@ -261,7 +286,10 @@ fn resolve_goal(goals: &[GoalView], name: &str) -> Result<GoalId> {
         .iter()
         .map(|g| match &g.name {
             Some(n) => format!("{} ({n})", g.id),
-            None => g.id.to_string(),
+            None => match mission_names.iter().find(|(_, id)| g.includes(id)) {
+                Some((n, _)) => format!("{} ({n})", g.id),
+                None => g.id.to_string(),
+            },
         })
         .collect();
     bail!(
@@ -338,10 +366,13 @@ pub fn operator(args: &OperatorArgs, registry: &NodeRegistry<RobotRuntime>) -> R
     let action = match request {
         Request::Status => return Ok(status(&member, args.json)),
         Request::Ready(action) => action,
-        Request::Cancel(goal) => OperatorAction::CancelGoal { goal: resolve_goal(member.state.goals(), &goal)? },
-        Request::Priority(goal, priority) => {
-            OperatorAction::SetPriority { goal: resolve_goal(member.state.goals(), &goal)?, priority }
+        Request::Cancel(goal) => {
+            OperatorAction::CancelGoal { goal: resolve_goal(member.state.goals(), &member.mission_names, &goal)? }
         }
+        Request::Priority(goal, priority) => OperatorAction::SetPriority {
+            goal: resolve_goal(member.state.goals(), &member.mission_names, &goal)?,
+            priority,
+        },
     };
     let issued_at = member.team_time();
     let id = member.state.issue_command(action.clone(), issued_at).context("issuing the command")?;
@@ -547,15 +578,19 @@ mod tests {
     #[test]
     fn goals_are_found_by_name_or_id_and_an_ambiguous_or_unknown_name_says_what_there_is() {
         let s = team();
-        let east = resolve_goal(s.goals(), "east").unwrap();
+        let names = [("start".to_string(), GoalId { origin: RobotId::new("mission"), seq: 0 })];
+        let resolve = |name: &str| resolve_goal(s.goals(), &names, name);
+        assert_eq!(resolve("start").unwrap().to_string(), "mission/0");
+        let east = resolve("east").unwrap();
         assert_eq!(s.goal(&east).unwrap().position, Point2::new(40.0, 0.0));
-        assert_eq!(resolve_goal(s.goals(), "mission/0").unwrap().to_string(), "mission/0");
-        assert_eq!(resolve_goal(s.goals(), &east.to_string()).unwrap(), east);
-        let err = resolve_goal(s.goals(), "far").unwrap_err().to_string();
+        assert_eq!(resolve("mission/0").unwrap().to_string(), "mission/0");
+        assert_eq!(resolve(&east.to_string()).unwrap(), east);
+        let err = resolve("far").unwrap_err().to_string();
         assert!(err.contains("2 goals are named `far`") && err.contains("give an id"), "{err}");
-        let err = resolve_goal(s.goals(), "west").unwrap_err().to_string();
+        let err = resolve("west").unwrap_err().to_string();
         assert!(err.contains("no goal named `west` among the 4") && err.contains("(east)"), "{err}");
-        assert!(resolve_goal(&[], "x").unwrap_err().to_string().ends_with("among the 0 the team knows"));
+        assert!(err.contains("mission/0 (start)"), "{err}");
+        assert!(resolve_goal(&[], &[], "x").unwrap_err().to_string().ends_with("among the 0 the team knows"));
     }
 
     #[test]
