@@ -103,6 +103,21 @@ fn invalid_fixtures_report_the_right_place_and_field() {
     }
 }
 
+/// Issue 37: a UGV role that ignores the operator's holds and recalls is valid, with a warning
+/// that names the role and the missing nodes.
+#[test]
+fn a_role_that_ignores_the_operator_is_valid_with_a_warning() {
+    let registry = spomp_robot::registry();
+    let f = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/missions/warn-ignores-operator.yaml");
+    let loaded = load_mission(&f, &registry);
+    assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
+    assert_eq!(loaded.diagnostics.len(), 1, "{:#?}", loaded.diagnostics);
+    let d = &loaded.diagnostics[0];
+    assert!(!d.is_error());
+    assert_eq!((d.line, d.column, d.node_path.as_str()), (8, 7, "roles.visitor.tree"));
+    assert!(d.message.contains("`operator_hold` or `operator_recall`"), "{}", d.message);
+}
+
 #[test]
 fn several_errors_are_reported_in_one_run() {
     let registry = spomp_robot::registry();

@@ -147,6 +147,9 @@ pub struct RunReport {
     pub team_rejected_by_kind: std::collections::BTreeMap<&'static str, u64>,
     /// Refused messages that named a sender outside the team (by the link or the robot).
     pub team_rejected_unknown_sender: u64,
+    /// Refused messages that carried a forged operator command (signed by a key other than the
+    /// operator's, or written by a robot; issue 37), also counted by kind above.
+    pub team_rejected_operator: u64,
     /// The team link's figures (bytes per link and tier), when one is plugged in.
     pub team_link: Option<serde_json::Value>,
     /// Resume states written.
@@ -1572,6 +1575,7 @@ impl LoopState {
         r.tick_rate_hz = if r.wall_s > 0.0 { r.ticks as f64 / r.wall_s } else { 0.0 };
         r.dropped_inputs += self.pairer.dropped() + robot.superseded_panoramas();
         r.tree_status = self.status.to_string();
+        r.team_rejected_operator = robot.team().refused_operator_records();
         r.robot_time_s = self.now().map_or(0.0, |t| t.as_secs_f64());
         (r.odometry_to_command_p50_ms, r.odometry_to_command_p99_ms) = percentiles(&self.odom_latency);
         (r.panorama_to_command_p50_ms, r.panorama_to_command_p99_ms) = percentiles(&self.panorama_latency);

@@ -57,7 +57,7 @@ complete_when: time_limit
 time_limit_s: TIME_LIMIT
 comms: { position_range_m: 1000, data_range_m: 1000, bandwidth_bytes_per_s: 1000000 }
 sim:
-  world: { generate: { size_m: [400, 300], vehicle_clusters: 0, roadblocks: 2, seed: 3 } }
+  world: { generate: { size_m: [400, 300], vehicle_clusters: 0, roadblocks: 2 } }
   prior_map: true
   faults: FAULTS
   operator: SCRIPT
@@ -89,7 +89,7 @@ fn holds(sim: &Simulation, robot: &str, goal: &GoalId) -> bool {
 #[test]
 fn goals_added_cancelled_and_a_hold_are_applied_by_the_ugvs() {
     let script = "[{ at_s: 40, goal_cancel: { goal: far } }, { at_s: 150, hold: all }, { at_s: 170, resume: all }, \
-                  { at_s: 300, goal_add: { at: [100, 100], priority: 1, name: casualty } }]";
+                  { at_s: 300, goal_add: { at: [40, 150], priority: 1, name: casualty } }]";
     let loaded = mission("ops-a", 900, script, "[]");
     let mut sim = simulation(&loaded, options());
     let far = mission_goal(1);
