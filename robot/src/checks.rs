@@ -112,13 +112,20 @@ fn operator_script_problems(mission: &MissionFile) -> Vec<RobotProblem> {
     problems
 }
 
-/// Roles of UGVs and UAVs whose tree (its subtrees expanded) has no `operator_hold` or no
-/// `operator_recall` node: such a robot still stops when held (the command output's floor), but
+/// In a mission with an operator in the loop (`sim.operator` entries or a robot's
+/// `team_link`), roles of UGVs and UAVs whose tree (its subtrees expanded) has no
+/// `operator_hold` or no `operator_recall` node: such a robot still stops when held (the command output's floor), but
 /// a held mission's nodes keep running (a drive may time out) and a recall is not obeyed.
 fn roles_ignoring_the_operator(
     mission: &MissionFile,
     role_nodes: &BTreeMap<String, BTreeSet<String>>,
 ) -> Vec<RobotProblem> {
+    // Only where the mission file shows an operator in the loop: scripted commands, or a team
+    // link (which `spomp operator` joins). Elsewhere nothing can issue a command.
+    let scripted = mission.sim.as_ref().is_some_and(|s| !s.operator.is_empty());
+    if !scripted && mission.team.iter().all(|r| r.team_link.is_none()) {
+        return Vec::new();
+    }
     let mut warnings = Vec::new();
     let mut done = BTreeSet::new();
     for robot in &mission.team {

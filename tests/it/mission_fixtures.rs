@@ -114,7 +114,7 @@ fn a_role_that_ignores_the_operator_is_valid_with_a_warning() {
     assert_eq!(loaded.diagnostics.len(), 1, "{:#?}", loaded.diagnostics);
     let d = &loaded.diagnostics[0];
     assert!(!d.is_error());
-    assert_eq!((d.line, d.column, d.node_path.as_str()), (8, 7, "roles.visitor.tree"));
+    assert_eq!((d.line, d.column, d.node_path.as_str()), (9, 7, "roles.visitor.tree"));
     assert!(d.message.contains("`operator_hold` or `operator_recall`"), "{}", d.message);
 }
 

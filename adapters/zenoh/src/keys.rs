@@ -362,7 +362,8 @@ mod tests {
         KeyDir::generate(&dir, "city", &robots).unwrap();
         assert!(KeyDir::generate(&dir, "city", &robots).is_err(), "never overwrites");
         let keys = KeyDir::load(&dir).unwrap();
-        assert_eq!(keys.members().count(), 2);
+        assert_eq!(keys.robots().count(), 2);
+        assert_eq!(keys.members().count(), 3, "the robots and the operator");
         let sec = keys.security(&RobotId::new("ugv1")).unwrap();
         assert_eq!(sec.robot().as_str(), "ugv1");
         assert!(keys.credentials(&RobotId::new("uav1")).unwrap().password.len() >= 32);

@@ -162,7 +162,8 @@ pub fn load_mission_str<E: 'static>(
     let subtrees = include_stage(&root, path, &roots, &mut out, &mut diags);
     wiring_stage(&root, path, registry, &subtrees, &roots, &mut out, &mut diags);
     team_stage(&mission, &root, path, registry, &out.roles, &mut diags);
-    if diags.is_empty() {
+    // Warnings (a role that ignores the operator) do not stop the node factories' checks.
+    if !diags.iter().any(Diagnostic::is_error) {
         build_stage(nodes, path, &out, &mut diags);
     }
     finish(out, Some(mission), diags)
