@@ -13,6 +13,10 @@ publishes `map → ugv1/odom`, and every node transition reaches the transient-l
 reader — which joins late, after spomp started, as a late joiner does. The labels arrive in a
 frame other than the configured sensor frame: spomp must say so (`frame_mismatches`).
 
+It also plays rviz's "Publish Point" tool: with the team's keys and `--clicked-point`, spomp
+takes a `geometry_msgs/PointStamped` on `/clicked_point` in the map frame as the operator's
+"add goal" and refuses one in another frame, and says so on `/rosout`.
+
 Loopback only: Cyclone is bound to 127.0.0.1 without multicast, spomp runs with
 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, on a domain of this test's own.
 
@@ -25,6 +29,7 @@ import os
 import struct
 import subprocess
 import sys
+import tempfile
 import time
 
 DOMAIN = 150 + os.getpid() % 50
@@ -39,7 +44,7 @@ from cyclonedds.util import duration  # noqa: E402
 # The ROS 2 types, written out independently of spomp's.
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from cyclonedds_types import (  # noqa: E402
-    Header, Image, Log, Odometry, Point, Pose, PoseStamped, PoseWithCovariance, Quaternion, TFMessage, Time,
+    Header, Image, Log, Odometry, Point, PointStamped, Pose, PoseStamped, PoseWithCovariance, Quaternion, TFMessage, Time,
     Twist, TwistStamped, TwistWithCovariance, Vector3)
 
 
@@ -73,9 +78,13 @@ def main():
     spomp = sys.argv[1] if len(sys.argv) > 1 else "target/debug/spomp"
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     env.pop("ROS_DOMAIN_ID", None)
+    scratch = tempfile.TemporaryDirectory(prefix="spomp-interop-")  # removed at exit
+    keys = os.path.join(scratch.name, "keys")
+    subprocess.run([spomp, "keys", "generate", "tests/missions/ros2/interop.yaml", "--out", keys],
+                   check=True, capture_output=True)
     proc = subprocess.Popen(
         [spomp, "run", "tests/missions/ros2/interop.yaml", "--robot", "ugv1", "--json",
-         "--domain-id", str(DOMAIN), "--until-s", "25"],
+         "--domain-id", str(DOMAIN), "--until-s", "25", "--keys", keys, "--clicked-point"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
 
     dp = DomainParticipant(DOMAIN)
@@ -87,6 +96,9 @@ def main():
     pose_w = DataWriter(dp, Topic(dp, "rt/ugv1/pose_in", PoseStamped), qos=reliable)
     cmd_r = DataReader(dp, Topic(dp, "rt/ugv1/cmd_vel", TwistStamped), qos=best_effort)
     tf_r = DataReader(dp, Topic(dp, "rt/tf", TFMessage), qos=best_effort)
+    # rviz's "Publish Point": reliable, on the global /clicked_point.
+    click_w = DataWriter(dp, Topic(dp, "rt/clicked_point", PointStamped), qos=reliable)
+    clicked = False
     # rcl's /rosout profile; created after spomp started, so it joins late.
     rosout_qos = Qos(Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=100)),
                      Policy.Durability.TransientLocal, Policy.History.KeepLast(1000))
@@ -117,6 +129,12 @@ def main():
             d, s = flat_ground_panorama(stamp)
             depth_w.write(d)
             sem_w.write(s)
+        if not clicked and now - start > 5.0:
+            # Ahead of the robot on its way (a goal it may take without turning back), then
+            # one in a frame spomp does not take.
+            click_w.write(PointStamped(header=Header(stamp=stamp, frame_id="map"), point=Point(60.0, 5.0, 0.0)))
+            click_w.write(PointStamped(header=Header(stamp=stamp, frame_id="ugv1/odom"), point=Point(1.0, 1.0, 0.0)))
+            clicked = True
         if rosout_r is None and now - start > 3.0:
             rosout_r = DataReader(dp, rosout_topic, qos=rosout_qos)
         if rosout_r is not None:
@@ -172,6 +190,13 @@ def main():
     mismatches = report.get("frame_mismatches", {})
     if mismatches.get("/ugv1/panorama/semantic header.frame_id") != "camera":
         problems.append(f"spomp did not report the labels' frame `camera`: {mismatches}")
+    if received.get("operator_points") != 2 or report.get("operator_points_refused") != 1:
+        problems.append(f"clicked points: {received.get('operator_points')} taken, "
+                        f"{report.get('operator_points_refused')} refused; expected 2 and 1")
+    if not any(e.msg.startswith("clicked point: goal operator/") for e in logs):
+        problems.append("no /rosout entry of the clicked point's goal")
+    if not any(e.msg.startswith("clicked point refused: a point in frame `ugv1/odom`") for e in logs):
+        problems.append("no /rosout entry of the refused clicked point")
     if not forward:
         problems.append(f"spomp never commanded the robot forward toward its goal: {commands[-10:]}")
     if problems:
@@ -182,7 +207,7 @@ def main():
           f"{received['poses']} poses into spomp; {len(commands)} commands out "
           f"({len(forward)} forward, up to {max(forward):.2f} m/s, TwistStamped in ugv1/base_link); "
           f"/tf map -> ugv1/odom; {len(transitions)} transitions on /rosout to a late transient-local reader; "
-          f"frame mismatch reported")
+          f"frame mismatch reported; a clicked point became the operator's goal, one in another frame refused")
     return 0
 
 

@@ -45,6 +45,12 @@ class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
 
 
 @dataclass
+class PointStamped(IdlStruct, typename="geometry_msgs::msg::dds_::PointStamped_"):
+    header: Header
+    point: Point
+
+
+@dataclass
 class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
     x: float64
     y: float64

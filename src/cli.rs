@@ -12,8 +12,8 @@ use spomp_core::{Point2, Pose2};
 use spomp_robot::RobotRuntime;
 
 use crate::{
-    args, commands, experiment, log_cmd, memory_stage, plan_cmd, replay_cmd, run_cmd, sim_cmd, terrain_cmd, world_cmd,
-    world_import,
+    args, commands, experiment, log_cmd, memory_stage, operator_cmd, plan_cmd, replay_cmd, run_cmd, sim_cmd,
+    terrain_cmd, world_cmd, world_import,
 };
 
 /// Mission framework for air–ground robot teams.
@@ -81,6 +81,11 @@ enum Command {
     /// Run one robot of a mission over ROS 2: on a real robot, or driving a robot of
     /// `spomp sim --ros2`.
     Run(run_cmd::RunArgs),
+    /// Act as the team's operator during a mission, over the signed team link: add, cancel and
+    /// re-prioritise goals, recall, hold and resume robots, see the team's status (exit 0 when
+    /// every robot reached acknowledged the command, 2 when not, 1 on an error; see
+    /// docs/operators.md).
+    Operator(operator_cmd::OperatorArgs),
     /// Make the team's keys: `spomp keys generate MISSION --out DIR`.
     Keys {
         #[command(subcommand)]
@@ -441,6 +446,7 @@ where
         Command::Sim(args) => sim_cmd::sim(&args, registry),
         Command::Experiment(args) => experiment::experiment(&args, registry),
         Command::Run(args) => run_cmd::run(&args, registry),
+        Command::Operator(args) => operator_cmd::operator(&args, registry),
         Command::Keys { action: KeysCommand::Generate { mission, out } } => {
             crate::team_link::generate(&mission, &out, registry)
         }

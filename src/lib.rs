@@ -41,6 +41,8 @@ mod farm_cmd;
 mod live;
 mod log_cmd;
 mod memory_stage;
+mod operator_cmd;
+mod operator_desk;
 mod output;
 mod plan_cmd;
 mod recording;

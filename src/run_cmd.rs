@@ -73,6 +73,16 @@ pub struct RunArgs {
     /// 127.0.0.1:8765; bind another address only when asked.
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
     pub live: Option<std::net::SocketAddr>,
+    /// With --live: take points a viewer publishes (Foxglove's 3-D panel "Publish point",
+    /// display frame `map`) as the operator's "add goal" commands, signed with the operator's
+    /// key — which --keys must hold (operator.key.json). See docs/operators.md.
+    #[arg(long, requires = "live")]
+    pub live_operator: bool,
+    /// Take rviz's "Publish Point" clicks (`geometry_msgs/PointStamped` in the map frame on
+    /// TOPIC, default `/clicked_point`) as the operator's "add goal" commands, signed with the
+    /// operator's key — which --keys must hold (operator.key.json). See docs/operators.md.
+    #[arg(long, value_name = "TOPIC", num_args = 0..=1, default_missing_value = "/clicked_point")]
+    pub clicked_point: Option<String>,
     /// A folder besides the mission's own that its includes, plan files and world may be in
     /// (repeatable).
     #[arg(long = "allow-dir", value_name = "DIR")]
@@ -141,6 +151,14 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         out!("{:<18} {}", "team/status", settings.topics.status());
         return Ok(ExitCode::SUCCESS);
     }
+    // Before anything starts: an operator interface without the operator's key is refused.
+    let operator_key = match (args.live_operator, &args.clicked_point) {
+        (true, _) => Some(crate::operator_desk::operator_key(args.team_link.keys.as_deref(), "--live-operator")?),
+        (false, Some(_)) => {
+            Some(crate::operator_desk::operator_key(args.team_link.keys.as_deref(), "--clicked-point")?)
+        }
+        (false, None) => None,
+    };
     let seed = args.seed.unwrap_or(spomp_world::SimSpec::of_mission(mission)?.first_seed());
     if args.lockstep {
         settings.lockstep = Some(spomp_ros2::settings::LockstepSettings { seed, timeout_s: args.lockstep_timeout_s });
@@ -182,12 +200,31 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
         info.team_session = robot.team().session();
         info.team_secured = robot.team().security().is_some();
     }
-    let peers: Vec<RobotId> = mission.team.iter().filter(|r| r.id != args.robot).map(|r| RobotId::new(&r.id)).collect();
+    let mut peers: Vec<RobotId> =
+        mission.team.iter().filter(|r| r.id != args.robot).map(|r| RobotId::new(&r.id)).collect();
+    if link.link.is_some() {
+        // The operator (`spomp operator`) joins the link like a robot: it is sent what it lacks
+        // (the robots' acknowledgements above all) whenever it is reachable.
+        peers.push(RobotId::new(spomp_teamstate::OPERATOR_ID));
+    }
     let mut node = RobotNode::new(robot, settings.clone(), peers).context("starting the ROS 2 node")?;
     for n in &link.notes {
         errln!("{n}");
     }
     crate::team_link::plug(&mut node, link.link, &args.team_link, &args.robot);
+    let mut live_points = None;
+    if let Some(key) = operator_key {
+        let (desk, queue) = crate::operator_desk::Desk::new(key, args.live_operator)?;
+        node.set_operator_desk(Box::new(desk), args.clicked_point.as_deref())
+            .context("subscribing to the clicked-point topic")?;
+        if let Some(topic) = &args.clicked_point {
+            errln!(
+                "operator: points on {topic} (map frame `{}`) become goals, signed as the operator's",
+                settings.frames.map
+            );
+        }
+        live_points = queue.map(|q| crate::operator_desk::live_handler(settings.frames.map.clone(), q));
+    }
 
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
@@ -197,9 +234,17 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     }
     let live = match args.live {
         Some(addr) => {
-            let server =
-                spomp_live::LiveServer::start(addr, &format!("spomp run {} --robot {}", mission.mission, args.robot))?;
+            let options = spomp_live::LiveOptions { points: live_points };
+            let takes_points = options.points.is_some();
+            let name = format!("spomp run {} --robot {}", mission.mission, args.robot);
+            let server = spomp_live::LiveServer::start_with(addr, &name, options)?;
             errln!("live view: {} (Foxglove: Open connection → Foxglove WebSocket; docs/live.md)", server.url());
+            if takes_points {
+                errln!(
+                    "operator: points published from the viewer (3-D panel \"Publish point\", frame `{}`) become goals, signed as the operator's",
+                    settings.frames.map
+                );
+            }
             Some(LiveTap::new(server))
         }
         None => None,

@@ -40,18 +40,24 @@ fn free_port() -> u16 {
 struct Team {
     dir: PathBuf,
     domain: String,
+    mission: &'static str,
     ports: BTreeMap<&'static str, u16>,
 }
 
 impl Team {
     fn new(name: &str, domain: String) -> Team {
+        Team::of(name, domain, MISSION, &ROBOTS)
+    }
+
+    /// The team of `mission`, whose robots are `robots`.
+    fn of(name: &str, domain: String, mission: &'static str, robots: &[&'static str]) -> Team {
         let dir = std::env::temp_dir().join(format!("spomp-team-link-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).expect("temp dir");
-        let keys = spomp().args(["keys", "generate", MISSION, "--out"]).arg(dir.join("keys")).output().expect("keys");
+        let keys = spomp().args(["keys", "generate", mission, "--out"]).arg(dir.join("keys")).output().expect("keys");
         assert!(keys.status.success(), "{}", String::from_utf8_lossy(&keys.stderr));
-        let ports = ROBOTS.iter().map(|r| (*r, free_port())).collect();
-        Team { dir, domain, ports }
+        let ports = robots.iter().map(|r| (*r, free_port())).collect();
+        Team { dir, domain, mission, ports }
     }
 
     fn keys(&self) -> PathBuf {
@@ -62,21 +68,15 @@ impl Team {
         self.dir.join(format!("{robot}.state"))
     }
 
-    /// The farm in lockstep; `extra` after the rest (`--rate` caps its speed).
+    /// The farm in lockstep; `extra` after the rest (`--rate` caps its speed; a
+    /// `--lockstep-timeout-s` there replaces the default 5 s).
     fn start_farm(&self, extra: &[&str]) -> Reap {
+        let timeout: &[&str] =
+            if extra.contains(&"--lockstep-timeout-s") { &[] } else { &["--lockstep-timeout-s", "5"] };
         let child = spomp()
-            .args([
-                "sim",
-                MISSION,
-                "--ros2",
-                "--lockstep",
-                "--lockstep-timeout-s",
-                "5",
-                "--domain-id",
-                &self.domain,
-                "--json",
-                "--no-mcap",
-            ])
+            .args(["sim", self.mission, "--ros2", "--lockstep"])
+            .args(timeout)
+            .args(["--domain-id", &self.domain, "--json", "--no-mcap"])
             .args(extra)
             .arg("--out")
             .arg(self.dir.join("sim"))
@@ -91,10 +91,10 @@ impl Team {
     /// ugv1's (gossip finds the rest).
     fn start_robot(&self, robot: &str, extra: &[&str]) -> Reap {
         let mut cmd = spomp();
-        cmd.args(["run", MISSION, "--robot", robot, "--lockstep", "--json", "--domain-id", &self.domain]);
+        cmd.args(["run", self.mission, "--robot", robot, "--lockstep", "--json", "--domain-id", &self.domain]);
         cmd.arg("--keys").arg(self.keys());
         cmd.args(["--listen", &format!("tcp/127.0.0.1:{}", self.ports[robot])]);
-        for hub in ["base", "ugv1"].iter().filter(|h| **h != robot) {
+        for hub in ["base", "ugv1"].iter().filter(|h| **h != robot && self.ports.contains_key(*h)) {
             cmd.args(["--connect", &format!("tcp/127.0.0.1:{}", self.ports[hub])]);
         }
         cmd.arg("--state-file").arg(self.state_file(robot)).args(["--state-period-s", "1"]).args(extra);
@@ -413,4 +413,230 @@ fn a_resumed_uav_continues_its_survey_where_it_was() {
     );
     assert!(make("ugv1").resume(Time::ZERO, reframe("{}")).is_err(), "the UAV's team state given to ugv1");
     assert!(make("uav1").resume(Time::ZERO, state[..state.len() / 2].to_vec()).is_err(), "cut short");
+}
+
+const OPERATOR_MISSION: &str = "tests/missions/ros2/farm-operator.yaml";
+const OPERATOR_ROBOTS: [&str; 3] = ["base", "ugv1", "ugv2"];
+
+/// `spomp operator` of `team` with the key folder `keys`, connecting to the basestation:
+/// its exit code and its `--json` outcome.
+fn operator(team: &Team, keys: &std::path::Path, args: &[&str]) -> (Option<i32>, serde_json::Value) {
+    operator_waiting(team, keys, 30, args)
+}
+
+/// [`operator`] waiting at most `wait_s` wall seconds for the robots.
+fn operator_waiting(
+    team: &Team,
+    keys: &std::path::Path,
+    wait_s: u32,
+    args: &[&str],
+) -> (Option<i32>, serde_json::Value) {
+    let out = spomp()
+        .args(["operator", team.mission, "--keys"])
+        .arg(keys)
+        .args(["--connect", &format!("tcp/127.0.0.1:{}", team.ports["base"]), "--json"])
+        .args(["--wait-s", &wait_s.to_string()])
+        .args(args)
+        .output()
+        .expect("spomp operator runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let value = serde_json::from_str(&stdout).unwrap_or_else(|_| {
+        panic!("spomp operator {args:?} printed no JSON:\n{stdout}\n{}", String::from_utf8_lossy(&out.stderr))
+    });
+    (out.status.code(), value)
+}
+
+/// Waits (at most `limit` of wall time) until `found` finds something in `robot`'s state file.
+fn wait_for<T>(team: &Team, robot: &str, limit: Duration, what: &str, found: impl Fn(&TeamState) -> Option<T>) -> T {
+    let start = Instant::now();
+    loop {
+        if let Some(t) = team.team_state(robot).as_ref().and_then(&found) {
+            return t;
+        }
+        assert!(start.elapsed() < limit, "{what}: not within {limit:?}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// A key folder that claims to be the operator's but signs with ugv1's key: `team.json` lists
+/// ugv1's public key as the operator's, `operator.key.json` holds ugv1's secret key (and the
+/// operator's real transport password, so the link admits it). A compromised robot's key
+/// trying to command the team.
+fn robot_key_as_operator(team: &Team) -> PathBuf {
+    let real = team.keys();
+    let rogue = team.dir.join("rogue-operator-keys");
+    std::fs::create_dir_all(&rogue).expect("rogue dir");
+    let read = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(real.join(name)).expect("key file")).expect("json")
+    };
+    let mut team_json = read("team.json");
+    let ugv1_public = team_json["members"]["ugv1"].clone();
+    team_json["operators"]["operator"] = ugv1_public;
+    let mut operator_key = read("operator.key.json");
+    operator_key["secret_key"] = read("ugv1.key.json")["secret_key"].clone();
+    let write = |name: &str, text: String| {
+        use std::os::unix::fs::PermissionsExt;
+        let path = rogue.join(name);
+        std::fs::write(&path, text).expect("write");
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).expect("chmod");
+    };
+    write("team.json", team_json.to_string());
+    write("operator.key.json", operator_key.to_string());
+    write("transport.passwords", std::fs::read_to_string(real.join("transport.passwords")).expect("passwords"));
+    rogue
+}
+
+/// Issue 37's acceptance, in a lockstep farm with the signed Zenoh link: the operator adds a
+/// goal from the command line once the farm's clock has passed 300 s and a UGV claims and
+/// visits it; a cancel while a UGV holds a goal makes it drop the claim at once (the release is
+/// stamped no later than one sync round after the robot applied the cancel) and the goal is
+/// never visited; `recall ugv2` brings ugv2 home; a command signed with a robot's key is
+/// refused by every robot and counted; a point published from a viewer to the basestation's
+/// live view (the stdlib Python Foxglove client) adds a goal the team sees.
+///
+/// Wall time only bounds the waits: the farm's speed is capped (`--rate 8`), and every check
+/// is on the robots' own records and clocks.
+#[test]
+fn the_operator_adds_cancels_and_recalls_over_the_signed_link_and_a_robot_key_cannot_command() {
+    let team = Team::of("operator", domain(800), OPERATOR_MISSION, &OPERATOR_ROBOTS);
+    let live_port = free_port();
+    let live = format!("127.0.0.1:{live_port}");
+    // A robot the loaded machine keeps waiting is not dropped by the farm: the run would go on
+    // without it.
+    let mut farm = team.start_farm(&["--rate", "8", "--lockstep-timeout-s", "60"]);
+    let robots: Vec<(&str, Reap)> = OPERATOR_ROBOTS
+        .iter()
+        .map(|r| {
+            let extra: &[&str] = if *r == "base" { &["--live", &live, "--live-operator"] } else { &[] };
+            (*r, team.start_robot(r, extra))
+        })
+        .collect();
+    let keys = team.keys();
+    let (ugv1, ugv2) = (RobotId::new("ugv1"), RobotId::new("ugv2"));
+
+    // t = 300 s of the farm's clock, as ugv1's records say.
+    let t = wait_for(&team, "ugv1", Duration::from_secs(400), "the farm's clock passing 300 s", |s| {
+        s.robot_pose(&ugv1).map(|(_, t)| t).filter(|t| t.as_secs_f64() >= 300.0)
+    });
+    eprintln!("operator acts at t = {:.1} s", t.as_secs_f64());
+
+    // goal add: every robot acknowledges; a UGV claims and visits the goal.
+    let (code, add) = operator(&team, &keys, &["goal", "add", "--at", "70,10", "--name", "east"]);
+    assert_eq!(code, Some(0), "{add:#}");
+    for r in OPERATOR_ROBOTS {
+        assert!(add["acknowledged"].get(r).is_some(), "{r} did not acknowledge: {add:#}");
+        assert!(add["acknowledged"][r].as_f64().unwrap_or(0.0) >= 300.0, "{add:#}");
+    }
+    let east = goal_id(&add);
+    let visitor = wait_for(&team, "ugv1", Duration::from_secs(240), "the added goal visited", |s| {
+        s.goal(&east).and_then(|g| g.visited.clone())
+    });
+    assert!(["ugv1", "ugv2"].contains(&visitor.1.as_str()), "{visitor:?}");
+    assert!(visitor.0.as_secs_f64() > t.as_secs_f64(), "visited before it was added: {visitor:?}");
+
+    // goal cancel while a UGV holds it.
+    let (code, far) = operator(&team, &keys, &["goal", "add", "--at", "108,60", "--name", "far"]);
+    assert_eq!(code, Some(0), "{far:#}");
+    let far = goal_id(&far);
+    let holder = wait_for(&team, "ugv1", Duration::from_secs(60), "a UGV claiming the far goal", |s| {
+        s.goal(&far).and_then(|g| g.claimant.as_ref().map(|c| c.robot.clone()))
+    });
+    let (code, cancel) = operator(&team, &keys, &["goal", "cancel", "far"]);
+    assert_eq!(code, Some(0), "{cancel:#}");
+    let cancel_id = cancel["id"].as_str().expect("command id").to_string();
+    // In the holder's own records: the acknowledgement of the cancel, and its claim released
+    // no later than one sync round (1 s) after it.
+    let holder_name: &'static str = if holder == ugv1 { "ugv1" } else { "ugv2" };
+    let (acked_at, released_at) =
+        wait_for(&team, holder_name, Duration::from_secs(60), "the holder's release of the cancelled goal", |s| {
+            let acked = s
+                .commands()
+                .into_iter()
+                .find(|c| c.id.to_string() == cancel_id)?
+                .acked_by
+                .into_iter()
+                .find(|(r, _)| r == &holder)?
+                .1;
+            let released = s.records().find_map(|r| match (&r.key, &r.body) {
+                (RecordKey::Claim { goal, claimant }, spomp_teamstate::RecordBody::Claim(c))
+                    if goal == &far && claimant == &holder && !c.active =>
+                {
+                    Some(c.stamp)
+                }
+                _ => None,
+            })?;
+            Some((acked, released))
+        });
+    assert!(
+        released_at.as_secs_f64() <= acked_at.as_secs_f64() + 1.0,
+        "{holder} applied the cancel at {acked_at:?} but released its claim only at {released_at:?}"
+    );
+
+    // recall ugv2: it drives home (its start, 12,85) and stays.
+    let home = Point2::new(12.0, 85.0);
+    let away = team.team_state("ugv2").and_then(|s| s.robot_pose(&ugv2)).map(|(p, _)| p.position().distance(home));
+    assert!(away.is_some_and(|d| d > 10.0), "ugv2 is home already ({away:?} m): the recall would prove nothing");
+    let (code, recall) = operator(&team, &keys, &["recall", "ugv2"]);
+    assert_eq!(code, Some(0), "{recall:#}");
+    assert_eq!(recall["acknowledged"].as_object().map(|o| o.len()), Some(1), "only ugv2 is concerned: {recall:#}");
+    wait_for(&team, "ugv2", Duration::from_secs(120), "ugv2 home after the recall", |s| {
+        s.robot_pose(&ugv2).filter(|(p, _)| p.position().distance(home) < 3.0)
+    });
+
+    // A command signed with ugv1's key: nobody applies it, every robot refuses and counts it.
+    let rogue = robot_key_as_operator(&team);
+    let (code, forged) = operator_waiting(&team, &rogue, 5, &["hold", "all"]);
+    assert_eq!(code, Some(2), "{forged:#}");
+    assert_eq!(forged["acknowledged"].as_object().map(|o| o.len()), Some(0), "{forged:#}");
+
+    // A point published to the basestation's live view, as Foxglove's 3-D panel does.
+    let python = Command::new("python3").arg("--version").output().is_ok_and(|o| o.status.success());
+    if python {
+        let out = Command::new("python3")
+            .arg("scripts/foxglove-publish-point.py")
+            .arg(format!("ws://{live}"))
+            .args(["62", "50"])
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .expect("python3 runs");
+        assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stdout));
+        wait_for(&team, "ugv1", Duration::from_secs(60), "the viewer's goal reaching ugv1", |s| {
+            s.goals().iter().find(|g| g.position.distance(Point2::new(62.0, 50.0)) < 0.5).map(|g| g.id.clone())
+        });
+    } else {
+        eprintln!("no python3: the viewer's part skipped");
+    }
+
+    // The status the operator sees at the end.
+    let (code, status) = operator(&team, &keys, &["status"]);
+    assert_eq!(code, Some(0), "{status:#}");
+    let modes: BTreeMap<String, String> = status["robots"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|r| (r["robot"].as_str().unwrap_or("").to_string(), r["mode"].as_str().unwrap_or("").to_string()))
+        .collect();
+    assert_eq!(modes.get("ugv2").map(String::as_str), Some("recall"), "{status:#}");
+    assert_eq!(modes.get("ugv1").map(String::as_str), Some("mission"), "the forged hold held nobody: {status:#}");
+
+    let _ = Command::new("kill").args(["-INT", &farm.0.id().to_string()]).status();
+    let _ = wait_with_timeout(&mut farm.0, Duration::from_secs(30));
+    let reports = stop_robots(robots);
+    for robot in OPERATOR_ROBOTS {
+        let refused = reports[robot]["team_rejected_by_kind"]["bad_signature"].as_u64().unwrap_or(0);
+        assert!(refused > 0, "{robot} did not count the forged command: {:#}", reports[robot]);
+    }
+    // The far goal was never visited, by anyone's records.
+    for robot in OPERATOR_ROBOTS {
+        let state = team.team_state(robot).unwrap_or_else(|| panic!("{robot}'s state file"));
+        let g = state.goal(&far).unwrap_or_else(|| panic!("{robot} does not know the far goal"));
+        assert!(g.visited.is_none() && g.cancelled.is_some(), "{robot}: {g:?}");
+    }
+}
+
+/// The goal an `goal add` outcome's command added (`operator/<seq>`).
+fn goal_id(outcome: &serde_json::Value) -> GoalId {
+    let id = outcome["id"].as_str().unwrap_or_else(|| panic!("no command id: {outcome:#}"));
+    let (operator, seq) = id.split_once('#').unwrap_or_else(|| panic!("command id `{id}`"));
+    GoalId { origin: RobotId::new(operator), seq: seq.parse().unwrap_or_else(|_| panic!("command id `{id}`")) }
 }

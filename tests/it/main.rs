@@ -11,6 +11,7 @@
 mod cli;
 mod cli_experiment;
 mod cli_harden;
+mod cli_operator;
 mod cli_replay;
 mod cli_sim;
 mod cli_sites;

@@ -12,6 +12,12 @@
 //! subscribing later is sent the latest one at once. The server advertises the `time`
 //! capability and broadcasts the run's (simulated) time, so a viewer's clock follows the run.
 //!
+//! Opt-in ([`LiveOptions::points`]), the server also offers the protocol's `clientPublish`
+//! capability and takes points a viewer publishes (Foxglove's 3-D panel "Publish point",
+//! `geometry_msgs/PointStamped`, json or cdr; see [`points`]): each is handed to the caller's
+//! handler, which decides what it means (the CLI: an operator's "add goal"). Without it a
+//! viewer's advertisement is refused, as before.
+//!
 //! Only subscribed channels cost anything: a message nobody subscribes to is dropped before it
 //! is copied. Each viewer has a bounded queue (1024 messages by default); a slow viewer loses
 //! the oldest messages, and never slows the run down.
@@ -21,13 +27,16 @@ use std::net::SocketAddr;
 use std::sync::{Arc, Mutex, PoisonError};
 
 mod front;
+pub mod points;
 #[cfg(test)]
 mod tests;
 #[cfg(any(test, feature = "viewer"))]
 pub mod viewer;
 
-use foxglove::websocket::{Capability, ChannelView, Client, ServerListener};
+use foxglove::websocket::{Capability, ChannelView, Client, ClientChannel, ServerListener, Status};
+
 use foxglove::{ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer, WebSocketServerHandle};
+pub use points::{PointHandler, PublishedPoint};
 
 /// Where the live view listens unless told otherwise: loopback only.
 pub const DEFAULT_ADDR: SocketAddr = SocketAddr::new(std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST), 8765);
@@ -78,13 +87,39 @@ struct Latest {
 /// Latest messages of the latched channels, by topic; shared with the server's listener.
 type LatchedMessages = Arc<Mutex<HashMap<String, Latest>>>;
 
-/// Sends a new subscriber of a latched channel its latest message.
+/// What the server does for its viewers beyond serving channels: sends a new subscriber of a
+/// latched channel its latest message, and hands published points to the handler.
 struct LatchedReplay {
     context: Arc<Context>,
     latched: LatchedMessages,
+    points: Option<PointHandler>,
 }
 
 impl ServerListener for LatchedReplay {
+    fn on_client_advertise(&self, client: Client, channel: &ClientChannel) {
+        if self.points.is_none() {
+            return;
+        }
+        match points::accepts(&channel.schema_name, &channel.encoding) {
+            Ok(()) => client.send_status(Status::info(format!(
+                "{}: each point published here becomes an operator's goal",
+                channel.topic
+            ))),
+            Err(why) => client.send_status(Status::warning(format!("{}: {why}", channel.topic))),
+        }
+    }
+
+    fn on_message_data(&self, client: Client, channel: &ClientChannel, payload: &[u8]) {
+        let Some(handler) = &self.points else { return };
+        let answer = points::accepts(&channel.schema_name, &channel.encoding)
+            .and_then(|()| points::decode(&channel.topic, &channel.encoding, payload))
+            .and_then(|point| handler(&point));
+        client.send_status(match answer {
+            Ok(done) => Status::info(format!("{}: {done}", channel.topic)),
+            Err(why) => Status::error(format!("{}: refused: {why}", channel.topic)),
+        });
+    }
+
     fn on_subscribe(&self, client: Client, channel: ChannelView<'_>) {
         // Copied out so the lock is not held while the message is queued.
         let latest = {
@@ -96,6 +131,20 @@ impl ServerListener for LatchedReplay {
             return;
         };
         raw.log_with_meta_to_sink(&data, PartialMetadata::with_log_time(log_time_ns), client.sink_id());
+    }
+}
+
+/// How the server serves, beyond its address and name.
+#[derive(Clone, Default)]
+pub struct LiveOptions {
+    /// Take points viewers publish (the `clientPublish` capability, encodings `json` and
+    /// `cdr`) and hand each to this handler. None: viewers may only watch.
+    pub points: Option<PointHandler>,
+}
+
+impl std::fmt::Debug for LiveOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LiveOptions").field("points", &self.points.is_some()).finish()
     }
 }
 
@@ -116,20 +165,34 @@ impl LiveServer {
     /// Starts serving on `addr` (port 0: any free port; see [`LiveServer::local_addr`]).
     /// `name` is what viewers show as the server's name.
     pub fn start(addr: SocketAddr, name: &str) -> Result<Self, LiveError> {
+        LiveServer::start_with(addr, name, LiveOptions::default())
+    }
+
+    /// [`LiveServer::start`] with `options` (points published by viewers, …).
+    pub fn start_with(addr: SocketAddr, name: &str, options: LiveOptions) -> Result<Self, LiveError> {
         // A context of its own: channels and subscriptions of one server only (tests run
         // several at once in a process).
         let context = Context::new();
         let latched = LatchedMessages::default();
-        let listener = Arc::new(LatchedReplay { context: context.clone(), latched: latched.clone() });
+        let takes_points = options.points.is_some();
+        let listener =
+            Arc::new(LatchedReplay { context: context.clone(), latched: latched.clone(), points: options.points });
+        let mut capabilities = vec![Capability::Time];
+        if takes_points {
+            capabilities.push(Capability::ClientPublish);
+        }
         // The crate's server listens on loopback only, behind the front.
-        let handle = WebSocketServer::new()
+        let mut server = WebSocketServer::new()
             .context(&context)
             .name(name)
             .bind("127.0.0.1", 0)
-            .capabilities([Capability::Time])
-            .listener(listener)
-            .start_blocking()
-            .map_err(|e| LiveError::Start { addr, message: e.to_string() })?;
+            .capabilities(capabilities)
+            .listener(listener);
+        if takes_points {
+            // Foxglove publishes in the first of these it can write: json whatever its profile.
+            server = server.supported_encodings(points::POINT_ENCODINGS);
+        }
+        let handle = server.start_blocking().map_err(|e| LiveError::Start { addr, message: e.to_string() })?;
         let backend = SocketAddr::from(([127, 0, 0, 1], handle.port()));
         let front = match front::Front::start(addr, backend) {
             Ok(f) => f,

@@ -18,6 +18,8 @@ use crate::{LEGACY_SUBPROTOCOL, SUBPROTOCOL};
 
 /// Opcode of a binary message-data frame from the server.
 const OP_MESSAGE_DATA: u8 = 0x01;
+/// Opcode of a binary message-data frame from a client (on a channel it advertised).
+const OP_CLIENT_MESSAGE_DATA: u8 = 0x01;
 /// Opcode of a binary time frame from the server.
 const OP_TIME: u8 = 0x02;
 /// Most subscriptions sent again after a refusal (see [`Viewer::retry_refused_subscription`]).
@@ -171,6 +173,38 @@ impl Viewer {
         let text = json!({ "op": "subscribe", "subscriptions": subscriptions }).to_string();
         self.socket.send(Message::text(text))?;
         Ok(())
+    }
+
+    /// Advertises a client channel `id` on `topic` (the server must offer `clientPublish`):
+    /// what Foxglove's 3-D panel sends before its first "Publish point".
+    pub fn advertise(&mut self, id: u32, topic: &str, encoding: &str, schema_name: &str) -> Result<(), ViewerError> {
+        let channel = json!({ "id": id, "topic": topic, "encoding": encoding, "schemaName": schema_name });
+        let text = json!({ "op": "advertise", "channels": [channel] }).to_string();
+        self.socket.send(Message::text(text))?;
+        Ok(())
+    }
+
+    /// Publishes `payload` on the advertised client channel `id` (binary opcode 1, the channel
+    /// id, the payload).
+    pub fn publish(&mut self, id: u32, payload: &[u8]) -> Result<(), ViewerError> {
+        let mut frame = Vec::with_capacity(5 + payload.len());
+        frame.push(OP_CLIENT_MESSAGE_DATA);
+        frame.extend_from_slice(&id.to_le_bytes());
+        frame.extend_from_slice(payload);
+        self.socket.send(Message::binary(frame))?;
+        Ok(())
+    }
+
+    /// Reads until the server sends a status containing `needle` (the first such is returned),
+    /// or `timeout` passes. Statuses received earlier count.
+    pub fn wait_for_status(&mut self, needle: &str, timeout: Duration) -> Result<String, ViewerError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(s) = self.statuses.iter().find(|s| s.contains(needle)) {
+                return Ok(s.clone());
+            }
+            self.read_before(deadline, &format!("a status saying `{needle}`"))?;
+        }
     }
 
     /// Reads until a message on a subscription arrives, or `timeout` passes.

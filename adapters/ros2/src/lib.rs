@@ -34,5 +34,5 @@ pub use mission_section::Ros2Spec;
 
 pub use run::{RobotNode, RunObserver, RunReport};
 pub use settings::{RunSettings, SettingsError};
-pub use team::{StateSink, TeamChannel};
+pub use team::{OperatorDesk, StateSink, TeamChannel};
 pub use topics::TopicNames;

@@ -368,4 +368,40 @@ mod tests {
             assert_eq!(round_trip(&out), out);
         }
     }
+
+    /// Regression (issue 37): goal views with operator fields left unset (an ordinary goal) and
+    /// set (an operator's named, urgent, cancelled goal) must cross the farm's CDR as they are;
+    /// fields left out of the encoding shifted every later one, the farm could not read the
+    /// robots' answers and a lockstep run stalled at its first step.
+    #[test]
+    fn goal_views_with_and_without_operator_fields_cross_the_wire() {
+        use spomp_teamstate::{OperatorAction, TeamState, TeamStateParams};
+        let mut team = TeamState::new(RobotId::new("operator"), u32::MAX, TeamStateParams::default()).expect("state");
+        team.add_mission_goal(0, Point2::new(10.0, 10.0)).expect("mission goal");
+        let add = OperatorAction::AddGoal {
+            position: Point2::new(60.0, 5.0),
+            name: Some("east".into()),
+            priority: 3,
+            class: Some("car".into()),
+        };
+        let id = team.issue_command(add, Time::from_nanos(5)).expect("add");
+        team.issue_command(OperatorAction::CancelGoal { goal: id.goal_id() }, Time::from_nanos(6)).expect("cancel");
+        let goals = team.goals().to_vec();
+        assert!(goals.iter().any(|g| g.priority == 0 && g.name.is_none()));
+        assert!(goals.iter().any(|g| g.priority == 3 && g.cancelled.is_some()));
+        let done = StepDone {
+            now: Time::from_nanos(3),
+            ticked: true,
+            command: None,
+            flight: None,
+            estimate_after_panorama: None,
+            estimate: None,
+            tree: "running".into(),
+            transitioned: vec![1],
+            problems: Vec::new(),
+            goals,
+        };
+        let out = LockstepOut { robot: "ugv1".into(), seq: 9, reply: Reply::Done(Box::new(done)) };
+        assert_eq!(round_trip(&out), out);
+    }
 }

@@ -32,7 +32,7 @@ use crate::frames::{FrameCheck, FrameField};
 use crate::lockstep::{self, LockstepIn, LockstepOut, Op, Reply, StepDone};
 use crate::pairing::{OdometryHistory, PanoramaPairer};
 use crate::settings::RunSettings;
-use crate::team::{StateSink, TeamChannel};
+use crate::team::{OperatorDesk, StateSink, TeamChannel};
 use crate::topics::{CLOCK_TOPIC, ROSOUT_TOPIC};
 use crate::workers::{SkillWorkers, WorkOutcome};
 
@@ -157,6 +157,8 @@ pub struct RunReport {
     /// Messages on the ROS 2 `team/in` topic ignored because the team state goes over the
     /// team link.
     pub team_in_ignored: u64,
+    /// Clicked points refused (another frame, or the operator desk said no).
+    pub operator_points_refused: u64,
     /// Inputs that named a frame other than the configured one: `topic field` → the frame id
     /// last found (a `/diagnostics` warning while any is here).
     pub frame_mismatches: std::collections::BTreeMap<String, String>,
@@ -215,6 +217,8 @@ pub struct InputCounts {
     pub team: u64,
     /// `/clock` messages.
     pub clock: u64,
+    /// Points taken from the clicked-point topic (rviz's "Publish Point"), when it is read.
+    pub operator_points: u64,
 }
 
 /// Why a run could not start.
@@ -274,12 +278,20 @@ pub struct RobotNode {
     team_credit: LinkCredit,
     /// Where the resume state goes, and how often (seconds).
     state_sink: Option<(StateSink, f64)>,
+    /// The operator's tools wired to this robot.
+    operator: Option<Operator>,
     // Entities before the node: they are dropped first.
     /// A farm's lockstep calls and this robot's answers (`--lockstep`).
     lockstep: Option<(Subscription<LockstepIn>, Publisher<LockstepOut>)>,
     inputs: Inputs,
     outputs: Outputs,
     node: DdsNode,
+}
+
+/// The operator's tools wired to a robot: the desk, and the clicked-point topic when it is read.
+struct Operator {
+    desk: Box<dyn OperatorDesk>,
+    clicked_point: Option<Subscription<ros::PointStamped>>,
 }
 
 /// Wall-clock budget of one pass when nothing arrives: the loop sleeps this long at most.
@@ -350,6 +362,7 @@ impl RobotNode {
             team_channel: None,
             team_credit: LinkCredit::default(),
             state_sink: None,
+            operator: None,
             node,
         })
     }
@@ -373,6 +386,55 @@ impl RobotNode {
     /// robot time and once at shutdown.
     pub fn set_state_sink(&mut self, sink: StateSink, period_s: f64) {
         self.state_sink = Some((sink, period_s.max(0.1)));
+    }
+
+    /// Wires the operator's tools: `desk` is polled every pass (every lockstep step) before the
+    /// robot ticks, and, with `clicked_point` (rviz's `/clicked_point`), each
+    /// `geometry_msgs/PointStamped` there in the robot's map frame is handed to it; a point in
+    /// another frame is refused (no transform is looked up) and logged on `/rosout`, as is
+    /// what the desk answers.
+    pub fn set_operator_desk(
+        &mut self,
+        desk: Box<dyn OperatorDesk>,
+        clicked_point: Option<&str>,
+    ) -> Result<(), DdsError> {
+        // Reliable, as rviz publishes: a click is a command, not a sample.
+        let sub = match clicked_point {
+            Some(topic) => Some(self.node.subscription(topic, &state_qos(16))?),
+            None => None,
+        };
+        self.operator = Some(Operator { desk, clicked_point: sub });
+        Ok(())
+    }
+
+    /// Takes the clicked points and polls the desk (see [`RobotNode::set_operator_desk`]).
+    fn serve_operator(&mut self, state: &mut LoopState, now: Time) {
+        let Some(Operator { desk, clicked_point }) = self.operator.as_mut() else { return };
+        let mut answers = Vec::new();
+        if let Some(sub) = clicked_point.as_ref() {
+            while let Some(msg) = take(sub, &mut state.report.malformed_inputs) {
+                state.report.received.operator_points += 1;
+                let answer = if msg.header.frame_id != self.settings.frames.map {
+                    Err(format!(
+                        "a point in frame `{}`; only points in `{}` are taken (no transform is looked up)",
+                        msg.header.frame_id, self.settings.frames.map
+                    ))
+                } else {
+                    desk.on_clicked_point(&mut self.robot, now, &msg)
+                };
+                answers.push(answer);
+            }
+        }
+        desk.poll(&mut self.robot, now);
+        for answer in answers {
+            match answer {
+                Ok(done) => self.log(now, 20, format!("clicked point: {done}")),
+                Err(why) => {
+                    state.report.operator_points_refused += 1;
+                    self.log(now, 30, format!("clicked point refused: {why}"));
+                }
+            }
+        }
     }
 
     fn save_state(&mut self, state: &mut LoopState) {
@@ -405,6 +467,7 @@ impl RobotNode {
             if until_s.is_some_and(|u| now.as_secs_f64() >= u) {
                 break;
             }
+            self.serve_operator(&mut state, now);
             if let Some(frame) = state.pending_frame(&self.settings) {
                 let frame = Arc::new(frame);
                 observer.on_panorama(&id, &frame);
@@ -747,6 +810,7 @@ impl RobotNode {
                 }
             }
         }
+        self.serve_operator(state, now);
         while let Some(msg) = take(&self.inputs.estop, &mut state.report.malformed_inputs) {
             if msg.data != state.estop {
                 let what = if msg.data { "e-stop engaged: tree halted" } else { "e-stop released" };

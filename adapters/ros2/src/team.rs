@@ -27,3 +27,20 @@ pub trait TeamChannel: Send {
 
 /// Where a robot's resume state goes (the CLI writes it to a file atomically).
 pub type StateSink = Box<dyn FnMut(Vec<u8>) + Send>;
+
+/// The operator's tools as a robot's node serves them (the CLI implements it: it signs each
+/// request as the operator's command and writes it into the robot's team state). Called on the
+/// node's loop thread with the robot, so whatever it does happens between ticks.
+pub trait OperatorDesk: Send {
+    /// A point clicked in the robot's map frame (rviz's "Publish Point" on `/clicked_point`):
+    /// what was done (`Ok`) or why not (`Err`), which the node logs on `/rosout`.
+    fn on_clicked_point(
+        &mut self,
+        robot: &mut spomp_robot::Robot,
+        now: spomp_core::Time,
+        point: &spomp_ros_msgs::PointStamped,
+    ) -> Result<String, String>;
+    /// Once per pass of the loop (every lockstep step), before the robot ticks: requests that
+    /// arrived by other ways (the live view's published points) are applied here.
+    fn poll(&mut self, robot: &mut spomp_robot::Robot, now: spomp_core::Time);
+}

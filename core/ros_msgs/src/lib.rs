@@ -176,6 +176,15 @@ pub struct PoseStamped {
     pub pose: Pose,
 }
 
+/// `geometry_msgs/PointStamped`: what rviz's "Publish Point" tool sends on `/clicked_point`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PointStamped {
+    /// Header: the frame the point is in (rviz's fixed frame).
+    pub header: Header,
+    /// The point.
+    pub point: Vector3,
+}
+
 /// `geometry_msgs/Twist`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Twist {
@@ -1282,6 +1291,15 @@ macro_rules! twist_deps {
 impl RosMessage for PoseStamped {
     const TYPE_NAME: &'static str = "geometry_msgs/msg/PoseStamped";
     const DEFINITION: &'static str = concat!("std_msgs/Header header\nPose pose\n", header_deps!(), pose_deps!());
+}
+
+impl RosMessage for PointStamped {
+    const TYPE_NAME: &'static str = "geometry_msgs/msg/PointStamped";
+    const DEFINITION: &'static str = concat!(
+        "std_msgs/Header header\nPoint point\n",
+        header_deps!(),
+        dependency!("geometry_msgs/Point", "float64 x\nfloat64 y\nfloat64 z\n")
+    );
 }
 
 impl RosMessage for Twist {

@@ -65,22 +65,20 @@ pub struct GoalView {
     /// Robots for which the goal is currently marked unreachable.
     pub unreachable_for: Vec<RobotId>,
     /// Its priority set by the operator (issue 37): 0 for an ordinary goal, higher is more
-    /// urgent. Left out of the serialised view when 0.
-    #[serde(default, skip_serializing_if = "is_zero")]
+    /// urgent.
+    // Always serialised: the view also travels in non-self-describing encodings (the lockstep
+    // farm's CDR answers), where a field left out shifts every later one.
+    #[serde(default)]
     pub priority: i32,
     /// The operator command that cancelled it, if it is cancelled (never claimed again).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(default)]
     pub cancelled: Option<crate::operator::CommandId>,
     /// The name an operator gave it.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(default)]
     pub name: Option<String>,
     /// The class an operator gave it.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(default)]
     pub class: Option<String>,
-}
-
-fn is_zero(p: &i32) -> bool {
-    *p == 0
 }
 
 impl GoalView {
