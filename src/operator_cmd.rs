@@ -184,7 +184,7 @@ impl Member {
         state.set_command_seq_floor(u32::try_from(now.as_secs()).unwrap_or(u32::MAX));
         let mut config = LinkConfig::new(&mission.mission, operator.clone());
         for e in &args.connect {
-            spomp_behaviors::mission::check_endpoint(e).map_err(|why| anyhow::anyhow!("--connect: {why}"))?;
+            spomp_zenoh::mission_section::check_endpoint(e).map_err(|why| anyhow::anyhow!("--connect: {why}"))?;
         }
         config.connect = args.connect.clone();
         config.multicast_scouting = false;

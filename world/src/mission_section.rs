@@ -33,7 +33,7 @@ pub struct SimSpec {
     /// without a UAV.
     #[serde(default)]
     pub prior_map: bool,
-    /// Operator commands scripted at simulated times (see [`crate::operator_script`]).
+    /// Operator commands scripted at simulated times, each issued over the modelled radio.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub operator: Vec<crate::operator_script::ScriptedCommand>,
 }
