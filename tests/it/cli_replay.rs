@@ -123,6 +123,10 @@ fn a_setting_changed_on_replay_diverges_where_the_simulator_does() {
     assert_ne!(changed, text, "the mission's ugv1 line changed");
     let mission = missions.join("patrol-return-home.yaml");
     std::fs::write(&mission, changed).unwrap();
+    // The subtrees it includes (the operator's branches) beside it, as in `missions/`.
+    std::fs::create_dir_all(missions.join("subtrees")).unwrap();
+    let subtree = "subtrees/operator.yaml";
+    std::fs::copy(root().join("missions").join(subtree), missions.join(subtree)).unwrap();
     let changed_log = record(&mission, "20", "2", &out.path().join("b"));
     let expected = first_output_difference(&log, &changed_log, "ugv1").expect("inflation changes ugv1's commands");
 
