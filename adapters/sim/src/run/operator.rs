@@ -8,9 +8,9 @@
 use std::collections::BTreeSet;
 
 use spomp_behaviors::mission::MissionSection;
+use spomp_teamstate::{CommandId, CommandTarget, OPERATOR_ID, OperatorAction, TeamState};
 use spomp_world::mission_section::SimSpec;
 use spomp_world::operator_script::{ScriptedCommand, ScriptedGoalRef};
-use spomp_teamstate::{CommandId, CommandTarget, OPERATOR_ID, OperatorAction, TeamState};
 
 use super::*;
 
@@ -48,7 +48,8 @@ pub struct OperatorCommandSummary {
 impl SimOperator {
     /// The operator of `mission`, or None without `sim.operator` entries.
     pub(super) fn for_mission(mission: &MissionFile) -> Result<Option<SimOperator>, SimError> {
-        let script = SimSpec::of_mission(mission).map_err(|e| SimError::invalid("sim.operator", e.to_string()))?.operator;
+        let script =
+            SimSpec::of_mission(mission).map_err(|e| SimError::invalid("sim.operator", e.to_string()))?.operator;
         if script.is_empty() {
             return Ok(None);
         }
