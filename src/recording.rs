@@ -302,6 +302,10 @@ impl<W: Write + Seek> spomp_ros2::RunObserver for LogObserver<W> {
         errln!("warning: robot {robot}: {message}");
     }
 
+    fn on_operator(&mut self, _robot: &str, now: Time, event: &spomp_robot::operator_log::OperatorEvent) {
+        self.record(|r| r.json("/team/events", now, event));
+    }
+
     fn on_command(&mut self, robot: &str, now: Time, cmd: Twist2) {
         self.record(|r| r.command(robot, now, cmd));
     }

@@ -504,11 +504,18 @@ fn the_operator_adds_cancels_and_recalls_over_the_signed_link_and_a_robot_key_ca
     // A robot the loaded machine keeps waiting is not dropped by the farm: the run would go on
     // without it.
     let mut farm = team.start_farm(&["--rate", "8", "--lockstep-timeout-s", "60"]);
+    // ugv2 records its run: the operator's commands and its acknowledgements must be in its log.
+    let ugv2_log = team.dir.join("ugv2-operator.mcap");
+    let ugv2_log_arg = ugv2_log.to_str().expect("utf-8 path").to_string();
     let robots: Vec<(&str, Reap)> = OPERATOR_ROBOTS
         .iter()
         .map(|r| {
-            let extra: &[&str] = if *r == "base" { &["--live", &live, "--live-operator"] } else { &[] };
-            (*r, team.start_robot(r, extra))
+            let extra: Vec<&str> = match *r {
+                "base" => vec!["--live", &live, "--live-operator"],
+                "ugv2" => vec!["--record", &ugv2_log_arg],
+                _ => Vec::new(),
+            };
+            (*r, team.start_robot(r, &extra))
         })
         .collect();
     let keys = team.keys();
@@ -626,6 +633,28 @@ fn the_operator_adds_cancels_and_recalls_over_the_signed_link_and_a_robot_key_ca
         let refused = reports[robot]["team_rejected_by_kind"]["bad_signature"].as_u64().unwrap_or(0);
         assert!(refused > 0, "{robot} did not count the forged command: {:#}", reports[robot]);
     }
+    // ugv2's log: each command it heard, and its own acknowledgement of the recall, on
+    // /team/events as the simulator writes them.
+    let log = spomp_mcap::read_replay_log(&std::fs::read(&ugv2_log).expect("ugv2's log")).expect("ugv2's log reads");
+    let events: Vec<serde_json::Value> = log
+        .messages
+        .iter()
+        .filter(|m| m.topic == "/team/events")
+        .map(|m| {
+            let msg: spomp_ros_msgs::StringMsg = spomp_mcap::decode_cdr(&m.topic, &m.data).expect("a string message");
+            serde_json::from_str(&msg.data).expect("JSON")
+        })
+        .collect();
+    let recall_id = recall["id"].as_str().expect("command id");
+    let has = |event: &str, robot: &str| {
+        events.iter().any(|e| e["event"] == event && e["command"] == recall_id && e["robot"] == robot)
+    };
+    assert!(has("operator_command_heard", "ugv2"), "the recall is not in ugv2's log: {events:#?}");
+    assert!(has("operator_acknowledged", "ugv2"), "ugv2's acknowledgement is not in its log: {events:#?}");
+    for kind in ["goal_add", "goal_cancel", "recall"] {
+        assert!(events.iter().any(|e| e["kind"] == kind), "no {kind} command in ugv2's log: {events:#?}");
+    }
+
     // The far goal was never visited, by anyone's records.
     for robot in OPERATOR_ROBOTS {
         let state = team.team_state(robot).unwrap_or_else(|| panic!("{robot}'s state file"));

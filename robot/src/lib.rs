@@ -10,6 +10,8 @@
 //! - [`team_round`]: the team link's send round ([`Robot::team_round`] within a
 //!   [`LinkCredit`]) and the background work's modelled latency ([`ModelledWork`]), written once
 //!   for every adapter; the adapters only move bytes and work.
+//! - [`operator_log`]: the operator's commands and acknowledgements a robot's team state
+//!   comes to hold, reported once each for its log.
 //! - [`RobotView`]: what observers and tools may read of a robot, read-only.
 //! - [`RobotSetup`]: the one translation from a mission, a robot id and the [`OperatingArea`]
 //!   to a robot's configuration, with its [`NavigationSettings`] from the mission's
@@ -24,6 +26,7 @@ pub mod checks;
 pub mod class_names;
 pub mod mission_section;
 pub mod nodes;
+pub mod operator_log;
 mod robot;
 pub mod runtime;
 pub mod seam;

@@ -58,6 +58,8 @@ pub trait RunObserver: RobotObserver {
     /// A lockstep farm's hello was taken, before any call of its run: the heavy skills run in the
     /// background (`true`, under the farm's latency model) or inline.
     fn on_lockstep(&mut self, _background_skills: bool) {}
+    /// The robot's team state newly holds an operator command or an acknowledgement of one.
+    fn on_operator(&mut self, _robot: &str, _now: Time, _event: &spomp_robot::operator_log::OperatorEvent) {}
 }
 
 /// An observer that ignores everything.
@@ -1216,6 +1218,9 @@ impl RobotNode {
                 let _ = self.outputs.tf.publish(tf);
             }
         }
+        for event in state.operator_log.poll(self.robot.team()) {
+            observer.on_operator(id.as_str(), now, &event);
+        }
         let path = self.robot.planned_path().unwrap_or(&[]);
         if path.len() != state.last_path_len || path.first() != state.last_path_start.as_ref() {
             state.last_path_len = path.len();
@@ -1383,6 +1388,8 @@ struct LoopState {
     work_rx: std::collections::HashMap<u64, Instant>,
     panorama_processed: Option<Instant>,
     skill_failed: bool,
+    /// The operator's commands and acknowledgements reported to the observer so far.
+    operator_log: spomp_robot::operator_log::OperatorLog,
     /// Robot time of the newest position input.
     position_rx: Option<Time>,
     /// A UAV: it needs a fresh position, not odometry and panoramas.
@@ -1477,6 +1484,7 @@ impl LoopState {
             work_rx: std::collections::HashMap::new(),
             panorama_processed: None,
             skill_failed: false,
+            operator_log: Default::default(),
             position_rx: None,
             flies: false,
             sensorless: false,
