@@ -638,11 +638,32 @@ fn print_summary(run: &RunSummary, trial_dir: &Path, with_mcap: bool) {
                 (Some(t), Some(b)) => format!("{t:.0} s {b}"),
                 _ => "—".to_string(),
             },
-            fmt_time(g.visited_s),
-            g.visited_by.as_deref().unwrap_or("—")
+            // A goal the operator cancelled before anyone visited it says so, and by whom.
+            match (g.visited_s, g.cancelled_s) {
+                (None, Some(t)) => format!("cancel {t:.0} s"),
+                (visited, _) => fmt_time(visited),
+            },
+            match (g.visited_by.as_deref(), g.cancelled_s) {
+                (Some(by), _) => by,
+                (None, Some(_)) => "operator",
+                (None, None) => "—",
+            }
         );
     }
-    out!("goals visited: {}/{}", run.goals_visited, run.goals.len());
+    let cancelled = run.goals.iter().filter(|g| g.visited_s.is_none() && g.cancelled_s.is_some()).count();
+    if cancelled > 0 {
+        out!("goals visited: {}/{} ({cancelled} cancelled by the operator)", run.goals_visited, run.goals.len());
+    } else {
+        out!("goals visited: {}/{}", run.goals_visited, run.goals.len());
+    }
+    if !run.operator.is_empty() {
+        out!("operator commands (sim.operator):");
+        for c in &run.operator {
+            let applied: Vec<String> = c.acked_by.iter().map(|(robot, t)| format!("{robot} {t:.0} s")).collect();
+            let applied = if applied.is_empty() { "nobody".to_string() } else { applied.join(", ") };
+            out!("  {:>6.0} s  {:<12} {}; applied by {}", c.issued_s, c.id, c.action, applied);
+        }
+    }
     out!("");
     out!(
         "{:<8} {:<12} {:>11} {:>9} {:>11} {:>8} {:<12} {:>16}",
