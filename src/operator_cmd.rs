@@ -166,15 +166,12 @@ impl Member {
             .context("the operator's team state")?;
         // The mission's goals, as every robot adds them (`mission/<index>`): the team's claims
         // and visits of them refer to them, and their names address them.
-        let mut mission_names = Vec::new();
         for (k, g) in mission.goals.iter().flat_map(|g| g.manual.iter()).enumerate() {
-            let id = state
+            state
                 .add_mission_goal(k as u32, Point2::new(g.x_m, g.y_m))
                 .with_context(|| format!("goals.manual[{k}]"))?;
-            if let Some(name) = &g.name {
-                mission_names.push((name.clone(), id));
-            }
         }
+        let mission_names = spomp_robot::setup::mission_goal_names(mission);
         state.set_security(Arc::new(security)).context("securing the operator's team state")?;
         let now = wall_now();
         // Every run a larger session (robots take each session's messages once), and command

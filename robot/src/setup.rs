@@ -8,7 +8,7 @@ use spomp_behaviors::mission::MissionFile;
 use spomp_behaviors::mission::schema::{
     DEFAULT_PRIOR_SIGMA_DEG, DEFAULT_PRIOR_SIGMA_M, DEFAULT_TICK_HZ, DEFAULT_TIME_LIMIT_PER_M_S, LocalizationMode,
 };
-use spomp_core::{AerialMap, ClassTable, GeoPoint, GridSpec, Pose2, RobotId, RobotKind};
+use spomp_core::{AerialMap, ClassTable, GeoPoint, GoalId, GridSpec, Pose2, RobotId, RobotKind};
 use spomp_localization::LocalizationParams;
 use spomp_mapping::{CompressionParams, GoalDetectionParams, PngLevel};
 use spomp_teamstate::TeamStateParams;
@@ -246,6 +246,21 @@ impl RobotSetup {
             map_origin: area.map_origin,
         })
     }
+}
+
+/// The mission's named goals (`goals.manual` entries with a `name`) and the ids every robot
+/// gives them (`mission/<index>`, as [`spomp_teamstate::TeamState::add_mission_goal`] does):
+/// how an operator's command addresses a goal by its name in the mission.
+pub fn mission_goal_names(mission: &MissionFile) -> Vec<(String, GoalId)> {
+    mission
+        .goals
+        .iter()
+        .flat_map(|g| g.manual.iter().enumerate())
+        .filter_map(|(k, g)| {
+            let id = GoalId { origin: RobotId::new(spomp_teamstate::MISSION_WRITER), seq: k as u32 };
+            g.name.clone().map(|name| (name, id))
+        })
+        .collect()
 }
 
 /// The team-state parameters of a mission: its deconfliction radius and claim lease over the

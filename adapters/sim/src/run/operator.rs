@@ -66,15 +66,7 @@ impl SimOperator {
         let id = RobotId::new(OPERATOR_ID);
         let team = TeamState::new(id.clone(), u32::MAX, spomp_robot::setup::team_params(mission))
             .map_err(|e| SimError::invalid("sim.operator", e.to_string()))?;
-        let mission_names = mission
-            .goals
-            .iter()
-            .flat_map(|g| g.manual.iter().enumerate())
-            .filter_map(|(k, g)| {
-                let id = GoalId { origin: RobotId::new(spomp_teamstate::MISSION_WRITER), seq: k as u32 };
-                g.name.clone().map(|name| (name, id))
-            })
-            .collect();
+        let mission_names = spomp_robot::setup::mission_goal_names(mission);
         Ok(Some(SimOperator {
             id,
             team,
