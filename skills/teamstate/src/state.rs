@@ -12,7 +12,7 @@ use crate::intern::{KeyNo, key_no, with_keys};
 use crate::params::TeamStateParams;
 use crate::record::{
     ClaimRecord, GoalOrigin, GoalRecord, Limits, MapVersion, Record, RecordBody, RecordKey, RecordSet, RobotRecord,
-    TierSet, UnreachableRecord, VisitRecord, check_scan, finite_pose, record_stamp,
+    Tier, TierSet, UnreachableRecord, VisitRecord, check_scan, finite_pose, record_stamp,
 };
 use crate::sync::{HEADER_BYTES, InFlight, PeerState, SyncMessage};
 use crate::view::{GoalIndex, GoalView, Lease, build_goal_index};
@@ -787,13 +787,17 @@ impl TeamState {
 
     // ------------------------------------------------------------------ sync
 
-    fn peer_has_all(&self, peer: &PeerState) -> bool {
+    fn peer_has_all(&self, peer: &PeerState, takes: TierSet) -> bool {
         // Only records changed since the peer's cursor, pending ones and in-flight ones can be
         // missing at the peer.
         let unseen = self.changes.range(peer.change_cursor + 1..).map(|(_, no)| no);
         with_keys(|table| {
             let held_by_peer = |no: &KeyNo| {
                 let Some(rec) = table.key(*no).and_then(|key| self.records.get(key)) else { return true };
+                // A record of a tier the peer does not take is not missing there.
+                if !takes.contains(rec.tier()) {
+                    return true;
+                }
                 let held = peer.confirmed.get(*no);
                 // Poses change every tick; any version counts, or a sync would never complete.
                 match rec.key {
@@ -813,9 +817,18 @@ impl TeamState {
         if peer == &self.self_id {
             return None;
         }
+        let takes = self.tiers_taken_by(peer);
+        let allowed_tiers = allowed_tiers.and(takes);
         let state = self.peers.entry(peer.clone()).or_default();
-        for (_, &no) in self.changes.range(state.change_cursor + 1..) {
-            state.pending.insert(no);
+        let changed = self.changes.range(state.change_cursor + 1..).map(|(_, &no)| no);
+        if takes == TierSet::ALL {
+            state.pending.extend(changed);
+        } else {
+            // Records of tiers the peer never takes are never pending for it: they would pile
+            // up there (every scan) and keep its sync from ever being complete.
+            with_keys(|table| {
+                state.pending.extend(changed.filter(|&no| table.key(no).is_some_and(|k| takes.contains(k.tier()))));
+            });
         }
         state.change_cursor = self.change_seq;
         let records = &self.records;
@@ -872,7 +885,7 @@ impl TeamState {
         }
         let flag = {
             let state = self.peers.get(peer)?;
-            self.peer_has_all(state)
+            self.peer_has_all(state, takes)
         };
         let state = self.peers.get_mut(peer)?;
         let flag_unconfirmed = state.last_flag_sent != Some(flag) || !state.flag_confirmed;
@@ -1120,7 +1133,20 @@ impl TeamState {
     /// robot holds (any version of a pose), and the peer's newest message said the same of this
     /// robot. The UAV waits on this before it returns to exploring.
     pub fn sync_complete_with(&self, peer: &RobotId) -> bool {
-        self.peers.get(peer).is_some_and(|p| p.peer_says_we_have_all && self.peer_has_all(p))
+        self.peers.get(peer).is_some_and(|p| p.peer_says_we_have_all && self.peer_has_all(p, self.tiers_taken_by(peer)))
+    }
+
+    /// The tiers `peer` is sent, whatever its link allows: an operator (the reserved id
+    /// [`crate::OPERATOR_ID`], or a member the team's keys list as an operator) takes the
+    /// coordination tier only — goals, claims, visits, poses, commands and acknowledgements are
+    /// all it reads, and scans and maps would crowd its link to the robot it reaches (a laptop
+    /// on the base's radio). Every robot takes every tier. The one place this rule is kept:
+    /// [`TeamState::make_sync`] applies it, so every link (the simulator's radio, the Zenoh
+    /// team link) carries the same to an operator.
+    pub fn tiers_taken_by(&self, peer: &RobotId) -> TierSet {
+        let operator =
+            peer.as_str() == crate::OPERATOR_ID || self.security.as_ref().is_some_and(|s| s.keys().is_operator(peer));
+        if operator { TierSet::only(Tier::Coordination) } else { TierSet::ALL }
     }
 
     /// Forgets what is known about `peer`'s holdings (e.g. the peer restarted); everything is

@@ -8,7 +8,7 @@
 use std::collections::BTreeSet;
 
 use spomp_behaviors::mission::MissionSection;
-use spomp_teamstate::{CommandId, CommandTarget, OPERATOR_ID, OperatorAction, TeamState};
+use spomp_teamstate::{CommandId, CommandTarget, OPERATOR_ID, OperatorAction, SyncMessage, TeamState};
 use spomp_world::mission_section::SimSpec;
 use spomp_world::operator_script::{ScriptedCommand, ScriptedGoalRef};
 
@@ -29,6 +29,42 @@ pub(super) struct SimOperator {
     acks_shown: BTreeSet<(CommandId, RobotId)>,
     /// The mission's named goals (`goals.manual`): name → id, as every robot loads them.
     mission_names: Vec<(String, GoalId)>,
+    /// What crossed the operator's links.
+    pub(super) traffic: OperatorTraffic,
+}
+
+/// The team-state traffic between the robots and the simulator's operator over its radio links,
+/// for the run's summary: what an operator's console would have to receive.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
+pub struct OperatorTraffic {
+    /// Messages the robots sent the operator.
+    pub received_messages: u64,
+    /// Bytes the robots sent the operator.
+    pub received_bytes: u64,
+    /// Those bytes by the tier they carried (coordination, scans, maps); a message's header
+    /// counts as coordination. The operator is sent coordination records only
+    /// (`TeamState::tiers_taken_by`).
+    pub received_bytes_by_tier: [u64; 3],
+    /// Messages the operator sent the robots.
+    pub sent_messages: u64,
+    /// Bytes the operator sent the robots.
+    pub sent_bytes: u64,
+}
+
+impl OperatorTraffic {
+    pub(super) fn count_received(&mut self, bytes: &[u8]) {
+        self.received_messages += 1;
+        self.received_bytes += bytes.len() as u64;
+        // A message that does not decode is refused by the operator's team state; its bytes
+        // count with coordination (the header's tier).
+        let by_tier = match SyncMessage::decode(bytes) {
+            Ok(m) => m.bytes_by_tier(bytes.len()),
+            Err(_) => [bytes.len() as u64, 0, 0],
+        };
+        for (total, b) in self.received_bytes_by_tier.iter_mut().zip(by_tier) {
+            *total += b;
+        }
+    }
 }
 
 /// A command's issue and acknowledgements, for the run's summary.
@@ -76,6 +112,7 @@ impl SimOperator {
             waiting: Vec::new(),
             acks_shown: BTreeSet::new(),
             mission_names,
+            traffic: OperatorTraffic::default(),
         }))
     }
 
