@@ -131,6 +131,9 @@ pub struct TeamState {
     /// Messages refused because of an operator record: a command signed by a key that is not
     /// the operator's, or written by a robot (a secured team).
     refused_operator_records: u64,
+    /// Bumped whenever a command or acknowledgement record is stored (see
+    /// [`TeamState::operator_records_version`]).
+    operator_version: u64,
 }
 
 impl TeamState {
@@ -158,6 +161,7 @@ impl TeamState {
             session: 0,
             command_seq_floor: 0,
             refused_operator_records: 0,
+            operator_version: 0,
         })
     }
 
@@ -220,6 +224,14 @@ impl TeamState {
         self.refused_operator_records
     }
 
+    /// A number that changes whenever an operator command or an acknowledgement is added to
+    /// this team state (written here or merged from a peer), and only then: whoever derives
+    /// something from the commands (a robot's orders and acknowledgements, a log of them)
+    /// redoes it only when the number moved. It never decreases.
+    pub fn operator_records_version(&self) -> u64 {
+        self.operator_version
+    }
+
     /// The records (for the operator module).
     pub(crate) fn records_set(&self) -> &RecordSet {
         &self.records
@@ -279,6 +291,9 @@ impl TeamState {
     /// Logs a change of `key`; called before the record is stored.
     fn note_change(&mut self, key: &RecordKey) {
         self.change_seq += 1;
+        if matches!(key, RecordKey::Command(_) | RecordKey::CommandAck { .. }) {
+            self.operator_version += 1;
+        }
         let no = key_no(key);
         let earlier = if no.is_immutable() {
             // Written once, except by a writer that lost its counter (a different body under

@@ -27,6 +27,9 @@ pub(super) struct SimOperator {
     waiting: Vec<ScriptedCommand>,
     /// Acknowledgements shown as events already: (command, robot).
     acks_shown: BTreeSet<(CommandId, RobotId)>,
+    /// Each robot's operator-records version when its acknowledgements were last looked at
+    /// (by robot index): while it stands, the robot holds no new one.
+    acks_looked: Vec<Option<u64>>,
     /// The mission's named goals (`goals.manual`): name → id, as every robot loads them.
     mission_names: Vec<(String, GoalId)>,
     /// What crossed the operator's links.
@@ -111,6 +114,7 @@ impl SimOperator {
             next: 0,
             waiting: Vec::new(),
             acks_shown: BTreeSet::new(),
+            acks_looked: Vec::new(),
             mission_names,
             traffic: OperatorTraffic::default(),
         }))
@@ -217,7 +221,12 @@ impl Simulation {
     pub(super) fn track_acknowledgements(&mut self, observer: &mut dyn SimObserver) {
         let now = self.now;
         let Some(op) = self.operator.as_mut() else { return };
-        for r in &self.robots {
+        op.acks_looked.resize(self.robots.len(), None);
+        for (r, looked) in self.robots.iter().zip(op.acks_looked.iter_mut()) {
+            let version = r.robot.team().operator_records_version();
+            if looked.replace(version) == Some(version) {
+                continue;
+            }
             for c in r.robot.team().commands() {
                 if c.acked_by(&r.id) && op.acks_shown.insert((c.id.clone(), r.id.clone())) {
                     observer.on_event(
