@@ -22,12 +22,11 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use spomp_behaviors::NodeRegistry;
-use spomp_behaviors::mission::{LoadOptions, load_mission_with};
+use spomp_behaviors::mission::{LoadOptions, MissionFile, load_mission_with};
 use spomp_core::{GoalId, Point2, RobotId, Time};
 use spomp_robot::RobotRuntime;
 use spomp_teamstate::{
-    CommandId, CommandTarget, CommandView, GoalView, OPERATOR_ID, OperatorAction, TeamState, TeamStateParams, Tier,
-    TierSet,
+    CommandId, CommandTarget, CommandView, GoalView, OPERATOR_ID, OperatorAction, TeamState, Tier, TierSet,
 };
 use spomp_zenoh::{KeyDir, LinkConfig, TeamLink};
 
@@ -40,7 +39,8 @@ const SYNC_BUDGET_BYTES: usize = 64 * 1024;
 /// Options of `spomp operator`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct OperatorArgs {
-    /// Mission file (the team's name and robots).
+    /// Mission file: the team's name, robots and goals, and its team-state parameters (the
+    /// deconfliction radius the goals are grouped with), read as the robots read them.
     pub mission: PathBuf,
     /// The team's key folder (`spomp keys generate`); `operator.key.json` must be in it.
     #[arg(long, value_name = "DIR")]
@@ -162,15 +162,7 @@ impl Member {
         let security = keys.operator_security().with_context(|| {
             format!("{}: the operator's key (operator.key.json) is needed to issue commands", args.keys.display())
         })?;
-        let mut state = TeamState::new(operator.clone(), u32::MAX, TeamStateParams::default())
-            .context("the operator's team state")?;
-        // The mission's goals, as every robot adds them (`mission/<index>`): the team's claims
-        // and visits of them refer to them, and their names address them.
-        for (k, g) in mission.goals.iter().flat_map(|g| g.manual.iter()).enumerate() {
-            state
-                .add_mission_goal(k as u32, Point2::new(g.x_m, g.y_m))
-                .with_context(|| format!("goals.manual[{k}]"))?;
-        }
+        let mut state = operator_state(mission)?;
         let mission_names = spomp_robot::setup::mission_goal_names(mission);
         state.set_security(Arc::new(security)).context("securing the operator's team state")?;
         let now = wall_now();
@@ -253,6 +245,20 @@ impl Member {
     fn team_time(&self) -> Time {
         self.state.robots().iter().map(|(_, s)| s.stamp).max().unwrap_or(Time::ZERO)
     }
+}
+
+/// The operator member's team state for `mission`: the team-state parameters every robot of
+/// the mission uses (its deconfliction radius above all: the operator's goal view, which names
+/// and statuses are read from, must group goals as the robots' do), and the mission's goals as
+/// every robot adds them (`mission/<index>`: the team's claims and visits of them refer to
+/// them, and their names address them).
+fn operator_state(mission: &MissionFile) -> Result<TeamState> {
+    let mut state = TeamState::new(RobotId::new(OPERATOR_ID), u32::MAX, spomp_robot::setup::team_params(mission))
+        .context("the operator's team state")?;
+    for (k, g) in mission.goals.iter().flat_map(|g| g.manual.iter()).enumerate() {
+        state.add_mission_goal(k as u32, Point2::new(g.x_m, g.y_m)).with_context(|| format!("goals.manual[{k}]"))?;
+    }
+    Ok(state)
 }
 
 fn wall_now() -> Duration {
@@ -555,6 +561,7 @@ fn print_status(s: &Status<'_>) {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+    use spomp_teamstate::TeamStateParams;
 
     /// A team state holding a mission goal and three operator goals, two of them named alike.
     fn team() -> TeamState {
@@ -588,6 +595,36 @@ mod tests {
         assert!(err.contains("no goal named `west` among the 4") && err.contains("(east)"), "{err}");
         assert!(err.contains("mission/0 (start)"), "{err}");
         assert!(resolve_goal(&[], &[], "x").unwrap_err().to_string().ends_with("among the 0 the team knows"));
+    }
+
+    /// Regression: the operator's team state used the skill's default deconfliction radius
+    /// (10 m), not the mission's, so two goals the robots keep apart were one goal to it.
+    #[test]
+    fn the_operator_groups_goals_with_the_missions_deconfliction_radius() {
+        let text = "mission: radius\n\
+             team:\n  - { id: ugv1, kind: ugv, role: idle, priority: 1, start: { x_m: 5, y_m: 5 } }\n\
+             goals:\n  manual:\n    - { x_m: 50, y_m: 50, name: west }\n    - { x_m: 56, y_m: 50, name: east }\n\
+             \x20 deconfliction_radius_m: 3\n\
+             roles:\n  idle: { tree: { wait: { duration_s: 10 } } }\n\
+             complete_when: time_limit\ntime_limit_s: 10\n";
+        let loaded = spomp_behaviors::mission::load_mission_str(
+            text,
+            std::path::Path::new("radius.yaml"),
+            &crate::registry(),
+            &LoadOptions::default(),
+        );
+        assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
+        let mission = loaded.mission.as_ref().unwrap();
+        let state = operator_state(mission).unwrap();
+        assert_eq!(state.goals().len(), 2, "6 m apart with a 3 m radius: two goals, as the robots see them");
+        let names = spomp_robot::setup::mission_goal_names(mission);
+        assert_eq!(resolve_goal(state.goals(), &names, "east").unwrap().to_string(), "mission/1");
+        // An operator goal 2 m from `east` is within the mission's radius: one goal with it.
+        let mut state = state;
+        let added = OperatorAction::AddGoal { position: Point2::new(58.0, 50.0), name: None, priority: 1, class: None };
+        let id = state.issue_command(added, Time::ZERO).unwrap();
+        assert_eq!(state.goal(&id.goal_id()).unwrap().id.to_string(), "mission/1");
+        assert_eq!(state.goals().len(), 2);
     }
 
     #[test]

@@ -78,11 +78,16 @@ pub(crate) fn live_handler(map_frame: String, queue: SyncSender<Pending>) -> spo
 }
 
 impl Desk {
-    /// A desk signing with `security`; with `live`, also the queue the live view's handler
-    /// ([`live_handler`]) fills.
-    pub(crate) fn new(security: Arc<TeamSecurity>, live: bool) -> Result<(Desk, Option<SyncSender<Pending>>)> {
-        let mut member = TeamState::new(RobotId::new(OPERATOR_ID), u32::MAX, TeamStateParams::default())
-            .context("the operator's team state")?;
+    /// A desk signing with `security`, its member's team state with the mission's parameters
+    /// (`spomp_robot::setup::team_params`, as the robots'); with `live`, also the queue the live
+    /// view's handler ([`live_handler`]) fills.
+    pub(crate) fn new(
+        security: Arc<TeamSecurity>,
+        live: bool,
+        params: TeamStateParams,
+    ) -> Result<(Desk, Option<SyncSender<Pending>>)> {
+        let mut member =
+            TeamState::new(RobotId::new(OPERATOR_ID), u32::MAX, params).context("the operator's team state")?;
         member.set_security(security).context("securing the operator's team state")?;
         let (queue, inbox) = if live {
             let (tx, rx) = sync_channel(QUEUE);

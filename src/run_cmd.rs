@@ -214,7 +214,8 @@ pub fn run(args: &RunArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
     crate::team_link::plug(&mut node, link.link, &args.team_link, &args.robot);
     let mut live_points = None;
     if let Some(key) = operator_key {
-        let (desk, queue) = crate::operator_desk::Desk::new(key, args.live_operator)?;
+        let (desk, queue) =
+            crate::operator_desk::Desk::new(key, args.live_operator, spomp_robot::setup::team_params(mission))?;
         node.set_operator_desk(Box::new(desk), args.clicked_point.as_deref())
             .context("subscribing to the clicked-point topic")?;
         if let Some(topic) = &args.clicked_point {

@@ -664,6 +664,19 @@ fn print_summary(run: &RunSummary, trial_dir: &Path, with_mcap: bool) {
             out!("  {:>6.0} s  {:<12} {}; applied by {}", c.issued_s, c.id, c.action, applied);
         }
     }
+    if let Some(link) = &run.operator_link {
+        let [coordination, scans, maps] = link.received_bytes_by_tier;
+        out!(
+            "operator link: received {} messages, {:.1} kB (coordination {:.1}, scans {:.1}, maps {:.1} kB); sent {} messages, {:.1} kB",
+            link.received_messages,
+            link.received_bytes as f64 / 1e3,
+            coordination as f64 / 1e3,
+            scans as f64 / 1e3,
+            maps as f64 / 1e3,
+            link.sent_messages,
+            link.sent_bytes as f64 / 1e3
+        );
+    }
     out!("");
     out!(
         "{:<8} {:<12} {:>11} {:>9} {:>11} {:>8} {:<12} {:>16}",

@@ -44,6 +44,8 @@ pub enum OperatorEvent {
 pub struct OperatorLog {
     commands: BTreeSet<CommandId>,
     acks: BTreeSet<(CommandId, RobotId)>,
+    /// The team state's operator-records version last polled: nothing new while it stands.
+    seen: Option<u64>,
 }
 
 impl OperatorLog {
@@ -51,6 +53,13 @@ impl OperatorLog {
     /// first, each in command order.
     pub fn poll(&mut self, team: &TeamState) -> Vec<OperatorEvent> {
         let mut out = Vec::new();
+        // Only a new command or acknowledgement record can add an event: until one arrives,
+        // a poll (each state publish) looks at one number and allocates nothing.
+        let version = team.operator_records_version();
+        if self.seen == Some(version) {
+            return out;
+        }
+        self.seen = Some(version);
         let views = team.commands();
         for c in &views {
             if self.commands.insert(c.id.clone()) {

@@ -32,6 +32,7 @@
 //! robot, refuses the whole message and is counted ([`TeamState::refused_operator_records`]).
 //! Without security (the simulator) commands are believed like every record.
 
+use std::collections::BTreeMap;
 use std::fmt;
 
 use serde::{Deserialize, Serialize};
@@ -367,30 +368,43 @@ pub(crate) fn apply_goal_commands(records: &RecordSet, index: &mut GoalIndex) {
 impl TeamState {
     /// Every operator command held, in command order, with the robots that acknowledged it.
     pub fn commands(&self) -> Vec<CommandView> {
-        let acks = self.command_acks();
+        // Acknowledgements are keyed (command, robot): grouped in one pass, in robot order.
+        let mut acks: BTreeMap<&CommandId, Vec<(RobotId, Time)>> = BTreeMap::new();
+        for (command, robot, stamp) in self.command_acks(None) {
+            acks.entry(command).or_default().push((robot.clone(), stamp));
+        }
         command_records(self.records_set())
             .into_iter()
             .map(|(id, c)| CommandView {
                 id: id.clone(),
                 command: c.clone(),
-                acked_by: acks.iter().filter(|(cmd, ..)| *cmd == id).map(|(_, r, t)| ((*r).clone(), *t)).collect(),
+                acked_by: acks.remove(id).unwrap_or_default(),
             })
             .collect()
     }
 
-    /// The command `id`, if held, with its acknowledgements.
+    /// The command `id`, if held, with its acknowledgements (looked up, not listed).
     pub fn command(&self, id: &CommandId) -> Option<CommandView> {
-        self.commands().into_iter().find(|c| &c.id == id)
+        let RecordBody::Command(command) = &self.records_set().get(&RecordKey::Command(id.clone()))?.body else {
+            return None;
+        };
+        let acked_by = self.command_acks(Some(id)).into_iter().map(|(_, r, t)| (r.clone(), t)).collect();
+        Some(CommandView { id: id.clone(), command: command.as_ref().clone(), acked_by })
     }
 
-    /// Every acknowledgement held: (command, robot, stamp), in key order.
-    fn command_acks(&self) -> Vec<(&CommandId, &RobotId, Time)> {
+    /// The acknowledgements held: (command, robot, stamp), in key order; of one command only
+    /// with `only`.
+    fn command_acks(&self, only: Option<&CommandId>) -> Vec<(&CommandId, &RobotId, Time)> {
         let first = RecordKey::CommandAck {
-            command: CommandId { operator: RobotId::new(""), seq: 0 },
+            command: only.cloned().unwrap_or(CommandId { operator: RobotId::new(""), seq: 0 }),
             robot: RobotId::new(""),
         };
         self.records_set()
             .starting_at(first)
+            .take_while(|r| match (&r.key, only) {
+                (RecordKey::CommandAck { command, .. }, Some(only)) => command == only,
+                _ => true,
+            })
             .map_while(|r| match (&r.key, &r.body) {
                 (RecordKey::CommandAck { command, robot }, RecordBody::CommandAck(a)) => {
                     Some(Some((command, robot, a.stamp)))
@@ -422,11 +436,14 @@ impl TeamState {
     /// goal commands and robot commands addressing it (not those it issued itself).
     pub fn commands_to_acknowledge(&self) -> Vec<CommandId> {
         let me = self.self_id();
-        let acked: Vec<&CommandId> =
-            self.command_acks().into_iter().filter(|(_, r, _)| *r == me).map(|(c, ..)| c).collect();
+        // Each command's own acknowledgement is looked up by its key: O(commands × log records),
+        // not a scan of every acknowledgement per command.
+        let acked = |id: &CommandId| {
+            self.records_set().contains_key(&RecordKey::CommandAck { command: id.clone(), robot: me.clone() })
+        };
         command_records(self.records_set())
             .into_iter()
-            .filter(|(id, c)| &id.operator != me && c.action.concerns(me) && !acked.contains(id))
+            .filter(|(id, c)| &id.operator != me && c.action.concerns(me) && !acked(id))
             .map(|(id, _)| id.clone())
             .collect()
     }

@@ -63,6 +63,11 @@ impl TierSet {
         self.0 & (1 << tier as u8) != 0
     }
 
+    /// The tiers in both sets.
+    pub const fn and(self, other: TierSet) -> Self {
+        TierSet(self.0 & other.0)
+    }
+
     /// The set as bits (bit k = tier k), the way logs and wire protocols carry it.
     pub const fn bits(self) -> u8 {
         self.0

@@ -12,7 +12,7 @@ use crate::intern::{KeyNo, key_no, with_keys};
 use crate::params::TeamStateParams;
 use crate::record::{
     ClaimRecord, GoalOrigin, GoalRecord, Limits, MapVersion, Record, RecordBody, RecordKey, RecordSet, RobotRecord,
-    TierSet, UnreachableRecord, VisitRecord, check_scan, finite_pose, record_stamp,
+    Tier, TierSet, UnreachableRecord, VisitRecord, check_scan, finite_pose, record_stamp,
 };
 use crate::sync::{HEADER_BYTES, InFlight, PeerState, SyncMessage};
 use crate::view::{GoalIndex, GoalView, Lease, build_goal_index};
@@ -131,6 +131,9 @@ pub struct TeamState {
     /// Messages refused because of an operator record: a command signed by a key that is not
     /// the operator's, or written by a robot (a secured team).
     refused_operator_records: u64,
+    /// Bumped whenever a command or acknowledgement record is stored (see
+    /// [`TeamState::operator_records_version`]).
+    operator_version: u64,
 }
 
 impl TeamState {
@@ -158,6 +161,7 @@ impl TeamState {
             session: 0,
             command_seq_floor: 0,
             refused_operator_records: 0,
+            operator_version: 0,
         })
     }
 
@@ -220,6 +224,14 @@ impl TeamState {
         self.refused_operator_records
     }
 
+    /// A number that changes whenever an operator command or an acknowledgement is added to
+    /// this team state (written here or merged from a peer), and only then: whoever derives
+    /// something from the commands (a robot's orders and acknowledgements, a log of them)
+    /// redoes it only when the number moved. It never decreases.
+    pub fn operator_records_version(&self) -> u64 {
+        self.operator_version
+    }
+
     /// The records (for the operator module).
     pub(crate) fn records_set(&self) -> &RecordSet {
         &self.records
@@ -279,6 +291,9 @@ impl TeamState {
     /// Logs a change of `key`; called before the record is stored.
     fn note_change(&mut self, key: &RecordKey) {
         self.change_seq += 1;
+        if matches!(key, RecordKey::Command(_) | RecordKey::CommandAck { .. }) {
+            self.operator_version += 1;
+        }
         let no = key_no(key);
         let earlier = if no.is_immutable() {
             // Written once, except by a writer that lost its counter (a different body under
@@ -787,13 +802,17 @@ impl TeamState {
 
     // ------------------------------------------------------------------ sync
 
-    fn peer_has_all(&self, peer: &PeerState) -> bool {
+    fn peer_has_all(&self, peer: &PeerState, takes: TierSet) -> bool {
         // Only records changed since the peer's cursor, pending ones and in-flight ones can be
         // missing at the peer.
         let unseen = self.changes.range(peer.change_cursor + 1..).map(|(_, no)| no);
         with_keys(|table| {
             let held_by_peer = |no: &KeyNo| {
                 let Some(rec) = table.key(*no).and_then(|key| self.records.get(key)) else { return true };
+                // A record of a tier the peer does not take is not missing there.
+                if !takes.contains(rec.tier()) {
+                    return true;
+                }
                 let held = peer.confirmed.get(*no);
                 // Poses change every tick; any version counts, or a sync would never complete.
                 match rec.key {
@@ -813,9 +832,18 @@ impl TeamState {
         if peer == &self.self_id {
             return None;
         }
+        let takes = self.tiers_taken_by(peer);
+        let allowed_tiers = allowed_tiers.and(takes);
         let state = self.peers.entry(peer.clone()).or_default();
-        for (_, &no) in self.changes.range(state.change_cursor + 1..) {
-            state.pending.insert(no);
+        let changed = self.changes.range(state.change_cursor + 1..).map(|(_, &no)| no);
+        if takes == TierSet::ALL {
+            state.pending.extend(changed);
+        } else {
+            // Records of tiers the peer never takes are never pending for it: they would pile
+            // up there (every scan) and keep its sync from ever being complete.
+            with_keys(|table| {
+                state.pending.extend(changed.filter(|&no| table.key(no).is_some_and(|k| takes.contains(k.tier()))));
+            });
         }
         state.change_cursor = self.change_seq;
         let records = &self.records;
@@ -872,7 +900,7 @@ impl TeamState {
         }
         let flag = {
             let state = self.peers.get(peer)?;
-            self.peer_has_all(state)
+            self.peer_has_all(state, takes)
         };
         let state = self.peers.get_mut(peer)?;
         let flag_unconfirmed = state.last_flag_sent != Some(flag) || !state.flag_confirmed;
@@ -1120,7 +1148,20 @@ impl TeamState {
     /// robot holds (any version of a pose), and the peer's newest message said the same of this
     /// robot. The UAV waits on this before it returns to exploring.
     pub fn sync_complete_with(&self, peer: &RobotId) -> bool {
-        self.peers.get(peer).is_some_and(|p| p.peer_says_we_have_all && self.peer_has_all(p))
+        self.peers.get(peer).is_some_and(|p| p.peer_says_we_have_all && self.peer_has_all(p, self.tiers_taken_by(peer)))
+    }
+
+    /// The tiers `peer` is sent, whatever its link allows: an operator (the reserved id
+    /// [`crate::OPERATOR_ID`], or a member the team's keys list as an operator) takes the
+    /// coordination tier only — goals, claims, visits, poses, commands and acknowledgements are
+    /// all it reads, and scans and maps would crowd its link to the robot it reaches (a laptop
+    /// on the base's radio). Every robot takes every tier. The one place this rule is kept:
+    /// [`TeamState::make_sync`] applies it, so every link (the simulator's radio, the Zenoh
+    /// team link) carries the same to an operator.
+    pub fn tiers_taken_by(&self, peer: &RobotId) -> TierSet {
+        let operator =
+            peer.as_str() == crate::OPERATOR_ID || self.security.as_ref().is_some_and(|s| s.keys().is_operator(peer));
+        if operator { TierSet::only(Tier::Coordination) } else { TierSet::ALL }
     }
 
     /// Forgets what is known about `peer`'s holdings (e.g. the peer restarted); everything is

@@ -158,3 +158,49 @@ proptest! {
         }
     }
 }
+
+/// The operator takes the coordination tier only (goals, claims, poses, commands,
+/// acknowledgements), whatever the link allows: a robot's scans and map versions are never sent
+/// to it, never wait for it (the robot's pending set for it does not grow with them), and the
+/// sync between them still completes. Robots still send each other everything. Regression: a
+/// robot sent the operator every tier while it was reachable.
+#[test]
+fn an_operator_is_sent_coordination_records_only_and_its_sync_completes() {
+    use spomp_core::Pose2;
+    use spomp_teamstate::{GoalOrigin, Tier, TierSet};
+    let mut ugv1 = robot("ugv1", 1);
+    let mut ugv2 = robot("ugv2", 2);
+    let mut op = robot(OPERATOR_ID, u32::MAX);
+    ugv1.identify_goal(Point2::new(40.0, 0.0), GoalOrigin::Detected, t(1.0)).unwrap();
+    ugv1.set_pose(Pose2::new(1.0, 2.0, 0.0), t(1.0)).unwrap();
+    for k in 0..3 {
+        assert!(ugv1.add_scan(scan("ugv1", 5.0 * f64::from(k), 0.0, 2.0 + f64::from(k))).unwrap());
+    }
+    ugv1.add_map_version(1, t(3.0), vec![7; 1000]).unwrap();
+    let msg = ugv1.make_sync(&id(OPERATOR_ID), TierSet::ALL, usize::MAX).unwrap();
+    assert!(!msg.records.is_empty());
+    assert!(
+        msg.records.iter().all(|r| r.tier() == Tier::Coordination),
+        "{:?}",
+        msg.records.iter().map(|r| r.key.clone()).collect::<Vec<_>>()
+    );
+    op.apply_bytes(&id("ugv1"), &msg.encode()).unwrap();
+    sync_fully(&mut ugv1, &mut op);
+    assert!(op.scans_since(0).0.is_empty() && op.newest_map().is_none(), "no scans, no maps at the operator");
+    assert_eq!(op.goals().len(), 1);
+    assert!(op.robot_pose(&id("ugv1")).is_some());
+    assert!(ugv1.sync_complete_with(&id(OPERATOR_ID)), "complete without the tiers the operator does not take");
+    assert!(op.sync_complete_with(&id("ugv1")));
+    // More scans: nothing for the operator, and nothing kept waiting for it.
+    let before = ugv1.table_sizes();
+    for k in 3..6 {
+        assert!(ugv1.add_scan(scan("ugv1", 5.0 * f64::from(k), 0.0, 10.0 + f64::from(k))).unwrap());
+    }
+    assert!(ugv1.make_sync(&id(OPERATOR_ID), TierSet::ALL, usize::MAX).is_none_or(|m| m.records.is_empty()));
+    assert_eq!(ugv1.table_sizes().peer_entries, before.peer_entries);
+    assert!(ugv1.sync_complete_with(&id(OPERATOR_ID)));
+    // A robot is sent every tier.
+    sync_fully(&mut ugv1, &mut ugv2);
+    assert_eq!(ugv2.scans_since(0).0.len(), 6);
+    assert!(ugv2.newest_map().is_some());
+}

@@ -120,6 +120,7 @@ impl Simulation {
             nodes_never_ticked,
             problems: self.problems.into_values().collect(),
             operator,
+            operator_link: self.operator.as_ref().map(|op| op.traffic),
         };
         let localization_errors = self
             .robots

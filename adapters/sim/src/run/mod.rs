@@ -61,7 +61,7 @@ use spomp_teamstate::{GoalOrigin, Tier, TierSet};
 
 pub use external::{DrivenStep, DrivenTeamMessage, ExternalDrivers};
 pub use observer::{NoObserver, RobotSnapshot, SimEvent, SimObserver};
-pub use operator::OperatorCommandSummary;
+pub use operator::{OperatorCommandSummary, OperatorTraffic};
 pub use options::{SimOptions, SkillLatency};
 pub use pace::RealTimePacer;
 pub use setup::{faults_for_mission, radio_for_mission};

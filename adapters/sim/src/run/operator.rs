@@ -8,7 +8,7 @@
 use std::collections::BTreeSet;
 
 use spomp_behaviors::mission::MissionSection;
-use spomp_teamstate::{CommandId, CommandTarget, OPERATOR_ID, OperatorAction, TeamState};
+use spomp_teamstate::{CommandId, CommandTarget, OPERATOR_ID, OperatorAction, SyncMessage, TeamState};
 use spomp_world::mission_section::SimSpec;
 use spomp_world::operator_script::{ScriptedCommand, ScriptedGoalRef};
 
@@ -27,8 +27,47 @@ pub(super) struct SimOperator {
     waiting: Vec<ScriptedCommand>,
     /// Acknowledgements shown as events already: (command, robot).
     acks_shown: BTreeSet<(CommandId, RobotId)>,
+    /// Each robot's operator-records version when its acknowledgements were last looked at
+    /// (by robot index): while it stands, the robot holds no new one.
+    acks_looked: Vec<Option<u64>>,
     /// The mission's named goals (`goals.manual`): name → id, as every robot loads them.
     mission_names: Vec<(String, GoalId)>,
+    /// What crossed the operator's links.
+    pub(super) traffic: OperatorTraffic,
+}
+
+/// The team-state traffic between the robots and the simulator's operator over its radio links,
+/// for the run's summary: what an operator's console would have to receive.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
+pub struct OperatorTraffic {
+    /// Messages the robots sent the operator.
+    pub received_messages: u64,
+    /// Bytes the robots sent the operator.
+    pub received_bytes: u64,
+    /// Those bytes by the tier they carried (coordination, scans, maps); a message's header
+    /// counts as coordination. The operator is sent coordination records only
+    /// (`TeamState::tiers_taken_by`).
+    pub received_bytes_by_tier: [u64; 3],
+    /// Messages the operator sent the robots.
+    pub sent_messages: u64,
+    /// Bytes the operator sent the robots.
+    pub sent_bytes: u64,
+}
+
+impl OperatorTraffic {
+    pub(super) fn count_received(&mut self, bytes: &[u8]) {
+        self.received_messages += 1;
+        self.received_bytes += bytes.len() as u64;
+        // A message that does not decode is refused by the operator's team state; its bytes
+        // count with coordination (the header's tier).
+        let by_tier = match SyncMessage::decode(bytes) {
+            Ok(m) => m.bytes_by_tier(bytes.len()),
+            Err(_) => [bytes.len() as u64, 0, 0],
+        };
+        for (total, b) in self.received_bytes_by_tier.iter_mut().zip(by_tier) {
+            *total += b;
+        }
+    }
 }
 
 /// A command's issue and acknowledgements, for the run's summary.
@@ -75,7 +114,9 @@ impl SimOperator {
             next: 0,
             waiting: Vec::new(),
             acks_shown: BTreeSet::new(),
+            acks_looked: Vec::new(),
             mission_names,
+            traffic: OperatorTraffic::default(),
         }))
     }
 
@@ -180,7 +221,12 @@ impl Simulation {
     pub(super) fn track_acknowledgements(&mut self, observer: &mut dyn SimObserver) {
         let now = self.now;
         let Some(op) = self.operator.as_mut() else { return };
-        for r in &self.robots {
+        op.acks_looked.resize(self.robots.len(), None);
+        for (r, looked) in self.robots.iter().zip(op.acks_looked.iter_mut()) {
+            let version = r.robot.team().operator_records_version();
+            if looked.replace(version) == Some(version) {
+                continue;
+            }
             for c in r.robot.team().commands() {
                 if c.acked_by(&r.id) && op.acks_shown.insert((c.id.clone(), r.id.clone())) {
                     observer.on_event(

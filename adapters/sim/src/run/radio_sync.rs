@@ -116,12 +116,18 @@ impl Simulation {
             }
             let budget = usize::try_from(link.budget_bytes).unwrap_or(usize::MAX);
             if let Some(msg) = op.team.make_sync(&r.id, tiers, budget) {
-                let _ = r.robot.on_team_message(self.now, &op.id, msg.encode());
+                let bytes = msg.encode();
+                op.traffic.sent_messages += 1;
+                op.traffic.sent_bytes += bytes.len() as u64;
+                let _ = r.robot.on_team_message(self.now, &op.id, bytes);
                 r.robot.deliver_recorded(observer);
             }
+            // The robot's team state sends the operator the tiers it takes (coordination only),
+            // whatever the link allows.
             let sent = r.robot.team_round(self.now, &op.id, tiers, RoundShape::OneMessage, &mut r.link_credit);
             r.robot.deliver_recorded(observer);
             for (_, bytes) in sent {
+                op.traffic.count_received(&bytes);
                 let _ = op.team.apply_bytes(&r.id, &bytes);
             }
         }

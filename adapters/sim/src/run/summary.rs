@@ -193,6 +193,9 @@ pub struct RunSummary {
     /// The operator's commands (`sim.operator`) and which robots applied them; absent without.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub operator: Vec<super::OperatorCommandSummary>,
+    /// The team-state traffic over the operator's links (`sim.operator`); absent without one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub operator_link: Option<super::OperatorTraffic>,
 }
 
 /// A reported problem and how often it came up.
