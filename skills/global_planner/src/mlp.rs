@@ -351,6 +351,8 @@ impl LaneGrad {
 
     /// Adds one sample's gradient: inputs `x`, hidden activations `a`, output weights `w_not` /
     /// `w_trav` and the logits' gradients `g_not` / `g_trav` (the flat path's expressions).
+    // One index over seven arrays reads as the flat path's loop it must match.
+    #[allow(clippy::needless_range_loop)]
     #[inline(always)]
     fn add(
         &mut self,
