@@ -210,9 +210,22 @@ impl Mlp {
     pub fn train_rows(
         &mut self,
         rows: usize,
+        row: impl FnMut(usize, &mut [f32]) -> bool,
+        settings: TrainSettings,
+        rng: &mut impl Rng,
+    ) -> f32 {
+        self.train_rows_with(rows, row, settings, rng, true)
+    }
+
+    /// [`Mlp::train_rows`], the gradient in padded rows when `use_lanes` and the hidden layer
+    /// fits them, else in the flat layout (the reference the padded path must reproduce).
+    fn train_rows_with(
+        &mut self,
+        rows: usize,
         mut row: impl FnMut(usize, &mut [f32]) -> bool,
         settings: TrainSettings,
         rng: &mut impl Rng,
+        use_lanes: bool,
     ) -> f32 {
         if rows == 0 {
             return f32::NAN;
@@ -228,32 +241,60 @@ impl Mlp {
         let batches = settings.samples.div_ceil(batch).max(1);
         let mut loss_sum = 0.0f32;
         let mut loss_count = 0usize;
+        // Hidden layers up to `LANES` wide accumulate the gradient in padded rows (whole
+        // vectors, as the forward pass): every element gets the same products added in the same
+        // order as in the flat layout, so the same bits; the padding lanes stay unread.
+        let lanes = use_lanes && nh <= LANES;
+        let mut lane_grad = LaneGrad::new(if lanes { self.inputs } else { 0 });
         for batch_index in 0..batches {
             self.grad.fill(0.0);
             let mut batch_loss = 0.0f32;
-            for _ in 0..batch {
-                let r = rng.random_range(0..rows);
-                let label = row(r, &mut x);
-                let dz = self.logit(&x);
-                let p_trav = sigmoid(dz);
-                let target = if label { 1.0 } else { 0.0 };
-                let p_label = if label { p_trav } else { 1.0 - p_trav };
-                batch_loss -= p_label.max(1e-7).ln();
-                // Softmax cross-entropy gradient with respect to the two logits.
-                let g_trav = p_trav - target;
-                let g_not = -g_trav;
-                self.grad[b2] += g_not;
-                self.grad[b2 + 1] += g_trav;
-                for j in 0..nh {
-                    let a = self.hidden_act[j];
-                    self.grad[w2 + j] += g_not * a;
-                    self.grad[w2 + nh + j] += g_trav * a;
-                    self.back[j] = (g_not * self.params[w2 + j] + g_trav * self.params[w2 + nh + j]) * a * (1.0 - a);
-                    self.grad[b1 + j] += self.back[j];
+            if lanes {
+                lane_grad.clear();
+                let (mut w_not, mut w_trav) = ([0.0f32; LANES], [0.0f32; LANES]);
+                w_not[..nh].copy_from_slice(&self.params[w2..w2 + nh]);
+                w_trav[..nh].copy_from_slice(&self.params[w2 + nh..b2]);
+                for _ in 0..batch {
+                    let r = rng.random_range(0..rows);
+                    let label = row(r, &mut x);
+                    let dz = self.logit(&x);
+                    let p_trav = sigmoid(dz);
+                    let target = if label { 1.0 } else { 0.0 };
+                    let p_label = if label { p_trav } else { 1.0 - p_trav };
+                    batch_loss -= p_label.max(1e-7).ln();
+                    let g_trav = p_trav - target;
+                    let g_not = -g_trav;
+                    let mut a = [0.0f32; LANES];
+                    a[..nh].copy_from_slice(&self.hidden_act);
+                    lane_grad.add(&x, &a, &w_not, &w_trav, g_not, g_trav);
                 }
-                for (grad_row, &xi) in self.grad[..b1].chunks_exact_mut(nh).zip(&x) {
-                    for (g, bk) in grad_row.iter_mut().zip(&self.back) {
-                        *g += bk * xi;
+                lane_grad.write_to(&mut self.grad, nh);
+            } else {
+                for _ in 0..batch {
+                    let r = rng.random_range(0..rows);
+                    let label = row(r, &mut x);
+                    let dz = self.logit(&x);
+                    let p_trav = sigmoid(dz);
+                    let target = if label { 1.0 } else { 0.0 };
+                    let p_label = if label { p_trav } else { 1.0 - p_trav };
+                    batch_loss -= p_label.max(1e-7).ln();
+                    // Softmax cross-entropy gradient with respect to the two logits.
+                    let g_trav = p_trav - target;
+                    let g_not = -g_trav;
+                    self.grad[b2] += g_not;
+                    self.grad[b2 + 1] += g_trav;
+                    for j in 0..nh {
+                        let a = self.hidden_act[j];
+                        self.grad[w2 + j] += g_not * a;
+                        self.grad[w2 + nh + j] += g_trav * a;
+                        self.back[j] =
+                            (g_not * self.params[w2 + j] + g_trav * self.params[w2 + nh + j]) * a * (1.0 - a);
+                        self.grad[b1 + j] += self.back[j];
+                    }
+                    for (grad_row, &xi) in self.grad[..b1].chunks_exact_mut(nh).zip(&x) {
+                        for (g, bk) in grad_row.iter_mut().zip(&self.back) {
+                            *g += bk * xi;
+                        }
                     }
                 }
             }
@@ -276,6 +317,79 @@ impl Mlp {
             }
         }
         loss_sum / loss_count.max(1) as f32
+    }
+}
+
+/// One batch's gradient for a hidden layer at most [`LANES`] wide, in padded rows: `w1` one row
+/// per input, then `b1`, the two output rows of `w2` and `b2`.
+struct LaneGrad {
+    w1: Vec<[f32; LANES]>,
+    b1: [f32; LANES],
+    w_not: [f32; LANES],
+    w_trav: [f32; LANES],
+    b2: [f32; 2],
+}
+
+impl LaneGrad {
+    fn new(inputs: usize) -> Self {
+        LaneGrad {
+            w1: vec![[0.0; LANES]; inputs],
+            b1: [0.0; LANES],
+            w_not: [0.0; LANES],
+            w_trav: [0.0; LANES],
+            b2: [0.0; 2],
+        }
+    }
+
+    fn clear(&mut self) {
+        self.w1.fill([0.0; LANES]);
+        self.b1 = [0.0; LANES];
+        self.w_not = [0.0; LANES];
+        self.w_trav = [0.0; LANES];
+        self.b2 = [0.0; 2];
+    }
+
+    /// Adds one sample's gradient: inputs `x`, hidden activations `a`, output weights `w_not` /
+    /// `w_trav` and the logits' gradients `g_not` / `g_trav` (the flat path's expressions).
+    // One index over seven arrays reads as the flat path's loop it must match.
+    #[allow(clippy::needless_range_loop)]
+    #[inline(always)]
+    fn add(
+        &mut self,
+        x: &[f32],
+        a: &[f32; LANES],
+        w_not: &[f32; LANES],
+        w_trav: &[f32; LANES],
+        g_not: f32,
+        g_trav: f32,
+    ) {
+        self.b2[0] += g_not;
+        self.b2[1] += g_trav;
+        let mut back = [0.0f32; LANES];
+        for j in 0..LANES {
+            self.w_not[j] += g_not * a[j];
+            self.w_trav[j] += g_trav * a[j];
+            back[j] = (g_not * w_not[j] + g_trav * w_trav[j]) * a[j] * (1.0 - a[j]);
+            self.b1[j] += back[j];
+        }
+        for (row, &xi) in self.w1.iter_mut().zip(x) {
+            for (g, bk) in row.iter_mut().zip(&back) {
+                *g += bk * xi;
+            }
+        }
+    }
+
+    /// Writes the gradient into the flat layout of `hidden` units (`w1[inputs][hidden]`, `b1`,
+    /// `w2[2][hidden]`, `b2[2]`).
+    fn write_to(&self, grad: &mut [f32], hidden: usize) {
+        let b1 = hidden * self.w1.len();
+        for (flat, row) in grad[..b1].chunks_exact_mut(hidden).zip(&self.w1) {
+            flat.copy_from_slice(&row[..hidden]);
+        }
+        grad[b1..b1 + hidden].copy_from_slice(&self.b1[..hidden]);
+        grad[b1 + hidden..b1 + 2 * hidden].copy_from_slice(&self.w_not[..hidden]);
+        grad[b1 + 2 * hidden..b1 + 3 * hidden].copy_from_slice(&self.w_trav[..hidden]);
+        grad[b1 + 3 * hidden..b1 + 3 * hidden + 2].copy_from_slice(&self.b2);
     }
 }
 
@@ -351,6 +465,38 @@ mod tests {
             let x = [1.0f32; 11];
             let flat = sigmoid(Mlp::forward(&m.params, 11, &x, &mut flat_hidden));
             assert_eq!(flat.to_bits(), m.probability(&x).to_bits());
+        }
+    }
+
+    /// Training with the gradient in padded rows leaves every parameter, accumulator and the
+    /// loss with the bits of the flat gradient's training, whatever the hidden layer's width.
+    #[test]
+    fn padded_gradient_trains_to_the_same_bits_as_the_flat_one() {
+        for hidden in [1, 7, 10, 16, 17] {
+            let mut rng = ChaCha8Rng::seed_from_u64(hidden as u64);
+            let rows: Vec<(Vec<f32>, bool)> = (0..300)
+                .map(|_| {
+                    let x: Vec<f32> = (0..11).map(|_| rng.random_range(-3.0..3.0)).collect();
+                    let label = x[0] + 0.5 * x[3] > 0.2;
+                    (x, label)
+                })
+                .collect();
+            let row = |r: usize, x: &mut [f32]| {
+                x.copy_from_slice(&rows[r].0);
+                rows[r].1
+            };
+            let (mut padded, mut flat) = (Mlp::new(11, hidden), Mlp::new(11, hidden));
+            for round in 0..3 {
+                let seed = 40 + round;
+                let a =
+                    padded.train_rows_with(rows.len(), row, settings(1000), &mut ChaCha8Rng::seed_from_u64(seed), true);
+                let b =
+                    flat.train_rows_with(rows.len(), row, settings(1000), &mut ChaCha8Rng::seed_from_u64(seed), false);
+                assert_eq!(a.to_bits(), b.to_bits(), "{hidden} hidden units, round {round}");
+                let bits = |v: &[f32]| v.iter().map(|p| p.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&padded.params), bits(&flat.params), "{hidden} hidden units, round {round}");
+                assert_eq!(bits(&padded.mean_sq), bits(&flat.mean_sq), "{hidden} hidden units, round {round}");
+            }
         }
     }
 

@@ -168,48 +168,85 @@ impl EdgeRouter {
                 }
             }
         }
-        let (wi, hi) = (w as i64, h as i64);
-        for pass in 0..2 {
-            let back: i64 = if pass == 0 { -1 } else { 1 };
-            for k in 0..n {
-                let i = if pass == 0 { k } else { n - 1 - k };
-                let (c, r) = ((i % w) as i64, (i / w) as i64);
-                let mut best = self.clearance[i];
-                for (dc, dr) in [(back, 0), (back, back), (0, back), (-back, back)] {
-                    let (nc, nr) = (c + dc, r + dr);
-                    if nc >= 0 && nr >= 0 && nc < wi && nr < hi {
-                        best = best.min(self.clearance[(nr * wi + nc) as usize].saturating_add(1));
+        // Forward pass (left, up-left, up, up-right), then backward (right, down-right, down,
+        // down-left), each in index order: row by row with the borders tested once per row,
+        // not four neighbours' bounds per cell (the same minima in the same order).
+        let cl = &mut self.clearance;
+        for r in 0..h {
+            let row = r * w;
+            for c in 0..w {
+                let i = row + c;
+                let mut best = cl[i];
+                if c > 0 {
+                    best = best.min(cl[i - 1].saturating_add(1));
+                }
+                if r > 0 {
+                    let up = i - w;
+                    best = best.min(cl[up].saturating_add(1));
+                    if c > 0 {
+                        best = best.min(cl[up - 1].saturating_add(1));
+                    }
+                    if c + 1 < w {
+                        best = best.min(cl[up + 1].saturating_add(1));
                     }
                 }
-                self.clearance[i] = best;
+                cl[i] = best;
+            }
+        }
+        for r in (0..h).rev() {
+            let row = r * w;
+            for c in (0..w).rev() {
+                let i = row + c;
+                let mut best = cl[i];
+                if c + 1 < w {
+                    best = best.min(cl[i + 1].saturating_add(1));
+                }
+                if r + 1 < h {
+                    let down = i + w;
+                    best = best.min(cl[down].saturating_add(1));
+                    if c + 1 < w {
+                        best = best.min(cl[down + 1].saturating_add(1));
+                    }
+                    if c > 0 {
+                        best = best.min(cl[down - 1].saturating_add(1));
+                    }
+                }
+                cl[i] = best;
             }
         }
         // Components by flood fill over 4-neighbours (a diagonal move needs both cells beside
         // it, so 8-connected routes join 4-connected cells only).
         self.component.clear();
         self.component.resize(n, NO_NODE);
+        let (component, stack) = (&mut self.component, &mut self.stack);
         let mut next = 0u32;
         for seed in 0..n {
-            if owner[seed] == NO_NODE || self.component[seed] != NO_NODE {
+            if owner[seed] == NO_NODE || component[seed] != NO_NODE {
                 continue;
             }
-            self.component[seed] = next;
-            self.stack.clear();
-            self.stack.push(seed as u32);
-            while let Some(i) = self.stack.pop() {
+            component[seed] = next;
+            stack.clear();
+            stack.push(seed as u32);
+            while let Some(i) = stack.pop() {
                 let i = i as usize;
                 let (c, r) = (i % w, i / w);
-                let neighbours = [
-                    (c + 1 < w).then(|| i + 1),
-                    (c > 0).then(|| i - 1),
-                    (r + 1 < h).then(|| i + w),
-                    (r > 0).then(|| i - w),
-                ];
-                for j in neighbours.into_iter().flatten() {
-                    if owner[j] != NO_NODE && self.component[j] == NO_NODE && step_ok(elev[i], elev[j], max_step_m) {
-                        self.component[j] = next;
-                        self.stack.push(j as u32);
+                let mut visit = |j: usize| {
+                    if owner[j] != NO_NODE && component[j] == NO_NODE && step_ok(elev[i], elev[j], max_step_m) {
+                        component[j] = next;
+                        stack.push(j as u32);
                     }
+                };
+                if c + 1 < w {
+                    visit(i + 1);
+                }
+                if c > 0 {
+                    visit(i - 1);
+                }
+                if r + 1 < h {
+                    visit(i + w);
+                }
+                if r > 0 {
+                    visit(i - w);
                 }
             }
             next += 1;
@@ -621,5 +658,97 @@ mod tests {
         walled[10 * 60 + 4] = NO_NODE;
         assert_ne!(router.route_key(&map, &walled, &question(0.1)), key);
         assert_ne!(router.route_key(&map, &owner, &question(0.2)), key);
+    }
+
+    /// The clearance and components as first written (every cell testing its four chamfer
+    /// neighbours' bounds): the row-wise passes must give the same tables.
+    fn reference_prepare(map: &AerialMap, owner: &[u32], max_step_m: f32) -> (Vec<u8>, Vec<u32>) {
+        let (w, h) = (map.spec.width as usize, map.spec.height as usize);
+        let n = w * h;
+        let elev = &map.elevation;
+        let mut clearance = vec![CLEARANCE_CELLS; n];
+        for r in 0..h {
+            for c in 0..w {
+                let i = r * w + c;
+                if c + 1 < w && !step_ok(elev[i], elev[i + 1], 0.5 * max_step_m) {
+                    clearance[i] = 0;
+                    clearance[i + 1] = 0;
+                }
+                if r + 1 < h && !step_ok(elev[i], elev[i + w], 0.5 * max_step_m) {
+                    clearance[i] = 0;
+                    clearance[i + w] = 0;
+                }
+            }
+        }
+        let (wi, hi) = (w as i64, h as i64);
+        for pass in 0..2 {
+            let back: i64 = if pass == 0 { -1 } else { 1 };
+            for k in 0..n {
+                let i = if pass == 0 { k } else { n - 1 - k };
+                let (c, r) = ((i % w) as i64, (i / w) as i64);
+                let mut best = clearance[i];
+                for (dc, dr) in [(back, 0), (back, back), (0, back), (-back, back)] {
+                    let (nc, nr) = (c + dc, r + dr);
+                    if nc >= 0 && nr >= 0 && nc < wi && nr < hi {
+                        best = best.min(clearance[(nr * wi + nc) as usize].saturating_add(1));
+                    }
+                }
+                clearance[i] = best;
+            }
+        }
+        let mut component = vec![NO_NODE; n];
+        let mut next = 0u32;
+        for seed in 0..n {
+            if owner[seed] == NO_NODE || component[seed] != NO_NODE {
+                continue;
+            }
+            component[seed] = next;
+            let mut stack = vec![seed];
+            while let Some(i) = stack.pop() {
+                let (c, r) = (i % w, i / w);
+                let neighbours = [
+                    (c + 1 < w).then(|| i + 1),
+                    (c > 0).then(|| i - 1),
+                    (r + 1 < h).then(|| i + w),
+                    (r > 0).then(|| i - w),
+                ];
+                for j in neighbours.into_iter().flatten() {
+                    if owner[j] != NO_NODE && component[j] == NO_NODE && step_ok(elev[i], elev[j], max_step_m) {
+                        component[j] = next;
+                        stack.push(j);
+                    }
+                }
+            }
+            next += 1;
+        }
+        (clearance, component)
+    }
+
+    /// The clearance and component tables over a rough random map with holes in the coverage,
+    /// unknown elevations and a non-square grid equal the per-cell reference's.
+    #[test]
+    fn prepared_tables_equal_the_per_cell_reference() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let spec = GridSpec::new(Point2::new(0.0, 0.0), 0.5, 73, 41);
+        let mut map = AerialMap::unknown(spec);
+        let mut owner = vec![NO_NODE; spec.len()];
+        for i in 0..spec.len() {
+            map.class[i] = 0;
+            map.elevation[i] = match rng.random_range(0..20) {
+                0 => f32::NAN,
+                1..=3 => 0.3,
+                _ => rng.random_range(0.0..0.05),
+            };
+            if rng.random_range(0..6) > 0 {
+                owner[i] = rng.random_range(0..9);
+            }
+        }
+        let mut router = EdgeRouter::default();
+        router.prepare(&map, &owner, 0.1);
+        let (clearance, component) = reference_prepare(&map, &owner, 0.1);
+        assert!(clearance.iter().any(|&c| c == 0) && clearance.iter().any(|&c| c > 1));
+        assert_eq!(router.clearance, clearance);
+        assert_eq!(router.component, component);
     }
 }
