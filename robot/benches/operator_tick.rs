@@ -50,12 +50,7 @@ fn robot(commands: usize) -> Robot {
     let registry = spomp_robot::registry();
     let loaded = load_mission_str(MISSION, std::path::Path::new("operator-tick.yaml"), &registry, &Default::default());
     assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
-    let area = OperatingArea {
-        classes: ClassTable::default_table(),
-        grid: GridSpec::new(Point2::new(0.0, 0.0), 0.5, 40, 40),
-        prior_map: None,
-        map_origin: None,
-    };
+    let area = OperatingArea::new(ClassTable::default_table(), GridSpec::new(Point2::new(0.0, 0.0), 0.5, 40, 40));
     let mut robot = Robot::from_mission(&loaded, "ugv1", &area, 1, &registry).unwrap();
     let mut op = TeamState::new(RobotId::new(OPERATOR_ID), u32::MAX, TeamStateParams::default()).unwrap();
     for k in 0..commands {

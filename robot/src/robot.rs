@@ -786,12 +786,7 @@ mod tests {
         let loaded =
             load_mission_str(text, std::path::Path::new("first.yaml"), &crate::registry(), &Default::default());
         assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
-        let area = OperatingArea {
-            classes: ClassTable::default_table(),
-            grid: GridSpec::new(Point2::new(0.0, 0.0), 0.5, 40, 40),
-            prior_map: None,
-            map_origin: None,
-        };
+        let area = OperatingArea::new(ClassTable::default_table(), GridSpec::new(Point2::new(0.0, 0.0), 0.5, 40, 40));
         Robot::from_mission(&loaded, "ugv1", &area, 1, &crate::registry()).unwrap()
     }
 

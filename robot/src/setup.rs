@@ -36,6 +36,14 @@ pub struct OperatingArea {
     pub map_origin: Option<GeoPoint>,
 }
 
+impl OperatingArea {
+    /// An area of `grid` with `classes`, no prior map and no georeference: the robots know only
+    /// what the team maps, and QGroundControl plans are laid out around their planned homes.
+    pub fn new(classes: ClassTable, grid: GridSpec) -> Self {
+        OperatingArea { classes, grid, prior_map: None, map_origin: None }
+    }
+}
+
 /// Where a robot's map-frame pose comes from, as the adapter must supply it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum PoseInput {
@@ -302,12 +310,7 @@ mod tests {
     }
 
     fn kld_of(mission: &MissionFile) -> bool {
-        let area = OperatingArea {
-            classes: ClassTable::default_table(),
-            grid: GridSpec::new(Point2::new(0.0, 0.0), 0.5, 40, 40),
-            prior_map: None,
-            map_origin: None,
-        };
+        let area = OperatingArea::new(ClassTable::default_table(), GridSpec::new(Point2::new(0.0, 0.0), 0.5, 40, 40));
         let setup = RobotSetup::from_mission(mission, "ugv1", &area, 1).unwrap();
         match setup.config.localization {
             LocalizationSetup::CrossView { params, .. } => params.kld_sampling,

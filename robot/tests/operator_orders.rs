@@ -30,12 +30,7 @@ fn ugv1() -> Robot {
     let loaded =
         load_mission_str(MISSION, std::path::Path::new("operator-orders.yaml"), &registry, &Default::default());
     assert!(loaded.is_valid(), "{:#?}", loaded.diagnostics);
-    let area = OperatingArea {
-        classes: ClassTable::default_table(),
-        grid: GridSpec::new(Point2::new(0.0, 0.0), 0.5, 40, 40),
-        prior_map: None,
-        map_origin: None,
-    };
+    let area = OperatingArea::new(ClassTable::default_table(), GridSpec::new(Point2::new(0.0, 0.0), 0.5, 40, 40));
     let mut robot = Robot::from_mission(&loaded, "ugv1", &area, 1, &registry).unwrap();
     let pose = PoseEstimate { stamp: t(1.0), pose: Pose2::new(5.0, 5.0, 0.0), confidence: 1.0, ..Default::default() };
     robot.on_external_pose(t(1.0), pose);

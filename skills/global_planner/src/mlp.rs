@@ -257,12 +257,8 @@ impl Mlp {
                 for _ in 0..batch {
                     let r = rng.random_range(0..rows);
                     let label = row(r, &mut x);
-                    let dz = self.logit(&x);
-                    let p_trav = sigmoid(dz);
-                    let target = if label { 1.0 } else { 0.0 };
-                    let p_label = if label { p_trav } else { 1.0 - p_trav };
-                    batch_loss -= p_label.max(1e-7).ln();
-                    let g_trav = p_trav - target;
+                    let (log_p_label, g_trav) = label_loss_gradient(sigmoid(self.logit(&x)), label);
+                    batch_loss -= log_p_label;
                     let g_not = -g_trav;
                     let mut a = [0.0f32; LANES];
                     a[..nh].copy_from_slice(&self.hidden_act);
@@ -273,13 +269,8 @@ impl Mlp {
                 for _ in 0..batch {
                     let r = rng.random_range(0..rows);
                     let label = row(r, &mut x);
-                    let dz = self.logit(&x);
-                    let p_trav = sigmoid(dz);
-                    let target = if label { 1.0 } else { 0.0 };
-                    let p_label = if label { p_trav } else { 1.0 - p_trav };
-                    batch_loss -= p_label.max(1e-7).ln();
-                    // Softmax cross-entropy gradient with respect to the two logits.
-                    let g_trav = p_trav - target;
+                    let (log_p_label, g_trav) = label_loss_gradient(sigmoid(self.logit(&x)), label);
+                    batch_loss -= log_p_label;
                     let g_not = -g_trav;
                     self.grad[b2] += g_not;
                     self.grad[b2 + 1] += g_trav;
@@ -391,6 +382,17 @@ impl LaneGrad {
         grad[b1 + 2 * hidden..b1 + 3 * hidden].copy_from_slice(&self.w_trav[..hidden]);
         grad[b1 + 3 * hidden..b1 + 3 * hidden + 2].copy_from_slice(&self.b2);
     }
+}
+
+/// One drawn sample's log-likelihood of its label, ln p(label) (floored at ln 1e−7), and the
+/// softmax cross-entropy gradient with respect to the "traversable" logit, given the network's
+/// p(traversable); the other logit's gradient is its negative. Both gradient layouts of
+/// [`Mlp::train_rows`] take it from here.
+#[inline(always)]
+fn label_loss_gradient(p_trav: f32, label: bool) -> (f32, f32) {
+    let target = if label { 1.0 } else { 0.0 };
+    let p_label = if label { p_trav } else { 1.0 - p_trav };
+    (p_label.max(1e-7).ln(), p_trav - target)
 }
 
 /// The logistic function 1 / (1 + e^−x), with [`exp`] below.
