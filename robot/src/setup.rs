@@ -243,6 +243,12 @@ impl RobotSetup {
             map_publish_period_s: options.map_publish_period_s,
             map_compression: options.map_compression.clone(),
             prior_map: area.prior_map.clone(),
+            ground_teammates: mission
+                .team
+                .iter()
+                .filter(|r| r.kind == RobotKind::Ugv && r.id != spec.id)
+                .map(|r| RobotId::new(&r.id))
+                .collect(),
         };
         Ok(RobotSetup {
             index,

@@ -18,14 +18,16 @@
 
 mod common;
 
+use std::sync::Arc;
+
 use common::{DriverSetup, DrivingRobot, fill, ring};
 
 use spomp_behaviors::{BbValue, Status};
-use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, Twist2};
+use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, RobotId, Twist2};
 use spomp_global_planner::GlobalPlannerParams;
 use spomp_sim::{OdometryModel, OdometryNoiseParams, Ugv, UgvParams};
 use spomp_teamstate::TeamStateParams;
-use spomp_world::{CityParams, World, generate_city, reachable_cells};
+use spomp_world::{CityParams, Obstacle, World, generate_city, reachable_cells};
 
 const ROAD: u8 = 0;
 const BUILDING: u8 = 2;
@@ -412,4 +414,88 @@ fn back_up_refuses_ground_behind_that_is_not_known_safe() {
     assert!(run.position().x > 21.9, "it did not move back: {}", run.summary());
     assert_eq!(run.ugv.collisions(), 0, "{}", run.summary());
     assert!(run.reports.iter().any(|r| r.contains("not backing up blind")), "{:?}", run.reports);
+}
+
+/// The ring with its bottom street narrowed to a 3-m lane between x = 10 and 40 m (buildings on
+/// both sides): there a body in the lane and the walls beside it fill the whole window the
+/// paper's edge rule searches for a way past (Δφ = 0.3 rad).
+/// The right-hand side street is walled off, so the lane is the only way from its start to its
+/// far end.
+fn ring_with_lane() -> World {
+    let mut w = ring();
+    fill(&mut w, (10.0, 40.0), (0.0, 2.5), BUILDING, 10.0);
+    fill(&mut w, (10.0, 40.0), (5.5, 8.0), BUILDING, 10.0);
+    fill(&mut w, (52.0, 60.0), (10.0, 18.0), BUILDING, 10.0);
+    w
+}
+
+/// A robot waiting in the lane of [`ring_with_lane`] for `wait_s` with a teammate's body parked
+/// `ahead_m` in front of it until `leaves_at_s`, then on the top street: the teammate shows in
+/// the panoramas while it is there. `shared`: the teammate is one of the robot's ground
+/// teammates and its pose reaches the robot's team state every second, as the radio gives it to
+/// robots this close; otherwise the robot knows nothing of it (as the code before this rule).
+fn parked_teammate(name: &str, ahead_m: f64, leaves_at_s: f64, wait_s: f64, shared: bool) -> DrivingRobot {
+    use spomp_teamstate::{TeamState, TierSet};
+    let start = Pose2::new(14.0, 4.0, 0.0);
+    let tree = format!("wait: {{ duration_s: {wait_s} }}");
+    let mut run = one_node(name, ring_with_lane(), start, &tree, true);
+    let mate = RobotId::new("ugv2");
+    if shared {
+        run.rt.runtime_mut().nav_mut().unwrap().set_ground_teammates(vec![mate.clone()]);
+    }
+    let parked = Pose2::new(start.x + ahead_m, start.y, std::f64::consts::PI);
+    let gone = Pose2::new(30.0, 24.0, 0.0);
+    let mut mate_state = TeamState::new(mate.clone(), 2, TeamStateParams::default()).unwrap();
+    let me = RobotId::new("ugv1");
+    let mut status = Status::Running;
+    while status == Status::Running && run.t.as_secs_f64() < wait_s + 5.0 {
+        let t = run.t;
+        let body = if t.as_secs_f64() < leaves_at_s { parked } else { gone };
+        if shared && t.nanos % 1_000_000_000 == 0 {
+            mate_state.set_pose(body, t).unwrap();
+            if let Some(msg) = mate_state.make_sync(&me, TierSet::ALL, 1 << 20) {
+                run.rt.team_state_mut().apply(&mate, &msg).unwrap();
+            }
+        }
+        let others = [Obstacle { center: body.position(), radius_m: 0.5, bottom_m: 0.0, top_m: 0.8, class: VEHICLE }];
+        let pose = run.ugv.pose();
+        let odom = run.odom.update(t, pose, run.ugv.twist());
+        run.rt.on_odometry(odom);
+        run.rt.on_external_pose(PoseEstimate { stamp: t, pose, covariance: [0.0; 9], confidence: 1.0 });
+        if let Some(frame) = run.sensor.poll_among(t, &run.world, pose, run.ugv.base_elevation_m(), odom.pose, &others)
+        {
+            run.rt.on_panorama(Arc::new(frame));
+        }
+        run.rt.maintain(t);
+        run.rt.begin_tick();
+        status = run.ex.tick(t, &mut run.rt, None);
+        run.advance(Twist2::ZERO);
+    }
+    assert_eq!(status, Status::Success, "{}", run.summary());
+    run
+}
+
+/// The robot's plan from where it waits to beyond the lane's far end.
+fn plan_down_the_lane(run: &mut DrivingRobot) -> Result<Vec<Point2>, String> {
+    let nav = run.rt.runtime_mut().nav_mut().unwrap();
+    nav.plan(Point2::new(14.0, 4.0), Point2::new(46.0, 4.0)).map(|p| p.waypoints).map_err(|e| e.to_string())
+}
+
+#[test]
+fn a_teammate_parked_in_the_road_does_not_cut_the_road_for_good() {
+    // Regression (five-UGV study, seed 10): robots that start in a file, or meet head-on in a
+    // lane, see each other as obstacles. The robot's own scans then marked the edges through
+    // the teammate not_trav twice and removed them for good, and a robot whose ways out were all
+    // cut so never found a path again ("no path between start and goal" for 1100 s). A teammate
+    // is not terrain: a scan that ends at one marks the edge (a cost that sends the robot another
+    // way if there is one) but does not remove it.
+    let mut blind = parked_teammate("teammate-unknown", 5.0, 20.0, 30.0, false);
+    assert!(blind.removed_edges() >= 1, "without the teammate's pose the scans cut the lane: {}", blind.summary());
+    let cut = plan_down_the_lane(&mut blind);
+    assert!(cut.as_ref().is_err_and(|e| e.contains("no path")), "the lane was the only way: {cut:?}");
+    let mut run = parked_teammate("teammate-known", 5.0, 20.0, 30.0, true);
+    assert_eq!(run.removed_edges(), 0, "{}", run.summary());
+    assert!(run.rt.nav().unwrap().global().graph_stats().not_trav_edges >= 1, "marked: {}", run.summary());
+    let path = plan_down_the_lane(&mut run).unwrap();
+    assert!(path.iter().all(|p| p.y < 10.0), "down the lane: {path:?}\n{}", run.summary());
 }

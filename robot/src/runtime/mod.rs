@@ -70,6 +70,9 @@ pub struct RuntimeConfig {
     /// An aerial map the robot starts with (surveyed before the mission); `None`: only what the
     /// team maps. Shared, not copied: robots of a team hold one prior map until they change it.
     pub(crate) prior_map: Option<Arc<AerialMap>>,
+    /// The other ground robots of the team (UGVs): their bodies show in this robot's panoramas
+    /// and a scan of its own that ends at one removes no edge. Empty: every scan may.
+    pub(crate) ground_teammates: Vec<RobotId>,
 }
 
 impl RuntimeConfig {
@@ -93,7 +96,15 @@ impl RuntimeConfig {
             map_publish_period_s: 10.0,
             map_compression: CompressionParams::default(),
             prior_map: None,
+            ground_teammates: Vec::new(),
         }
+    }
+
+    /// With `teammates` as the team's other ground robots (see
+    /// [`NavStack::bins_at_teammates`]).
+    pub fn with_ground_teammates(mut self, teammates: Vec<RobotId>) -> Self {
+        self.ground_teammates = teammates;
+        self
     }
 
     /// With the semantic class table `classes`.
@@ -327,7 +338,9 @@ impl RobotRuntime {
         }
         rt.localization = Localization::from_setup(&config.localization, config.start)?;
         if let Some(nav) = config.nav {
-            rt.nav = Some(Box::new(NavStack::new(nav, &rt.classes)?));
+            let mut stack = NavStack::new(nav, &rt.classes)?;
+            stack.set_ground_teammates(config.ground_teammates);
+            rt.nav = Some(Box::new(stack));
         }
         if let Some(map) = config.prior_map {
             rt.map = Some(Orthomap::from_shared(map)?);

@@ -13,6 +13,7 @@ use spomp_core::{
 };
 use spomp_global_planner::{
     GlobalPath, GlobalPlanner, GlobalPlannerParams, NodeId, PlanError, ScanSharer, TrainOutcome,
+    bins_ending_at_teammates,
 };
 use spomp_local_planner::{Dwa, LocalPlannerParams, SafeRegion, TerrainAnalyzer, TerrainParams};
 use spomp_mapping::Orthomap;
@@ -146,6 +147,10 @@ pub struct NavStack {
     trail: VecDeque<Point2>,
     /// Where the robot got stuck ([`NavStack::note_stuck_at`]).
     stuck_spots: Vec<Point2>,
+    /// Ground teammates: a scan that ends at one removes no edge.
+    ground_teammates: Vec<RobotId>,
+    /// Scratch for their positions (no allocation per panorama).
+    teammate_positions: Vec<Point2>,
     map_version_seen: Option<u64>,
     team_scan_cursor: usize,
     /// A [`PlannerJob`] holds a copy of the planner.
@@ -293,6 +298,8 @@ impl NavStack {
             blocked_edges: Vec::new(),
             trail: VecDeque::new(),
             stuck_spots: Vec::new(),
+            ground_teammates: Vec::new(),
+            teammate_positions: Vec::new(),
             map_version_seen: None,
             team_scan_cursor: 0,
             planner_in_flight: false,
@@ -345,12 +352,15 @@ impl NavStack {
     ) -> Result<(), String> {
         self.analyzed_depth = Some(frame.depth.clone());
         self.record_trail(pose.pose.position());
+        // A scan that ends at a teammate marks edges but removes none (see
+        // `bins_ending_at_teammates`).
+        let removes = self.bins_at_teammates(&scan, team) == 0;
         let scan = Arc::new(scan);
         self.view = Some(LocalView { region, pose, odom_pose: frame.odom_pose, stamp: frame.stamp });
         if has_map {
-            self.global.add_scan(&scan, true).map_err(|e| e.to_string())?;
+            self.global.add_scan(&scan, removes).map_err(|e| e.to_string())?;
             if self.planner_in_flight {
-                self.scans_since_planner_left.push((scan.clone(), true));
+                self.scans_since_planner_left.push((scan.clone(), removes));
             }
         }
         if self.sharer.should_share(&scan) {
@@ -358,6 +368,32 @@ impl NavStack {
         }
         self.latest_scan = Some(scan);
         Ok(())
+    }
+
+    /// The ground teammates whose bodies show in this robot's panoramas
+    /// ([`Self::bins_at_teammates`]).
+    pub fn set_ground_teammates(&mut self, teammates: Vec<RobotId>) {
+        self.ground_teammates = teammates;
+    }
+
+    /// How many bins of `scan` (map frame) end at a ground teammate's last known position, no
+    /// older than `experience.teammate_max_age_s` at the scan's stamp
+    /// (`spomp_global_planner::bins_ending_at_teammates`).
+    pub(crate) fn bins_at_teammates(&mut self, scan: &ReachabilityScan, team: &TeamState) -> usize {
+        let x = &self.params.global.experience;
+        if self.ground_teammates.is_empty() || x.teammate_clearance_m <= 0.0 {
+            return 0;
+        }
+        let now = scan.stamp.as_secs_f64();
+        self.teammate_positions.clear();
+        for id in &self.ground_teammates {
+            if let Some((pose, stamp)) = team.robot_pose(id)
+                && now - stamp.as_secs_f64() <= x.teammate_max_age_s
+            {
+                self.teammate_positions.push(pose.position());
+            }
+        }
+        bins_ending_at_teammates(scan, &self.teammate_positions, x.teammate_clearance_m)
     }
 
     /// Keeps the global planner current: a new map version grows the graph; scans other robots

@@ -26,6 +26,7 @@ mod routing;
 mod sharing;
 mod star;
 pub mod synthetic;
+mod teammates;
 
 pub use error::{PlanError, ScanError, SetupError};
 pub use experience::EdgeState;
@@ -38,3 +39,4 @@ pub use planner::{
 pub use routing::forget_shared_routes;
 pub use sharing::ScanSharer;
 pub use star::EdgeObservation;
+pub use teammates::bins_ending_at_teammates;

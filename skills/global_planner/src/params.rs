@@ -32,7 +32,7 @@ impl GlobalPlannerParams {
         let x = &params.experience;
         let in_range = |v: f64, lo: f64, hi: f64| v.is_finite() && v >= lo && v <= hi;
         // Bounds keep every buffer and loop sized sensibly whatever a mission file says.
-        let checks: [(&'static str, bool, &str); 13] = [
+        let checks: [(&'static str, bool, &str); 15] = [
             ("graph.visibility_range_m", in_range(g.visibility_range_m, 0.1, 500.0), "must be in [0.1, 500] m"),
             ("graph.edge_sample_spacing_m", in_range(g.edge_sample_spacing_m, 0.05, 100.0), "must be in [0.05, 100] m"),
             ("graph.attach_radius_m", in_range(g.attach_radius_m, 0.0, 200.0), "must be in [0, 200] m"),
@@ -45,6 +45,8 @@ impl GlobalPlannerParams {
             ("learning.max_scan_range_m", in_range(l.max_scan_range_m, 0.1, 500.0), "must be in [0.1, 500] m"),
             ("experience.on_edge_radius_m", in_range(x.on_edge_radius_m, 0.0, 50.0), "must be in [0, 50] m"),
             ("experience.min_crossing_range_m", in_range(x.min_crossing_range_m, 0.0, 50.0), "must be in [0, 50] m"),
+            ("experience.teammate_clearance_m", in_range(x.teammate_clearance_m, 0.0, 20.0), "must be in [0, 20] m"),
+            ("experience.teammate_max_age_s", in_range(x.teammate_max_age_s, 0.0, 600.0), "must be in [0, 600] s"),
             (
                 "experience.crossing_window_rad",
                 in_range(x.crossing_window_rad, 0.0, std::f64::consts::PI),
@@ -186,6 +188,14 @@ pub struct ExperienceParams {
     /// Traversal probability per sample charged (in addition) along an edge marked not_trav
     /// that is not removed (marked from other robots' scans).
     pub not_trav_sample_probability: f64,
+    /// A scan bin whose obstacle lies within this distance of a ground teammate's last known
+    /// position ends at the teammate ([`bins_ending_at_teammates`](crate::bins_ending_at_teammates)),
+    /// and a robot's own scan with such a bin marks edges but never removes one: a teammate
+    /// standing in the road is not terrain. Covers the teammate's body, the safe region's
+    /// inflation in front of it and both robots' localization error. 0 turns this off, metres.
+    pub teammate_clearance_m: f64,
+    /// Teammate positions older than this are not used for that test, seconds.
+    pub teammate_max_age_s: f64,
 }
 
 impl Default for ExperienceParams {
@@ -199,6 +209,8 @@ impl Default for ExperienceParams {
             min_crossing_range_m: 1.0,
             trav_sample_probability: 0.99,
             not_trav_sample_probability: 0.01,
+            teammate_clearance_m: 2.0,
+            teammate_max_age_s: 2.0,
         }
     }
 }

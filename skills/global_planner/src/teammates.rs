@@ -1,0 +1,86 @@
+//! Teammates are not terrain. A ground robot standing in the road shows in another robot's
+//! panorama as an obstacle, and that robot's reachability scan stops at it. The paper's edge
+//! rules take such a scan like any other: two of the robot's own scans that end at the teammate
+//! mark the edges through it not_trav, lock them and remove them for good. Robots that start in
+//! a file, or meet head-on in a lane, then cut the very roads they stand on, and a robot whose
+//! every way out was cut so never finds a path again. The robot therefore takes a scan in which a
+//! teammate ends some bin as it takes another robot's scan: its not_trav observations mark an
+//! edge (a cost that steers the robot away from where teammates stand) but never remove it. The
+//! scan itself is not changed: its training votes and what the team receives stay as they were.
+
+use spomp_core::{Point2, ReachabilityScan};
+
+/// How many bins of `scan` (map frame) end at one of `teammates` (their last known positions):
+/// bins with an obstacle whose end point lies within `clearance_m` of a teammate. A clearance of
+/// 0 (or one that is not a number) finds none.
+///
+/// The obstacle of a bin lies just beyond the bin's end point (the safe stretch stops the
+/// local planner's inflation short of it), so the test is on the end point: `clearance_m` must
+/// cover the teammate's body radius, that inflation and both robots' localization error.
+pub fn bins_ending_at_teammates(scan: &ReachabilityScan, teammates: &[Point2], clearance_m: f64) -> usize {
+    if teammates.is_empty() || !(clearance_m.is_finite() && clearance_m > 0.0) || scan.obstacle.len() != scan.bins() {
+        return 0;
+    }
+    let origin = scan.pose.position();
+    let max_range = scan.range_m.iter().copied().fold(0.0f32, f32::max) as f64;
+    // Only teammates a bin's end point can come near.
+    let near: Vec<Point2> = teammates
+        .iter()
+        .copied()
+        .filter(|t| t.x.is_finite() && t.y.is_finite() && t.distance(origin) <= max_range + clearance_m)
+        .collect();
+    if near.is_empty() {
+        return 0;
+    }
+    (0..scan.bins())
+        .filter(|&bin| scan.obstacle[bin] && near.iter().any(|t| t.distance(scan.endpoint(bin)) <= clearance_m))
+        .count()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use spomp_core::{Pose2, RobotId, Time};
+
+    /// A scan from the origin looking along +x, every bin ending at an obstacle `range` away.
+    fn ring(range: f32, bins: usize) -> ReachabilityScan {
+        ReachabilityScan {
+            robot: RobotId::new("ugv1"),
+            stamp: Time::from_secs_f64(1.0),
+            pose: Pose2::new(0.0, 0.0, 0.0),
+            range_m: vec![range; bins],
+            obstacle: vec![true; bins],
+        }
+    }
+
+    #[test]
+    fn counts_the_bins_that_end_at_a_teammate() {
+        let scan = ring(5.0, 360);
+        let mate = Point2::new(6.0, 0.0);
+        let n = bins_ending_at_teammates(&scan, &[mate], 2.0);
+        let expected = (0..scan.bins()).filter(|&b| scan.endpoint(b).distance(mate) <= 2.0).count();
+        assert_eq!(n, expected);
+        assert!(n > 0 && n < 60, "{n}");
+        // A bin without an obstacle ends in the unknown, never at a teammate.
+        let mut open = ring(5.0, 360);
+        open.obstacle.iter_mut().for_each(|o| *o = false);
+        assert_eq!(bins_ending_at_teammates(&open, &[mate], 2.0), 0);
+    }
+
+    #[test]
+    fn no_teammate_in_reach_or_no_clearance_finds_none() {
+        let scan = ring(5.0, 64);
+        assert_eq!(bins_ending_at_teammates(&scan, &[Point2::new(40.0, 0.0)], 2.0), 0);
+        assert_eq!(bins_ending_at_teammates(&scan, &[Point2::new(6.0, 0.0)], 0.0), 0);
+        assert_eq!(bins_ending_at_teammates(&scan, &[Point2::new(6.0, 0.0)], f64::NAN), 0);
+        assert_eq!(bins_ending_at_teammates(&scan, &[Point2::new(f64::NAN, 0.0)], 2.0), 0);
+        assert_eq!(bins_ending_at_teammates(&scan, &[], 2.0), 0);
+    }
+
+    #[test]
+    fn a_malformed_scan_finds_none() {
+        let mut scan = ring(5.0, 64);
+        scan.obstacle.truncate(10);
+        assert_eq!(bins_ending_at_teammates(&scan, &[Point2::new(6.0, 0.0)], 2.0), 0);
+    }
+}
