@@ -777,13 +777,12 @@ const ANY_WINDOW: u32 = u32::MAX;
 /// wrap-around on both sides, `half` holds w_a per column ([`ANY_WINDOW`]: a column whose rise
 /// is not used, given any value).
 ///
-/// On ground and walls w_a changes slowly along a row, so most runs of [`LANES`] columns share
-/// one w_a: their neighbours at ±w_a are then two vector loads instead of a gather. Runs with
-/// mixed w_a take the scalar loop. Columns without a return do not count: on a real sensor's
-/// panorama scattered missing returns (whose w_a would be W_max's) split a tenth of the runs
-/// that would otherwise share one w_a. (Selecting among the loads of each distinct w_a of a run was
-/// measured slower: mixed runs mostly spread widely; so were a gather loop on AVX2 and
-/// AVX-512, and keeping this function out of line.)
+/// The baseline's version (AVX2 and AVX-512 run [`azimuth_rise_with`]'s permutes). On ground
+/// and walls w_a changes slowly along a row, so most runs of [`LANES`] columns share one w_a:
+/// their neighbours at ±w_a are then two vector loads instead of a gather. Runs with mixed w_a
+/// take the scalar loop. Columns marked [`ANY_WINDOW`] do not count. (Selecting among the loads
+/// of each distinct w_a of a run was measured slower here: mixed runs mostly spread widely; so
+/// were a gather loop on AVX2 and AVX-512, and keeping this function out of line.)
 #[inline(always)]
 fn azimuth_rise(padded: &[f32], pad: usize, half: &[u32], rise: &mut [f32]) {
     let cols = rise.len().min(half.len()).min(padded.len().saturating_sub(2 * pad));
