@@ -613,7 +613,7 @@ fn gradient_row_columns<S: pulp::Simd>(
 
 /// `minps`: a where a < b, else b (so b where either is NaN, and b for ±0 against ∓0).
 #[inline(always)]
-fn min_ps(a: f32, b: f32) -> f32 {
+pub(crate) fn min_ps(a: f32, b: f32) -> f32 {
     if a < b { a } else { b }
 }
 
