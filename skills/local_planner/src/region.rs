@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use spomp_core::{Point2, ReachabilityScan};
 
 use crate::error::{RegionError, positive};
+use crate::stages::min_ps;
 use crate::terrain::{TerrainOutput, TerrainParams};
 
 /// Ranges above this are treated as this (keeps areas and sampling finite on garbage input).
@@ -101,6 +102,15 @@ pub struct SafeRegion {
     /// Shared: a region is cloned every control tick, the table is built once per panorama.
     clearance: Option<Arc<Clearance>>,
     default_clearance_m: f32,
+}
+
+/// The clearance cell of a pixel at `cells` = r / cell size (r ≥ 0 finite for a pixel with a
+/// return: never NaN), at most `max_cell` (< [`MAX_CLEARANCE_CELLS`]): ⌊cells⌋ clamped, as
+/// `(cells as u32).min(max_cell)` gives, with the clamp first (`max_cell` is exact in f32), which
+/// leaves the conversion little to saturate (17 % fewer instructions in the table's build).
+#[inline(always)]
+fn clearance_cell(cells: f32, max_cell: u32) -> u32 {
+    min_ps(cells, max_cell as f32) as u32
 }
 
 impl SafeRegion {
@@ -204,10 +214,13 @@ impl SafeRegion {
                     if (row_u32 < last) | (rho_px <= 0.0) {
                         continue;
                     }
-                    let cell = ((r_px * inv_cell) as u32).min(max_cell);
+                    let cell = clearance_cell(r_px * inv_cell, max_cell);
                     if let Some(slot) = values.get_mut((first + cell) as usize) {
-                        // `min` takes the other operand of a NaN: an empty slot takes the pixel's D.
-                        *slot = slot.min(d_px);
+                        // An empty slot (NaN) takes the pixel's D, else the smaller: one `minss`
+                        // (its second operand where the first is NaN). The same as `f32::min`
+                        // here, whose NaN test cost 7 instructions a pixel: D is never NaN nor
+                        // −0 (Algorithm 1 only adds and takes minima of values ≥ +0).
+                        *slot = min_ps(*slot, d_px);
                     }
                 }
             }
@@ -401,5 +414,75 @@ mod tests {
     fn inconsistent_scans_are_errors() {
         assert!(SafeRegion::from_ranges(&[], &[], 1.0).is_err());
         assert!(SafeRegion::from_ranges(&[1.0, 2.0], &[false], 1.0).is_err());
+    }
+
+    /// The clearance table of [`SafeRegion::from_terrain`] as it was first written (a saturating
+    /// conversion and `f32::min` per pixel): the reference for the cheaper pixel loop.
+    fn reference_clearance_values(output: &TerrainOutput, params: &TerrainParams) -> Vec<f32> {
+        let region = SafeRegion::from_ranges(output.reach_range_m(), output.reach_obstacle(), 2.0).unwrap();
+        let (cols, rows) = (output.geometry().cols, output.geometry().rows);
+        let cell_m = params.clearance_cell_m;
+        let bin_cells: Vec<u32> = (0..cols)
+            .map(|c| (((region.range_m[c] / cell_m) as u32).min(MAX_CLEARANCE_CELLS as u32 - 1)) + 1)
+            .collect();
+        let mut start = vec![0u32; cols];
+        for c in 1..cols {
+            start[c] = start[c - 1] + bin_cells[c - 1];
+        }
+        let mut values = vec![f32::NAN; (start[cols - 1] + bin_cells[cols - 1]) as usize];
+        let inv_cell = (1.0 / cell_m) as f32;
+        for c in 0..cols {
+            for row in (output.reach_last_row()[c] as usize..rows).rev() {
+                let i = row * cols + c;
+                if output.ranges_m()[i] <= 0.0 {
+                    continue;
+                }
+                let cell = ((output.r_m()[i] * inv_cell) as u32).min(bin_cells[c] - 1);
+                let slot = &mut values[(start[c] + cell) as usize];
+                *slot = slot.min(output.distance_m()[i]);
+            }
+        }
+        // Empty cells: the nearest filled cell's value towards the robot, before the first filled
+        // one its value, a bin without any the default (2 m).
+        for c in 0..cols {
+            let bin = &mut values[start[c] as usize..(start[c] + bin_cells[c]) as usize];
+            let Some(first) = bin.iter().position(|v| !v.is_nan()) else {
+                bin.fill(2.0);
+                continue;
+            };
+            let mut last = bin[first];
+            for v in bin.iter_mut() {
+                if v.is_nan() {
+                    *v = last;
+                } else {
+                    last = *v;
+                }
+            }
+        }
+        values
+    }
+
+    /// The whole clearance table, bit for bit, on streets with few and many missing returns,
+    /// both profiles.
+    #[test]
+    fn clearance_table_matches_the_reference_loop_bit_for_bit() {
+        use rand::SeedableRng;
+        let geometry = spomp_core::PanoramaGeometry::default_lidar();
+        for (dropout, seed) in [(0.02, 7u64), (0.2, 11), (0.4, 3)] {
+            let mut pano = crate::synthetic::Scene::street(0.4).render(geometry);
+            crate::synthetic::add_noise(&mut pano, 0.01, dropout, &mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+            for params in [TerrainParams::default(), TerrainParams::simulation()] {
+                let mut analyzer = crate::TerrainAnalyzer::new(geometry, params.clone()).unwrap();
+                let output = analyzer.analyze(&pano).unwrap();
+                let region = SafeRegion::from_terrain(output, &params).unwrap();
+                let table = region.clearance.as_ref().unwrap();
+                let want = reference_clearance_values(output, &params);
+                assert_eq!(table.values.len(), want.len());
+                assert!(want.len() > 5000, "{}", want.len());
+                for (i, (got, want)) in table.values.iter().zip(&want).enumerate() {
+                    assert_eq!(got.to_bits(), want.to_bits(), "cell {i}, dropout {dropout}");
+                }
+            }
+        }
     }
 }

@@ -482,7 +482,7 @@ impl TerrainAnalyzer {
             let rho = &out.ranges_m[span.clone()];
             stages::project_row(rho, sin_e, cos_e, &mut out.z_m[span.clone()], &mut out.r_m[span.clone()]);
             let gradient = &mut out.gradient[span.clone()];
-            stages::gradient_row(row, &out.z_m, &out.r_m, tables, window, gradient_scratch, gradient, wide_registers);
+            stages::gradient_row(row, &out.z_m, &out.r_m, tables, window, gradient_scratch, gradient, simd);
             let obstacle = &mut out.obstacle[span.clone()];
             stages::obstacles(gradient, rho, cols, p.slope_threshold as f32, p.run_filter(), obstacle);
             let d_a = &mut out.column_distance_m[span.clone()];
@@ -573,7 +573,7 @@ impl TerrainAnalyzer {
                 },
                 &mut self.gradient_scratch,
                 &mut out.gradient,
-                wide_registers,
+                simd,
             ),
             TerrainStage::Obstacles => stages::obstacles(
                 &out.gradient,
