@@ -32,8 +32,40 @@ pub fn bins_ending_at_teammates(scan: &ReachabilityScan, teammates: &[Point2], c
     if near.is_empty() {
         return 0;
     }
+    // A point within `clearance_m` of a teammate `dist` away lies within asin(clearance / dist)
+    // of its bearing, so only the bins in that window (a bin of margin for rounding) can end
+    // near it: the exact test, two trigonometric calls per bin, runs on those alone.
+    let n = scan.bins();
+    let step = std::f64::consts::TAU / n as f64;
+    let windows: Vec<(f64, f64)> = near
+        .iter()
+        .map(|&t| {
+            let d = t - origin;
+            let dist = d.norm();
+            let half = if dist > clearance_m { (clearance_m / dist).asin() } else { std::f64::consts::PI };
+            // Bin k looks along yaw − k·step.
+            (-(d.angle() - scan.pose.yaw) / step, half / step + 1.0)
+        })
+        .collect();
+    let in_window = |bin: usize| {
+        windows.iter().any(|&(centre, half)| {
+            let off = (bin as f64 - centre).rem_euclid(n as f64);
+            off.min(n as f64 - off) <= half
+        })
+    };
+    (0..n)
+        .filter(|&bin| {
+            scan.obstacle[bin] && in_window(bin) && near.iter().any(|t| t.distance(scan.endpoint(bin)) <= clearance_m)
+        })
+        .count()
+}
+
+/// [`bins_ending_at_teammates`] as first written, every bin tested: the reference the tests
+/// hold the windowed count to.
+#[cfg(test)]
+fn bins_ending_at_teammates_every_bin(scan: &ReachabilityScan, teammates: &[Point2], clearance_m: f64) -> usize {
     (0..scan.bins())
-        .filter(|&bin| scan.obstacle[bin] && near.iter().any(|t| t.distance(scan.endpoint(bin)) <= clearance_m))
+        .filter(|&bin| scan.obstacle[bin] && teammates.iter().any(|t| t.distance(scan.endpoint(bin)) <= clearance_m))
         .count()
 }
 
@@ -75,6 +107,39 @@ mod tests {
         assert_eq!(bins_ending_at_teammates(&scan, &[Point2::new(6.0, 0.0)], f64::NAN), 0);
         assert_eq!(bins_ending_at_teammates(&scan, &[Point2::new(f64::NAN, 0.0)], 2.0), 0);
         assert_eq!(bins_ending_at_teammates(&scan, &[], 2.0), 0);
+    }
+
+    #[test]
+    fn the_windowed_count_equals_testing_every_bin() {
+        // Scans from several poses with ranges and obstacles of every kind, teammates near and
+        // far, inside the clearance of the origin and around the ±π seam.
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for case in 0..200 {
+            let bins = [64, 360, 1024][case % 3];
+            let pose = Pose2::new(next() * 40.0 - 20.0, next() * 40.0 - 20.0, next() * 8.0 - 4.0);
+            let scan = ReachabilityScan {
+                robot: RobotId::new("ugv1"),
+                stamp: Time::from_secs_f64(1.0),
+                pose,
+                range_m: (0..bins).map(|_| (next() * 12.0) as f32).collect(),
+                obstacle: (0..bins).map(|_| next() < 0.7).collect(),
+            };
+            let mates: Vec<Point2> = (0..1 + case % 4)
+                .map(|_| Point2::new(pose.x + next() * 24.0 - 12.0, pose.y + next() * 24.0 - 12.0))
+                .collect();
+            let clearance = [0.5, 2.0, 6.0][case % 3];
+            assert_eq!(
+                bins_ending_at_teammates(&scan, &mates, clearance),
+                bins_ending_at_teammates_every_bin(&scan, &mates, clearance),
+                "case {case}"
+            );
+        }
     }
 
     #[test]
