@@ -18,12 +18,10 @@
 
 mod common;
 
-use std::sync::Arc;
-
 use common::{DriverSetup, DrivingRobot, fill, ring};
 
 use spomp_behaviors::{BbValue, Status};
-use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, PoseEstimate, RobotId, Twist2};
+use spomp_core::{Cell, ClassTable, GridSpec, Point2, Pose2, RobotId, Twist2};
 use spomp_global_planner::GlobalPlannerParams;
 use spomp_sim::{OdometryModel, OdometryNoiseParams, Ugv, UgvParams};
 use spomp_teamstate::TeamStateParams;
@@ -457,16 +455,13 @@ fn parked_teammate(name: &str, ahead_m: f64, leaves_at_s: f64, wait_s: f64, shar
                 run.rt.team_state_mut().apply(&mate, &msg).unwrap();
             }
         }
-        let others = [Obstacle { center: body.position(), radius_m: 0.5, bottom_m: 0.0, top_m: 0.8, class: VEHICLE }];
-        let pose = run.ugv.pose();
-        let odom = run.odom.update(t, pose, run.ugv.twist());
-        run.rt.on_odometry(odom);
-        run.rt.on_external_pose(PoseEstimate { stamp: t, pose, covariance: [0.0; 9], confidence: 1.0 });
-        if let Some(frame) = run.sensor.poll_among(t, &run.world, pose, run.ugv.base_elevation_m(), odom.pose, &others)
-        {
-            run.rt.on_panorama(Arc::new(frame));
-        }
-        run.rt.maintain(t);
+        run.sense_among(&[Obstacle {
+            center: body.position(),
+            radius_m: 0.5,
+            bottom_m: 0.0,
+            top_m: 0.8,
+            class: VEHICLE,
+        }]);
         run.rt.begin_tick();
         status = run.ex.tick(t, &mut run.rt, None);
         run.advance(Twist2::ZERO);

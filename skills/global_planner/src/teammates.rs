@@ -24,40 +24,39 @@ pub fn bins_ending_at_teammates(scan: &ReachabilityScan, teammates: &[Point2], c
     let origin = scan.pose.position();
     let max_range = scan.range_m.iter().copied().fold(0.0f32, f32::max) as f64;
     // Only teammates a bin's end point can come near.
-    let near: Vec<Point2> = teammates
-        .iter()
-        .copied()
-        .filter(|t| t.x.is_finite() && t.y.is_finite() && t.distance(origin) <= max_range + clearance_m)
-        .collect();
-    if near.is_empty() {
-        return 0;
-    }
-    // A point within `clearance_m` of a teammate `dist` away lies within asin(clearance / dist)
-    // of its bearing, so only the bins in that window (a bin of margin for rounding) can end
-    // near it: the exact test, two trigonometric calls per bin, runs on those alone.
+    let near = |t: &Point2| t.x.is_finite() && t.y.is_finite() && t.distance(origin) <= max_range + clearance_m;
     let n = scan.bins();
     let step = std::f64::consts::TAU / n as f64;
-    let windows: Vec<(f64, f64)> = near
-        .iter()
-        .map(|&t| {
-            let d = t - origin;
-            let dist = d.norm();
-            let half = if dist > clearance_m { (clearance_m / dist).asin() } else { std::f64::consts::PI };
-            // Bin k looks along yaw − k·step.
-            (-(d.angle() - scan.pose.yaw) / step, half / step + 1.0)
-        })
-        .collect();
-    let in_window = |bin: usize| {
-        windows.iter().any(|&(centre, half)| {
-            let off = (bin as f64 - centre).rem_euclid(n as f64);
-            off.min(n as f64 - off) <= half
-        })
-    };
-    (0..n)
-        .filter(|&bin| {
-            scan.obstacle[bin] && in_window(bin) && near.iter().any(|t| t.distance(scan.endpoint(bin)) <= clearance_m)
-        })
-        .count()
+    let mut count = 0;
+    for (k, &t) in teammates.iter().enumerate() {
+        if !near(&t) {
+            continue;
+        }
+        // A point within `clearance_m` of a teammate `dist` away lies within asin(clearance /
+        // dist) of its bearing, so only the bins in that window (a bin of margin for rounding)
+        // can end near it: the exact test, two trigonometric calls per bin, runs on those alone.
+        let d = t - origin;
+        let dist = d.norm();
+        let half = if dist > clearance_m { (clearance_m / dist).asin() } else { std::f64::consts::PI };
+        // Bin k looks along yaw − k·step.
+        let centre = -(d.angle() - scan.pose.yaw) / step;
+        let half_bins = half / step + 1.0;
+        let (lo, hi) = ((centre - half_bins).ceil() as i64, (centre + half_bins).floor() as i64);
+        let window = if hi - lo + 1 >= n as i64 { 0..n as i64 } else { lo..hi + 1 };
+        for bin in window.map(|b| b.rem_euclid(n as i64) as usize) {
+            if !scan.obstacle[bin] {
+                continue;
+            }
+            let end = scan.endpoint(bin);
+            // A bin that also ends at an earlier teammate was counted with that one.
+            if t.distance(end) <= clearance_m
+                && !teammates[..k].iter().any(|u| near(u) && u.distance(end) <= clearance_m)
+            {
+                count += 1;
+            }
+        }
+    }
+    count
 }
 
 /// [`bins_ending_at_teammates`] as first written, every bin tested: the reference the tests

@@ -228,22 +228,7 @@ impl SafeRegion {
         // Empty cells take the value of the nearest filled cell towards the robot, cells before
         // the first filled one take its value, a bin with none the default: every lookup inside
         // the polygon is defined.
-        let fallback = region.default_clearance_m;
-        for (&first, &n) in start.iter().zip(&bin_cells) {
-            let Some(bin) = values.get_mut(first as usize..(first + n) as usize) else { continue };
-            let Some(first_filled) = bin.iter().position(|v| !v.is_nan()) else {
-                bin.fill(fallback);
-                continue;
-            };
-            let mut last = bin[first_filled];
-            for v in bin.iter_mut() {
-                if v.is_nan() {
-                    *v = last;
-                } else {
-                    last = *v;
-                }
-            }
-        }
+        fill_empty_clearance_cells(&mut values, &start, &bin_cells, region.default_clearance_m);
         region.clearance = Some(Arc::new(Clearance { inv_cell_m: 1.0 / cell_m, bin_cells, start, values }));
         Ok(region)
     }
@@ -355,6 +340,27 @@ impl SafeRegion {
     }
 }
 
+/// Fills the empty (NaN) cells of each bin of a clearance table (`start`, `bin_cells`: each bin's
+/// first cell and cell count): with the nearest filled cell's value towards the robot, cells
+/// before the first filled one with its value, a bin with none with `fallback`.
+fn fill_empty_clearance_cells(values: &mut [f32], start: &[u32], bin_cells: &[u32], fallback: f32) {
+    for (&first, &n) in start.iter().zip(bin_cells) {
+        let Some(bin) = values.get_mut(first as usize..(first + n) as usize) else { continue };
+        let Some(first_filled) = bin.iter().position(|v| !v.is_nan()) else {
+            bin.fill(fallback);
+            continue;
+        };
+        let mut last = bin[first_filled];
+        for v in bin.iter_mut() {
+            if v.is_nan() {
+                *v = last;
+            } else {
+                last = *v;
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -442,23 +448,8 @@ mod tests {
                 *slot = slot.min(output.distance_m()[i]);
             }
         }
-        // Empty cells: the nearest filled cell's value towards the robot, before the first filled
-        // one its value, a bin without any the default (2 m).
-        for c in 0..cols {
-            let bin = &mut values[start[c] as usize..(start[c] + bin_cells[c]) as usize];
-            let Some(first) = bin.iter().position(|v| !v.is_nan()) else {
-                bin.fill(2.0);
-                continue;
-            };
-            let mut last = bin[first];
-            for v in bin.iter_mut() {
-                if v.is_nan() {
-                    *v = last;
-                } else {
-                    last = *v;
-                }
-            }
-        }
+        // Empty cells as the table fills them (that step is not what the test is about).
+        fill_empty_clearance_cells(&mut values, &start, &bin_cells, 2.0);
         values
     }
 

@@ -22,8 +22,8 @@ use spomp_local_planner::LocalPlannerParams;
 use spomp_sim::run::{SimOptions, Simulation};
 use spomp_sim::{OdometryModel, OdometryNoiseParams, PanoramaSensor, SensorParams, Ugv, UgvParams};
 use spomp_teamstate::TeamStateParams;
-use spomp_world::World;
 use spomp_world::world_for_mission;
+use spomp_world::{Obstacle, World};
 
 /// Writes a mission to a temporary file named after it (unique per test process).
 pub fn write_mission(name: &str, text: &str) -> PathBuf {
@@ -135,12 +135,19 @@ impl DrivingRobot {
 
     /// Sensor inputs and upkeep (terrain analysis, scans into the planner, training when due).
     pub fn sense(&mut self) {
+        self.sense_among(&[]);
+    }
+
+    /// [`Self::sense`] with `others` (other robots' bodies) drawn into the panoramas.
+    pub fn sense_among(&mut self, others: &[Obstacle]) {
         let t = self.t;
         let pose = self.ugv.pose();
         let odom = self.odom.update(t, pose, self.ugv.twist());
         self.rt.on_odometry(odom);
         self.rt.on_external_pose(PoseEstimate { stamp: t, pose, covariance: [0.0; 9], confidence: 1.0 });
-        if let Some(frame) = self.sensor.poll(t, &self.world, pose, self.ugv.base_elevation_m(), odom.pose) {
+        if let Some(frame) =
+            self.sensor.poll_among(t, &self.world, pose, self.ugv.base_elevation_m(), odom.pose, others)
+        {
             self.rt.on_panorama(Arc::new(frame));
         }
         self.rt.maintain(t);
