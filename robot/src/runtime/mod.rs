@@ -70,8 +70,9 @@ pub struct RuntimeConfig {
     /// An aerial map the robot starts with (surveyed before the mission); `None`: only what the
     /// team maps. Shared, not copied: robots of a team hold one prior map until they change it.
     pub(crate) prior_map: Option<Arc<AerialMap>>,
-    /// The other ground robots of the team (UGVs): their bodies show in this robot's panoramas
-    /// and a scan of its own that ends at one removes no edge. Empty: every scan may.
+    /// The other ground robots of the team (UGVs): their bodies show in this robot's panoramas,
+    /// and an edge a scan of its own finds blocked by one is marked, never removed. Empty: no
+    /// robot is taken for a teammate.
     pub(crate) ground_teammates: Vec<RobotId>,
 }
 
@@ -101,7 +102,7 @@ impl RuntimeConfig {
     }
 
     /// With `teammates` as the team's other ground robots (see
-    /// [`NavStack::bins_at_teammates`]).
+    /// [`NavStack::set_ground_teammates`]).
     pub fn with_ground_teammates(mut self, teammates: Vec<RobotId>) -> Self {
         self.ground_teammates = teammates;
         self

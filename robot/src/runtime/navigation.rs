@@ -13,7 +13,6 @@ use spomp_core::{
 };
 use spomp_global_planner::{
     GlobalPath, GlobalPlanner, GlobalPlannerParams, NodeId, PlanError, ScanSharer, TrainOutcome,
-    bins_ending_at_teammates,
 };
 use spomp_local_planner::{Dwa, LocalPlannerParams, SafeRegion, TerrainAnalyzer, TerrainParams};
 use spomp_mapping::Orthomap;
@@ -147,7 +146,7 @@ pub struct NavStack {
     trail: VecDeque<Point2>,
     /// Where the robot got stuck ([`NavStack::note_stuck_at`]).
     stuck_spots: Vec<Point2>,
-    /// Ground teammates: a scan that ends at one removes no edge.
+    /// Ground teammates: an edge a scan finds blocked by one is marked, never removed.
     ground_teammates: Vec<RobotId>,
     /// Scratch for their positions (no allocation per panorama).
     teammate_positions: Vec<Point2>,
@@ -155,8 +154,8 @@ pub struct NavStack {
     team_scan_cursor: usize,
     /// A [`PlannerJob`] holds a copy of the planner.
     planner_in_flight: bool,
-    /// Scans given to the planner since its copy left (own: true), for the copy when it is back.
-    scans_since_planner_left: Vec<(Arc<ReachabilityScan>, bool)>,
+    /// Scans given to the planner since its copy left, for the copy when it is back.
+    scans_since_planner_left: Vec<(Arc<ReachabilityScan>, ScanOrigin)>,
     /// No training-only planner job before this time (the last one found too few labels).
     retry_training_at: Option<Time>,
 }
@@ -198,6 +197,15 @@ impl TerrainJob {
             }
         }
     }
+}
+
+/// Whose a scan given to the planner is, so the planner's copy gets it the same way.
+#[derive(Debug)]
+enum ScanOrigin {
+    /// This robot's, taken with its ground teammates at these positions.
+    Own { teammates: Vec<Point2> },
+    /// Another robot's (never removes an edge).
+    Peer,
 }
 
 /// The global planner's heavy upkeep on a copy of it: [`NavStack::begin_planner_work`].
@@ -352,15 +360,16 @@ impl NavStack {
     ) -> Result<(), String> {
         self.analyzed_depth = Some(frame.depth.clone());
         self.record_trail(pose.pose.position());
-        // A scan that ends at a teammate marks edges but removes none (see
-        // `bins_ending_at_teammates`).
-        let removes = self.bins_at_teammates(&scan, team) == 0;
         let scan = Arc::new(scan);
         self.view = Some(LocalView { region, pose, odom_pose: frame.odom_pose, stamp: frame.stamp });
         if has_map {
-            self.global.add_scan(&scan, removes).map_err(|e| e.to_string())?;
+            // An edge a teammate blocks is marked, never removed (see
+            // `GlobalPlanner::add_own_scan_among`).
+            self.gather_teammate_positions(scan.stamp, team);
+            self.global.add_own_scan_among(&scan, &self.teammate_positions).map_err(|e| e.to_string())?;
             if self.planner_in_flight {
-                self.scans_since_planner_left.push((scan.clone(), removes));
+                let teammates = self.teammate_positions.clone();
+                self.scans_since_planner_left.push((scan.clone(), ScanOrigin::Own { teammates }));
             }
         }
         if self.sharer.should_share(&scan) {
@@ -371,29 +380,28 @@ impl NavStack {
     }
 
     /// The ground teammates whose bodies show in this robot's panoramas
-    /// ([`Self::bins_at_teammates`]).
+    /// ([`Self::gather_teammate_positions`]).
     pub fn set_ground_teammates(&mut self, teammates: Vec<RobotId>) {
         self.ground_teammates = teammates;
     }
 
-    /// How many bins of `scan` (map frame) end at a ground teammate's last known position, no
-    /// older than `experience.teammate_max_age_s` at the scan's stamp
-    /// (`spomp_global_planner::bins_ending_at_teammates`).
-    pub(crate) fn bins_at_teammates(&mut self, scan: &ReachabilityScan, team: &TeamState) -> usize {
-        let x = &self.params.global.experience;
-        if self.ground_teammates.is_empty() || x.teammate_clearance_m <= 0.0 {
-            return 0;
-        }
-        let now = scan.stamp.as_secs_f64();
+    /// The ground teammates' last known positions (map frame) in `team`, no older than
+    /// `experience.teammate_max_age_s` at `stamp`, into `teammate_positions`; none when the
+    /// teammate rule is off (`experience.teammate_clearance_m` 0).
+    fn gather_teammate_positions(&mut self, stamp: Time, team: &TeamState) {
         self.teammate_positions.clear();
+        let x = &self.params.global.experience;
+        if x.teammate_clearance_m <= 0.0 {
+            return;
+        }
+        let now = stamp.as_secs_f64();
         for id in &self.ground_teammates {
-            if let Some((pose, stamp)) = team.robot_pose(id)
-                && now - stamp.as_secs_f64() <= x.teammate_max_age_s
+            if let Some((pose, seen)) = team.robot_pose(id)
+                && now - seen.as_secs_f64() <= x.teammate_max_age_s
             {
                 self.teammate_positions.push(pose.position());
             }
         }
-        bins_ending_at_teammates(scan, &self.teammate_positions, x.teammate_clearance_m)
     }
 
     /// Keeps the global planner current: a new map version grows the graph; scans other robots
@@ -432,7 +440,7 @@ impl NavStack {
         for scan in scans.iter().filter(|s| s.robot != own) {
             let _ = self.global.add_scan(scan, false);
             if self.planner_in_flight {
-                self.scans_since_planner_left.push((Arc::clone(scan), false));
+                self.scans_since_planner_left.push((Arc::clone(scan), ScanOrigin::Peer));
             }
         }
         self.team_scan_cursor = cursor;
@@ -466,8 +474,11 @@ impl NavStack {
         let PlannerDone { mut planner, map_version, result, now } = done;
         match result {
             Ok(trained) => {
-                for (scan, own) in self.scans_since_planner_left.drain(..) {
-                    let _ = planner.add_scan(&scan, own);
+                for (scan, origin) in self.scans_since_planner_left.drain(..) {
+                    let _ = match origin {
+                        ScanOrigin::Own { teammates } => planner.add_own_scan_among(&scan, &teammates),
+                        ScanOrigin::Peer => planner.add_scan(&scan, false),
+                    };
                 }
                 // Edges failed while the copy was out (no-ops for those it already knew).
                 for &(a, b) in &self.blocked_edges {

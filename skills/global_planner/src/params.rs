@@ -190,8 +190,9 @@ pub struct ExperienceParams {
     pub not_trav_sample_probability: f64,
     /// A scan bin whose obstacle lies within this distance of a ground teammate's last known
     /// position ends at the teammate ([`bins_ending_at_teammates`](crate::bins_ending_at_teammates)),
-    /// and a robot's own scan with such a bin marks edges but never removes one: a teammate
-    /// standing in the road is not terrain. Covers the teammate's body, the safe region's
+    /// and an edge the robot's own scan judges not_trav where it crosses the boundary at such a
+    /// bin is marked, never removed ([`GlobalPlanner::add_own_scan_among`](crate::GlobalPlanner::add_own_scan_among)):
+    /// a teammate standing in the road is not terrain. Covers the teammate's body, the safe region's
     /// inflation in front of it and both robots' localization error. 0 turns this off, metres.
     pub teammate_clearance_m: f64,
     /// Teammate positions older than this are not used for that test, seconds.

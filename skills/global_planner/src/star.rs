@@ -4,6 +4,7 @@
 use spomp_core::{Point2, ReachabilityScan, normalize_angle};
 
 use crate::error::ScanError;
+use crate::teammates::BinFan;
 
 /// What one scan says about one edge.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -14,6 +15,21 @@ pub enum EdgeObservation {
     NotTrav,
     /// Anything else: both ends outside, several crossings, or unknown bins near the crossing.
     UnkTrav,
+}
+
+/// A scan's judgement of one edge: the observation, and for not_trav whether the boundary the
+/// edge crosses is a teammate's body ([`StarRegion::mark_teammates`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Verdict {
+    pub obs: EdgeObservation,
+    /// Not_trav only because a teammate stands there: the edge may be marked, never removed.
+    pub at_teammate: bool,
+}
+
+impl Verdict {
+    fn plain(obs: EdgeObservation) -> Self {
+        Verdict { obs, at_teammate: false }
+    }
 }
 
 /// How edges are judged against a scan's safe region.
@@ -38,6 +54,8 @@ pub(crate) struct StarRegion {
     pub range_m: Vec<f64>,
     pub obstacle: Vec<bool>,
     ends: Vec<Point2>,
+    /// Bins whose obstacle is a ground teammate (empty when none is).
+    at_teammate: Vec<bool>,
     pub max_range_m: f64,
 }
 
@@ -71,6 +89,7 @@ impl StarRegion {
         self.range_m.clear();
         self.obstacle.clear();
         self.ends.clear();
+        self.at_teammate.clear();
         for (b, (&r, &o)) in scan.range_m.iter().zip(&scan.obstacle).enumerate() {
             let r = r as f64;
             let (range, obstacle) = if r.is_finite() && r >= 0.0 { (r.min(cap), o && r <= cap) } else { (0.0, false) };
@@ -85,6 +104,36 @@ impl StarRegion {
 
     fn bins(&self) -> usize {
         self.range_m.len()
+    }
+
+    /// Marks the bins whose obstacle end point lies within `clearance_m` of one of `teammates`
+    /// (their last known positions, map frame): an edge crossing the boundary between such a
+    /// bin and its neighbour is blocked by a teammate, not by terrain. Returns how many bins.
+    pub fn mark_teammates(&mut self, teammates: &[Point2], clearance_m: f64) -> usize {
+        self.at_teammate.clear();
+        let n = self.bins();
+        let fan = BinFan { origin: self.origin, yaw: self.yaw, bins: n };
+        let (ends, obstacle) = (&self.ends, &self.obstacle);
+        let mut marks = Vec::new();
+        fan.for_each_ending_at(
+            |b| obstacle[b].then(|| ends[b]),
+            self.max_range_m,
+            teammates,
+            clearance_m,
+            |b| marks.push(b),
+        );
+        if !marks.is_empty() {
+            self.at_teammate.resize(n, false);
+            for &b in &marks {
+                self.at_teammate[b] = true;
+            }
+        }
+        marks.len()
+    }
+
+    /// Whether bin `b` ends at a teammate.
+    fn bin_at_teammate(&self, b: usize) -> bool {
+        self.at_teammate.get(b).copied().unwrap_or(false)
     }
 
     /// Fractional bin position of the direction towards `p`, in [0, bins).
@@ -119,7 +168,7 @@ impl StarRegion {
     /// The paper's classification of the segment `a`–`b` against this region.
     #[cfg(test)]
     pub fn classify(&self, a: Point2, b: Point2, window_rad: f64) -> EdgeObservation {
-        self.classify_path(&[a, b], &Judging { window_rad, on_edge_radius_m: 0.0, min_crossing_range_m: 0.0 })
+        self.classify_path(&[a, b], &Judging { window_rad, on_edge_radius_m: 0.0, min_crossing_range_m: 0.0 }).obs
     }
 
     /// The paper's classification of an edge, as the polyline `points` (two points for a
@@ -129,16 +178,18 @@ impl StarRegion {
     /// the boundary is the robot's own clearance from an obstacle beside it (the bins there end
     /// at the inflation margin, whatever lies along the edge), as at the foot of a ramp beside
     /// the curb's corner.
-    fn classify_path(&self, points: &[Point2], judging: &Judging) -> EdgeObservation {
+    fn classify_path(&self, points: &[Point2], judging: &Judging) -> Verdict {
+        let unknown = Verdict::plain(EdgeObservation::UnkTrav);
         let (Some(&first), Some(&last)) = (points.first(), points.last()) else {
-            return EdgeObservation::UnkTrav;
+            return unknown;
         };
         if polyline_point_distance(points, self.origin) > self.max_range_m {
-            return EdgeObservation::UnkTrav;
+            return unknown;
         }
         let n = self.bins();
         let mut crossings = 0usize;
         let mut crossing = first;
+        let mut chord = 0;
         for piece in points.windows(2) {
             let (a, b) = (piece[0], piece[1]);
             if segment_point_distance(a, b, self.origin) > self.max_range_m {
@@ -149,25 +200,29 @@ impl StarRegion {
                 if let Some(p) = segment_intersection(a, b, c, d) {
                     crossings += 1;
                     crossing = p;
+                    chord = j;
                     if crossings > 1 {
-                        return EdgeObservation::UnkTrav;
+                        return unknown;
                     }
                 }
             }
         }
         match crossings {
-            0 if self.contains(first) && self.contains(last) => EdgeObservation::Trav,
-            0 => EdgeObservation::UnkTrav,
-            _ if crossing.distance(self.origin) < judging.min_crossing_range_m => EdgeObservation::UnkTrav,
-            _ if self.unknown_near(crossing, judging.window_rad) => EdgeObservation::UnkTrav,
-            _ => EdgeObservation::NotTrav,
+            0 if self.contains(first) && self.contains(last) => Verdict::plain(EdgeObservation::Trav),
+            0 => unknown,
+            _ if crossing.distance(self.origin) < judging.min_crossing_range_m => unknown,
+            _ if self.unknown_near(crossing, judging.window_rad) => unknown,
+            _ => Verdict {
+                obs: EdgeObservation::NotTrav,
+                at_teammate: self.bin_at_teammate(chord) || self.bin_at_teammate((chord + 1) % n),
+            },
         }
     }
 
     /// Judges the edge `a`–`b` as [`StarRegion::classify_polyline`] does.
     #[cfg(test)]
     pub fn classify_edge(&self, a: Point2, b: Point2, window_rad: f64, on_edge_radius_m: f64) -> EdgeObservation {
-        self.classify_polyline(&[a, b], &Judging { window_rad, on_edge_radius_m, min_crossing_range_m: 0.0 })
+        self.classify_polyline(&[a, b], &Judging { window_rad, on_edge_radius_m, min_crossing_range_m: 0.0 }).obs
     }
 
     /// Judges the edge `points` (its ends and any interior vertices) as the paper does, except
@@ -176,8 +231,9 @@ impl StarRegion {
     /// to either end are judged each: not traversable when one of them is (the robot can reach
     /// `q`, so the edge is blocked beyond it), traversable when both are, unknown otherwise.
     /// This is how the edge a robot is driving gets judged from where the robot is, when the
-    /// safe region (≈ 5 m on flat ground) is much shorter than the edge.
-    pub fn classify_polyline(&self, points: &[Point2], judging: &Judging) -> EdgeObservation {
+    /// safe region (≈ 5 m on flat ground) is much shorter than the edge. A not_trav edge is at a
+    /// teammate when every not_trav part of it crosses the boundary at one.
+    pub fn classify_polyline(&self, points: &[Point2], judging: &Judging) -> Verdict {
         if judging.on_edge_radius_m > 0.0 && points.len() >= 2 {
             let (piece, q) = closest_on_polyline(points, self.origin);
             if q.distance(self.origin) <= judging.on_edge_radius_m && self.contains(q) {
@@ -187,10 +243,15 @@ impl StarRegion {
                 let mut towards_b = Vec::with_capacity(points.len() - piece);
                 towards_b.push(q);
                 towards_b.extend_from_slice(&points[piece + 1..]);
-                return match (self.classify_path(&towards_a, judging), self.classify_path(&towards_b, judging)) {
-                    (EdgeObservation::NotTrav, _) | (_, EdgeObservation::NotTrav) => EdgeObservation::NotTrav,
-                    (EdgeObservation::Trav, EdgeObservation::Trav) => EdgeObservation::Trav,
-                    _ => EdgeObservation::UnkTrav,
+                let (a, b) = (self.classify_path(&towards_a, judging), self.classify_path(&towards_b, judging));
+                let not_trav = |v: &Verdict| v.obs == EdgeObservation::NotTrav;
+                return match (a.obs, b.obs) {
+                    _ if not_trav(&a) || not_trav(&b) => Verdict {
+                        obs: EdgeObservation::NotTrav,
+                        at_teammate: [a, b].iter().filter(|v| not_trav(v)).all(|v| v.at_teammate),
+                    },
+                    (EdgeObservation::Trav, EdgeObservation::Trav) => Verdict::plain(EdgeObservation::Trav),
+                    _ => Verdict::plain(EdgeObservation::UnkTrav),
                 };
             }
         }
@@ -366,12 +427,12 @@ mod tests {
         }
         let s = StarRegion::from_scan(&scan(Pose2::new(0.0, 0.0, 0.0), range, obstacle), 30.0).unwrap();
         let north = [Point2::new(0.0, 0.0), Point2::new(0.0, 5.0)];
-        assert_eq!(s.classify_polyline(&north, &judging(0.3, 0.0)), EdgeObservation::NotTrav, "the paper's rule");
+        assert_eq!(s.classify_polyline(&north, &judging(0.3, 0.0)).obs, EdgeObservation::NotTrav, "the paper's rule");
         let near = Judging { window_rad: 0.3, on_edge_radius_m: 0.0, min_crossing_range_m: 1.0 };
-        assert_eq!(s.classify_polyline(&north, &near), EdgeObservation::UnkTrav);
+        assert_eq!(s.classify_polyline(&north, &near).obs, EdgeObservation::UnkTrav);
         // A crossing farther out still counts.
         let east = [Point2::new(0.0, 0.0), Point2::new(20.0, 0.0)];
-        assert_eq!(s.classify_polyline(&east, &near), EdgeObservation::NotTrav);
+        assert_eq!(s.classify_polyline(&east, &near).obs, EdgeObservation::NotTrav);
     }
 
     #[test]
@@ -381,23 +442,23 @@ mod tests {
         let p = |x: f64, y: f64| Point2::new(x, y);
         // Inside all along, around a corner.
         assert_eq!(
-            wall.classify_polyline(&[p(-5.0, 0.0), p(0.0, 5.0), p(5.0, 0.0)], &judging(w, 0.0)),
+            wall.classify_polyline(&[p(-5.0, 0.0), p(0.0, 5.0), p(5.0, 0.0)], &judging(w, 0.0)).obs,
             EdgeObservation::Trav
         );
         // The second piece leaves through the wall: one crossing.
         assert_eq!(
-            wall.classify_polyline(&[p(0.0, 0.0), p(5.0, 0.0), p(5.0, 20.0)], &judging(w, 0.0)),
+            wall.classify_polyline(&[p(0.0, 0.0), p(5.0, 0.0), p(5.0, 20.0)], &judging(w, 0.0)).obs,
             EdgeObservation::NotTrav
         );
         // Out through the wall and back in: two crossings, although each piece's straight
         // chord from end to end would say otherwise.
         let out_and_back = [p(0.0, 0.0), p(20.0, 0.0), p(20.0, 1.0), p(0.0, 1.0)];
-        assert_eq!(wall.classify_polyline(&out_and_back, &judging(w, 0.0)), EdgeObservation::UnkTrav);
+        assert_eq!(wall.classify_polyline(&out_and_back, &judging(w, 0.0)).obs, EdgeObservation::UnkTrav);
         assert_eq!(wall.classify(p(0.0, 0.0), p(0.0, 1.0), w), EdgeObservation::Trav);
         // The robot on the routed edge, 0.5 m from its corner piece: blocked towards the far end.
         let l_shape = [p(-15.0, 0.5), p(0.0, 0.5), p(0.0, 15.0)];
-        assert_eq!(wall.classify_polyline(&l_shape, &judging(w, 3.0)), EdgeObservation::NotTrav);
-        assert_eq!(wall.classify_polyline(&l_shape, &judging(w, 0.0)), EdgeObservation::UnkTrav, "two crossings");
+        assert_eq!(wall.classify_polyline(&l_shape, &judging(w, 3.0)).obs, EdgeObservation::NotTrav);
+        assert_eq!(wall.classify_polyline(&l_shape, &judging(w, 0.0)).obs, EdgeObservation::UnkTrav, "two crossings");
         assert_eq!(polyline_point_distance(&l_shape, p(1.0, 5.0)), 1.0);
         assert!(polyline_point_distance(&[], p(0.0, 0.0)).is_infinite());
     }

@@ -3,10 +3,13 @@
 //! rules take such a scan like any other: two of the robot's own scans that end at the teammate
 //! mark the edges through it not_trav, lock them and remove them for good. Robots that start in
 //! a file, or meet head-on in a lane, then cut the very roads they stand on, and a robot whose
-//! every way out was cut so never finds a path again. The robot therefore takes a scan in which a
-//! teammate ends some bin as it takes another robot's scan: its not_trav observations mark an
-//! edge (a cost that steers the robot away from where teammates stand) but never remove it. The
-//! scan itself is not changed: its training votes and what the team receives stay as they were.
+//! every way out was cut so never finds a path again. The robot therefore judges an edge whose
+//! boundary crossing is a teammate's body (a bin on either side of the crossing ends at the
+//! teammate) as it judges an edge from another robot's scan: not_trav marks it (a cost that
+//! steers the robot away from where teammates stand) but never removes it. Every other edge of
+//! the same scan is judged as the paper says: a roadblock beside a teammate still cuts the
+//! road. The scan itself is not changed: its training votes and what the team receives stay as
+//! they were.
 
 use spomp_core::{Point2, ReachabilityScan};
 
@@ -18,45 +21,77 @@ use spomp_core::{Point2, ReachabilityScan};
 /// local planner's inflation short of it), so the test is on the end point: `clearance_m` must
 /// cover the teammate's body radius, that inflation and both robots' localization error.
 pub fn bins_ending_at_teammates(scan: &ReachabilityScan, teammates: &[Point2], clearance_m: f64) -> usize {
-    if teammates.is_empty() || !(clearance_m.is_finite() && clearance_m > 0.0) || scan.obstacle.len() != scan.bins() {
+    if scan.obstacle.len() != scan.bins() {
         return 0;
     }
-    let origin = scan.pose.position();
+    let bins = BinFan { origin: scan.pose.position(), yaw: scan.pose.yaw, bins: scan.bins() };
     let max_range = scan.range_m.iter().copied().fold(0.0f32, f32::max) as f64;
-    // Only teammates a bin's end point can come near.
-    let near = |t: &Point2| t.x.is_finite() && t.y.is_finite() && t.distance(origin) <= max_range + clearance_m;
-    let n = scan.bins();
-    let step = std::f64::consts::TAU / n as f64;
     let mut count = 0;
-    for (k, &t) in teammates.iter().enumerate() {
-        if !near(&t) {
-            continue;
+    bins.for_each_ending_at(
+        |bin| scan.obstacle[bin].then(|| scan.endpoint(bin)),
+        max_range,
+        teammates,
+        clearance_m,
+        |_| count += 1,
+    );
+    count
+}
+
+/// The bins of a scan as directions: bin k looks along `yaw − k·2π/bins` from `origin`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct BinFan {
+    pub origin: Point2,
+    pub yaw: f64,
+    pub bins: usize,
+}
+
+impl BinFan {
+    /// Calls `visit` once for every bin whose obstacle end point (`obstacle_end(bin)`, `None`
+    /// for a bin that ends in the unknown) lies within `clearance_m` of one of `teammates`. No
+    /// end point lies beyond `max_range_m` of the origin. A clearance of 0 (or one that is not a
+    /// number) visits none.
+    pub fn for_each_ending_at(
+        &self,
+        obstacle_end: impl Fn(usize) -> Option<Point2>,
+        max_range_m: f64,
+        teammates: &[Point2],
+        clearance_m: f64,
+        mut visit: impl FnMut(usize),
+    ) {
+        let n = self.bins;
+        if n == 0 || teammates.is_empty() || !(clearance_m.is_finite() && clearance_m > 0.0) {
+            return;
         }
-        // A point within `clearance_m` of a teammate `dist` away lies within asin(clearance /
-        // dist) of its bearing, so only the bins in that window (a bin of margin for rounding)
-        // can end near it: the exact test, two trigonometric calls per bin, runs on those alone.
-        let d = t - origin;
-        let dist = d.norm();
-        let half = if dist > clearance_m { (clearance_m / dist).asin() } else { std::f64::consts::PI };
-        // Bin k looks along yaw − k·step.
-        let centre = -(d.angle() - scan.pose.yaw) / step;
-        let half_bins = half / step + 1.0;
-        let (lo, hi) = ((centre - half_bins).ceil() as i64, (centre + half_bins).floor() as i64);
-        let window = if hi - lo + 1 >= n as i64 { 0..n as i64 } else { lo..hi + 1 };
-        for bin in window.map(|b| b.rem_euclid(n as i64) as usize) {
-            if !scan.obstacle[bin] {
+        let origin = self.origin;
+        // Only teammates a bin's end point can come near.
+        let near = |t: &Point2| t.x.is_finite() && t.y.is_finite() && t.distance(origin) <= max_range_m + clearance_m;
+        let step = std::f64::consts::TAU / n as f64;
+        for (k, &t) in teammates.iter().enumerate() {
+            if !near(&t) {
                 continue;
             }
-            let end = scan.endpoint(bin);
-            // A bin that also ends at an earlier teammate was counted with that one.
-            if t.distance(end) <= clearance_m
-                && !teammates[..k].iter().any(|u| near(u) && u.distance(end) <= clearance_m)
-            {
-                count += 1;
+            // A point within `clearance_m` of a teammate `dist` away lies within asin(clearance /
+            // dist) of its bearing, so only the bins in that window (a bin of margin for
+            // rounding) can end near it: the exact test runs on those alone.
+            let d = t - origin;
+            let dist = d.norm();
+            let half = if dist > clearance_m { (clearance_m / dist).asin() } else { std::f64::consts::PI };
+            // Bin k looks along yaw − k·step.
+            let centre = -(d.angle() - self.yaw) / step;
+            let half_bins = half / step + 1.0;
+            let (lo, hi) = ((centre - half_bins).ceil() as i64, (centre + half_bins).floor() as i64);
+            let window = if hi - lo + 1 >= n as i64 { 0..n as i64 } else { lo..hi + 1 };
+            for bin in window.map(|b| b.rem_euclid(n as i64) as usize) {
+                let Some(end) = obstacle_end(bin) else { continue };
+                // A bin that also ends at an earlier teammate was visited with that one.
+                if t.distance(end) <= clearance_m
+                    && !teammates[..k].iter().any(|u| near(u) && u.distance(end) <= clearance_m)
+                {
+                    visit(bin);
+                }
             }
         }
     }
-    count
 }
 
 /// [`bins_ending_at_teammates`] as first written, every bin tested: the reference the tests

@@ -10,6 +10,7 @@ use spomp_core::{
 use spomp_global_planner::synthetic::{self, CityLayout, Probe, class, color};
 use spomp_global_planner::{
     EdgeState, GlobalPath, GlobalPlanner, GlobalPlannerParams, PathStatus, PlanError, TrainOutcome,
+    bins_ending_at_teammates,
 };
 
 const RES: f64 = 0.5;
@@ -235,6 +236,64 @@ fn other_robots_evidence_never_removes_an_edge() {
     assert_eq!(p.edge_state(edge), Some(EdgeState::NotTrav), "marked, but kept");
     assert_eq!(p.graph_stats().removed_edges, 0);
     assert!(matches!(p.path_status(&path), PathStatus::CostRose { .. }), "{:?}", p.path_status(&path));
+}
+
+/// Ground teammates' bodies (radius `TEAMMATE_RADIUS_M`) at `mates`, on the ring map's ground
+/// truth (with or without the roadblock).
+fn with_teammates<'a>(base: impl Fn(Point2) -> Probe + 'a, mates: &'a [Point2]) -> impl Fn(Point2) -> Probe + 'a {
+    move |p: Point2| {
+        if mates.iter().any(|m| m.distance(p) <= TEAMMATE_RADIUS_M) { Probe::Obstacle } else { base(p) }
+    }
+}
+
+const TEAMMATE_RADIUS_M: f64 = 1.4;
+
+#[test]
+fn teammates_across_the_road_mark_its_edge_but_a_roadblock_beside_teammates_still_cuts_it() {
+    let map = ring_map();
+    let fresh = || planner(GlobalPlannerParams::default(), &map);
+    let mut p0 = fresh();
+    let path = p0.plan(RING_START, RING_GOAL).unwrap();
+    let (edge, pose) = pose_before_block(&p0, &path);
+    // Three teammates side by side across the southern road where the roadblock would be (and
+    // no roadblock): the robot's own scans find the road's edge not_trav at their bodies.
+    let across = [Point2::new(BLOCK_X, 1.5), Point2::new(BLOCK_X, 4.0), Point2::new(BLOCK_X, 6.5)];
+    let held = synthetic::raycast_scan(
+        "ugv1",
+        Time::ZERO,
+        pose,
+        720,
+        30.0,
+        0.25,
+        with_teammates(synthetic::city_probe(&map), &across),
+    );
+    let mut p = fresh();
+    for _ in 0..4 {
+        let u = p.add_own_scan_among(&held, &across).unwrap();
+        assert!(u.at_teammates >= 1 && u.observed[1] >= 1, "{u:?}");
+        assert_eq!(u.edges_removed, 0, "{u:?}");
+    }
+    assert_eq!(p.edge_state(edge), Some(EdgeState::NotTrav), "marked, but kept");
+    // Without their positions the same scans cut the road for good (the rule's reason).
+    let mut blind = fresh();
+    for _ in 0..2 {
+        blind.add_scan(&held, true).unwrap();
+    }
+    assert_eq!(blind.edge_state(edge), None, "removed");
+
+    // The pile-up this rule once caused: a robot at a roadblock with teammates in its scan
+    // (queued behind it) still cuts the road at the block, since the block is not a teammate.
+    let behind = [Point2::new(pose.x - 4.0, pose.y - 1.5), Point2::new(pose.x - 4.0, pose.y + 1.5)];
+    let blocked =
+        synthetic::raycast_scan("ugv1", Time::ZERO, pose, 720, 30.0, 0.25, with_teammates(ring_truth(&map), &behind));
+    assert!(bins_ending_at_teammates(&blocked, &behind, 2.0) > 0, "the teammates show in the scan");
+    let mut q = fresh();
+    let first = q.add_own_scan_among(&blocked, &behind).unwrap();
+    assert_eq!(first.edges_removed, 0, "one observation is not enough");
+    let second = q.add_own_scan_among(&blocked, &behind).unwrap();
+    assert!(second.edges_removed >= 1, "{second:?}");
+    assert_eq!(q.edge_state(edge), None, "removed");
+    assert!(goes_north(&q.plan(RING_START, RING_GOAL).unwrap()));
 }
 
 #[test]
@@ -631,4 +690,55 @@ fn a_path_to_the_sidewalk_goes_up_the_ramp_the_aerial_elevation_shows() {
     assert_eq!(q.graph_stats().routed_edges, 0);
     let path = q.plan(Point2::new(10.0, 5.0), Point2::new(10.0, 16.0)).unwrap();
     assert!(curb_crossings(&path).iter().all(|x| !(20.0..23.0).contains(x)), "{:?}", path.waypoints);
+}
+
+/// Whether the polyline `points` crosses x = `x` somewhere on the southern road (y < 8 m).
+fn crosses_south_road_at(points: &[Point2], x: f64) -> bool {
+    points.windows(2).any(|w| {
+        let (a, b) = (w[0], w[1]);
+        if (a.x - x) * (b.x - x) > 0.0 || a.x == b.x {
+            return false;
+        }
+        let y = a.y + (x - a.x) / (b.x - a.x) * (b.y - a.y);
+        y < 8.0
+    })
+}
+
+#[test]
+fn a_robot_at_a_roadblock_in_the_region_of_the_node_beyond_it_plans_from_a_node_on_its_side() {
+    // Regression (the shipped mission with full sharing, seed 5): regions grow on the aerial
+    // map, which does not show a roadblock labelled road, so a robot that drove up to one stood
+    // in the region of the node beyond it. Every plan started with the straight leg to that node,
+    // through the block: no graph edge, so neither the scans nor the failed drives could remove
+    // it, and the robot tried it for 25 minutes.
+    let map = ring_map();
+    let fresh = planner(GlobalPlannerParams::default(), &map);
+    // A place on the southern road whose covering node lies at least 3 m further east, and a
+    // block across the road between the two.
+    let here = (100..600)
+        .map(|k| Point2::new(f64::from(k) * 0.1, 4.0))
+        .find_map(|p| {
+            let id = fresh.covering_node(p)?;
+            let (_, at, _) = fresh.nodes().find(|(n, _, _)| *n == id)?;
+            (at.x > p.x + 3.0 && at.y < 8.0).then_some(p)
+        })
+        .expect("a node covers road to its west");
+    let block = here.x + 0.8;
+    let truth = {
+        let base = synthetic::city_probe(&map);
+        move |p: Point2| if p.x >= block && p.x < block + 1.0 && p.y < 8.0 { Probe::Obstacle } else { base(p) }
+    };
+    let mut p = planner(GlobalPlannerParams::default(), &map);
+    let before = p.plan(here, RING_GOAL).unwrap();
+    assert!(before.waypoints[1].x > block, "the premise: it attaches beyond the block: {:?}", before.waypoints);
+    // The robot drove up to the block: its scans on the way vote the ground at the block.
+    for k in 0..6 {
+        let pose = Pose2::new(here.x - 0.5 * f64::from(k), here.y, 0.0);
+        p.add_scan(&synthetic::raycast_scan("ugv1", Time::ZERO, pose, 720, 30.0, 0.25, &truth), true).unwrap();
+    }
+    let after = p.plan(here, RING_GOAL).unwrap();
+    assert!(after.waypoints[1].x < block, "it starts from a node on its side: {:?}", after.waypoints);
+    assert!(!crosses_south_road_at(&after.waypoints[..2], block + 0.5), "{:?}", after.waypoints);
+    // (Whether the graph edges beyond are judged is the edge rules' business: on this map the
+    // road's south side is the map's edge, unknown ground, so they stay unk_trav here.)
 }

@@ -33,6 +33,24 @@ impl GlobalPlanner {
     /// on) every edge near it is judged trav / not_trav / unk_trav. `own` is true for the robot's
     /// own scans; other robots' scans can never remove an edge.
     pub fn add_scan(&mut self, scan: &ReachabilityScan, own: bool) -> Result<ScanUpdate, ScanError> {
+        self.take_scan(scan, own, &[])
+    }
+
+    /// Takes in the robot's own `scan`, taken while its ground teammates stood at `teammates`
+    /// (last known positions, map frame), as [`Self::add_scan`] does with `own`, except for
+    /// the edges a teammate blocks: a not_trav edge whose boundary crossing is a bin ending
+    /// within `experience.teammate_clearance_m` of a teammate is marked, never removed (a
+    /// teammate standing in the road is not terrain; see [`crate::bins_ending_at_teammates`]).
+    /// Every other edge of the scan is judged as the robot's own experience.
+    pub fn add_own_scan_among(
+        &mut self,
+        scan: &ReachabilityScan,
+        teammates: &[Point2],
+    ) -> Result<ScanUpdate, ScanError> {
+        self.take_scan(scan, true, teammates)
+    }
+
+    fn take_scan(&mut self, scan: &ReachabilityScan, own: bool, teammates: &[Point2]) -> Result<ScanUpdate, ScanError> {
         let mut region = std::mem::take(&mut self.region);
         let loaded = region.load(scan, self.params.learning.max_scan_range_m);
         let mut update = ScanUpdate::default();
@@ -41,6 +59,9 @@ impl GlobalPlanner {
                 update.cells_voted = self.vote(&region);
             }
             if self.params.experience.graph_updates {
+                if own {
+                    region.mark_teammates(teammates, self.params.experience.teammate_clearance_m);
+                }
                 self.judge_edges(&region, own, &mut update);
             }
         }
@@ -145,18 +166,21 @@ impl GlobalPlanner {
             if polyline_point_distance(&points, region.origin) > region.max_range_m {
                 continue;
             }
-            let obs = region.classify_polyline(&points, &judging);
+            let Verdict { obs, at_teammate } = region.classify_polyline(&points, &judging);
             update.observed[match obs {
                 EdgeObservation::Trav => 0,
                 EdgeObservation::NotTrav => 1,
                 EdgeObservation::UnkTrav => 2,
             }] += 1;
+            if at_teammate {
+                update.at_teammates += 1;
+            }
             if obs != EdgeObservation::UnkTrav {
-                changed.push((e, obs));
+                changed.push((e, obs, at_teammate));
             }
         }
         let params = self.params.experience.clone();
-        for &(e, obs) in &changed {
+        for &(e, obs, at_teammate) in &changed {
             let Some(d) = self.graph.edge_weight_mut(e) else {
                 continue;
             };
@@ -164,8 +188,9 @@ impl GlobalPlanner {
             // marked, never removed, by the robot's own not_trav observations, as by other
             // robots': seen from beside the passage, a scan's safe region ends at the corner of
             // the curb, whatever the passage holds. Being stuck on it still blocks it for the
-            // robot (the navigation's own record).
-            let removable = own && d.via.is_empty();
+            // robot (the navigation's own record). An edge a teammate blocks is marked, never
+            // removed: the teammate moves on.
+            let removable = own && d.via.is_empty() && !at_teammate;
             match d.experience.observe(obs, removable, &params) {
                 Transition::None => {}
                 Transition::Changed => {

@@ -18,7 +18,7 @@ use crate::features::{ClassChange, Features};
 use crate::mlp::{Mlp, TrainSettings};
 use crate::params::GlobalPlannerParams;
 use crate::routing::EdgeRouter;
-use crate::star::{EdgeObservation, Judging, StarRegion, polyline_point_distance};
+use crate::star::{EdgeObservation, Judging, StarRegion, Verdict, polyline_point_distance};
 use spomp_raster::SquaredEdt;
 
 mod costs;
@@ -170,6 +170,9 @@ pub struct ScanUpdate {
     pub edges_changed: usize,
     /// Edges removed for good.
     pub edges_removed: usize,
+    /// Not_trav observations of the robot's own scan whose crossing was a ground teammate's
+    /// body ([`GlobalPlanner::add_own_scan_among`]): marks only, never removals.
+    pub at_teammates: usize,
 }
 
 /// Result of [`GlobalPlanner::train`].
@@ -224,7 +227,7 @@ pub struct GlobalPlanner {
     /// The processor's widest instruction set, detected once (see [`Self::learned_cost_packed`]).
     simd: pulp::Arch,
     region: StarRegion,
-    judged: Vec<(EdgeIndex<u32>, EdgeObservation)>,
+    judged: Vec<(EdgeIndex<u32>, EdgeObservation, bool)>,
     edge_ids: Vec<EdgeIndex<u32>>,
     segment_features: Vec<f32>,
     router: EdgeRouter,

@@ -75,7 +75,9 @@ impl GlobalPlanner {
     /// to get across. The edges stay in the graph, with their state; pairs that are not edges
     /// are ignored.
     ///
-    /// The start and the goal attach to the nodes whose regions cover them. When no path joins
+    /// The start and the goal attach to the nodes whose regions cover them (the start to a
+    /// nearby node instead when the straight leg to its covering node crosses ground the scans
+    /// voted untraversable: [`Self::open_attachment`]). When no path joins
     /// those two, the search is tried again from and to the nodes around each point (the nearest
     /// within 15 m (`DETOUR_ATTACH_M`), by a straight leg over covered ground that the scans have not
     /// voted untraversable), and the cheapest path wins. Without this, a robot whose covering
@@ -87,7 +89,8 @@ impl GlobalPlanner {
         to: Point2,
         avoid: &[(NodeId, NodeId)],
     ) -> Result<GlobalPath, PlanError> {
-        let start = self.attach(from, "start")?;
+        let covering = self.attach(from, "start")?;
+        let start = self.open_attachment(from, covering);
         let goal = self.attach(to, "goal")?;
         let mut avoided: Vec<(u32, u32)> =
             avoid.iter().map(|&(a, b)| if a.0 <= b.0 { (a.0, b.0) } else { (b.0, a.0) }).collect();
@@ -133,6 +136,20 @@ impl GlobalPlanner {
             graph_cost,
             lead_in: 0,
         })
+    }
+
+    /// The node a path from `from` starts at: `covering`, the node whose region covers `from`,
+    /// when the straight leg to it is open ([`Self::leg_is_open`]); otherwise the nearest node
+    /// around `from` that a straight open leg reaches ([`Self::detour_legs`]), or `covering` when
+    /// none does. Regions are grown on the aerial map, which does not show a roadblock labelled
+    /// road: a robot that drove up to one stands in the region of the node beyond it, and the
+    /// leg to that node is no graph edge, so no scan or failed drive can remove it. The robot's
+    /// scans do vote the ground at the block untraversable, which closes the leg.
+    fn open_attachment(&mut self, from: Point2, covering: NodeIndex<u32>) -> NodeIndex<u32> {
+        if self.leg_is_open(from, self.graph[covering].position) {
+            return covering;
+        }
+        self.detour_legs(from, covering).into_iter().map(|(n, _)| n).find(|&n| n != covering).unwrap_or(covering)
     }
 
     /// A* between two nodes over the live edges minus the avoided pairs: the graph cost and
