@@ -221,7 +221,8 @@ fn three_ugvs_meeting_a_roadblock_the_aerial_map_does_not_show_all_get_past_it()
     let out_dir = tempfile::tempdir().unwrap();
     let out = spomp()
         .current_dir(root())
-        .args(["experiment", "tests/experiments/hidden-roadblock.yaml", "--jobs", "1", "--json", "--out"])
+        .args(["experiment", "tests/experiments/hidden-roadblock.yaml", "--allow-dir", "missions"])
+        .args(["--jobs", "1", "--json", "--out"])
         .arg(out_dir.path())
         .output()
         .unwrap();
