@@ -471,4 +471,36 @@ mod tests {
         let nan = scan(Pose2::new(f64::NAN, 0.0, 0.0), vec![1.0; 3], vec![true; 3]);
         assert!(matches!(StarRegion::from_scan(&nan, 30.0), Err(ScanError::NonFinitePose)));
     }
+
+    #[test]
+    fn a_not_trav_verdict_is_at_a_teammate_only_where_the_crossing_is_a_teammates_bin() {
+        // A closed wall 10 m around the robot; a teammate stands at the wall due east.
+        let mut wall = StarRegion::from_scan(&circle(360, 10.0, true), 30.0).unwrap();
+        let mate = Point2::new(10.5, 0.0);
+        let marked = wall.mark_teammates(&[mate], 2.0);
+        assert!(marked > 0 && marked < 30, "{marked}");
+        let j = judging(0.3, 0.0);
+        let east = wall.classify_polyline(&[Point2::new(0.0, 0.0), Point2::new(20.0, 0.0)], &j);
+        assert_eq!(east, Verdict { obs: EdgeObservation::NotTrav, at_teammate: true });
+        let north = wall.classify_polyline(&[Point2::new(0.0, 0.0), Point2::new(0.0, 20.0)], &j);
+        assert_eq!(north, Verdict { obs: EdgeObservation::NotTrav, at_teammate: false });
+        // The robot on an edge running east-west through it: judged from it both ways (each half
+        // crosses the wall once). At a teammate only when both halves are.
+        let on_edge = judging(0.3, 3.0);
+        let through = [Point2::new(-20.0, 0.0), Point2::new(20.0, 0.0)];
+        assert_eq!(
+            wall.classify_polyline(&through, &on_edge),
+            Verdict { obs: EdgeObservation::NotTrav, at_teammate: false }
+        );
+        wall.mark_teammates(&[mate, Point2::new(-10.5, 0.0)], 2.0);
+        assert_eq!(
+            wall.classify_polyline(&through, &on_edge),
+            Verdict { obs: EdgeObservation::NotTrav, at_teammate: true }
+        );
+        // Reloading a scan forgets the teammates; no teammates, or no clearance, marks none.
+        wall.load(&circle(360, 10.0, true), 30.0).unwrap();
+        assert!(!wall.classify_polyline(&[Point2::new(0.0, 0.0), Point2::new(20.0, 0.0)], &j).at_teammate);
+        assert_eq!(wall.mark_teammates(&[], 2.0), 0);
+        assert_eq!(wall.mark_teammates(&[mate], 0.0), 0);
+    }
 }
