@@ -113,22 +113,21 @@ impl StarRegion {
         self.at_teammate.clear();
         let n = self.bins();
         let fan = BinFan { origin: self.origin, yaw: self.yaw, bins: n };
-        let (ends, obstacle) = (&self.ends, &self.obstacle);
-        let mut marks = Vec::new();
+        let (ends, obstacle, marks) = (&self.ends, &self.obstacle, &mut self.at_teammate);
+        let mut count = 0;
         fan.for_each_ending_at(
             |b| obstacle[b].then(|| ends[b]),
             self.max_range_m,
             teammates,
             clearance_m,
-            |b| marks.push(b),
+            |b| {
+                // Sized on the first mark: a scan with no teammate in it keeps the buffer empty.
+                marks.resize(n, false);
+                marks[b] = true;
+                count += 1;
+            },
         );
-        if !marks.is_empty() {
-            self.at_teammate.resize(n, false);
-            for &b in &marks {
-                self.at_teammate[b] = true;
-            }
-        }
-        marks.len()
+        count
     }
 
     /// Whether bin `b` ends at a teammate.
