@@ -242,16 +242,13 @@ impl StarRegion {
                 let mut towards_b = Vec::with_capacity(points.len() - piece);
                 towards_b.push(q);
                 towards_b.extend_from_slice(&points[piece + 1..]);
-                let (a, b) = (self.classify_path(&towards_a, judging), self.classify_path(&towards_b, judging));
-                let not_trav = |v: &Verdict| v.obs == EdgeObservation::NotTrav;
-                return match (a.obs, b.obs) {
-                    _ if not_trav(&a) || not_trav(&b) => Verdict {
-                        obs: EdgeObservation::NotTrav,
-                        at_teammate: [a, b].iter().filter(|v| not_trav(v)).all(|v| v.at_teammate),
-                    },
-                    (EdgeObservation::Trav, EdgeObservation::Trav) => Verdict::plain(EdgeObservation::Trav),
-                    _ => Verdict::plain(EdgeObservation::UnkTrav),
-                };
+                let halves = [self.classify_path(&towards_a, judging), self.classify_path(&towards_b, judging)];
+                let mut blocked = halves.iter().filter(|v| v.obs == EdgeObservation::NotTrav).peekable();
+                if blocked.peek().is_some() {
+                    return Verdict { obs: EdgeObservation::NotTrav, at_teammate: blocked.all(|v| v.at_teammate) };
+                }
+                let both_trav = halves.iter().all(|v| v.obs == EdgeObservation::Trav);
+                return Verdict::plain(if both_trav { EdgeObservation::Trav } else { EdgeObservation::UnkTrav });
             }
         }
         self.classify_path(points, judging)
