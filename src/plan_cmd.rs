@@ -2,12 +2,15 @@
 //! and plans on it, one query or many random ones.
 //!
 //! A path the graph finds is not always one a robot can drive: the graph ranks classes (it
-//! may cross vegetation, which is costly, not forbidden) and sees no curbs. So every path is
-//! also checked against what the simulated UGV can drive on the world's ground truth: the cells
-//! it can reach from the start ([`spomp_world::reachable_cells`]: its step and drop limits, slope
-//! and disc footprint, down a curb but not up it). The path is drivable when every point of it
-//! lies within [`DRIVE_CORRIDOR_M`] of a reachable cell (the local planner swerves that much
-//! around a global path, off a curb edge, say) and on no impassable class. The report gives the
+//! may cross vegetation, which is costly, not forbidden), and an edge across a curb it found no
+//! ramp around stays straight, for the robot's scans to judge. So every path is also checked
+//! against what the simulated UGV can drive on the world's ground truth: the cells it can reach
+//! from the start ([`spomp_world::reachable_cells`]: its step and drop limits, slope and disc
+//! footprint, down a curb but not up it). The path is drivable when every point of it lies
+//! within [`DRIVE_CORRIDOR_M`] of a reachable cell (the local planner swerves that much around a
+//! global path, off a curb edge, say), on no impassable class, and the ground along its line
+//! rises by no more than a climb step and falls by no more than a drop step from one point to
+//! the next (a path straight up a curb). The report gives the
 //! share of queries whose path is drivable beside the graph's success rate, and what stopped
 //! the others (the class there and why).
 
@@ -58,6 +61,10 @@ pub fn drive(world: &World, limits: &UgvLimits, path: &[Point2]) -> Option<Block
     }
     let near = distance_to(&spec, &reach.data);
     let step = spec.resolution_m / 2.0;
+    // The ground under the path's line, point after point: a rise the UGV cannot climb stops it
+    // whatever ground it could reach around there (the sidewalk beyond a curb is reachable up a
+    // ramp elsewhere, so the corridor alone passes a path straight up the curb).
+    let mut ground: Option<f32> = world.elevation_at(first);
     for w in path.windows(2) {
         let (a, b) = (w[0], w[1]);
         let n = ((a.distance(b) / step).ceil() as usize).max(1);
@@ -69,6 +76,26 @@ pub fn drive(world: &World, limits: &UgvLimits, path: &[Point2]) -> Option<Block
             let i = spec.index(cell);
             if classes.rank(world.map().class[i]) >= spomp_core::classes::IMPASSABLE_RANK {
                 return Some(Blocked { at: p, class: name_at(p), why: "an impassable class".into() });
+            }
+            let here = world.elevation_at(p);
+            if let (Some(before), Some(now)) = (ground, here) {
+                let rise = f64::from(now - before);
+                if rise > limits.max_step_m + 1e-4 || -rise > limits.max_drop_m + 1e-4 {
+                    let (what, limit) =
+                        if rise > 0.0 { ("up", limits.max_step_m) } else { ("down", limits.max_drop_m) };
+                    return Some(Blocked {
+                        at: p,
+                        class: name_at(p),
+                        why: format!(
+                            "a step of {:.2} m {what} on the path's line, more than the UGV's {limit:.2} m (a curb \
+                             the path crosses where it has no ramp)",
+                            rise.abs()
+                        ),
+                    });
+                }
+            }
+            if here.is_some() {
+                ground = here;
             }
             if f64::from(near[i]) > DRIVE_CORRIDOR_M {
                 return Some(Blocked {
@@ -246,6 +273,7 @@ pub fn plan(a: &PlanArgs) -> Result<ExitCode> {
             })).collect::<Vec<_>>(),
             "path_length_m": single_path.map(|p| p.length_m),
             "path_cost": single_path.map(|p| p.cost),
+            "path_waypoints": single_path.map(|p| p.waypoints.iter().map(|w| [w.x, w.y]).collect::<Vec<_>>()),
         });
         out!("{}", serde_json::to_string_pretty(&v)?);
     } else {

@@ -171,6 +171,57 @@ fn world_show_pano_terrain_pipeline() {
     assert!(text.contains("total (fused)") && text.contains("staged total"), "{text}");
 }
 
+/// Ground height under a map-frame point, metres, from a generated world's `elevation.png`
+/// (1 mm per count, no offset, as `spomp world generate` writes it; row 0 is the north edge).
+fn elevation_m(dir: &Path, p: (f64, f64)) -> f64 {
+    let img = image::open(dir.join("elevation.png")).unwrap().to_luma16();
+    let (col, row) = ((p.0 / RESOLUTION_M).floor() as u32, (p.1 / RESOLUTION_M).floor() as u32);
+    f64::from(img.get_pixel(col, img.height() - 1 - row).0[0]) * 0.001
+}
+
+/// `spomp plan` judges the ground along a path's line too: a path the graph plans straight up a
+/// curb (an edge across it with no ramp in reach stays straight) is not drivable, although the
+/// sidewalk beyond is ground the UGV reaches up a ramp elsewhere. The corridor check alone
+/// passed such paths, so the report overstated what the UGV can drive.
+#[test]
+fn plan_reports_a_path_straight_up_a_curb_as_not_drivable() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = small_city(tmp.path());
+    let r = run_json(&["plan", s(&dir), "--random-pairs", "40", "--seed", "1", "--json"]);
+    let blocked = r["ugv_blocked"].as_array().unwrap();
+    let up = blocked
+        .iter()
+        .find(|b| b["why"].as_str().unwrap().contains("step of 0.15 m up"))
+        .unwrap_or_else(|| panic!("a path up a curb among the random pairs: {r}"));
+    let point = |v: &Value| (v[0].as_f64().unwrap(), v[1].as_f64().unwrap());
+    let (from, to) = (point(&up["from"]), point(&up["to"]));
+
+    // The same query alone: its path climbs the curb where the report says it stops.
+    let v = run_json(&[
+        "plan",
+        s(&dir),
+        "--from",
+        &format!("{},{}", from.0, from.1),
+        "--to",
+        &format!("{},{}", to.0, to.1),
+        "--json",
+    ]);
+    assert_eq!(v["ugv_drivable_rate"], 0.0, "{v}");
+    let at = point(&v["ugv_blocked"][0]["at"]);
+    let path: Vec<(f64, f64)> = v["path_waypoints"].as_array().unwrap().iter().map(point).collect();
+    let on_segment = |a: (f64, f64), b: (f64, f64)| {
+        let (ab, ap) = (((b.0 - a.0), (b.1 - a.1)), ((at.0 - a.0), (at.1 - a.1)));
+        let len = (ab.0 * ab.0 + ab.1 * ab.1).sqrt();
+        len > 0.0 && (ab.0 * ap.1 - ab.1 * ap.0).abs() / len < 1e-6 && (ab.0 * ap.0 + ab.1 * ap.1) / len <= len + 1e-6
+    };
+    let (a, b) =
+        path.windows(2).map(|w| (w[0], w[1])).find(|&(a, b)| on_segment(a, b)).expect("the stop is on the path");
+    let len = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
+    let before = (at.0 - (b.0 - a.0) / len * 0.3, at.1 - (b.1 - a.1) / len * 0.3);
+    let climb = elevation_m(&dir, at) - elevation_m(&dir, before);
+    assert!(climb > 0.1, "the ground rises {climb} m at {at:?} on {a:?} → {b:?}");
+}
+
 #[test]
 fn plan_between_road_cells_and_random_pairs() {
     let tmp = tempfile::tempdir().unwrap();
@@ -191,6 +242,17 @@ fn plan_between_road_cells_and_random_pairs() {
     let length = v["path_length_m"].as_f64().unwrap();
     assert!(length >= straight - 1e-6 && length < 3.0 * straight, "{length} vs {straight}");
     assert!(v["path_cost"].as_f64().unwrap() > 0.0);
+    // The path itself: from the start to the goal, as long as the reported length.
+    let points: Vec<(f64, f64)> = v["path_waypoints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| (p[0].as_f64().unwrap(), p[1].as_f64().unwrap()))
+        .collect();
+    assert!(points.len() >= 3, "{points:?}");
+    assert_eq!((points[0], points[points.len() - 1]), (from, to));
+    let walked: f64 = points.windows(2).map(|w| ((w[1].0 - w[0].0).powi(2) + (w[1].1 - w[0].1).powi(2)).sqrt()).sum();
+    assert!((walked - length).abs() < 1e-6, "{walked} vs {length}");
     assert!(v["build_ms"].as_f64().unwrap() > 0.0);
     let pic = image::open(out_dir.join("plan.png")).unwrap();
     assert_eq!((pic.width(), pic.height()), (240, 200));
@@ -203,7 +265,7 @@ fn plan_between_road_cells_and_random_pairs() {
     // Random pairs on road and gravel: a rate, no single-path fields; same seed, same rate.
     let r = run_json(&["plan", s(&dir), "--random-pairs", "20", "--seed", "4", "--json"]);
     assert!(r["success_rate"].as_f64().unwrap() >= 0.9, "{r}");
-    assert!(r["path_length_m"].is_null() && r["path_cost"].is_null());
+    assert!(r["path_length_m"].is_null() && r["path_cost"].is_null() && r["path_waypoints"].is_null());
     assert!(r["query_ms_max"].as_f64().unwrap() >= r["query_ms_median"].as_f64().unwrap());
     let again = run_json(&["plan", s(&dir), "--random-pairs", "20", "--seed", "4", "--json"]);
     assert_eq!(again["success_rate"], r["success_rate"]);
