@@ -86,7 +86,8 @@ pub struct GraphParams {
     /// Highest elevation step between neighbouring aerial-map cells a UGV drives over, metres.
     /// An edge whose straight line crosses a higher step (a curb, the side of a parked vehicle)
     /// follows a step-free route through the two nodes' regions instead, when there is one (a
-    /// curb ramp); otherwise it stays straight for experience to judge. `null`: edges are
+    /// curb ramp; the route rises at most half this much from cell to cell, what terrain
+    /// analysis does not flag); otherwise it stays straight for experience to judge. `null`: edges are
     /// always straight (for aerial maps whose elevation cannot resolve curbs).
     pub max_step_m: Option<f64>,
 }

@@ -119,6 +119,12 @@ const CLEARANCE_CELLS: u8 = 6;
 const CLEARANCE_PENALTY: u32 = 15;
 /// Inside the band near a step, a route keeps a vertex every this many chain cells.
 const TIGHT_VERTEX_CELLS: usize = 2;
+/// A route moves only between cells whose elevations differ by at most this share of the step
+/// limit: terrain analysis flags a rise above half the limit as an obstacle when near (the
+/// clearance's "noticeable" rise), although the robot could climb it, so a route up a ramp's
+/// side flank, within the limit, was one the local planner would not drive (a UGV stood at a
+/// ramp's foot with its look-ahead over the flank). A ramp rises a few centimetres a cell.
+const PASSABLE_STEP_SHARE: f32 = 0.5;
 
 impl EdgeRouter {
     /// Whether the digital line from `a` to `b` passes between two cells (consecutive on the
@@ -150,7 +156,7 @@ impl EdgeRouter {
         // Clearance: cells beside a rise of more than half the step limit are 0 (terrain
         // analysis flags such a rise when near, although the robot could climb it), then a
         // Chebyshev distance by two chamfer passes.
-        let noticeable = 0.5 * max_step_m;
+        let noticeable = PASSABLE_STEP_SHARE * max_step_m;
         self.clearance.clear();
         self.clearance.resize(n, CLEARANCE_CELLS);
         for r in 0..h {
@@ -231,7 +237,7 @@ impl EdgeRouter {
                 let i = i as usize;
                 let (c, r) = (i % w, i / w);
                 let mut visit = |j: usize| {
-                    if owner[j] != NO_NODE && component[j] == NO_NODE && step_ok(elev[i], elev[j], max_step_m) {
+                    if owner[j] != NO_NODE && component[j] == NO_NODE && step_ok(elev[i], elev[j], noticeable) {
                         component[j] = next;
                         stack.push(j as u32);
                     }
@@ -338,6 +344,7 @@ impl EdgeRouter {
     /// The A* and string pulling of [`Self::route`], for two covered cells of one component.
     fn search(&mut self, map: &AerialMap, owner: &[u32], question: &Question) -> Option<Vec<Point2>> {
         let Question { a, b, max_step_m, .. } = *question;
+        let max_step_m = PASSABLE_STEP_SHARE * max_step_m;
         let w = map.spec.width as i32;
         let (c0, r0, c1, r1) = question.search_box(map);
         let (bw, bh) = ((c1 - c0 + 1) as usize, (r1 - r0 + 1) as usize);
@@ -563,6 +570,48 @@ mod tests {
         assert!(on_ramp, "{points:?}");
     }
 
+    /// The largest rise between consecutive cells under the route's pieces from `a` to `b`.
+    fn largest_rise(map: &AerialMap, a: Cell, vias: &[Point2], b: Cell) -> f32 {
+        let mut cells = vec![(a.col as i32, a.row as i32)];
+        cells.extend(vias.iter().map(|&v| {
+            let c = map.spec.cell_at(v).unwrap();
+            (c.col as i32, c.row as i32)
+        }));
+        cells.push((b.col as i32, b.row as i32));
+        let elev = |(c, r): (i32, i32)| map.elevation[map.spec.index(Cell::new(c as u32, r as u32))];
+        let mut rise = 0.0f32;
+        for w in cells.windows(2) {
+            let mut prev = w[0];
+            walk_cells(w[0], w[1], |cell| {
+                rise = rise.max((elev(cell) - elev(prev)).abs());
+                if cell.0 != prev.0 && cell.1 != prev.1 {
+                    // Passing a corner: the robot's footprint covers both cells beside it.
+                    for side in [(cell.0, prev.1), (prev.0, cell.1)] {
+                        rise = rise.max((elev(side) - elev(prev)).abs()).max((elev(cell) - elev(side)).abs());
+                    }
+                }
+                prev = cell;
+            });
+        }
+        rise
+    }
+
+    #[test]
+    fn a_route_leaves_a_ramp_where_it_meets_the_top_not_over_its_side() {
+        // Regression: a route from the road to the raised ground just beside the ramp's foot
+        // left the ramp over its side, a rise of 0.075 m: within the 0.1 m step limit, but above half of
+        // it, which terrain analysis flags as an obstacle when near, so the local planner would
+        // not drive it and the robot stood at the ramp's foot.
+        let map = curb_map();
+        let owner: Vec<u32> = (0..400).map(|i| if i / 20 < 10 { 1 } else { 2 }).collect();
+        let (a, b) = (Cell::new(15, 4), Cell::new(12, 10));
+        let mut router = EdgeRouter::default();
+        router.prepare(&map, &owner, 0.1);
+        let vias = router.route(&map, &owner, a, b, 30, 0.1).expect("a route up the ramp");
+        let rise = largest_rise(&map, a, &vias, b);
+        assert!(rise <= 0.05 + 1e-6, "a rise of {rise} m on {vias:?}");
+    }
+
     #[test]
     fn no_ramp_no_route_and_unknown_elevation_is_no_step() {
         let mut map = curb_map();
@@ -713,7 +762,10 @@ mod tests {
                     (r > 0).then(|| i - w),
                 ];
                 for j in neighbours.into_iter().flatten() {
-                    if owner[j] != NO_NODE && component[j] == NO_NODE && step_ok(elev[i], elev[j], max_step_m) {
+                    if owner[j] != NO_NODE
+                        && component[j] == NO_NODE
+                        && step_ok(elev[i], elev[j], PASSABLE_STEP_SHARE * max_step_m)
+                    {
                         component[j] = next;
                         stack.push(j);
                     }
