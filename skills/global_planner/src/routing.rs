@@ -220,8 +220,8 @@ impl EdgeRouter {
                 cl[i] = best;
             }
         }
-        // Components by flood fill over 4-neighbours (a diagonal move needs both cells beside
-        // it, so 8-connected routes join 4-connected cells only).
+        // Components by flood fill over 4-neighbours and the rises a route may take (a diagonal
+        // move needs both cells beside it, so 8-connected routes join 4-connected cells only).
         self.component.clear();
         self.component.resize(n, NO_NODE);
         let (component, stack) = (&mut self.component, &mut self.stack);
@@ -599,9 +599,9 @@ mod tests {
     #[test]
     fn a_route_leaves_a_ramp_where_it_meets_the_top_not_over_its_side() {
         // Regression: a route from the road to the raised ground just beside the ramp's foot
-        // left the ramp over its side, a rise of 0.075 m: within the 0.1 m step limit, but above half of
-        // it, which terrain analysis flags as an obstacle when near, so the local planner would
-        // not drive it and the robot stood at the ramp's foot.
+        // left the ramp over its side, a rise of 0.075 m: within the 0.1 m step limit, but
+        // above half of it, which terrain analysis flags as an obstacle when near, so the local
+        // planner would not drive it and the robot stood at the ramp's foot.
         let map = curb_map();
         let owner: Vec<u32> = (0..400).map(|i| if i / 20 < 10 { 1 } else { 2 }).collect();
         let (a, b) = (Cell::new(15, 4), Cell::new(12, 10));
