@@ -533,6 +533,20 @@ mod tests {
         map
     }
 
+    /// The coverage of [`curb_map`]: node 1 owns the low side, node 2 the raised side (ramp
+    /// included).
+    fn two_sides() -> Vec<u32> {
+        (0..400).map(|i| if i / 20 < 10 { 1 } else { 2 }).collect()
+    }
+
+    /// A fresh router's route on `map` covered by [`two_sides`] (0.1 m step limit).
+    fn route_over_two_sides(map: &AerialMap, a: Cell, b: Cell) -> Option<Vec<Point2>> {
+        let owner = two_sides();
+        let mut router = EdgeRouter::default();
+        router.prepare(map, &owner, 0.1);
+        router.route(map, &owner, a, b, 30, 0.1)
+    }
+
     #[test]
     fn a_straight_line_over_the_curb_crosses_a_step_one_over_the_ramp_does_not() {
         let map = curb_map();
@@ -544,12 +558,8 @@ mod tests {
     #[test]
     fn the_route_goes_up_the_ramp_and_every_piece_is_step_free() {
         let map = curb_map();
-        // Node 1 owns the low side, node 2 the raised side (ramp included).
-        let owner: Vec<u32> = (0..400).map(|i| if i / 20 < 10 { 1 } else { 2 }).collect();
         let (a, b) = (Cell::new(4, 4), Cell::new(4, 16));
-        let mut router = EdgeRouter::default();
-        router.prepare(&map, &owner, 0.1);
-        let vias = router.route(&map, &owner, a, b, 30, 0.1).expect("a route up the ramp");
+        let vias = route_over_two_sides(&map, a, b).expect("a route up the ramp");
         assert!(!vias.is_empty());
         let mut points = vec![map.spec.center(a)];
         points.extend(&vias);
@@ -603,11 +613,8 @@ mod tests {
         // above half of it, which terrain analysis flags as an obstacle when near, so the local
         // planner would not drive it and the robot stood at the ramp's foot.
         let map = curb_map();
-        let owner: Vec<u32> = (0..400).map(|i| if i / 20 < 10 { 1 } else { 2 }).collect();
         let (a, b) = (Cell::new(15, 4), Cell::new(12, 10));
-        let mut router = EdgeRouter::default();
-        router.prepare(&map, &owner, 0.1);
-        let vias = router.route(&map, &owner, a, b, 30, 0.1).expect("a route up the ramp");
+        let vias = route_over_two_sides(&map, a, b).expect("a route up the ramp");
         let rise = largest_rise(&map, a, &vias, b);
         assert!(rise <= 0.05 + 1e-6, "a rise of {rise} m on {vias:?}");
     }
@@ -615,27 +622,25 @@ mod tests {
     #[test]
     fn no_ramp_no_route_and_unknown_elevation_is_no_step() {
         let mut map = curb_map();
-        let owner: Vec<u32> = (0..400).map(|i| if i / 20 < 10 { 1 } else { 2 }).collect();
         for row in 10..13u32 {
             for col in 14..17u32 {
                 map.elevation[map.spec.index(Cell::new(col, row))] = 0.15;
             }
         }
-        let mut router = EdgeRouter::default();
-        router.prepare(&map, &owner, 0.1);
-        assert_eq!(router.route(&map, &owner, Cell::new(4, 4), Cell::new(4, 16), 30, 0.1), None);
+        assert_eq!(route_over_two_sides(&map, Cell::new(4, 4), Cell::new(4, 16)), None);
         // Cells the UAV has not measured: no evidence of a step.
         for col in 0..20u32 {
             map.elevation[map.spec.index(Cell::new(col, 10))] = f32::NAN;
         }
         assert!(!EdgeRouter::crosses_step(&map, Cell::new(5, 5), Cell::new(5, 15), 0.1));
         // Ground the graph does not cover (a building) is not used.
-        let mut walled: Vec<u32> = (0..400).map(|i| if i / 20 < 10 { 1 } else { 2 }).collect();
+        let mut walled = two_sides();
         for (i, o) in walled.iter_mut().enumerate() {
             if i / 20 == 11 {
                 *o = NO_NODE;
             }
         }
+        let mut router = EdgeRouter::default();
         router.prepare(&map, &walled, 0.1);
         assert_eq!(router.route(&map, &walled, Cell::new(4, 4), Cell::new(4, 16), 30, 0.1), None);
     }
@@ -643,7 +648,7 @@ mod tests {
     #[test]
     fn a_route_is_searched_once_and_never_served_for_another_map() {
         let map = curb_map();
-        let owner: Vec<u32> = (0..400).map(|i| if i / 20 < 10 { 1 } else { 2 }).collect();
+        let owner = two_sides();
         let (a, b) = (Cell::new(3, 4), Cell::new(3, 16));
         let mut first = EdgeRouter::default();
         first.prepare(&map, &owner, 0.1);
