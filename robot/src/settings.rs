@@ -48,9 +48,11 @@ pub struct WatchdogParams {
     /// seconds. A `navigate_to` or `return_home` whose robot has not moved at all (odometry
     /// within 0.25 m) for this long fails with `no_progress`.
     pub stuck_timeout_s: f64,
-    /// A `navigate_to` or `return_home` whose robot has not come 1 m nearer its target (straight
-    /// line, the best distance so far) for this long fails with `no_progress`, however often it
-    /// replanned: replans extend the time limit, this bound they do not (`navigate_to`'s own
+    /// A `navigate_to` or `return_home` whose robot has come neither 1 m nearer its target
+    /// (straight line, the best distance so far) nor 1 m further along its path (the least path
+    /// left so far; a longer route forced by an edge found blocked or costlier resets it, at most
+    /// three times a drive) for this long fails with `no_progress`, however often it replanned:
+    /// replans extend the time limit, this bound they do not (`navigate_to`'s own
     /// `no_progress_timeout_s` port overrides it), seconds.
     pub no_progress_timeout_s: f64,
 }

@@ -59,6 +59,13 @@ pub(super) struct Driver {
     /// [`PROGRESS_MARGIN_M`] nearer: the no-progress bound, which replans do not reset.
     pub(super) closest_m: f64,
     pub(super) closest_at: Time,
+    /// Least path length left seen on the routes the robot followed, since the last detour
+    /// ([`Driver::take_detour`]): getting [`PROGRESS_MARGIN_M`] below it is progress too.
+    pub(super) route_best_m: f64,
+    /// Detours this drive may still take, each a new, longer path-length baseline.
+    pub(super) detours_left: u32,
+    /// When the robot last made progress of either kind (straight line or along its path).
+    pub(super) progress_at: Time,
     /// Odometry position the robot has stayed within [`MOTIONLESS_RADIUS_M`] of, and since when.
     pub(super) still_at: Option<Point2>,
     pub(super) still_since: Time,
@@ -78,6 +85,9 @@ impl Driver {
             pinned_since: Time::ZERO,
             closest_m: f64::INFINITY,
             closest_at: Time::ZERO,
+            route_best_m: f64::INFINITY,
+            detours_left: DETOURS_PER_DRIVE,
+            progress_at: Time::ZERO,
             still_at: None,
             still_since: Time::ZERO,
         }
@@ -99,6 +109,9 @@ impl Driver {
         self.pinned_since = now;
         self.closest_m = f64::INFINITY;
         self.closest_at = now;
+        self.route_best_m = f64::INFINITY;
+        self.detours_left = DETOURS_PER_DRIVE;
+        self.progress_at = now;
         self.still_at = None;
         self.still_since = now;
         Ok(())
@@ -106,9 +119,11 @@ impl Driver {
 
     /// The no-progress check of a drive toward a target `distance_m` away (straight line), with
     /// the robot's odometry position `odom`: why the drive makes no progress, if it does not.
-    /// Two signs: the robot has not come [`PROGRESS_MARGIN_M`] nearer the target than its best
-    /// for `bound_s`, whatever the route did meanwhile; or its odometry has stayed within
-    /// [`MOTIONLESS_RADIUS_M`] for `still_s` (wedged: commands are given, nothing moves).
+    /// Two signs: for `bound_s` the robot has come neither [`PROGRESS_MARGIN_M`] nearer the
+    /// target than its best nor that much further along its path than its best
+    /// ([`Driver::route_progress`]), whatever the replans did meanwhile; or its odometry has
+    /// stayed within [`MOTIONLESS_RADIUS_M`] for `still_s` (wedged: commands are given, nothing
+    /// moves).
     pub(super) fn no_progress(
         &mut self,
         now: Time,
@@ -120,6 +135,7 @@ impl Driver {
         if distance_m.is_finite() && (distance_m < self.closest_m - PROGRESS_MARGIN_M || !self.closest_m.is_finite()) {
             self.closest_m = distance_m;
             self.closest_at = now;
+            self.progress_at = now;
         }
         if let Some(p) = odom
             && self.still_at.is_none_or(|a| a.distance(p) > MOTIONLESS_RADIUS_M)
@@ -127,9 +143,14 @@ impl Driver {
             self.still_at = Some(p);
             self.still_since = now;
         }
-        if now.secs_since(self.closest_at) > bound_s {
+        if now.secs_since(self.progress_at) > bound_s {
+            let along = if self.route_best_m.is_finite() {
+                format!(" nor less than {:.1} m of path left", self.route_best_m)
+            } else {
+                String::new()
+            };
             return Some(format!(
-                "no progress: no nearer than {:.1} m to the target for {bound_s:.0} s",
+                "no progress: no nearer than {:.1} m to the target{along} for {bound_s:.0} s",
                 self.closest_m
             ));
         }
@@ -137,6 +158,30 @@ impl Driver {
             return Some(format!("no progress: the robot has not moved for {still_s:.0} s"));
         }
         None
+    }
+
+    /// Feeds the no-progress check the path length left on the route being followed: getting
+    /// [`PROGRESS_MARGIN_M`] below the least seen is progress, so a detour that first leads
+    /// away from the target (round a block whose road is cut) is not given up while the robot
+    /// gains on it. Replans do not lower the bar: a new, longer route counts only as a detour.
+    pub(super) fn route_progress(&mut self, now: Time, remaining_m: f64) {
+        if remaining_m.is_finite()
+            && (remaining_m < self.route_best_m - PROGRESS_MARGIN_M || !self.route_best_m.is_finite())
+        {
+            self.route_best_m = remaining_m;
+            self.progress_at = now;
+        }
+    }
+
+    /// A route forced by something the robot learnt (an edge gone or costlier, an edge it
+    /// could not drive) is longer than the path it had left: its length becomes the baseline
+    /// of [`Driver::route_progress`], at most [`DETOURS_PER_DRIVE`] times a drive, so that
+    /// routes flipping back and forth cannot keep a drive alive for ever.
+    pub(super) fn take_detour(&mut self, length_m: f64) {
+        if length_m.is_finite() && length_m > self.route_best_m && self.detours_left > 0 {
+            self.detours_left -= 1;
+            self.route_best_m = length_m;
+        }
     }
 
     /// Feeds the watchdog the remaining distance and the robot's position; true when no

@@ -9,7 +9,8 @@
 //!   `rt.rng`. On every tick it runs DWA with the robot's pose relative to the panorama taken
 //!   from odometry (`view.odom_pose⁻¹ ⊕ odometry`), and writes `rt.command`. It also keeps the
 //!   progress watchdog (no reduction of the remaining distance by [`PROGRESS_MARGIN_M`] within
-//!   the stuck timeout → stuck).
+//!   the stuck timeout → stuck; and the no-progress bound, on the straight-line distance and
+//!   the path left, whatever the replans do).
 //! - [`Navigator`] adds the global path: plans on the robot's `GlobalPlanner` (through
 //!   `NavStack::plan`), feeds the driver a pure-pursuit waypoint on the path (the farthest point
 //!   within the look-ahead, never moving back), replans when the path's edges are removed or
@@ -74,6 +75,10 @@ pub const PINNED_RADIUS_M: f64 = 2.0;
 
 /// ... for this many stuck timeouts is stuck, and backs out along its own trail.
 pub const PINNED_TIMEOUTS: f64 = 2.0;
+
+/// Detours a drive may take ([`driver::Driver::take_detour`]): each is a longer route forced by
+/// an edge found blocked or costlier, against which progress along the path is measured anew.
+pub const DETOURS_PER_DRIVE: u32 = 3;
 /// `navigate_to`'s look-ahead when the mission leaves `lookahead_m` out, and `return_home`'s,
 /// metres: the port's declared default.
 pub const DEFAULT_LOOKAHEAD_M: f64 = 8.0;
@@ -98,14 +103,14 @@ pub fn register_navigation(r: &mut NodeRegistry<RobotRuntime>) {
         NodeTypeSpec::leaf(
             "navigate_to",
             Action,
-            "Plans a path on the robot's traversability graph from its pose to `target`, follows it by giving the local planner the farthest path point within `lookahead_m` that the path reaches without leaving that circle and whose straight line (widened to 1 m either side at the point) crosses no curb the aerial map shows unless the path does (a path up a curb ramp is followed, not cut across the curb) (local goal per panorama, DWA at every tick), and replans when an edge of the path is removed or the path's cost rises after a reachability scan (checked at every panorama), and every 10 s; replans keep the edge being driven (they search from the node ahead, keeping the rest of an edge routed around a curb). When the remaining path length has not shrunk by 1 m for `stuck_timeout_s` on a graph edge, the robot marks that edge failed on its global planner and replans from the node behind (a blockage the scans could not judge). A robot that stays within 2 m of one point for twice `stuck_timeout_s` is stuck too: it backs out along its own trail to the newest trail point from which the graph has a path (so does any plan from a place the graph has no path from, such as a node whose edges were all removed). Success within `tolerance_m`; Failure (reason in `failure_reason`) when there is no path (`no_path`, also when a blocked path has no alternative), when stuck with no edge to give up (`stuck`), when it makes no progress (`no_progress`: not 1 m nearer the target than its best for `no_progress_timeout_s`, replans or not, or its odometry not 0.25 m from one point for `stuck_timeout_s`; the edge being driven is marked failed on the robot's global planner, which then plans around it), or past the time limit (`time_limit`): `time_limit_s` if given, else `time_per_m_s` (unset: the mission's `goals.time_limit_per_m_s`) × the planned path length, counted from the start and extended by a replan forced by a blocked or costlier path to now + `time_per_m_s` × the new length. With no aerial map yet (empty graph) it drives toward the target with the local planner alone (time limit from the straight-line distance) and plans as soon as a graph exists. A target where the robot's map has no data yet (a goal another robot found in a map version that has not reached this one) is approached over the graph to the reachable node nearest it, then straight on with the local planner alone. Writes the robot's planned path and publishes its end on the team state; finishing or halting stops the robot and clears both.",
+            "Plans a path on the robot's traversability graph from its pose to `target`, follows it by giving the local planner the farthest path point within `lookahead_m` that the path reaches without leaving that circle and whose straight line (widened to 1 m either side at the point) crosses no curb the aerial map shows unless the path does (a path up a curb ramp is followed, not cut across the curb) (local goal per panorama, DWA at every tick), and replans when an edge of the path is removed or the path's cost rises after a reachability scan (checked at every panorama), and every 10 s; replans keep the edge being driven (they search from the node ahead, keeping the rest of an edge routed around a curb). When the remaining path length has not shrunk by 1 m for `stuck_timeout_s` on a graph edge, the robot marks that edge failed on its global planner and replans from the node behind (a blockage the scans could not judge). A robot that stays within 2 m of one point for twice `stuck_timeout_s` is stuck too: it backs out along its own trail to the newest trail point from which the graph has a path (so does any plan from a place the graph has no path from, such as a node whose edges were all removed). Success within `tolerance_m`; Failure (reason in `failure_reason`) when there is no path (`no_path`, also when a blocked path has no alternative), when stuck with no edge to give up (`stuck`; the edge is the one the robot stands on when its look-ahead has moved past it, say onto the last leg to a target beyond a curb), when it makes no progress (`no_progress`: for `no_progress_timeout_s`, replans or not, neither 1 m nearer the target than its best nor 1 m less path left than its best — a route forced by an edge found blocked or costlier that is longer than the path left sets a new path-left baseline, at most 3 times a drive, so a detour round a block is not given up while the robot gains on it — or its odometry not 0.25 m from one point for `stuck_timeout_s`; the edge being driven is marked failed on the robot's global planner, which then plans around it), or past the time limit (`time_limit`): `time_limit_s` if given, else `time_per_m_s` (unset: the mission's `goals.time_limit_per_m_s`) × the planned path length, counted from the start and extended by a replan forced by a blocked or costlier path to now + `time_per_m_s` × the new length. With no aerial map yet (empty graph) it drives toward the target with the local planner alone (time limit from the straight-line distance) and plans as soon as a graph exists. A target where the robot's map has no data yet (a goal another robot found in a map version that has not reached this one) is approached over the graph to the reachable node nearest it, then straight on with the local planner alone. Writes the robot's planned path and publishes its end on the team state; finishing or halting stops the robot and clears both.",
             vec![
                 PortSpec::input("target", Point, "Where to go (map frame)."),
                 PortSpec::input("tolerance_m", Float, "Arrival radius, metres.").with_default(json!(2.0)),
                 PortSpec::optional("time_limit_s", Float, "Fixed time limit, seconds; overrides `time_per_m_s`."),
                 PortSpec::optional("time_per_m_s", Float, "Time limit per metre of planned path, s/m; unset: the mission's `goals.time_limit_per_m_s`."),
                 PortSpec::optional("stuck_timeout_s", Float, "Fail as stuck after this long without 1 m of progress along the path, seconds; unset: the robot's `navigation.watchdog.stuck_timeout_s` (30 s unless the mission says otherwise)."),
-                PortSpec::optional("no_progress_timeout_s", Float, "Fail with `no_progress` when the robot has not come 1 m nearer the target (straight line, best so far) for this long, whatever the replans did, seconds; unset: the robot's `navigation.watchdog.no_progress_timeout_s` (120 s unless the mission says otherwise)."),
+                PortSpec::optional("no_progress_timeout_s", Float, "Fail with `no_progress` when the robot has come neither 1 m nearer the target (straight line, best so far) nor 1 m further along its path (path left, best so far; up to 3 detours reset that baseline) for this long, whatever the replans did, seconds; unset: the robot's `navigation.watchdog.no_progress_timeout_s` (120 s unless the mission says otherwise)."),
                 PortSpec::input("lookahead_m", Float, "Distance ahead along the global path of the waypoint given to the local planner, metres.").with_default(json!(DEFAULT_LOOKAHEAD_M)),
                 PortSpec::optional("global_planner", Params, "Only `search: { replan_cost_rise_ratio }` (the robot's graph, learning and experience are shared by all nodes and set in its navigation parameters)."),
                 PortSpec::optional("local_planner", Params, "Overrides of `local_goal` and `dwa` (spomp-local-planner) over the robot's parameters, for this node; `terrain` is the robot's."),
@@ -575,6 +580,62 @@ mod tests {
         assert_eq!(q3, Point2::new(19.0, 8.0), "the foot of the ramp");
         let (q4, _) = route.pursue(Point2::new(19.0, 9.5), 8.0, curb);
         assert_eq!(q4, Point2::new(14.0, 11.0), "up the ramp, the target");
+    }
+
+    #[test]
+    fn a_robot_wedged_below_the_last_node_is_on_the_edge_that_led_it_there() {
+        // The last edge climbs a curb (5, 0) → (12, 0); the target lies 3 m off it, 4 m short of
+        // its end. The look-ahead reaches the last leg while the robot stands mid-edge.
+        let p = path(&[(0.0, 0.0), (5.0, 0.0), (12.0, 0.0), (8.0, 3.0)]);
+        let mut route = Route::new(Some(p), Point2::new(0.0, 0.0), Point2::new(8.0, 3.0));
+        let here = Point2::new(8.0, 0.2);
+        let (q, _) = route.pursue(here, 8.0, open);
+        assert_eq!(q, Point2::new(8.0, 3.0), "the look-ahead is the target");
+        assert_eq!(route.nodes_around(route.reached), (Some(NodeId(11)), None), "no edge ahead of the look-ahead");
+        let s = route.project(here);
+        assert!((s - 8.0).abs() < 1e-9, "{s}");
+        assert_eq!(route.nodes_around(s), (Some(NodeId(10)), Some(NodeId(11))));
+        // Never beyond the look-ahead point: a robot that strayed past it projects onto it.
+        let mut early = Route::new(Some(path(&[(0.0, 0.0), (5.0, 0.0), (40.0, 0.0)])), here, Point2::new(40.0, 0.0));
+        early.pursue(Point2::new(0.0, 0.0), 8.0, open);
+        assert!((early.project(Point2::new(20.0, 1.0)) - 8.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn progress_along_a_detour_is_progress_but_flipping_routes_is_not() {
+        let t = |s: f64| Time::from_secs_f64(s);
+        let far = |d: &mut Driver, s: f64| d.no_progress(t(s), 130.0, Some(Point2::new(s, 0.0)), 120.0, 30.0);
+        // Round a block: the path left shrinks by 1.5 m/s from 480 m while the straight line
+        // to the target stays at 130 m or more for 300 s.
+        let mut d = Driver::new(Overrides::default());
+        d.take_detour(480.0);
+        for k in 0..300 {
+            let s = k as f64;
+            d.route_progress(t(s), 480.0 - 1.5 * s);
+            assert!(far(&mut d, s).is_none(), "gaining on the detour at {s} s");
+        }
+        // Two routes flipping every 10 s, each driven 15 m: each switch to the longer one is a
+        // detour until the three are spent; then only the shorter one's least path left counts,
+        // and the drive ends one bound after the last progress (70 s).
+        let mut d = Driver::new(Overrides::default());
+        d.route_progress(t(0.0), 300.0);
+        let mut ended = None;
+        for k in 0..2000 {
+            let s = k as f64 * 0.5;
+            let since = s % 10.0;
+            let length = if ((s / 10.0) as u32).is_multiple_of(2) { 300.0 } else { 400.0 };
+            if since == 0.0 {
+                d.take_detour(length);
+            }
+            d.route_progress(t(s), length - 1.5 * since);
+            if let Some(why) = far(&mut d, s) {
+                ended = Some((s, why));
+                break;
+            }
+        }
+        let (s, why) = ended.expect("the flipping drive ends");
+        assert!(s > 120.0 && s <= 70.0 + 120.5, "ended at {s} s: {why}");
+        assert!(why.contains("nor less than 286.5 m of path left"), "{why}");
     }
 
     #[test]

@@ -25,6 +25,9 @@ pub(super) struct Navigator {
     pub(super) behind: Option<NodeId>,
     /// Graph node the robot is heading to (`None` on the last stretch to the target).
     pub(super) ahead: Option<NodeId>,
+    /// The graph edge the robot itself stands on, from its projection on the route (kept
+    /// while a replan from the node ahead makes the rest of it the route's first leg).
+    pub(super) on_edge: Option<(NodeId, NodeId)>,
 }
 
 /// What a navigation run asks for.
@@ -58,6 +61,7 @@ impl Navigator {
             checked_view: None,
             behind: None,
             ahead: None,
+            on_edge: None,
         }
     }
 
@@ -111,6 +115,7 @@ impl Navigator {
         self.route = None;
         self.behind = None;
         self.ahead = None;
+        self.on_edge = None;
         let from = rt.pose().map_or(rt.start().position(), |p| p.pose.position());
         let path = Self::plan(rt, from, req.target).map_err(|e| (Reason::NoPath, format!("no path: {e}")))?;
         self.adopt(rt, Route::new(path, from, req.target), now, Trigger::Start, req);
@@ -243,6 +248,9 @@ impl Navigator {
                 let remaining = route.length();
                 self.adopt(rt, route, now, trigger, req);
                 self.driver.rebase(remaining);
+                if trigger == Trigger::Changed {
+                    self.driver.take_detour(remaining);
+                }
                 Ok(())
             }
             // A periodic replan that fails keeps the current path (e.g. the robot is momentarily
@@ -305,6 +313,7 @@ impl Navigator {
             })
         };
         let (waypoint, remaining) = route.pursue(here, req.lookahead_m, steps);
+        self.driver.route_progress(now, remaining);
         // The graph edge the robot is on: its nodes behind and ahead (kept across a replan that
         // re-attached the robot to the node it was heading to).
         let probe = (route.reached - waypoint.distance(here) + BLOCKAGE_PROBE_M).max(0.0);
@@ -313,8 +322,21 @@ impl Navigator {
             self.behind = behind;
         }
         self.ahead = ahead;
+        self.on_edge = match route.nodes_around(route.project(here)) {
+            (Some(a), Some(b)) => Some((a, b)),
+            (None, Some(b)) => self.on_edge.filter(|&(_, e)| e == b),
+            _ => None,
+        };
         if self.driver.stuck(now, Some(here), remaining, req.stuck_timeout_s) {
             let pinned = self.driver.pinned(now, Some(here), req.stuck_timeout_s);
+            // The look-ahead may have moved past the edge that wedged the robot (onto the last
+            // leg to a target just beyond a curb): then the edge is the one the robot stands on.
+            if (self.behind.is_none() || self.ahead.is_none())
+                && let Some((a, b)) = self.on_edge
+            {
+                self.behind = Some(a);
+                self.ahead = Some(b);
+            }
             if let Some(nav) = rt.nav_mut()
                 && let (Some(a), Some(b)) = (self.behind, self.ahead)
             {
@@ -326,6 +348,7 @@ impl Navigator {
                 let remaining = route.length();
                 self.adopt(rt, route, now, Trigger::Changed, req);
                 self.driver.restart_watchdog(now, remaining);
+                self.driver.take_detour(remaining);
                 return Step::Running;
             }
             // Stuck on a graph edge the scans could not judge (e.g. a blockage seen from too far
@@ -343,6 +366,7 @@ impl Navigator {
                     let remaining = route.length();
                     self.adopt(rt, route, now, Trigger::Changed, req);
                     self.driver.restart_watchdog(now, remaining);
+                    self.driver.take_detour(remaining);
                     Step::Running
                 }
                 Err(e) => Step::Failed(

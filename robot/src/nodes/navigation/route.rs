@@ -151,6 +151,41 @@ impl Route {
         (behind, path.nodes.get(k).copied())
     }
 
+    /// Arc length of the point of the route nearest `p`, among the segments up to the
+    /// look-ahead point's (the stretch the robot has been driving; ties go to the later point).
+    pub(super) fn project(&self, p: Point2) -> f64 {
+        let n = self.points.len();
+        if n < 2 {
+            return 0.0;
+        }
+        let mut best = (f64::INFINITY, 0.0);
+        for i in 0..=self.segment.min(n - 2) {
+            let (a, b) = (self.points[i], self.points[i + 1]);
+            let d = b - a;
+            let dd = d.dot(d);
+            let t = if dd > 1e-12 { ((p - a).dot(d) / dd).clamp(0.0, 1.0) } else { 0.0 };
+            let s = (self.cumulative[i] + t * (self.cumulative[i + 1] - self.cumulative[i])).min(self.reached.max(0.0));
+            let gap = self.point_at_from(i, s).distance(p);
+            if gap <= best.0 {
+                best = (gap, s);
+            }
+        }
+        best.1
+    }
+
+    /// The point at arc length `s` on segment `i` or later.
+    fn point_at_from(&self, i: usize, s: f64) -> Point2 {
+        let n = self.points.len();
+        let mut i = i.min(n - 2);
+        while i + 2 < n && self.cumulative[i + 1] < s {
+            i += 1;
+        }
+        let len = self.cumulative[i + 1] - self.cumulative[i];
+        let t = if len > 1e-12 { ((s - self.cumulative[i]) / len).clamp(0.0, 1.0) } else { 1.0 };
+        let (a, b) = (self.points[i], self.points[i + 1]);
+        a + (b - a) * t
+    }
+
     /// The look-ahead point and the waypoints after it up to (not including) the first
     /// waypoint of `node` from there on: the rest of the way to that node, which a replan from
     /// the node keeps. Empty when `node` is not ahead on the path or is the next waypoint.
@@ -177,17 +212,9 @@ impl Route {
 
     /// The point at arc length `s` (clamped to the path), from the current segment on.
     pub(super) fn point_at(&self, s: f64) -> Point2 {
-        let n = self.points.len();
-        if n < 2 {
+        if self.points.len() < 2 {
             return self.points.first().copied().unwrap_or_default();
         }
-        let mut i = self.segment.min(n - 2);
-        while i + 2 < n && self.cumulative[i + 1] < s {
-            i += 1;
-        }
-        let len = self.cumulative[i + 1] - self.cumulative[i];
-        let t = if len > 1e-12 { ((s - self.cumulative[i]) / len).clamp(0.0, 1.0) } else { 1.0 };
-        let (a, b) = (self.points[i], self.points[i + 1]);
-        a + (b - a) * t
+        self.point_at_from(self.segment, s)
     }
 }
