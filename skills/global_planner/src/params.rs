@@ -90,6 +90,14 @@ pub struct GraphParams {
     /// analysis does not flag); otherwise it stays straight for experience to judge. `null`: edges are
     /// always straight (for aerial maps whose elevation cannot resolve curbs).
     pub max_step_m: Option<f64>,
+    /// Make an edge that stays straight up a curb (a step above `max_step_m` and at most 0.5 m
+    /// high, with no route round it) a last resort: 10⁹ is added to its cost until a scan finds
+    /// it traversable, so a path climbs such a curb only when nothing else joins the two sides.
+    /// Scans seldom judge a curb before the robot is at its foot, where it is wedged. With graph
+    /// updates off it has no effect. Off by default: it sends robots up far ramps instead of to
+    /// the curb's foot, which pays where goals lie up on sidewalks and costs a little where they
+    /// do not (ten-seed comparisons in the global planner README).
+    pub curbs_last_resort: bool,
 }
 
 impl Default for GraphParams {
@@ -101,6 +109,7 @@ impl Default for GraphParams {
             attach_radius_m: 5.0,
             edge_sample_spacing_m: 1.0,
             max_step_m: Some(0.1),
+            curbs_last_resort: false,
         }
     }
 }

@@ -127,6 +127,25 @@ const TIGHT_VERTEX_CELLS: usize = 2;
 const PASSABLE_STEP_SHARE: f32 = 0.5;
 
 impl EdgeRouter {
+    /// The largest elevation difference between two cells consecutive on the digital line from
+    /// `a` to `b` (cells without an elevation are skipped), metres.
+    pub fn largest_step(map: &AerialMap, a: Cell, b: Cell) -> f32 {
+        let w = map.spec.width as usize;
+        let mut prev: Option<f32> = None;
+        let mut largest = 0.0f32;
+        bresenham((a.col as i32, a.row as i32), (b.col as i32, b.row as i32), |c, r| {
+            let e = map.elevation[r as usize * w + c as usize];
+            if let Some(p) = prev
+                && p.is_finite()
+                && e.is_finite()
+            {
+                largest = largest.max((p - e).abs());
+            }
+            prev = Some(e);
+        });
+        largest
+    }
+
     /// Whether the digital line from `a` to `b` passes between two cells (consecutive on the
     /// line) whose elevations differ by more than `max_step_m`.
     pub fn crosses_step(map: &AerialMap, a: Cell, b: Cell, max_step_m: f32) -> bool {

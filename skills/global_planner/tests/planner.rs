@@ -692,6 +692,72 @@ fn a_path_to_the_sidewalk_goes_up_the_ramp_the_aerial_elevation_shows() {
     assert!(curb_crossings(&path).iter().all(|x| !(20.0..23.0).contains(x)), "{:?}", path.waypoints);
 }
 
+/// 120 m × 25 m: the curb map's road and sidewalk, with the one ramp far along the curb, at
+/// x ∈ [110, 113) m: beyond the visibility range of the nodes near the west end.
+fn curb_with_a_far_ramp_map() -> AerialMap {
+    let mut m = blank(240, 50, class::ROAD, color::ROAD);
+    paint(&mut m, 0..240, 20..40, class::SIDEWALK, color::SIDEWALK);
+    paint(&mut m, 0..240, 40..50, class::BUILDING, color::BUILDING);
+    for row in 20..50u32 {
+        for col in 0..240u32 {
+            let i = m.spec.index(Cell::new(col, row));
+            m.elevation[i] = if row >= 40 {
+                10.0
+            } else if (220..226).contains(&col) && row < 26 {
+                0.15 * ((row - 20) as f32 * 0.5 + 0.25) / 3.0
+            } else {
+                0.15
+            };
+        }
+    }
+    m
+}
+
+#[test]
+fn an_edge_straight_up_a_curb_is_a_last_resort_while_a_ramp_joins_the_two_sides() {
+    let map = curb_with_a_far_ramp_map();
+    let (start, goal) = (Point2::new(10.0, 5.0), Point2::new(10.0, 16.0));
+    let mut params = GlobalPlannerParams::default();
+    params.graph.curbs_last_resort = true;
+    let mut p = planner(params.clone(), &map);
+    let stats = p.graph_stats();
+    assert!(stats.edges_up_curbs >= 1 && stats.routed_edges >= 1, "{stats:?}");
+    let path = p.plan(start, goal).unwrap();
+    let crossings = curb_crossings(&path);
+    assert_eq!(crossings.len(), 1, "{:?}", path.waypoints);
+    assert!((110.0..113.0).contains(&crossings[0]), "round by the ramp, 100 m away: {:?}", path.waypoints);
+    assert!(path.length_m > 200.0, "{}", path.length_m);
+
+    // By default, and in the paper's ablation without graph updates, the straight edges keep
+    // their plain costs: the path goes straight up the curb near the goal.
+    let mut frozen = params.clone();
+    frozen.experience.graph_updates = false;
+    for plain in [GlobalPlannerParams::default(), frozen] {
+        let mut q = planner(plain, &map);
+        let straight = q.plan(start, goal).unwrap();
+        let crossings = curb_crossings(&straight);
+        assert!(crossings.iter().all(|&x| x < 40.0), "{:?}", straight.waypoints);
+        assert!(straight.length_m < 60.0, "{}", straight.length_m);
+    }
+
+    // Without a ramp at all, the curb edges are all there is: a path still exists.
+    let mut no_ramp = map.clone();
+    for row in 20..26u32 {
+        for col in 220..226u32 {
+            let i = no_ramp.spec.index(Cell::new(col, row));
+            no_ramp.elevation[i] = 0.15;
+        }
+    }
+    let mut r = planner(params, &no_ramp);
+    let last_resort = r.plan(start, goal).unwrap();
+    assert!(
+        last_resort.cost >= 1e9 && last_resort.length_m < 60.0,
+        "{} m, cost {}",
+        last_resort.length_m,
+        last_resort.cost
+    );
+}
+
 /// Whether the polyline `points` crosses x = `x` somewhere on the southern road (y < 8 m).
 fn crosses_south_road_at(points: &[Point2], x: f64) -> bool {
     points.windows(2).any(|w| {

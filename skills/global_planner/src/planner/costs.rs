@@ -145,7 +145,14 @@ impl GlobalPlanner {
         let Some(d) = self.graph.edge_weight(e) else {
             return;
         };
-        let cost = self.experienced_cost(d.base_cost, d.samples.len(), &d.experience);
+        let mut cost = self.experienced_cost(d.base_cost, d.samples.len(), &d.experience);
+        if d.up_curb
+            && self.params.graph.curbs_last_resort
+            && self.params.experience.graph_updates
+            && d.experience.state != EdgeState::Trav
+        {
+            cost += LAST_RESORT_COST;
+        }
         if let Some(d) = self.graph.edge_weight_mut(e) {
             d.cost = cost;
         }

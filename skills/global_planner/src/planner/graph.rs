@@ -148,11 +148,13 @@ impl GlobalPlanner {
                 continue;
             };
             let (pa, pb) = (pa.position, pb.position);
-            let via = match (max_step, map.spec.cell_at(pa), map.spec.cell_at(pb)) {
+            let (via, up_curb) = match (max_step, map.spec.cell_at(pa), map.spec.cell_at(pb)) {
                 (Some(step), Some(ca), Some(cb)) if EdgeRouter::crosses_step(map, ca, cb, step) => {
-                    self.router.route(map, &self.owner, ca, cb, reach, step).unwrap_or_default()
+                    let via = self.router.route(map, &self.owner, ca, cb, reach, step).unwrap_or_default();
+                    let up_curb = via.is_empty() && EdgeRouter::largest_step(map, ca, cb) <= CURB_MAX_RISE_M;
+                    (via, up_curb)
                 }
-                _ => Vec::new(),
+                _ => (Vec::new(), false),
             };
             if !via.is_empty() {
                 self.routed_edges += 1;
@@ -171,6 +173,7 @@ impl GlobalPlanner {
                 base_cost: 0.0,
                 cost: 0.0,
                 experience: EdgeExperience::default(),
+                up_curb,
             };
             let e = self.graph.add_edge(na, nb, data);
             self.edge_of_pair.insert((a, b), e);

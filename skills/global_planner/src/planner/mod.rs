@@ -57,7 +57,23 @@ struct EdgeData {
     /// Cost used by the search (base cost overridden by experience).
     cost: f64,
     experience: EdgeExperience,
+    /// A straight edge up a curb: it crosses a low step (above the climb limit, at most
+    /// [`CURB_MAX_RISE_M`]) that no route within the two regions avoids. With
+    /// `graph.curbs_last_resort`, until a scan finds it traversable it is a last resort
+    /// ([`LAST_RESORT_COST`]).
+    up_curb: bool,
 }
+
+/// Steps up to this rise are curbs: low enough that terrain analysis cannot judge them from
+/// afar (a scan sees a 0.15 m curb only near), unlike a parked vehicle's side or a wall, which
+/// the scans judge like any obstacle. Metres.
+pub const CURB_MAX_RISE_M: f32 = 0.5;
+
+/// Added to the cost of an edge straight up a curb ([`EdgeData::up_curb`]) while no scan found
+/// it traversable, with `graph.curbs_last_resort` and graph updates on: a path takes one only
+/// when nothing else joins its two sides. Such an edge's scans mostly say unk_trav (the crossing is seen from afar, or is too
+/// near), so without it a robot is sent to the foot of a curb it cannot climb.
+pub const LAST_RESORT_COST: f64 = 1e9;
 
 /// A planned path.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -146,6 +162,8 @@ pub struct GraphStats {
     pub labelled_cells: usize,
     /// Edges routed around elevation steps instead of straight (ever made, removed or not).
     pub routed_edges: usize,
+    /// Live edges straight up a curb no route avoids (the last resorts of a search).
+    pub edges_up_curbs: usize,
     /// Training rounds run.
     pub training_rounds: usize,
 }
@@ -461,6 +479,7 @@ impl GlobalPlanner {
             ..Default::default()
         };
         for d in self.graph.edge_weights() {
+            s.edges_up_curbs += usize::from(d.up_curb);
             match d.experience.state {
                 EdgeState::Trav => s.trav_edges += 1,
                 EdgeState::NotTrav => s.not_trav_edges += 1,
