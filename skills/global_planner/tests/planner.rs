@@ -620,24 +620,6 @@ mod prop {
 }
 
 #[test]
-fn the_cost_left_of_a_path_sums_its_edges_from_a_node_on() {
-    let map = ring_map();
-    let mut p = planner(GlobalPlannerParams::default(), &map);
-    let path = p.plan(RING_START, RING_GOAL).unwrap();
-    assert!(path.nodes.len() >= 3, "{:?}", path.nodes);
-    let cost_of = |id| p.edges().find(|e| e.id == id).map(|e| e.cost).unwrap();
-    let whole = p.path_graph_cost(&path).unwrap();
-    assert_eq!(p.path_graph_cost_from(&path, 0), Some(whole));
-    for k in 0..path.nodes.len() {
-        let left: f64 = path.edges[k..].iter().map(|&e| cost_of(e)).sum();
-        let got = p.path_graph_cost_from(&path, k).unwrap();
-        assert!((got - left).abs() <= 1e-9 * whole.max(1.0), "from node {k}: {got} against {left}");
-    }
-    assert_eq!(p.path_graph_cost_from(&path, path.nodes.len() - 1), Some(0.0), "nothing left after the last node");
-    assert_eq!(p.path_graph_cost_from(&path, path.nodes.len()), None, "not a node of the path");
-}
-
-#[test]
 fn plan_avoiding_skips_the_given_edges_and_keeps_them() {
     let map = ring_map();
     let mut p = planner(GlobalPlannerParams::default(), &map);
