@@ -197,28 +197,6 @@ impl Navigator {
         last
     }
 
-    /// Whether a periodic replan's `candidate` is worth leaving the current path for: when both
-    /// go on from the node the robot is heading to, the candidate's graph cost must be below the
-    /// current path's remaining graph cost by the replanning ratio (the same margin by which a
-    /// rise forces a replan). Without that hysteresis, costs that shift a little with every
-    /// training round swap two routes of about the same cost at every period, and a robot can
-    /// drive back and forth between them for minutes. Other candidates are taken as they come.
-    fn worth_switching(&self, rt: &RobotRuntime, candidate: &Route, ratio: f64) -> bool {
-        let (Some(ahead), Some(current), Some(new), Some(nav)) =
-            (self.ahead, self.route.as_ref().and_then(|r| r.path.as_ref()), candidate.path.as_ref(), rt.nav())
-        else {
-            return true;
-        };
-        if new.nodes.first() != Some(&ahead) {
-            return true;
-        }
-        let Some(k) = current.nodes.iter().position(|&n| n == ahead) else { return true };
-        match nav.global().path_graph_cost_from(current, k) {
-            Some(left) => new.graph_cost * (1.0 + ratio) < left,
-            None => true,
-        }
-    }
-
     /// Checks the path after new information; replans when needed.
     pub(super) fn maybe_replan(
         &mut self,
@@ -266,10 +244,6 @@ impl Navigator {
             }
         };
         match self.replan(rt, here, req.target, current_edge_gone) {
-            Ok(route) if trigger == Trigger::Periodic && !self.worth_switching(rt, &route, ratio) => {
-                self.next_replan = now + std::time::Duration::from_secs_f64(REPLAN_PERIOD_S);
-                Ok(())
-            }
             Ok(route) => {
                 let remaining = route.length();
                 self.adopt(rt, route, now, trigger, req);

@@ -70,9 +70,6 @@ impl Route {
         // Whether the path itself crosses a step up to the segment being looked at (then a
         // line across it is no worse than the plan, such as a roadblock's the scans must judge).
         let mut path_steps = false;
-        // Whether the path has been inside the circle on the way here (at or behind the last
-        // look-ahead point alike).
-        let mut inside = false;
         for i in self.segment.min(n - 2)..n - 1 {
             if self.cumulative[i] > horizon {
                 break;
@@ -110,17 +107,14 @@ impl Route {
                         }
                     }
                     path_steps |= t >= 1.0 && planned_step;
-                    inside = true;
                     // The path leaves the circle here: where it comes back in later (a path
                     // that folds back, to a curb ramp and back along the sidewalk) is beyond a
-                    // stretch the robot has not driven, so the look-ahead never jumps there —
-                    // also when it leaves just behind the last look-ahead point (the robot
-                    // eased back a few centimetres).
-                    if t < 1.0 {
+                    // stretch the robot has not driven, so the look-ahead never jumps there.
+                    if t < 1.0 && fallback[1].is_some() {
                         break;
                     }
                 }
-                None if inside => break,
+                None if fallback[1].is_some() => break,
                 None => {}
             }
         }

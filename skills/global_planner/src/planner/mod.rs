@@ -71,9 +71,8 @@ pub const CURB_MAX_RISE_M: f32 = 0.5;
 
 /// Added to the cost of an edge straight up a curb ([`EdgeData::up_curb`]) while no scan found
 /// it traversable, with `graph.curbs_last_resort` and graph updates on: a path takes one only
-/// when nothing else joins its two sides. Such an edge's scans mostly say unk_trav (the
-/// crossing is seen from afar, or is too near), so without it a robot is sent to the foot of a
-/// curb it cannot climb.
+/// when nothing else joins its two sides. Such an edge's scans mostly say unk_trav (the crossing is seen from afar, or is too
+/// near), so without it a robot is sent to the foot of a curb it cannot climb.
 pub const LAST_RESORT_COST: f64 = 1e9;
 
 /// A planned path.
@@ -381,18 +380,11 @@ impl GlobalPlanner {
 
     /// Current cost of a path's graph edges; `None` when one of them has been removed.
     pub fn path_graph_cost(&self, path: &GlobalPath) -> Option<f64> {
-        self.path_graph_cost_from(path, 0)
-    }
-
-    /// The current cost of the graph edges of a planned path from its node `first` on (index
-    /// in `path.nodes`): what is left of it for a robot heading to that node. `None` as for
-    /// [`GlobalPlanner::path_graph_cost`], or when `first` is not a node of the path.
-    pub fn path_graph_cost_from(&self, path: &GlobalPath, first: usize) -> Option<f64> {
-        if path.nodes.len() != path.edges.len() + 1 || first >= path.nodes.len() {
+        if path.nodes.len() != path.edges.len() + 1 {
             return None;
         }
         let mut cost = 0.0;
-        for (k, e) in path.edges.iter().enumerate().skip(first) {
+        for (k, e) in path.edges.iter().enumerate() {
             let idx = EdgeIndex::new(e.0 as usize);
             let (a, b) = self.graph.edge_endpoints(idx)?;
             let want = (path.nodes[k].0, path.nodes[k + 1].0);
