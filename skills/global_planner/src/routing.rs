@@ -147,21 +147,9 @@ impl EdgeRouter {
     }
 
     /// Whether the digital line from `a` to `b` passes between two cells (consecutive on the
-    /// line) whose elevations differ by more than `max_step_m`.
+    /// line) whose elevations differ by more than `max_step_m` (positive).
     pub fn crosses_step(map: &AerialMap, a: Cell, b: Cell, max_step_m: f32) -> bool {
-        let w = map.spec.width as usize;
-        let mut prev: Option<f32> = None;
-        let mut crosses = false;
-        bresenham((a.col as i32, a.row as i32), (b.col as i32, b.row as i32), |c, r| {
-            let e = map.elevation[r as usize * w + c as usize];
-            if let Some(p) = prev
-                && !step_ok(p, e, max_step_m)
-            {
-                crosses = true;
-            }
-            prev = Some(e);
-        });
-        crosses
+        Self::largest_step(map, a, b) > max_step_m
     }
 
     /// Computes the clearance and the step-free components of the covered ground for the map

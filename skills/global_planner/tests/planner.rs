@@ -639,15 +639,22 @@ fn plan_avoiding_skips_the_given_edges_and_keeps_them() {
 /// 40 m × 25 m: road below y = 10 m, a sidewalk 0.15 m up behind a curb above it, one ramp up
 /// the curb at x ∈ [20, 23) m rising over y ∈ [10, 13) m, buildings above y = 20 m.
 fn curb_and_ramp_map() -> AerialMap {
-    let mut m = blank(80, 50, class::ROAD, color::ROAD);
-    paint(&mut m, 0..80, 20..40, class::SIDEWALK, color::SIDEWALK);
-    paint(&mut m, 0..80, 40..50, class::BUILDING, color::BUILDING);
+    curb_map_with_ramp(80, 40)
+}
+
+/// `width` cells (0.5 m each) by 25 m: road below y = 10 m, a sidewalk 0.15 m up behind a
+/// curb, one ramp 3 m wide from column `ramp_col` rising over y ∈ [10, 13) m, buildings above
+/// y = 20 m.
+fn curb_map_with_ramp(width: u32, ramp_col: u32) -> AerialMap {
+    let mut m = blank(width, 50, class::ROAD, color::ROAD);
+    paint(&mut m, 0..width, 20..40, class::SIDEWALK, color::SIDEWALK);
+    paint(&mut m, 0..width, 40..50, class::BUILDING, color::BUILDING);
     for row in 20..50u32 {
-        for col in 0..80u32 {
+        for col in 0..width {
             let i = m.spec.index(Cell::new(col, row));
             m.elevation[i] = if row >= 40 {
                 10.0
-            } else if (40..46).contains(&col) && row < 26 {
+            } else if (ramp_col..ramp_col + 6).contains(&col) && row < 26 {
                 // Cell centres 0.25 m into the ramp rise 0.15 m over its 3 m.
                 0.15 * ((row - 20) as f32 * 0.5 + 0.25) / 3.0
             } else {
@@ -695,22 +702,7 @@ fn a_path_to_the_sidewalk_goes_up_the_ramp_the_aerial_elevation_shows() {
 /// 120 m × 25 m: the curb map's road and sidewalk, with the one ramp far along the curb, at
 /// x ∈ [110, 113) m: beyond the visibility range of the nodes near the west end.
 fn curb_with_a_far_ramp_map() -> AerialMap {
-    let mut m = blank(240, 50, class::ROAD, color::ROAD);
-    paint(&mut m, 0..240, 20..40, class::SIDEWALK, color::SIDEWALK);
-    paint(&mut m, 0..240, 40..50, class::BUILDING, color::BUILDING);
-    for row in 20..50u32 {
-        for col in 0..240u32 {
-            let i = m.spec.index(Cell::new(col, row));
-            m.elevation[i] = if row >= 40 {
-                10.0
-            } else if (220..226).contains(&col) && row < 26 {
-                0.15 * ((row - 20) as f32 * 0.5 + 0.25) / 3.0
-            } else {
-                0.15
-            };
-        }
-    }
-    m
+    curb_map_with_ramp(240, 220)
 }
 
 #[test]

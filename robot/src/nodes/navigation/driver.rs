@@ -55,10 +55,9 @@ pub(super) struct Driver {
     /// point, and when: a robot that stays near one point is stuck, whatever its route says.
     pub(super) pinned_at: Option<Point2>,
     pub(super) pinned_since: Time,
-    /// Nearest the robot came to the target (straight line), and when it last got
-    /// [`PROGRESS_MARGIN_M`] nearer: the no-progress bound, which replans do not reset.
+    /// Nearest the robot came to the target (straight line), lowered by [`PROGRESS_MARGIN_M`]
+    /// steps: the no-progress bound's first measure, which replans do not reset.
     pub(super) closest_m: f64,
-    pub(super) closest_at: Time,
     /// Least path length left seen on the routes the robot followed, since the last detour
     /// ([`Driver::take_detour`]): getting [`PROGRESS_MARGIN_M`] below it is progress too.
     pub(super) route_best_m: f64,
@@ -84,7 +83,6 @@ impl Driver {
             pinned_at: None,
             pinned_since: Time::ZERO,
             closest_m: f64::INFINITY,
-            closest_at: Time::ZERO,
             route_best_m: f64::INFINITY,
             detours_left: DETOURS_PER_DRIVE,
             progress_at: Time::ZERO,
@@ -108,7 +106,6 @@ impl Driver {
         self.pinned_at = None;
         self.pinned_since = now;
         self.closest_m = f64::INFINITY;
-        self.closest_at = now;
         self.route_best_m = f64::INFINITY;
         self.detours_left = DETOURS_PER_DRIVE;
         self.progress_at = now;
@@ -134,7 +131,6 @@ impl Driver {
     ) -> Option<String> {
         if distance_m.is_finite() && (distance_m < self.closest_m - PROGRESS_MARGIN_M || !self.closest_m.is_finite()) {
             self.closest_m = distance_m;
-            self.closest_at = now;
             self.progress_at = now;
         }
         if let Some(p) = odom

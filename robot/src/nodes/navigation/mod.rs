@@ -710,7 +710,7 @@ mod tests {
         let mut d = Driver::new(Overrides::default());
         let t = |s: f64| Time::from_secs_f64(s);
         let at = |x: f64| Some(Point2::new(x, 0.0));
-        d.closest_at = t(0.0);
+        d.progress_at = t(0.0);
         d.still_since = t(0.0);
         // The robot drives back and forth (never still) while replans keep restarting the stuck
         // window and extending the time limit: it never gets 1 m nearer than 40 m.

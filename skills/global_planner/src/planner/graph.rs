@@ -149,10 +149,15 @@ impl GlobalPlanner {
             };
             let (pa, pb) = (pa.position, pb.position);
             let (via, up_curb) = match (max_step, map.spec.cell_at(pa), map.spec.cell_at(pb)) {
-                (Some(step), Some(ca), Some(cb)) if EdgeRouter::crosses_step(map, ca, cb, step) => {
-                    let via = self.router.route(map, &self.owner, ca, cb, reach, step).unwrap_or_default();
-                    let up_curb = via.is_empty() && EdgeRouter::largest_step(map, ca, cb) <= CURB_MAX_RISE_M;
-                    (via, up_curb)
+                (Some(step), Some(ca), Some(cb)) => {
+                    let rise = EdgeRouter::largest_step(map, ca, cb);
+                    if rise > step {
+                        let via = self.router.route(map, &self.owner, ca, cb, reach, step).unwrap_or_default();
+                        let up_curb = via.is_empty() && rise <= CURB_MAX_RISE_M;
+                        (via, up_curb)
+                    } else {
+                        (Vec::new(), false)
+                    }
                 }
                 _ => (Vec::new(), false),
             };

@@ -71,8 +71,9 @@ pub const CURB_MAX_RISE_M: f32 = 0.5;
 
 /// Added to the cost of an edge straight up a curb ([`EdgeData::up_curb`]) while no scan found
 /// it traversable, with `graph.curbs_last_resort` and graph updates on: a path takes one only
-/// when nothing else joins its two sides. Such an edge's scans mostly say unk_trav (the crossing is seen from afar, or is too
-/// near), so without it a robot is sent to the foot of a curb it cannot climb.
+/// when nothing else joins its two sides. Such an edge's scans mostly say unk_trav (the
+/// crossing is seen from afar, or is too near), so without it a robot is sent to the foot of a
+/// curb it cannot climb.
 pub const LAST_RESORT_COST: f64 = 1e9;
 
 /// A planned path.
