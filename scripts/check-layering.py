@@ -20,7 +20,7 @@ Layers, bottom to top: core < messages < skills < behaviors (engine + mission la
 - tools (benchmark support) depend on no spomp crate and are used as dev-dependencies only.
 Dev-dependencies (tests, benchmarks, examples) obey the same rules: a skill's tests cannot
 reach up to the robot, nor an adapter's tests into another adapter; tools are the one extra a
-dev-dependency may name.
+dev-dependency may name, besides the package itself (to turn its own features on for its tests).
 Every spomp crate must live in a known layer directory.
 
 Inside `spomp-behaviors`, the engine (every module but `mission/`) knows nothing of the mission
@@ -124,6 +124,10 @@ def main() -> int:
                 continue
             dep_layer = ours[dep["name"]]
             is_dev = dep.get("kind") == "dev"
+            if is_dev and dep["name"] == name:
+                # A package naming itself as a dev-dependency turns on its own features for its
+                # tests (the CLI's `deploy`): no edge between crates.
+                continue
             if dep_layer == "tool":
                 if not is_dev and layer != "tool":
                     problems.append(f"{name} ({layer}) may use the tool {dep['name']} as a dev-dependency only")

@@ -36,17 +36,21 @@ macro_rules! errln {
 mod args;
 pub mod cli;
 mod commands;
+mod deploy;
 pub mod experiment;
+#[cfg(feature = "deploy")]
 mod farm_cmd;
 mod live;
 mod log_cmd;
 mod memory_stage;
 mod operator_cmd;
+#[cfg(feature = "deploy")]
 mod operator_desk;
 mod output;
 mod plan_cmd;
 mod recording;
 mod replay_cmd;
+#[cfg(feature = "deploy")]
 mod ros_args;
 mod run_cmd;
 mod sim_cmd;

@@ -12,15 +12,19 @@ use indicatif::ProgressBar;
 use spomp_behaviors::trace::TransitionRecord;
 use spomp_core::panorama::DEFAULT_RANGE_SCALE_M;
 use spomp_core::{
-    AerialMap, ClassTable, FlightCommand, Odometry, PanoramaFrame, PanoramaGeometry, Point2, PoseEstimate,
-    ReachabilityScan, RobotId, RobotKind, Time, Twist2,
+    AerialMap, ClassTable, Odometry, PanoramaFrame, PanoramaGeometry, Point2, PoseEstimate, ReachabilityScan, RobotId,
+    RobotKind, Time,
 };
-use spomp_mcap::{RecordError, Recorder, RunInfo};
+use spomp_mcap::{RecordError, Recorder};
 use spomp_robot::{RobotObserver, SeamCall};
 use spomp_ros_msgs::GoalMarkerInput;
 use spomp_sim::run::{RobotSnapshot, SimEvent, SimObserver};
 
 use crate::sim_cmd::output_path;
+
+// What `spomp run` records besides: a build with the `deploy` feature.
+#[cfg(feature = "deploy")]
+mod robot_node;
 
 /// How a run is recorded (everything but the recorder itself).
 pub(crate) struct ObserverSettings {
@@ -57,7 +61,8 @@ pub(crate) struct LogObserver<W: Write + Seek> {
     /// The goals in the order they were identified.
     goals: Vec<GoalState>,
     /// The run's setup, written once a lockstep farm said how the heavy skills run.
-    pending_info: Option<RunInfo>,
+    #[cfg(feature = "deploy")]
+    pending_info: Option<spomp_mcap::RunInfo>,
 }
 
 impl<W: Write + Seek> LogObserver<W> {
@@ -70,19 +75,9 @@ impl<W: Write + Seek> LogObserver<W> {
             last_pano: HashMap::new(),
             last_second: -1,
             goals: Vec::new(),
+            #[cfg(feature = "deploy")]
             pending_info: None,
         }
-    }
-
-    /// Writes `info` when a lockstep farm's hello says how the heavy skills run.
-    pub fn with_pending_info(mut self, info: Option<RunInfo>) -> Self {
-        self.pending_info = info;
-        self
-    }
-
-    /// Writes the run's setup now.
-    pub fn run_info(&mut self, info: &RunInfo) {
-        self.record(|r| r.run_info(info));
     }
 
     /// The recorder, to be finished; the first error met while recording, if any.
@@ -91,11 +86,6 @@ impl<W: Write + Seek> LogObserver<W> {
             Some(e) => Err(e),
             None => Ok(self.recorder),
         }
-    }
-
-    /// The recorder and the first error met while recording, if any.
-    pub fn into_parts(self) -> (Option<Recorder<W>>, Option<anyhow::Error>) {
-        (self.recorder, self.error)
     }
 
     fn record(&mut self, f: impl FnOnce(&mut Recorder<W>) -> Result<(), RecordError>) {
@@ -279,43 +269,5 @@ impl<W: Write + Seek> SimObserver for LogObserver<W> {
         {
             self.error = Some(e.into());
         }
-    }
-}
-
-impl<W: Write + Seek> spomp_ros2::RunObserver for LogObserver<W> {
-    fn on_lockstep(&mut self, background_skills: bool) {
-        if let Some(info) = self.pending_info.take() {
-            let info = RunInfo { background_skills, ..info };
-            self.run_info(&info);
-        }
-    }
-
-    fn on_external_pose(&mut self, robot: &str, estimate: &PoseEstimate) {
-        self.record(|r| r.pose_in(robot, estimate.stamp, estimate.pose, 0.0));
-    }
-
-    fn on_tf(&mut self, topic: &str, time: Time, msg: &spomp_ros_msgs::TfMessage) {
-        self.record(|r| r.transform(topic, time, msg));
-    }
-
-    fn on_frame_mismatch(&mut self, robot: &str, message: &str) {
-        errln!("warning: robot {robot}: {message}");
-    }
-
-    fn on_operator(&mut self, _robot: &str, now: Time, event: &spomp_robot::operator_log::OperatorEvent) {
-        self.record(|r| r.json("/team/events", now, event));
-    }
-
-    fn on_command(&mut self, robot: &str, now: Time, cmd: Twist2) {
-        self.record(|r| r.command(robot, now, cmd));
-    }
-
-    fn on_flight(&mut self, robot: &str, now: Time, cmd: Option<&FlightCommand>) {
-        let topic = format!("/{robot}/setpoint");
-        self.record(|r| r.json(&topic, now, &cmd));
-    }
-
-    fn on_estimate(&mut self, robot: &str, estimate: &PoseEstimate) {
-        self.record(|r| r.estimate(robot, estimate));
     }
 }

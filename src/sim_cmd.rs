@@ -192,6 +192,12 @@ pub fn sim(args: &SimArgs, registry: &NodeRegistry<RobotRuntime>) -> Result<Exit
             return usage(format!("--kill {robot}@…: no robot `{robot}` in the team; robots are: {}", ids.join(", ")));
         }
     }
+    if args.ros2 && !crate::deploy::BUILT {
+        return crate::deploy::not_built("spomp sim --ros2");
+    }
+    if args.live.is_some() && !crate::deploy::BUILT {
+        return crate::deploy::not_built("spomp sim --live");
+    }
     if args.ros2 && trials > 1 {
         return usage(format!("--ros2 runs one trial (the robots' processes drive one world); got {trials} trials"));
     }
@@ -423,15 +429,15 @@ fn run_trial(
     // Serving before the world is built, so a viewer can connect while the run is set up.
     let live = match args.live {
         Some(addr) => {
-            let server = spomp_live::LiveServer::start(addr, &format!("spomp sim {} (seed {seed})", mission.mission))?;
+            let tap = LiveTap::start(addr, &format!("spomp sim {} (seed {seed})", mission.mission))?;
             bar.suspend(|| {
                 errln!(
                     "live view: {} (Foxglove: Open connection → Foxglove WebSocket; docs/live.md), {}× real time",
-                    server.url(),
+                    tap.url(),
                     args.rate.unwrap_or(1.0)
                 );
             });
-            Some(LiveTap::new(server))
+            Some(tap)
         }
         None => None,
     };
@@ -457,6 +463,7 @@ fn run_trial(
     };
     let mut sim = Simulation::new(loaded, registry, Arc::new(world), options)
         .with_context(|| format!("setting up `{}` (seed {seed})", mission.mission))?;
+    #[cfg(feature = "deploy")]
     if args.ros2 {
         let farm = crate::farm_cmd::FarmDrivers::new(
             mission,

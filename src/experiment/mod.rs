@@ -4,6 +4,8 @@
 //!
 //! See `docs/experiments.md`.
 
+// Trials run as robots run them: a farm and `spomp run` processes (the `deploy` feature).
+#[cfg(feature = "deploy")]
 pub mod deployed;
 pub mod report;
 pub mod rows;
@@ -327,6 +329,9 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
         .filter(|t| !done.contains_key(&(loaded.configurations[t.configuration].name.clone(), t.seed, t.deployed)))
         .cloned()
         .collect();
+    if !crate::deploy::BUILT && pending.iter().any(|t| t.deployed.is_some()) {
+        return crate::deploy::not_built("deployed trials (--deployed, a configuration's `deployed:`)");
+    }
     let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize);
     if !args.force
         && let Some(budget) = crate::memory_stage::machine_budget()
@@ -362,7 +367,9 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
     let file_dir = file.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let mut allow_dirs: Vec<PathBuf> = vec![file_dir.to_path_buf()];
     allow_dirs.extend(args.allow_dirs.iter().cloned());
+    #[cfg(feature = "deploy")]
     let work_dir = out_dir.join("deployed");
+    #[cfg(feature = "deploy")]
     let deployment = deployed::Deployment { allow_dirs: &allow_dirs, work_dir: &work_dir };
     let run_one = |t: &Trial| {
         if interrupted.load(Ordering::Relaxed) {
@@ -372,7 +379,11 @@ fn run(file: &Path, args: &ExperimentArgs, registry: &NodeRegistry<RobotRuntime>
         let hash = hash_of(t);
         let outcome = match t.deployed {
             None => run_trial(t, configuration, &hash, registry, parallel_robots, &interrupted),
+            #[cfg(feature = "deploy")]
             Some(_) => deployed::run_deployed_trial(t, configuration, &hash, registry, &deployment, &interrupted),
+            // Refused before any trial ran (above).
+            #[cfg(not(feature = "deploy"))]
+            Some(_) => Err(crate::deploy::not_built_error("a deployed trial")),
         };
         match outcome {
             Ok(Some(row)) => {

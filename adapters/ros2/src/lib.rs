@@ -12,15 +12,24 @@
 //! processes drive its robots: it publishes their sensors and `/clock`, and takes their commands
 //! and team-state messages. This crate depends on no other adapter; the CLI wires them.
 
+//!
+//! Without the `dds` feature (on by default) the crate is what reading a mission needs: the
+//! `ros2:` section, topic names, frames, run settings and the message conversions. The node, the
+//! farm link and the lockstep protocol speak DDS and need the feature (RustDDS and its
+//! dependencies are about a fifth of a release build of `spomp`).
+
 pub mod clock;
 pub mod convert;
 pub mod dds;
+#[cfg(feature = "dds")]
 pub mod farm;
 pub mod frames;
+#[cfg(feature = "dds")]
 pub mod lockstep;
 pub mod mission_section;
 
 pub mod pairing;
+#[cfg(feature = "dds")]
 pub mod run;
 pub mod settings;
 pub mod team;
@@ -29,9 +38,11 @@ pub mod workers;
 
 pub use clock::TimeBase;
 pub use dds::{DdsError, DdsSettings};
+#[cfg(feature = "dds")]
 pub use farm::FarmLink;
 pub use mission_section::Ros2Spec;
 
+#[cfg(feature = "dds")]
 pub use run::{RobotNode, RunObserver, RunReport};
 pub use settings::{RunSettings, SettingsError};
 pub use team::{OperatorDesk, StateSink, TeamChannel};

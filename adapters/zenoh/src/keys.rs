@@ -27,10 +27,21 @@ use serde::{Deserialize, Serialize};
 use spomp_core::RobotId;
 use spomp_teamstate::{OPERATOR_ID, TeamKeys, TeamSecurity};
 
-use crate::link::Credentials;
-
 const TEAM_FORMAT: &str = "spomp-team-keys/1";
 const ROBOT_FORMAT: &str = "spomp-robot-key/1";
+/// Transport authentication: this robot's user name and password, and the team's dictionary of
+/// every member's (Zenoh's user/password authentication: a challenge and an HMAC, so the password
+/// never crosses the link).
+#[derive(Clone, Debug)]
+pub struct Credentials {
+    /// This robot's user name.
+    pub user: String,
+    /// This robot's password.
+    pub password: String,
+    /// A file of `user:password` lines, one per member: whom this robot accepts.
+    pub dictionary_file: std::path::PathBuf,
+}
+
 /// The team's public keys.
 pub const TEAM_FILE: &str = "team.json";
 /// Zenoh's user/password dictionary.

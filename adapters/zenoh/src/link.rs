@@ -22,18 +22,7 @@ use spomp_teamstate::Tier;
 use zenoh::Wait;
 use zenoh::sample::SampleKind;
 
-/// Transport authentication: this robot's user name and password, and the team's dictionary of
-/// every member's (Zenoh's user/password authentication: a challenge and an HMAC, so the password
-/// never crosses the link).
-#[derive(Clone, Debug)]
-pub struct Credentials {
-    /// This robot's user name.
-    pub user: String,
-    /// This robot's password.
-    pub password: String,
-    /// A file of `user:password` lines, one per member: whom this robot accepts.
-    pub dictionary_file: std::path::PathBuf,
-}
+use crate::keys::Credentials;
 
 /// How a robot joins the team link.
 #[derive(Clone, Debug)]
