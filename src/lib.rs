@@ -14,6 +14,10 @@
 //! `validate`, `sim`, `run`, `nodes` and `schema` then see the added node types (the JSON Schema and
 //! the node reference include them), and the mission sections of the adapters this binary links
 //! (see [`register_sections`]). See `examples/custom-node/`.
+//!
+//! Features: the default build is the simulator and its tools; `deploy` adds what robots run —
+//! `spomp run` over ROS 2, the Zenoh team link, `spomp operator`, the live view, the ROS 2 robot
+//! farm and deployed experiment trials. A lab's binary for robots asks for `deploy`.
 
 /// `println!` that stops quietly when stdout is closed (e.g. piped into `head`) instead of
 /// panicking.
