@@ -18,7 +18,7 @@ use crate::{
 
 /// Mission framework for air–ground robot teams.
 #[derive(Parser, Debug)]
-#[command(name = "spomp", version, about, long_about = None)]
+#[command(name = "spomp", version = crate::deploy::VERSION, about, long_about = None)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

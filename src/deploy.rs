@@ -8,6 +8,14 @@ use std::process::ExitCode;
 /// Whether this build has the `deploy` feature.
 pub(crate) const BUILT: bool = cfg!(feature = "deploy");
 
+/// `spomp --version`: the version and which build this is, so a missing command is explained
+/// before it is tried.
+pub(crate) const VERSION: &str = if BUILT {
+    concat!(env!("CARGO_PKG_VERSION"), " (deploy build: simulator, tools, ROS 2, team link, live view)")
+} else {
+    concat!(env!("CARGO_PKG_VERSION"), " (default build: simulator and tools; robots need --features deploy)")
+};
+
 /// How to get a build that can do `what`.
 const REBUILD: &str =
     "cargo build --release --features deploy (or cargo install --path . --features deploy; docs/building.md)";

@@ -4,6 +4,16 @@
 
 use crate::{root, spomp};
 
+/// The README's test command tests the whole product: the binary it builds is the `deploy`
+/// build, and says so (a default build's `--version` names the feature robots need).
+#[test]
+fn the_test_build_is_the_deploy_build() {
+    let out = spomp().arg("--version").output().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("(deploy build"), "{text}");
+}
+
 #[test]
 fn validate_exit_codes() {
     spomp().current_dir(root()).args(["validate", "missions/visit-all-vehicle-clusters.yaml"]).assert().code(0);
