@@ -174,30 +174,42 @@ impl PanoramaRenderer {
         // all in the same cache set.
         let rows = g.rows;
         let cols = g.cols;
+        // The scratch is blank between blocks: each block blanks again only the rows its
+        // columns may have written (from the highest row a march reached down), and the rows
+        // above those go to the image blank without passing through the scratch.
         let mut block_range = vec![0.0f32; rows * COLUMN_BLOCK];
         let mut block_class = vec![UNKNOWN_CLASS; rows * COLUMN_BLOCK];
         let mut col0 = 0;
         while col0 < cols {
             let width = COLUMN_BLOCK.min(cols - col0);
-            block_range.fill(0.0);
-            block_class.fill(UNKNOWN_CLASS);
+            let mut top = rows;
             for k in 0..width {
                 let mut column = BlockColumn { range: &mut block_range, class: &mut block_class, k };
-                self.march_column(world, &ray, col0 + k, &mut column);
+                top = top.min(self.march_column(world, &ray, col0 + k, &mut column));
             }
             let image_rows = out.range_m.chunks_exact_mut(cols).zip(out_sem.class.chunks_exact_mut(cols));
             let block_rows = block_range.chunks_exact(COLUMN_BLOCK).zip(block_class.chunks_exact(COLUMN_BLOCK));
-            for ((range_row, class_row), (block_range_row, block_class_row)) in image_rows.zip(block_rows) {
-                copy_block_piece(&mut range_row[col0..col0 + width], block_range_row);
-                copy_block_piece(&mut class_row[col0..col0 + width], block_class_row);
+            for (row, ((range_row, class_row), (block_range_row, block_class_row))) in
+                image_rows.zip(block_rows).enumerate()
+            {
+                if row < top {
+                    copy_block_piece(&mut range_row[col0..col0 + width], &[0.0; COLUMN_BLOCK]);
+                    copy_block_piece(&mut class_row[col0..col0 + width], &[UNKNOWN_CLASS; COLUMN_BLOCK]);
+                } else {
+                    copy_block_piece(&mut range_row[col0..col0 + width], block_range_row);
+                    copy_block_piece(&mut class_row[col0..col0 + width], block_class_row);
+                }
             }
+            block_range[top * COLUMN_BLOCK..].fill(0.0);
+            block_class[top * COLUMN_BLOCK..].fill(UNKNOWN_CLASS);
             col0 += width;
         }
     }
 
     /// Marches column `col`'s ray across the height field from `ray`'s start, filling its
-    /// column of the block scratch (cleared by the caller).
-    fn march_column(&self, world: &World, ray: &RayStart, col: usize, column: &mut BlockColumn<'_>) {
+    /// column of the block scratch (blank before); returns the highest row it may have written
+    /// (the rows count when it wrote none).
+    fn march_column(&self, world: &World, ray: &RayStart, col: usize, column: &mut BlockColumn<'_>) -> usize {
         let spec = world.spec();
         let res = ray.res;
         let (w, h) = (spec.width as i64, spec.height as i64);
@@ -207,10 +219,10 @@ impl PanoramaRenderer {
         let max_range = self.max_range_m;
         let (z_s, top_dz, far_top_tan) = (ray.z_s, ray.top_dz, ray.far_top_tan);
         let (sy, cy) = ray.yaw_sin_cos;
-        let Some(&(ca, sa)) = self.col_dir.get(col) else { return };
+        let Some(&(ca, sa)) = self.col_dir.get(col) else { return column.rows() };
         let rows = column.rows().min(self.tan_row.len());
         if rows == 0 {
-            return;
+            return column.rows();
         }
         // World direction of this column's ray.
         let dx = cy * ca - sy * sa;
@@ -292,6 +304,7 @@ impl PanoramaRenderer {
             }
             t_in = t_out;
         }
+        row
     }
 }
 

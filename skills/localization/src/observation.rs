@@ -253,8 +253,10 @@ impl LocalObservation {
                 if !(u >= 0.0 && v >= 0.0 && u < side_f && v < side_f) {
                     return;
                 }
-                let (iu, iv) = (u as usize, v as usize);
-                let Some(bits) = mask.get_mut(iv * side + iu) else {
+                // Through u32 (u and v are below the grid's side, at most 4096): a float to and
+                // from a 64-bit unsigned integer is a branchy sequence on x86-64.
+                let (iu, iv) = (u as u32, v as u32);
+                let Some(bits) = mask.get_mut(iv as usize * side + iu as usize) else {
                     return;
                 };
                 let bit = 1u32 << slot;
