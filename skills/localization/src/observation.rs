@@ -28,6 +28,90 @@ fn has_return(range: f32) -> bool {
     (range > 0.0) & (range < f32::MAX)
 }
 
+/// One panorama row's pixels, with the azimuth cosine and sine of each column.
+struct RowPixels<'a> {
+    ranges: &'a [f32],
+    labels: &'a [u8],
+    col_cos: &'a [f32],
+    col_sin: &'a [f32],
+}
+
+/// What projecting a pixel of one row into the local grid needs: the row's elevation (cosine,
+/// sine), the sensor height, the range and height limits, and the grid's scale and size.
+struct RowProjection {
+    c_el: f32,
+    s_el: f32,
+    h: f32,
+    min_r: f32,
+    max_r: f32,
+    band: f32,
+    top: f32,
+    inv_res: f32,
+    half_f: f32,
+    side_f: f32,
+    side: usize,
+}
+
+impl RowProjection {
+    /// Files pixel `col` of `row` under its class, once per (cell, class): a return in range,
+    /// near the ground plane for a ground class, low for an obstacle class, inside the grid.
+    /// (Inlined into the row loops, so the row's constants stay in registers.)
+    #[inline(always)]
+    fn take(
+        &self,
+        row: &RowPixels<'_>,
+        col: usize,
+        slots: &ClassSlots,
+        mask: &mut [u32],
+        per_slot: &mut [Vec<ObservedCell>],
+    ) {
+        let (Some(&range), Some(&label), Some(&c_az), Some(&s_az)) =
+            (row.ranges.get(col), row.labels.get(col), row.col_cos.get(col), row.col_sin.get(col))
+        else {
+            return;
+        };
+        // NaN, infinite, zero (no return) and negative ranges all fail this test.
+        if !has_return(range) {
+            return;
+        }
+        let slot = slots.slot_of_class[label as usize];
+        if slot == NO_SLOT {
+            return;
+        }
+        let r = range * self.c_el;
+        if r < self.min_r || r > self.max_r {
+            return;
+        }
+        let z = self.h + range * self.s_el;
+        let keep = if slots.is_ground.get(slot as usize).copied().unwrap_or(false) {
+            z.abs() <= self.band
+        } else {
+            z >= -self.band && z <= self.top
+        };
+        if !keep {
+            return;
+        }
+        let u = (r * c_az) * self.inv_res + self.half_f;
+        let v = (r * s_az) * self.inv_res + self.half_f;
+        if !(u >= 0.0 && v >= 0.0 && u < self.side_f && v < self.side_f) {
+            return;
+        }
+        // Through u32 (u and v are below the grid's side, at most 4096): a float to and from a
+        // 64-bit unsigned integer is a branchy sequence on x86-64.
+        let (iu, iv) = (u as u32, v as u32);
+        let Some(bits) = mask.get_mut(iv as usize * self.side + iu as usize) else {
+            return;
+        };
+        let bit = 1u32 << slot;
+        if *bits & bit == 0 {
+            *bits |= bit;
+            if let Some(list) = per_slot.get_mut(slot as usize) {
+                list.push(ObservedCell { x: iu as f32 - self.half_f + 0.5, y: iv as f32 - self.half_f + 0.5 });
+            }
+        }
+    }
+}
+
 /// One observed cell: its centre in the robot frame, in map cells.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct ObservedCell {
@@ -220,65 +304,26 @@ impl LocalObservation {
             } else {
                 1
             };
+            let projection = RowProjection { c_el, s_el, h, min_r, max_r, band, top, inv_res, half_f, side_f, side };
+            let row =
+                RowPixels { ranges: row_ranges, labels: row_labels, col_cos: &trig.col_cos, col_sin: &trig.col_sin };
             let (mask, per_slot) = (&mut self.mask, &mut self.per_slot);
-            let mut take = |col: usize| {
-                let (Some(&range), Some(&label), Some(&c_az), Some(&s_az)) =
-                    (row_ranges.get(col), row_labels.get(col), trig.col_cos.get(col), trig.col_sin.get(col))
-                else {
-                    return;
-                };
-                // NaN, infinite, zero (no return) and negative ranges all fail this test.
-                if !has_return(range) {
-                    return;
-                }
-                let slot = slots.slot_of_class[label as usize];
-                if slot == NO_SLOT {
-                    return;
-                }
-                let r = range * c_el;
-                if r < min_r || r > max_r {
-                    return;
-                }
-                let z = h + range * s_el;
-                let keep = if slots.is_ground.get(slot as usize).copied().unwrap_or(false) {
-                    z.abs() <= band
-                } else {
-                    z >= -band && z <= top
-                };
-                if !keep {
-                    return;
-                }
-                let u = (r * c_az) * inv_res + half_f;
-                let v = (r * s_az) * inv_res + half_f;
-                if !(u >= 0.0 && v >= 0.0 && u < side_f && v < side_f) {
-                    return;
-                }
-                // Through u32 (u and v are below the grid's side, at most 4096): a float to and
-                // from a 64-bit unsigned integer is a branchy sequence on x86-64.
-                let (iu, iv) = (u as u32, v as u32);
-                let Some(bits) = mask.get_mut(iv as usize * side + iu as usize) else {
-                    return;
-                };
-                let bit = 1u32 << slot;
-                if *bits & bit == 0 {
-                    *bits |= bit;
-                    if let Some(list) = per_slot.get_mut(slot as usize) {
-                        list.push(ObservedCell { x: iu as f32 - half_f + 0.5, y: iv as f32 - half_f + 0.5 });
-                    }
-                }
-            };
             let cols = row_ranges.len();
             if stride == 1 {
                 // Rows read whole are mostly sky: skip blocks without a return in one test.
                 let mut start = 0;
                 for block in row_ranges.chunks(SKIP_BLOCK) {
                     if block.iter().fold(false, |any, &range| any | has_return(range)) {
-                        (start..start + block.len()).for_each(&mut take);
+                        for col in start..start + block.len() {
+                            projection.take(&row, col, slots, mask, per_slot);
+                        }
                     }
                     start += block.len();
                 }
             } else {
-                (0..cols).step_by(stride).for_each(&mut take);
+                for col in (0..cols).step_by(stride) {
+                    projection.take(&row, col, slots, mask, per_slot);
+                }
             }
         }
 
