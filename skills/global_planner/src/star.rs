@@ -6,6 +6,12 @@ use spomp_core::{Point2, ReachabilityScan, normalize_angle};
 use crate::error::ScanError;
 use crate::teammates::BinFan;
 
+/// Bins beyond a segment's own arc whose chords are still tested ([`StarRegion::chords_facing`]).
+const CHORD_MARGIN_BINS: usize = 2;
+/// A segment passing this close to the region's origin is tested against every chord: its arc
+/// seen from the origin approaches half a turn.
+const NEAR_ORIGIN_M: f64 = 0.01;
+
 /// What one scan says about one edge.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EdgeObservation {
@@ -178,6 +184,12 @@ impl StarRegion {
     /// at the inflation margin, whatever lies along the edge), as at the foot of a ramp beside
     /// the curb's corner.
     fn classify_path(&self, points: &[Point2], judging: &Judging) -> Verdict {
+        self.classify_path_among(points, judging, false)
+    }
+
+    /// [`Self::classify_path`], testing each segment against the chords it faces or, with
+    /// `every_chord`, against all of them (the same verdict: a test compares the two).
+    fn classify_path_among(&self, points: &[Point2], judging: &Judging, every_chord: bool) -> Verdict {
         let unknown = Verdict::plain(EdgeObservation::UnkTrav);
         let (Some(&first), Some(&last)) = (points.first(), points.last()) else {
             return unknown;
@@ -194,7 +206,7 @@ impl StarRegion {
             if segment_point_distance(a, b, self.origin) > self.max_range_m {
                 continue;
             }
-            for j in 0..n {
+            for j in self.chords_facing(a, b, every_chord) {
                 let (c, d) = (self.ends[j], self.ends[(j + 1) % n]);
                 if let Some(p) = segment_intersection(a, b, c, d) {
                     crossings += 1;
@@ -216,6 +228,35 @@ impl StarRegion {
                 at_teammate: self.bin_at_teammate(chord) || self.bin_at_teammate((chord + 1) % n),
             },
         }
+    }
+
+    /// The boundary chords a segment `a`–`b` may cross, in bin order: chord j joins the ends of
+    /// bins j and j + 1, so it lies within their wedge, and a segment that keeps clear of the
+    /// origin sweeps the shorter arc between the bins of its ends. Those bins with a margin of
+    /// [`CHORD_MARGIN_BINS`] on each side (for the rounding of the bin positions); every chord
+    /// when the segment passes within [`NEAR_ORIGIN_M`] of the origin or the arc is wide.
+    fn chords_facing(&self, a: Point2, b: Point2, every_chord: bool) -> impl Iterator<Item = usize> {
+        let n = self.bins();
+        let every = (0, n);
+        let (first, count) =
+            if every_chord || n <= 4 * CHORD_MARGIN_BINS || segment_point_distance(a, b, self.origin) < NEAR_ORIGIN_M {
+                every
+            } else {
+                let (ua, ub) = (self.bin_position(a), self.bin_position(b));
+                // The arc from the lower bin position to the higher, or round the other way when
+                // that is the shorter.
+                let (low, high) = if ua <= ub { (ua, ub) } else { (ub, ua) };
+                let (from, span) =
+                    if high - low <= n as f64 / 2.0 { (low, high - low) } else { (high, n as f64 - (high - low)) };
+                let count = span.floor() as usize + 1 + 2 * CHORD_MARGIN_BINS;
+                if count >= n {
+                    every
+                } else {
+                    let start = from.floor() as usize + n - CHORD_MARGIN_BINS;
+                    (start % n, count)
+                }
+            };
+        (first..first + count).map(move |k| k % n)
     }
 
     /// Judges the edge `a`–`b` as [`StarRegion::classify_polyline`] does.
@@ -498,5 +539,44 @@ mod tests {
         assert!(!wall.classify_polyline(&[Point2::new(0.0, 0.0), Point2::new(20.0, 0.0)], &j).at_teammate);
         assert_eq!(wall.mark_teammates(&[], 2.0), 0);
         assert_eq!(wall.mark_teammates(&[mate], 0.0), 0);
+    }
+
+    #[test]
+    fn testing_only_the_chords_a_segment_faces_gives_the_verdict_of_testing_every_chord() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let judging = Judging { window_rad: 0.3, on_edge_radius_m: 0.0, min_crossing_range_m: 0.0 };
+        let mut verdicts = std::collections::HashMap::new();
+        for _ in 0..200 {
+            let n = [16, 64, 360, 1024][rng.random_range(0..4)];
+            let pose = Pose2::new(
+                rng.random_range(-300.0..300.0),
+                rng.random_range(-300.0..300.0),
+                rng.random_range(-4.0..4.0),
+            );
+            let range: Vec<f32> =
+                (0..n).map(|_| if rng.random_bool(0.1) { 0.0 } else { rng.random_range(0.5..25.0) }).collect();
+            let obstacle: Vec<bool> = (0..n).map(|_| rng.random_bool(0.5)).collect();
+            let region = StarRegion::from_scan(&scan(pose, range, obstacle), 30.0).unwrap();
+            for _ in 0..50 {
+                // Polylines of one to three pieces around the robot, some passing right by it.
+                let (pieces, reach) = (rng.random_range(2..5), if rng.random_bool(0.5) { 6.0 } else { 35.0 });
+                let mut points: Vec<Point2> = (0..pieces)
+                    .map(|_| {
+                        let (d, a) = (rng.random_range(0.0..reach), rng.random_range(-4.0..4.0f64));
+                        Point2::new(pose.x + d * a.cos(), pose.y + d * a.sin())
+                    })
+                    .collect();
+                if rng.random_bool(0.1) {
+                    points.insert(1, Point2::new(pose.x + 0.004, pose.y - 0.003));
+                }
+                let facing = region.classify_path_among(&points, &judging, false);
+                let every = region.classify_path_among(&points, &judging, true);
+                assert_eq!(facing, every, "{points:?} against {n} bins");
+                *verdicts.entry(format!("{:?}", every.obs)).or_insert(0) += 1;
+            }
+        }
+        // Every kind of verdict was compared.
+        assert!(verdicts.len() == 3 && verdicts.values().all(|&k| k >= 100), "{verdicts:?}");
     }
 }
