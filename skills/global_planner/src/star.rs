@@ -203,10 +203,11 @@ impl StarRegion {
         let mut chord = 0;
         for piece in points.windows(2) {
             let (a, b) = (piece[0], piece[1]);
-            if segment_point_distance(a, b, self.origin) > self.max_range_m {
+            let clearance = segment_point_distance(a, b, self.origin);
+            if clearance > self.max_range_m {
                 continue;
             }
-            for j in self.chords_facing(a, b, every_chord) {
+            for j in self.chords_facing(a, b, clearance, every_chord) {
                 let (c, d) = (self.ends[j], self.ends[(j + 1) % n]);
                 if let Some(p) = segment_intersection(a, b, c, d) {
                     crossings += 1;
@@ -230,32 +231,32 @@ impl StarRegion {
         }
     }
 
-    /// The boundary chords a segment `a`–`b` may cross, in bin order: chord j joins the ends of
-    /// bins j and j + 1, so it lies within their wedge, and a segment that keeps clear of the
-    /// origin sweeps the shorter arc between the bins of its ends. Those bins with a margin of
-    /// [`CHORD_MARGIN_BINS`] on each side (for the rounding of the bin positions); every chord
-    /// when the segment passes within [`NEAR_ORIGIN_M`] of the origin or the arc is wide.
-    fn chords_facing(&self, a: Point2, b: Point2, every_chord: bool) -> impl Iterator<Item = usize> {
+    /// The boundary chords a segment `a`–`b` (passing `clearance` metres from the origin) may
+    /// cross, in bin order: chord j joins the ends of bins j and j + 1, so it lies within their
+    /// wedge, and a segment that keeps clear of the origin sweeps the shorter arc between the
+    /// bins of its ends. Those bins with a margin of [`CHORD_MARGIN_BINS`] on each side (for the
+    /// rounding of the bin positions); every chord when the segment passes within
+    /// [`NEAR_ORIGIN_M`] of the origin or the arc is wide.
+    fn chords_facing(&self, a: Point2, b: Point2, clearance: f64, every_chord: bool) -> impl Iterator<Item = usize> {
         let n = self.bins();
         let every = (0, n);
-        let (first, count) =
-            if every_chord || n <= 4 * CHORD_MARGIN_BINS || segment_point_distance(a, b, self.origin) < NEAR_ORIGIN_M {
+        let (first, count) = if every_chord || n <= 4 * CHORD_MARGIN_BINS || clearance < NEAR_ORIGIN_M {
+            every
+        } else {
+            let (ua, ub) = (self.bin_position(a), self.bin_position(b));
+            // The arc from the lower bin position to the higher, or round the other way when
+            // that is the shorter.
+            let (low, high) = if ua <= ub { (ua, ub) } else { (ub, ua) };
+            let (from, span) =
+                if high - low <= n as f64 / 2.0 { (low, high - low) } else { (high, n as f64 - (high - low)) };
+            let count = span.floor() as usize + 1 + 2 * CHORD_MARGIN_BINS;
+            if count >= n {
                 every
             } else {
-                let (ua, ub) = (self.bin_position(a), self.bin_position(b));
-                // The arc from the lower bin position to the higher, or round the other way when
-                // that is the shorter.
-                let (low, high) = if ua <= ub { (ua, ub) } else { (ub, ua) };
-                let (from, span) =
-                    if high - low <= n as f64 / 2.0 { (low, high - low) } else { (high, n as f64 - (high - low)) };
-                let count = span.floor() as usize + 1 + 2 * CHORD_MARGIN_BINS;
-                if count >= n {
-                    every
-                } else {
-                    let start = from.floor() as usize + n - CHORD_MARGIN_BINS;
-                    (start % n, count)
-                }
-            };
+                let start = from.floor() as usize + n - CHORD_MARGIN_BINS;
+                (start % n, count)
+            }
+        };
         (first..first + count).map(move |k| k % n)
     }
 
